@@ -1,0 +1,5 @@
+//! Subcommands of the `rccar` binary. Each file parses its flags with clap, wires library
+//! parts together and reports; the work itself is library code.
+
+pub mod common;
+pub mod config;

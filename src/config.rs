@@ -1,0 +1,630 @@
+//! The car's configuration: `config/car.toml`, the one file students edit.
+//!
+//! Loading goes in three steps:
+//! 1. the base file is parsed as TOML (a syntax error names its line);
+//! 2. an optional personal override file (git-ignored, e.g. `config/local.toml`) is merged on
+//!    top, table by table, and `key=value` overrides from the command line after it;
+//! 3. the merged tree is checked for unknown keys (a typo such as `steering.kpp` is an error
+//!    naming it, never silently ignored), deserialised into [`Config`] and every value is
+//!    range-checked by [`Config::validate`]; an error names the key, the value and the range.
+//!
+//! Every section has defaults ([`Default`]), so tests and the simulator can start from
+//! `Config::default()` and a file only needs the keys it changes. The shipped `car.toml` lists
+//! them all, with units and advice.
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// Everything that can go wrong while loading a configuration.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// File that failed.
+        path: PathBuf,
+        /// Underlying error.
+        source: std::io::Error,
+    },
+    /// TOML syntax error (the message carries the line and column).
+    #[error("{path}: {message}")]
+    Syntax {
+        /// File that failed.
+        path: PathBuf,
+        /// Parser message with line and column.
+        message: String,
+    },
+    /// A key that no section knows, most likely a typo.
+    #[error("{origin}: unknown key `{key}`{hint}")]
+    UnknownKey {
+        /// File (or `command line`) where the key was found.
+        origin: String,
+        /// Full dotted key, e.g. `steering.kpp`.
+        key: String,
+        /// ", did you mean ...?" when a close key exists.
+        hint: String,
+    },
+    /// A value of the wrong type.
+    #[error("{origin}: {message}")]
+    Type {
+        /// Where the value came from.
+        origin: String,
+        /// Deserialiser message, naming the key.
+        message: String,
+    },
+    /// A `key=value` override that cannot be parsed.
+    #[error("bad override `{0}`: expected key=value, e.g. steering.kp=0.8")]
+    BadOverride(String),
+    /// One or more values outside their allowed range.
+    #[error("{}", .0.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("\n"))]
+    Invalid(Vec<InvalidValue>),
+}
+
+/// One value outside its allowed range or inconsistent with another.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InvalidValue {
+    /// Dotted key, e.g. `steering.kp`.
+    pub key: String,
+    /// The offending value as written.
+    pub value: String,
+    /// What is allowed, e.g. `0 ..= 10`.
+    pub allowed: String,
+}
+
+impl fmt::Display for InvalidValue {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{} = {} is out of range (allowed: {})",
+            self.key, self.value, self.allowed
+        )
+    }
+}
+
+/// The whole configuration, one struct per `[section]` of `car.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// The camera: resolution, frame rate and how it is mounted.
+    pub camera: CameraConfig,
+    /// Region of interest and bird's-eye warp.
+    pub warp: WarpConfig,
+    /// Lane-line extraction: threshold, Canny, histogram.
+    pub lane: LaneConfig,
+    /// PID steering on the lane error.
+    pub steering: SteeringConfig,
+    /// Throttle policy.
+    pub throttle: ThrottleConfig,
+    /// Replay of recorded frames.
+    pub replay: ReplayConfig,
+}
+
+/// `[camera]`: the image the pipeline works on and the camera's pose on the car.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraConfig {
+    /// Width of the frames the pipeline processes, pixels (frames are resized to it).
+    pub width: u32,
+    /// Height of the frames the pipeline processes, pixels.
+    pub height: u32,
+    /// Frames per second; the controller's time step is 1/fps.
+    pub fps: f64,
+    /// Height of the lens above the floor, metres.
+    pub height_m: f64,
+    /// Downward tilt of the optical axis below horizontal, degrees.
+    pub tilt_deg: f64,
+    /// Horizontal field of view, degrees.
+    pub hfov_deg: f64,
+}
+
+impl Default for CameraConfig {
+    fn default() -> Self {
+        Self {
+            width: 320,
+            height: 240,
+            fps: 30.0,
+            height_m: 0.20,
+            tilt_deg: 20.0,
+            hfov_deg: 62.2,
+        }
+    }
+}
+
+/// `[warp]`: the region of interest and its bird's-eye (top-down) view.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WarpConfig {
+    /// The ROI's four corners in the camera frame, pixels, in the order
+    /// top-left, top-right, bottom-right, bottom-left.
+    pub src: [[f64; 2]; 4],
+    /// Width of the bird's-eye image, pixels.
+    pub out_width: u32,
+    /// Height of the bird's-eye image, pixels.
+    pub out_height: u32,
+}
+
+impl Default for WarpConfig {
+    fn default() -> Self {
+        // The ground rectangle 0.40..1.00 m ahead, 0.25 m either side, seen by the default
+        // camera (see `camera::PinholeCamera`); regenerate with `rccar config roi`.
+        Self {
+            src: [[93.72, 78.96], [225.28, 78.96], [308.75, 150.02], [10.25, 150.02]],
+            out_width: 320,
+            out_height: 240,
+        }
+    }
+}
+
+/// How the binary image is thresholded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ThresholdMode {
+    /// Fixed grey level (`lane.threshold`).
+    Fixed,
+    /// Otsu's method picks the level per frame.
+    Otsu,
+}
+
+/// `[lane]`: extracting the lane lines from the bird's-eye image.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LaneConfig {
+    /// `fixed` or `otsu`.
+    pub threshold_mode: ThresholdMode,
+    /// Grey level, 0..=255: pixels strictly brighter are "line".
+    pub threshold: u8,
+    /// Canny hysteresis low threshold (L1 gradient magnitude of the 3x3 Sobel).
+    pub canny_low: u16,
+    /// Canny hysteresis high threshold.
+    pub canny_high: u16,
+    /// Run a 5x5 Gaussian blur before Canny.
+    pub blur: bool,
+    /// Fraction of the bird's-eye height, from the bottom, summed by the histogram, 0..1.
+    pub band: f64,
+    /// A line is found only where its histogram peak reaches this fraction of the band height.
+    pub min_peak: f64,
+    /// Lane width between the two line centres in the bird's-eye image, pixels; used to
+    /// estimate a lost line from the other.
+    pub lane_width_px: f64,
+    /// L_F, the car's centre in the bird's-eye image, as an offset from the image centre,
+    /// pixels (positive = right). Non-zero when the camera is mounted off-centre.
+    pub center_offset_px: f64,
+}
+
+impl Default for LaneConfig {
+    fn default() -> Self {
+        Self {
+            threshold_mode: ThresholdMode::Fixed,
+            threshold: 170,
+            canny_low: 100,
+            canny_high: 200,
+            blur: true,
+            band: 0.4,
+            min_peak: 0.3,
+            lane_width_px: 191.4,
+            center_offset_px: 0.0,
+        }
+    }
+}
+
+/// `[steering]`: PID on the normalised lane error.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SteeringConfig {
+    /// Proportional gain: steer per unit of normalised error.
+    pub kp: f64,
+    /// Integral gain: steer per (unit error x second).
+    pub ki: f64,
+    /// Derivative gain: steer per (unit error / second), on the measurement.
+    pub kd: f64,
+    /// Largest contribution of the integral term, steer units (anti-windup).
+    pub integral_limit: f64,
+    /// Output clamp, steer units 0..=1.
+    pub max_steer: f64,
+    /// Largest change of the steering command per second, steer units per second.
+    pub slew_rate: f64,
+    /// Low-pass time constant of the derivative, seconds (0 = none).
+    pub derivative_tau: f64,
+}
+
+impl Default for SteeringConfig {
+    fn default() -> Self {
+        Self {
+            kp: 1.0,
+            ki: 0.1,
+            kd: 0.05,
+            integral_limit: 0.3,
+            max_steer: 1.0,
+            slew_rate: 8.0,
+            derivative_tau: 0.05,
+        }
+    }
+}
+
+/// `[throttle]`: speed policy.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ThrottleConfig {
+    /// Throttle on a straight with zero error, 0..=1.
+    pub base: f64,
+    /// Throttle never drops below this while the lane is seen, 0..=base.
+    pub min: f64,
+    /// How much the throttle drops per unit of |normalised error|.
+    pub error_slowdown: f64,
+    /// After the lane has been lost this long, seconds, the throttle is zero.
+    pub lost_timeout_s: f64,
+}
+
+impl Default for ThrottleConfig {
+    fn default() -> Self {
+        Self {
+            base: 0.5,
+            min: 0.2,
+            error_slowdown: 0.6,
+            lost_timeout_s: 0.5,
+        }
+    }
+}
+
+/// `[replay]`: running the pipeline over a folder of images.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ReplayConfig {
+    /// Write an annotated PNG for every frame.
+    pub annotate: bool,
+}
+
+impl Default for ReplayConfig {
+    fn default() -> Self {
+        Self { annotate: true }
+    }
+}
+
+/// Checks that collect every out-of-range value instead of stopping at the first.
+struct Checker(Vec<InvalidValue>);
+
+impl Checker {
+    fn range<T: PartialOrd + fmt::Display + Copy>(&mut self, key: &str, v: T, lo: T, hi: T) {
+        if !(v >= lo && v <= hi) {
+            self.0.push(InvalidValue {
+                key: key.into(),
+                value: v.to_string(),
+                allowed: format!("{lo} ..= {hi}"),
+            });
+        }
+    }
+    fn finite(&mut self, key: &str, v: f64) {
+        if !v.is_finite() {
+            self.0.push(InvalidValue {
+                key: key.into(),
+                value: v.to_string(),
+                allowed: "a finite number".into(),
+            });
+        }
+    }
+    fn fail(&mut self, key: &str, value: String, allowed: &str) {
+        self.0.push(InvalidValue {
+            key: key.into(),
+            value,
+            allowed: allowed.into(),
+        });
+    }
+}
+
+impl Config {
+    /// Checks every value against its range; returns all problems at once.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let mut c = Checker(Vec::new());
+        let cam = &self.camera;
+        c.range("camera.width", cam.width, 16, 4096);
+        c.range("camera.height", cam.height, 16, 4096);
+        c.range("camera.fps", cam.fps, 1.0, 240.0);
+        c.range("camera.height_m", cam.height_m, 0.01, 5.0);
+        c.range("camera.tilt_deg", cam.tilt_deg, -10.0, 89.0);
+        c.range("camera.hfov_deg", cam.hfov_deg, 10.0, 170.0);
+
+        let w = &self.warp;
+        for (i, p) in w.src.iter().enumerate() {
+            c.finite(&format!("warp.src[{i}]"), p[0]);
+            c.finite(&format!("warp.src[{i}]"), p[1]);
+        }
+        c.range("warp.out_width", w.out_width, 16, 4096);
+        c.range("warp.out_height", w.out_height, 16, 4096);
+        if let Err(e) = crate::lane::warp::Homography::from_quad_to_rect(&w.src, w.out_width, w.out_height) {
+            c.fail("warp.src", format!("{:?}", w.src), &e.to_string());
+        }
+
+        let l = &self.lane;
+        c.range("lane.canny_low", l.canny_low, 0, 2040);
+        c.range("lane.canny_high", l.canny_high, 0, 2040);
+        if l.canny_low > l.canny_high {
+            c.fail("lane.canny_low", l.canny_low.to_string(), "<= lane.canny_high");
+        }
+        c.range("lane.band", l.band, 0.01, 1.0);
+        c.range("lane.min_peak", l.min_peak, 0.0, 1.0);
+        c.range("lane.lane_width_px", l.lane_width_px, 1.0, w.out_width as f64);
+        c.range(
+            "lane.center_offset_px",
+            l.center_offset_px,
+            -(w.out_width as f64) / 2.0,
+            w.out_width as f64 / 2.0,
+        );
+
+        let s = &self.steering;
+        c.range("steering.kp", s.kp, 0.0, 20.0);
+        c.range("steering.ki", s.ki, 0.0, 20.0);
+        c.range("steering.kd", s.kd, 0.0, 5.0);
+        c.range("steering.integral_limit", s.integral_limit, 0.0, 1.0);
+        c.range("steering.max_steer", s.max_steer, 0.0, 1.0);
+        c.range("steering.slew_rate", s.slew_rate, 0.1, 1000.0);
+        c.range("steering.derivative_tau", s.derivative_tau, 0.0, 5.0);
+
+        let t = &self.throttle;
+        c.range("throttle.base", t.base, 0.0, 1.0);
+        c.range("throttle.min", t.min, 0.0, t.base.max(0.0));
+        c.range("throttle.error_slowdown", t.error_slowdown, 0.0, 5.0);
+        c.range("throttle.lost_timeout_s", t.lost_timeout_s, 0.0, 60.0);
+
+        if c.0.is_empty() {
+            Ok(())
+        } else {
+            Err(ConfigError::Invalid(c.0))
+        }
+    }
+
+    /// Loads `base`, then each override file, then `key=value` overrides; checks everything.
+    pub fn load(base: &Path, override_files: &[PathBuf], overrides: &[String]) -> Result<Config, ConfigError> {
+        let mut layers = vec![Layer::from_file(base)?];
+        for f in override_files {
+            layers.push(Layer::from_file(f)?);
+        }
+        for o in overrides {
+            layers.push(Layer::from_assignment(o)?);
+        }
+        Self::from_layers(&layers)
+    }
+
+    /// Parses one TOML text (e.g. a test's inline config) on top of the defaults.
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<Config, ConfigError> {
+        let table = text.parse::<toml::Table>().map_err(|e| ConfigError::Syntax {
+            path: origin.into(),
+            message: e.to_string(),
+        })?;
+        Self::from_layers(&[Layer {
+            origin: origin.to_string(),
+            table,
+        }])
+    }
+
+    /// This config with one dotted numeric or boolean key set, e.g. `steering.kp=0.8`;
+    /// used by gain sweeps. Validated like a file.
+    pub fn with_override(&self, assignment: &str) -> Result<Config, ConfigError> {
+        let base = Layer {
+            origin: "config".into(),
+            table: to_table(self),
+        };
+        Self::from_layers(&[base, Layer::from_assignment(assignment)?])
+    }
+
+    fn from_layers(layers: &[Layer]) -> Result<Config, ConfigError> {
+        let known = to_table(&Config::default());
+        let mut merged = toml::Table::new();
+        for layer in layers {
+            check_known(&layer.table, &known, "", &layer.origin)?;
+            merge(&mut merged, &layer.table);
+        }
+        let origin = layers.iter().map(|l| l.origin.as_str()).collect::<Vec<_>>().join(" + ");
+        // serde_path_to_error remembers which key was being read when a type is wrong.
+        let cfg: Config =
+            serde_path_to_error::deserialize(toml::Value::Table(merged)).map_err(|e| ConfigError::Type {
+                origin,
+                message: format!("`{}`: {}", e.path(), e.inner().message().trim()),
+            })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// The resolved configuration as TOML text.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).unwrap_or_else(|e| format!("# cannot print config: {e}"))
+    }
+}
+
+/// One source of settings: a file or a command-line assignment.
+struct Layer {
+    origin: String,
+    table: toml::Table,
+}
+
+impl Layer {
+    fn from_file(path: &Path) -> Result<Layer, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.into(),
+            source,
+        })?;
+        let table = text.parse::<toml::Table>().map_err(|e| ConfigError::Syntax {
+            path: path.into(),
+            message: e.to_string().trim_end().to_string(),
+        })?;
+        Ok(Layer {
+            origin: path.display().to_string(),
+            table,
+        })
+    }
+
+    fn from_assignment(text: &str) -> Result<Layer, ConfigError> {
+        let (key, value) = text
+            .split_once('=')
+            .ok_or_else(|| ConfigError::BadOverride(text.into()))?;
+        let key = key.trim();
+        if key.is_empty() || key.split('.').any(str::is_empty) {
+            return Err(ConfigError::BadOverride(text.into()));
+        }
+        // Parse the value as TOML so numbers, booleans, arrays and quoted strings all work;
+        // an unquoted word is taken as a string (`lane.threshold_mode=otsu`).
+        let value = format!("v = {}", value.trim())
+            .parse::<toml::Table>()
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.trim().to_string()));
+        let mut table = toml::Table::new();
+        let parts: Vec<&str> = key.split('.').collect();
+        let mut cur = &mut table;
+        for p in &parts[..parts.len() - 1] {
+            cur = cur
+                .entry(p.to_string())
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                .as_table_mut()
+                .expect("just inserted a table");
+        }
+        cur.insert(parts[parts.len() - 1].to_string(), value);
+        Ok(Layer {
+            origin: "command line".into(),
+            table,
+        })
+    }
+}
+
+fn to_table<T: Serialize>(v: &T) -> toml::Table {
+    toml::Table::try_from(v).expect("config types always serialise")
+}
+
+/// Every key of `layer` must exist in `known` (the default config's tree).
+fn check_known(layer: &toml::Table, known: &toml::Table, prefix: &str, origin: &str) -> Result<(), ConfigError> {
+    for (k, v) in layer {
+        let full = if prefix.is_empty() {
+            k.clone()
+        } else {
+            format!("{prefix}.{k}")
+        };
+        match known.get(k) {
+            None => {
+                let hint = closest(k, known.keys())
+                    .map(|c| format!(", did you mean `{c}`?"))
+                    .unwrap_or_default();
+                return Err(ConfigError::UnknownKey {
+                    origin: origin.into(),
+                    key: full,
+                    hint,
+                });
+            }
+            Some(toml::Value::Table(sub)) => {
+                if let toml::Value::Table(vt) = v {
+                    check_known(vt, sub, &full, origin)?;
+                } else {
+                    return Err(ConfigError::Type {
+                        origin: origin.into(),
+                        message: format!("`{full}` is a section ([{full}]), not a value"),
+                    });
+                }
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(())
+}
+
+fn merge(into: &mut toml::Table, from: &toml::Table) {
+    for (k, v) in from {
+        match (into.get_mut(k), v) {
+            (Some(toml::Value::Table(a)), toml::Value::Table(b)) => merge(a, b),
+            _ => {
+                into.insert(k.clone(), v.clone());
+            }
+        }
+    }
+}
+
+/// The known key closest to a misspelt one (edit distance ≤ 2).
+fn closest<'a>(word: &str, candidates: impl Iterator<Item = &'a String>) -> Option<&'a String> {
+    candidates
+        .map(|c| (edit_distance(word, c), c))
+        .filter(|(d, _)| *d <= 2)
+        .min_by_key(|(d, _)| *d)
+        .map(|(_, c)| c)
+}
+
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut cur = vec![i + 1];
+        for (j, cb) in b.iter().enumerate() {
+            let sub = prev[j] + usize::from(ca != *cb);
+            cur.push(sub.min(prev[j + 1] + 1).min(cur[j] + 1));
+        }
+        prev = cur;
+    }
+    prev[b.len()]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid() {
+        Config::default().validate().unwrap();
+    }
+
+    #[test]
+    fn shipped_car_toml_equals_defaults() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/car.toml");
+        let cfg = Config::load(&path, &[], &[]).unwrap();
+        assert_eq!(
+            cfg,
+            Config::default(),
+            "config/car.toml and Config::default() drifted apart"
+        );
+    }
+
+    #[test]
+    fn unknown_key_is_named_with_a_hint() {
+        let e = Config::from_toml_str("[steering]\nkpp = 1.0\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("steering.kpp") && e.contains("did you mean `kp`"), "{e}");
+        let e = Config::from_toml_str("[steer]\nkp = 1.0\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown key `steer`"), "{e}");
+    }
+
+    #[test]
+    fn out_of_range_names_key_value_and_range() {
+        let e = Config::from_toml_str("[steering]\nkp = -3.0\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "steering.kp = -3 is out of range (allowed: 0 ..= 20)");
+    }
+
+    #[test]
+    fn wrong_type_names_key() {
+        let e = Config::from_toml_str("[steering]\nkp = \"high\"\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("kp"), "{e}");
+    }
+
+    #[test]
+    fn collinear_roi_is_rejected() {
+        let e = Config::from_toml_str(
+            "[warp]\nsrc = [[0.0,0.0],[10.0,10.0],[20.0,20.0],[30.0,30.0]]\n",
+            "t.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("warp.src"), "{e}");
+    }
+
+    #[test]
+    fn overrides_layer_in_order() {
+        let cfg = Config::default().with_override("steering.kp=2.5").unwrap();
+        assert_eq!(cfg.steering.kp, 2.5);
+        let cfg = cfg.with_override("lane.threshold_mode=otsu").unwrap();
+        assert_eq!(cfg.lane.threshold_mode, ThresholdMode::Otsu);
+        assert!(Config::default().with_override("steering.kq=1").is_err());
+        assert!(Config::default().with_override("nonsense").is_err());
+    }
+}

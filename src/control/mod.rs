@@ -1,0 +1,36 @@
+//! Control: turns the lane measurement into a [`Command`] for the car.
+//!
+//! `pid` steers on the lane error, `throttle` picks the speed. Both take the time step as an
+//! argument and never read the clock. Behaviours (stop signs, lights, obstacles) will join
+//! here as a state machine; control never talks to the serial link: a sink delivers commands.
+
+use serde::{Deserialize, Serialize};
+
+/// What the car is told to do, both values in [−1, 1].
+///
+/// `steer`: −1 full left, 0 straight, +1 full right. `throttle`: −1 full reverse, 0 stop
+/// (ESC neutral), +1 full forward. [`Command::NEUTRAL`] is the safe state every exit path sends.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Command {
+    /// Steering, −1 (left) ..= 1 (right).
+    pub steer: f64,
+    /// Throttle, −1 (reverse) ..= 1 (forward); 0 is stop.
+    pub throttle: f64,
+}
+
+impl Command {
+    /// Wheels straight, motor stopped.
+    pub const NEUTRAL: Command = Command {
+        steer: 0.0,
+        throttle: 0.0,
+    };
+
+    /// A command with both values clamped to [−1, 1] (NaN becomes 0).
+    pub fn clamped(steer: f64, throttle: f64) -> Command {
+        let c = |v: f64| if v.is_nan() { 0.0 } else { v.clamp(-1.0, 1.0) };
+        Command {
+            steer: c(steer),
+            throttle: c(throttle),
+        }
+    }
+}
