@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# rccar's one test command (README, .ci/run): installs what is missing on a Debian machine,
+# then runs every test suite and closes with one "N passed, N failed" line over all of them.
+#
+#   bash tests/all.sh            everything
+#   RCCAR_SKIP_INSTALL=1 ...     don't touch apt/pip (you installed things yourself)
+set -uo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+LOG_DIR=$ROOT/target/test-logs
+mkdir -p "$LOG_DIR"
+
+# ---- 1. Debian packages (each stage lists what it needs) -------------------------------
+DEB_PACKAGES=(
+  python3-venv python3-pip fonts-dejavu-core   # OpenCV reference scripts, plot fonts
+)
+if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
+  missing=()
+  for p in "${DEB_PACKAGES[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
+  if [ ${#missing[@]} -gt 0 ]; then
+    echo "== installing Debian packages: ${missing[*]}"
+    SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO=sudo
+    $SUDO apt-get update -qq && $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null \
+      || { echo "apt-get install failed"; exit 1; }
+  fi
+  # ---- 2. the OpenCV 4.x reference, in a virtualenv of its own -------------------------
+  if ! .venv/bin/python -c "import cv2, numpy, skimage" >/dev/null 2>&1; then
+    echo "== installing the OpenCV reference into .venv (tests/parity/requirements.txt)"
+    python3 -m venv .venv && .venv/bin/pip install -q -r tests/parity/requirements.txt || { echo "pip install failed"; exit 1; }
+  fi
+fi
+export RCCAR_PYTHON=$ROOT/.venv/bin/python
+
+# ---- 3. the suites ------------------------------------------------------------------
+PASSED=0; FAILED=0; FAILED_STAGES=()
+# stage NAME COMMAND...: runs it, shows its output, adds up its "N passed / N failed".
+stage() {
+  local name=$1; shift
+  echo; echo "== $name: $*"
+  local log=$LOG_DIR/$name.log
+  "$@" 2>&1 | tee "$log"
+  local rc=${PIPESTATUS[0]}
+  # cargo: "test result: ok. 12 passed; 0 failed"; others: "N passed, N failed"
+  local p f
+  p=$(grep -aoE '([0-9]+) passed' "$log" | awk '{s+=$1} END {print s+0}')
+  f=$(grep -aoE '([0-9]+) failed' "$log" | awk '{s+=$1} END {print s+0}')
+  if [ "$rc" -ne 0 ] && [ "$f" -eq 0 ]; then f=1; fi
+  PASSED=$((PASSED + p)); FAILED=$((FAILED + f))
+  [ "$rc" -ne 0 ] && FAILED_STAGES+=("$name")
+  return 0
+}
+
+stage build cargo build --release --all-targets
+stage cargo-test cargo test --release --workspace
+stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
+
+echo
+if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi
+echo "rccar: $PASSED passed, $FAILED failed"
+[ "$FAILED" -eq 0 ] && [ ${#FAILED_STAGES[@]} -eq 0 ]
