@@ -18,5 +18,6 @@
 pub mod camera;
 pub mod config;
 pub mod control;
+pub mod detect;
 pub mod lane;
 pub mod sink;

@@ -19,12 +19,15 @@ enum Cmd {
     /// Check and print the configuration (config/car.toml plus overrides).
     #[command(subcommand)]
     Config(cli::config::ConfigCmd),
+    /// Run OpenCV Haar/LBP cascades on images; print boxes as JSON, write annotated images.
+    Detect(cli::detect::DetectArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Config(c) => cli::config::run(c),
+        Cmd::Detect(a) => cli::detect::run(a),
     };
     match result {
         Ok(code) => code,
