@@ -53,6 +53,7 @@ stage() {
 stage build cargo build --release --all-targets
 stage cargo-test cargo test --release --workspace
 stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
+stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 
 echo
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi
