@@ -13,6 +13,7 @@ mkdir -p "$LOG_DIR"
 # ---- 1. Debian packages (each stage lists what it needs) -------------------------------
 DEB_PACKAGES=(
   python3-venv python3-pip fonts-dejavu-core   # OpenCV reference scripts, plot fonts
+  opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   missing=()
