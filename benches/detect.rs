@@ -69,7 +69,11 @@ fn main() {
     println!("frontalface_default, scaleFactor 1.1, minNeighbors 3, {runs} runs each; times in ms");
     println!(
         "{:>8} | {:>15} | {:>15} | {:>7} | {:>20} | boxes",
-        "image", "ours med/min", "OpenCV med/min", "ratio", format!("ours {threads} threads")
+        "image",
+        "ours med/min",
+        "OpenCV med/min",
+        "ratio",
+        format!("ours {threads} threads")
     );
     for key in ["320x240", "512x512", "640x480"] {
         let c = &cv[key];
@@ -92,13 +96,25 @@ fn main() {
         };
         let (mut ours, boxes) = time(false);
         let (mut par, _) = time(true);
-        let mut theirs: Vec<f64> = c["ms"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let mut theirs: Vec<f64> = c["ms"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
         let (om, on) = stats(&mut ours);
         let (pm, pn) = stats(&mut par);
         let (cm, cn) = stats(&mut theirs);
         let mut ob: Vec<Vec<i64>> = boxes
             .iter()
-            .map(|d| vec![d.rect.x as i64, d.rect.y as i64, d.rect.width as i64, d.rect.height as i64])
+            .map(|d| {
+                vec![
+                    d.rect.x as i64,
+                    d.rect.y as i64,
+                    d.rect.width as i64,
+                    d.rect.height as i64,
+                ]
+            })
             .collect();
         ob.sort();
         let cb: Vec<Vec<i64>> = serde_json::from_value(c["boxes"].clone()).unwrap();
@@ -106,7 +122,11 @@ fn main() {
         println!(
             "{key:>8} | {om:>7.2}/{on:>7.2} | {cm:>7.2}/{cn:>7.2} | {:>7.3} | {pm:>9.2}/{pn:>9.2} | {}",
             on / cn,
-            if ob == cb { "same".to_string() } else { format!("DIFFER: ours {ob:?} OpenCV {cb:?}") }
+            if ob == cb {
+                "same".to_string()
+            } else {
+                format!("DIFFER: ours {ob:?} OpenCV {cb:?}")
+            }
         );
     }
 }

@@ -1,0 +1,179 @@
+//! The stock OpenCV cascades (Debian `opencv-data`, never copied into the repository) load
+//! with the expected shapes, quickly, and detect the same boxes sequentially and in parallel.
+//! Box-for-box agreement with OpenCV itself is `tests/parity/detect_parity.py`.
+
+use image::GrayImage;
+use rccar::detect::{Cascade, DetectParams, Detector, FeatureType};
+use std::path::Path;
+use std::time::Instant;
+
+const HAAR: &str = "/usr/share/opencv4/haarcascades/";
+const LBP: &str = "/usr/share/opencv4/lbpcascades/";
+
+fn stock(dir: &str, name: &str) -> Option<Cascade> {
+    let p = Path::new(dir).join(name);
+    if !p.exists() {
+        eprintln!("skipped: {} not installed (Debian package opencv-data)", p.display());
+        return None;
+    }
+    Some(Cascade::from_file(&p).unwrap_or_else(|e| panic!("{e}")))
+}
+
+/// A seeded test scene: noisy background and cartoon faces (bright oval, dark eyes, brows,
+/// nose and mouth) of several sizes, which the stock face cascades fire on.
+fn scene(w: u32, h: u32) -> GrayImage {
+    let mut s = 12345u32;
+    let faces = [
+        (60.0, 70.0, 36.0),
+        (170.0, 100.0, 50.0),
+        (260.0, 60.0, 28.0),
+        (250.0, 180.0, 40.0),
+    ];
+    GrayImage::from_fn(w, h, |x, y| {
+        s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        let (fx, fy) = (x as f32, y as f32);
+        let mut v = 90.0 + 0.2 * fx - 0.1 * fy;
+        for &(cx, cy, r) in &faces {
+            let e = |ex: f32, ey: f32, rx: f32, ry: f32| {
+                let (dx, dy) = ((fx - cx - ex * r) / (rx * r), (fy - cy - ey * r) / (ry * r));
+                dx * dx + dy * dy <= 1.0
+            };
+            if e(0.0, 0.0, 0.8, 1.05) {
+                v = 190.0;
+                if e(-0.33, -0.2, 0.17, 0.1) || e(0.33, -0.2, 0.17, 0.1) {
+                    v = 40.0; // eyes
+                } else if e(-0.33, -0.42, 0.22, 0.05) || e(0.33, -0.42, 0.22, 0.05) {
+                    v = 70.0; // brows
+                } else if e(0.0, 0.12, 0.07, 0.15) {
+                    v = 150.0; // nose
+                } else if e(0.0, 0.5, 0.3, 0.07) {
+                    v = 60.0; // mouth
+                }
+            }
+        }
+        image::Luma([(v + (s >> 28) as f32 - 8.0).clamp(0.0, 255.0) as u8])
+    })
+}
+
+#[test]
+fn stock_cascades_have_the_expected_shape() {
+    // (file, stages, features, window, feature type, tilted, max nodes per tree, old format)
+    let cases: [(&str, &str, usize, usize, (i32, i32), FeatureType, bool, usize, bool); 5] = [
+        (
+            HAAR,
+            "haarcascade_frontalface_default.xml",
+            25,
+            2913,
+            (24, 24),
+            FeatureType::Haar,
+            false,
+            1,
+            false,
+        ),
+        (
+            HAAR,
+            "haarcascade_fullbody.xml",
+            30,
+            1464,
+            (14, 28),
+            FeatureType::Haar,
+            true,
+            1,
+            false,
+        ),
+        (
+            HAAR,
+            "haarcascade_eye_tree_eyeglasses.xml",
+            30,
+            2553,
+            (20, 20),
+            FeatureType::Haar,
+            true,
+            3,
+            false,
+        ),
+        (
+            HAAR,
+            "haarcascade_licence_plate_rus_16stages.xml",
+            16,
+            91,
+            (64, 16),
+            FeatureType::Haar,
+            false,
+            1,
+            true,
+        ),
+        (
+            LBP,
+            "lbpcascade_frontalface.xml",
+            20,
+            136,
+            (24, 24),
+            FeatureType::Lbp,
+            false,
+            1,
+            false,
+        ),
+    ];
+    for (dir, name, stages, features, win, ft, tilted, nodes, old) in cases {
+        let Some(c) = stock(dir, name) else { continue };
+        assert_eq!(c.stage_count(), stages, "{name} stages");
+        assert_eq!(c.feature_count(), features, "{name} features");
+        assert_eq!((c.width, c.height), win, "{name} window");
+        assert_eq!(c.feature_type, ft, "{name}");
+        assert_eq!(c.has_tilted, tilted, "{name} tilted");
+        assert_eq!(c.max_nodes_per_tree, nodes, "{name} nodes per tree");
+        assert_eq!(c.old_format, old, "{name} format");
+    }
+}
+
+#[test]
+fn every_stock_cascade_loads_in_well_under_a_second() {
+    for dir in [HAAR, LBP] {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            eprintln!("skipped: {dir} not installed");
+            continue;
+        };
+        for e in entries.flatten() {
+            let t0 = Instant::now();
+            let c = Cascade::from_file(e.path()).unwrap_or_else(|err| panic!("{err}"));
+            let ms = t0.elapsed().as_secs_f64() * 1e3;
+            assert!(c.stage_count() > 0);
+            // frontalface_default (930 kB) takes ~15–30 ms in release builds.
+            assert!(ms < 500.0, "{}: {ms:.0} ms", e.path().display());
+        }
+    }
+}
+
+#[test]
+fn parallel_scales_give_the_same_boxes() {
+    let img = scene(320, 240);
+    let mut total = 0;
+    for (dir, name) in [
+        (HAAR, "haarcascade_frontalface_default.xml"),
+        (HAAR, "haarcascade_fullbody.xml"),
+        (LBP, "lbpcascade_frontalface.xml"),
+    ] {
+        let Some(c) = stock(dir, name) else { continue };
+        let mut d = Detector::new(c);
+        let raw = DetectParams {
+            min_neighbors: 0,
+            ..Default::default()
+        };
+        let mut seq = d.detect(&img, &raw).unwrap();
+        let mut par = d.detect(&img, &DetectParams { parallel: true, ..raw }).unwrap();
+        seq.sort_by_key(|b| (b.rect.x, b.rect.y, b.rect.width));
+        par.sort_by_key(|b| (b.rect.x, b.rect.y, b.rect.width));
+        assert_eq!(seq, par, "{name}");
+        eprintln!("{name}: {} raw hits", seq.len());
+        total += seq.len();
+        // A second call on the same detector (reused buffers) repeats itself.
+        let mut again = d.detect(&img, &raw).unwrap();
+        again.sort_by_key(|b| (b.rect.x, b.rect.y, b.rect.width));
+        assert_eq!(seq, again, "{name}");
+    }
+    // The scene is busy enough to fire some windows, so the comparison compares something.
+    if Path::new(HAAR).exists() {
+        assert!(total > 0, "no raw hits at all: the test scene is too plain");
+    }
+}
