@@ -177,3 +177,72 @@ fn parallel_scales_give_the_same_boxes() {
         assert!(total > 0, "no raw hits at all: the test scene is too plain");
     }
 }
+
+/// Golden boxes: OpenCV 4.14's `detectMultiScale2(scene, 1.1, 3)` on the cartoon scene, kept in
+/// `tests/data/detect/cartoon_faces.json`. `RCCAR_REGENERATE=1` rewrites the file by running
+/// OpenCV (`$RCCAR_PYTHON` or `python3` with cv2) on the scene; otherwise rccar must match it
+/// exactly (same boxes to the pixel, same neighbour counts).
+#[test]
+fn cartoon_faces_match_opencv_golden_boxes() {
+    let golden = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/detect/cartoon_faces.json");
+    let cascades = [
+        (HAAR, "haarcascade_frontalface_default.xml"),
+        (HAAR, "haarcascade_frontalface_alt.xml"),
+        (LBP, "lbpcascade_frontalface.xml"),
+    ];
+    if !Path::new(HAAR).exists() {
+        eprintln!("skipped: {HAAR} not installed");
+        return;
+    }
+    let img = scene(320, 240);
+    if std::env::var_os("RCCAR_REGENERATE").is_some() {
+        let png = std::env::temp_dir().join("rccar_cartoon_faces.png");
+        img.save(&png).unwrap();
+        let py = std::env::var("RCCAR_PYTHON").unwrap_or_else(|_| "python3".into());
+        let script = r#"
+import cv2, json, sys
+cv2.setNumThreads(1)
+g = cv2.imread(sys.argv[1], cv2.IMREAD_GRAYSCALE)
+out = {"opencv": cv2.__version__, "params": "scaleFactor 1.1, minNeighbors 3", "boxes": {}}
+for c in sys.argv[2:]:
+    r, n = cv2.CascadeClassifier(c).detectMultiScale2(g, 1.1, 3)
+    out["boxes"][c.split("/")[-1]] = sorted([list(map(int, b)) + [int(k)] for b, k in zip(r, n)]) if len(r) else []
+print(json.dumps(out, indent=1))
+"#;
+        let mut args = vec!["-c".to_string(), script.to_string(), png.display().to_string()];
+        args.extend(cascades.iter().map(|(d, n)| format!("{d}{n}")));
+        let out = std::process::Command::new(py)
+            .args(&args)
+            .output()
+            .expect("running OpenCV");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        std::fs::create_dir_all(golden.parent().unwrap()).unwrap();
+        std::fs::write(&golden, &out.stdout).unwrap();
+    }
+    let text = std::fs::read_to_string(&golden).expect("golden file (RCCAR_REGENERATE=1 writes it)");
+    let want: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let mut total = 0;
+    for (dir, name) in cascades {
+        let mut d = Detector::new(stock(dir, name).unwrap());
+        let mut got: Vec<Vec<i64>> = d
+            .detect(&img, &DetectParams::default())
+            .unwrap()
+            .iter()
+            .map(|b| {
+                let r = b.rect;
+                vec![
+                    r.x as i64,
+                    r.y as i64,
+                    r.width as i64,
+                    r.height as i64,
+                    b.neighbors as i64,
+                ]
+            })
+            .collect();
+        got.sort();
+        let expected: Vec<Vec<i64>> = serde_json::from_value(want["boxes"][name].clone()).unwrap();
+        assert_eq!(got, expected, "{name}: ours vs OpenCV {}", want["opencv"]);
+        total += got.len();
+    }
+    assert!(total >= 3, "the scene should hold detectable faces, found {total}");
+}

@@ -91,11 +91,13 @@ struct HaarOpt {
 }
 
 impl HaarOpt {
+    /// The feature's raw value on the window whose integral starts at `d[0]`.
+    /// `d` must be a window slice of length `Compiled::span` (every offset is below it).
     #[inline(always)]
     fn calc(&self, d: &[i32]) -> f32 {
         let s = |k: usize| {
             let o = &self.ofs[k];
-            d[o[0] as usize] - d[o[1] as usize] - d[o[2] as usize] + d[o[3] as usize]
+            at(d, o[0]) - at(d, o[1]) - at(d, o[2]) + at(d, o[3])
         };
         let mut v = self.w[0] * s(0) as f32 + self.w[1] * s(1) as f32;
         if self.three {
@@ -103,6 +105,17 @@ impl HaarOpt {
         }
         v
     }
+}
+
+/// `d[i]` without a bounds check in release builds.
+///
+/// Sound because every offset stored in a [`Compiled`] is below its `span` (it is computed as
+/// one past the largest offset) and every window slice passed in has length `span`.
+#[inline(always)]
+fn at(d: &[i32], i: u32) -> i32 {
+    debug_assert!((i as usize) < d.len());
+    // SAFETY: see above; `d.len() == span > i` by construction of `Compiled`.
+    unsafe { *d.get_unchecked(i as usize) }
 }
 
 /// A stump with its feature inlined (cascades whose trees have one node).
@@ -124,9 +137,7 @@ impl LbpOpt {
     #[inline(always)]
     fn calc(&self, d: &[i32]) -> usize {
         let o = &self.ofs;
-        let s = |a: usize, b: usize, c: usize, e: usize| {
-            d[o[a] as usize] - d[o[b] as usize] - d[o[c] as usize] + d[o[e] as usize]
-        };
+        let s = |a: usize, b: usize, c: usize, e: usize| at(d, o[a]) - at(d, o[b]) - at(d, o[c]) + at(d, o[e]);
         let c = s(5, 6, 9, 10);
         // Clockwise from the top-left cell, most significant bit first.
         ((s(0, 1, 4, 5) >= c) as usize) << 7
@@ -224,7 +235,20 @@ impl Compiled {
             }
         }
         out.norm = sum_ofs(1, 1, c.width - 2, c.height - 2, stride);
-        out.span = (c.height as usize) * stride + c.width as usize + 1 + if c.has_tilted { tilted_offset } else { 0 };
+        // The window's reach: one past the largest offset any feature reads. Every window
+        // slice handed to `calc` has exactly this length, which is what makes the unchecked
+        // reads there sound.
+        let max_ofs = out
+            .haar
+            .iter()
+            .flat_map(|f| f.ofs.iter().flatten())
+            .chain(out.stumps.iter().flat_map(|s| s.f.ofs.iter().flatten()))
+            .chain(out.lbp.iter().flat_map(|f| f.ofs.iter()))
+            .chain(out.norm.iter())
+            .copied()
+            .max()
+            .unwrap_or(0);
+        out.span = max_ofs as usize + 1;
         out
     }
 }
@@ -492,7 +516,8 @@ impl Job<'_> {
                         if nf > 0.0 {
                             let inv = (1.0 / nf.sqrt()) as f32;
                             if area * (inv as f64) < 0.1 {
-                                let d = &data[p..p + k.span.min(data.len() - p)];
+                                // Panics only on a bug in the level geometry, never on input.
+                                let d = &data[p..p + k.span];
                                 if c.max_nodes_per_tree == 1 {
                                     eval_stumps(c, k, d, inv)
                                 } else {
@@ -505,7 +530,7 @@ impl Job<'_> {
                             -1
                         }
                     }
-                    FeatureType::Lbp => eval_lbp(c, k, &data[p..]),
+                    FeatureType::Lbp => eval_lbp(c, k, &data[p..p + k.span]),
                 };
                 if result > 0 {
                     s.hits.push(Rect::new(
