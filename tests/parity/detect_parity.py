@@ -12,7 +12,8 @@ Both run on the same greyscale images with the cascades Debian's opencv-data ins
     cascades in that format; the file is written to a temp dir and never committed),
     fullbody (tilted features), lbpcascade_frontalface (LBP), eye_tree_eyeglasses (trees),
     licence_plate_rus_16stages (old format as shipped), lbpcascade_frontalface_improved;
-  * parameter sets: OpenCV's defaults (1.1, 3), (1.2, 5, minSize 30x30) and raw hits (1.1, 0).
+  * parameter sets: OpenCV's defaults (1.1, 3), (1.2, 5, minSize 30x30), raw hits (1.1, 0);
+    the full run adds (1.05, 2, maxSize 150x150) and (1.3, 1, minSize = maxSize = 50x50).
 
 A box of OpenCV's is matched by one of ours at IoU >= 0.9 (greedy, best first). Checks per
 cascade: >= 99% of OpenCV's boxes matched and the same box count in >= 95% of images. Every
@@ -167,7 +168,10 @@ def main():
         p = os.path.join(tmp, name + ".png")
         cv2.imwrite(p, im)
         paths.append(p)
-    param_sets = [(1.1, 3, (0, 0)), (1.2, 5, (30, 30)), (1.1, 0, (0, 0))]
+    # (scaleFactor, minNeighbors, minSize, maxSize); maxSize (0, 0) = the image size.
+    param_sets = [(1.1, 3, (0, 0), (0, 0)), (1.2, 5, (30, 30), (0, 0)), (1.1, 0, (0, 0), (0, 0))]
+    if not QUICK:  # a finer pyramid capped by maxSize, and minSize == maxSize (one scale)
+        param_sets += [(1.05, 2, (0, 0), (150, 150)), (1.3, 1, (50, 50), (50, 50))]
     print(f"{len(images)} images x {len(cascades)} cascades x {len(param_sets)} parameter sets, OpenCV {cv2.__version__}")
 
     passed = failed = 0
@@ -178,9 +182,9 @@ def main():
         assert not cc.empty(), casc
         n_ref = n_match = n_img = n_same = n_exact = n_nb = n_nb_img = 0
         diffs = []
-        for sf, mn, ms in param_sets:
+        for sf, mn, ms, mx in param_sets:
             args = [BIN, "detect", "--no-annotate", "--cascade", casc, "--scale-factor", str(sf),
-                    "--min-neighbors", str(mn), "--min-size", f"{ms[0]}x{ms[1]}"] + paths
+                    "--min-neighbors", str(mn), "--min-size", f"{ms[0]}x{ms[1]}", "--max-size", f"{mx[0]}x{mx[1]}"] + paths
             run = subprocess.run(args, capture_output=True, text=True)
             if run.returncode != 0:
                 print(f"FAIL {cname}: rccar exited {run.returncode}: {run.stderr.strip()}")
@@ -188,7 +192,7 @@ def main():
                 continue
             lines = [json.loads(l) for l in run.stdout.splitlines() if l.strip()]
             for (name, im), res in zip(images, lines):
-                r, nb = cc.detectMultiScale2(im, scaleFactor=sf, minNeighbors=mn, minSize=ms)
+                r, nb = cc.detectMultiScale2(im, scaleFactor=sf, minNeighbors=mn, minSize=ms, maxSize=mx)
                 ref = [tuple(int(v) for v in b) for b in (r.tolist() if len(r) else [])]
                 ours = [(b["x"], b["y"], b["width"], b["height"]) for b in res["boxes"]]
                 got, only_ref, only_ours = match(ref, ours)
@@ -202,7 +206,7 @@ def main():
                 n_img += 1
                 n_same += len(ref) == len(ours)
                 if only_ref or only_ours:
-                    diffs.append(f"    {name} (sf {sf}, mn {mn}, min {ms}): OpenCV {len(ref)} ours {len(ours)};"
+                    diffs.append(f"    {name} (sf {sf}, mn {mn}, min {ms}, max {mx}): OpenCV {len(ref)} ours {len(ours)};"
                                  f" OpenCV only {only_ref[:6]}; ours only {only_ours[:6]}")
         frac = n_match / n_ref if n_ref else 1.0
         same = n_same / n_img if n_img else 1.0
