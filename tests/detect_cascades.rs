@@ -58,7 +58,18 @@ fn scene(w: u32, h: u32) -> GrayImage {
 #[test]
 fn stock_cascades_have_the_expected_shape() {
     // (file, stages, features, window, feature type, tilted, max nodes per tree, old format)
-    let cases: [(&str, &str, usize, usize, (i32, i32), FeatureType, bool, usize, bool); 5] = [
+    type Case = (
+        &'static str,
+        &'static str,
+        usize,
+        usize,
+        (i32, i32),
+        FeatureType,
+        bool,
+        usize,
+        bool,
+    );
+    let cases: [Case; 5] = [
         (
             HAAR,
             "haarcascade_frontalface_default.xml",

@@ -102,7 +102,6 @@ pub fn partition(rects: &[Rect], eps: f64, labels: &mut Vec<usize>) -> usize {
         }
     }
     labels.clear();
-    labels.resize(n, usize::MAX);
     let mut class_of_root = vec![usize::MAX; n];
     let mut classes = 0;
     for i in 0..n {
@@ -111,7 +110,7 @@ pub fn partition(rects: &[Rect], eps: f64, labels: &mut Vec<usize>) -> usize {
             class_of_root[r] = classes;
             classes += 1;
         }
-        labels[i] = class_of_root[r];
+        labels.push(class_of_root[r]);
     }
     classes
 }

@@ -128,13 +128,14 @@ fn hline(ax: &Axis, row: &[u8], out: &mut [u16]) {
     let n = out.len();
     let first = row[0] as u16 * 256;
     let last_src = row[ax.offset[n - 1] as usize] as u16 * 256;
-    for d in 0..ax.min.min(n) {
-        out[d] = first;
-    }
-    for d in ax.min..ax.max {
-        let i = ax.offset[d] as usize;
-        let b = ax.weight[d];
-        out[d] = (256 - b) * row[i] as u16 + b * row[i + 1] as u16;
+    out[..ax.min.min(n)].fill(first);
+    for ((o, &i), &b) in out[ax.min..ax.max]
+        .iter_mut()
+        .zip(&ax.offset[ax.min..ax.max])
+        .zip(&ax.weight[ax.min..ax.max])
+    {
+        let i = i as usize;
+        *o = (256 - b) * row[i] as u16 + b * row[i + 1] as u16;
     }
     for o in out.iter_mut().take(n).skip(ax.max.max(ax.min)) {
         *o = last_src;
