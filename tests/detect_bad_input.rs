@@ -52,6 +52,27 @@ const GOOD_OLD: &str = r#"<?xml version="1.0"?>
 </opencv_storage>
 "#;
 
+/// A small LBP cascade: one stage, one category stump on a 3×3 grid of 2×2 cells.
+const GOOD_LBP: &str = r#"<?xml version="1.0"?>
+<opencv_storage>
+<cascade type_id="opencv-cascade-classifier">
+  <stageType>BOOST</stageType>
+  <featureType>LBP</featureType>
+  <height>8</height>
+  <width>8</width>
+  <featureParams><maxCatCount>256</maxCatCount></featureParams>
+  <stages>
+    <_>
+      <stageThreshold>-0.5</stageThreshold>
+      <weakClassifiers>
+        <_><internalNodes>0 -1 0 -1 0 0 0 0 0 0 -65536</internalNodes><leafValues>-1. 1.</leafValues></_>
+      </weakClassifiers></_>
+  </stages>
+  <features><_><rect>1 1 2 2</rect></_></features>
+</cascade>
+</opencv_storage>
+"#;
+
 fn load(text: &str) -> Result<Cascade, CascadeError> {
     Cascade::from_xml_str(text, "test.xml")
 }
@@ -69,6 +90,8 @@ fn good_cascades_load() {
     );
     assert!(c.has_tilted);
     assert_eq!(c.max_nodes_per_tree, 2);
+    let l = load(GOOD_LBP).unwrap();
+    assert_eq!((l.subset_size, l.subsets.len(), l.lbp_features.len()), (8, 8, 1));
     let o = load(GOOD_OLD).unwrap();
     assert!(o.old_format);
     assert_eq!(o.stages[0].threshold, c.stages[0].threshold);
@@ -146,6 +169,20 @@ fn negative_and_huge_sizes_are_rejected() {
         let e = err(&GOOD.replacen(from, to, 1));
         assert!(e.contains(want), "{from} -> {to}: {e}");
     }
+    for (from, to, want) in [
+        ("<rect>1 1 2 2</rect>", "<rect>1 1 3 2</rect>", "leaves the 8x8 window"),
+        ("<rect>1 1 2 2</rect>", "<rect>1 1 0 2</rect>", "leaves the 8x8 window"),
+        ("<rect>1 1 2 2</rect>", "<rect>1 1 2</rect>", "4 integers"),
+        ("0 0 0 0 -65536", "0 0 0 -65536", "multiple of 11"),
+        (
+            "<maxCatCount>256</maxCatCount>",
+            "<maxCatCount>0</maxCatCount>",
+            "maxCatCount > 0",
+        ),
+    ] {
+        let e = err(&GOOD_LBP.replacen(from, to, 1));
+        assert!(e.contains(want), "LBP {from} -> {to}: {e}");
+    }
     let e = err(&GOOD_OLD.replace("<size>8 8</size>", "<size>8 -8</size>"));
     assert!(e.contains("<size>"), "{e}");
     let e = err(&GOOD_OLD.replace("<parent>-1</parent>", "<parent>3</parent>"));
@@ -217,10 +254,12 @@ proptest! {
     /// A valid cascade with one byte replaced, one span deleted or a number swapped for an
     /// arbitrary token loads or fails cleanly, and a loaded one can run.
     #[test]
-    fn loader_survives_mutations(pos in 0usize..GOOD.len(), len in 0usize..40, byte in 0x20u8..0x7f,
+    fn loader_survives_mutations(base in prop::sample::select(vec![GOOD, GOOD_OLD, GOOD_LBP]),
+                                 pos in 0usize..880, len in 0usize..40, byte in 0x20u8..0x7f,
                                  token in prop::sample::select(vec!["-1", "0", "99999", "-99999", "1e40", "nan", "", "1 2", "x", "2147483648", "-2147483649", "4.5"]),
                                  which in 0usize..3) {
-        let mut s = GOOD.as_bytes().to_vec();
+        let mut s = base.as_bytes().to_vec();
+        let pos = pos % s.len();
         match which {
             0 => s[pos] = byte,
             1 => { let end = (pos + len).min(s.len()); s.drain(pos..end); }

@@ -8,6 +8,8 @@
 //!   -> light_state(&rgb, rect)       traffic-light colour inside a box
 //! ```
 //!
+//! [`DetectStage`] bundles labelled cascades (stop, light, obstacle) for the pipeline.
+//!
 //! The boxes are OpenCV 4's `detectMultiScale` boxes for the same grey image (see
 //! `docs/detect.md` and `tests/parity/detect_parity.py` for the measured agreement).
 
@@ -17,8 +19,10 @@ pub mod group;
 pub mod integral;
 pub mod light;
 pub mod resize;
+pub mod stage;
 
 pub use cascade::{Cascade, CascadeError, FeatureType};
 pub use detector::{DetectError, DetectParams, Detection, Detector};
 pub use group::{group_rectangles, Rect};
 pub use light::{light_state, LightReading, LightState};
+pub use stage::{CascadeSpec, DetectStage, DetectedObject};
