@@ -215,6 +215,18 @@ mod tests {
     }
 
     #[test]
+    fn a_specular_glint_does_not_outshine_the_lit_lamp() {
+        // Green lamp lit at the bottom, a 2×2 white glint on the (dark) red lamp at the top.
+        let mut img = light(2, [40, 255, 120]);
+        for (x, y) in [(30, 22), (31, 22), (30, 23), (31, 23)] {
+            img.put_pixel(x, y, Rgb([255, 255, 255]));
+        }
+        let r = light_state(&img, Rect::new(10, 10, 30, 90));
+        assert_eq!(r.state, LightState::Green);
+        assert!(r.confidence > 0.5, "{}", r.confidence);
+    }
+
+    #[test]
     fn wrong_hue_or_dark_box_lowers_confidence() {
         let rect = Rect::new(10, 10, 30, 90);
         let good = light_state(&light(2, [40, 255, 120]), rect);
