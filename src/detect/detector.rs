@@ -260,6 +260,9 @@ struct Scratch {
     ii: Integrals,
     resizer: Resizer,
     hits: Vec<Rect>,
+    /// Hits per level, in the order this worker scanned its levels (parallel mode).
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+    counts: Vec<usize>,
 }
 
 /// One pyramid level to scan.
@@ -280,6 +283,12 @@ pub struct Detector {
     scratch: Scratch,
     levels: Vec<Level>,
     raw: Vec<Rect>,
+    /// One scratch set per worker thread (parallel mode), kept between calls.
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+    pool: Vec<Scratch>,
+    /// Worker of each level (parallel mode).
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+    assign: Vec<usize>,
 }
 
 impl Detector {
@@ -291,6 +300,8 @@ impl Detector {
             scratch: Scratch::default(),
             levels: Vec::new(),
             raw: Vec::new(),
+            pool: Vec::new(),
+            assign: Vec::new(),
         }
     }
 
@@ -385,19 +396,40 @@ impl Detector {
             rows,
         };
         #[cfg(feature = "parallel")]
-        if params.parallel && self.levels.len() > 1 {
+        if params.parallel && self.levels.len() > 1 && rayon::current_num_threads() > 1 {
             use rayon::prelude::*;
-            let per_level: Vec<Vec<Rect>> = self
-                .levels
-                .par_iter()
-                .map_init(Scratch::default, |s, l| {
-                    s.hits.clear();
+            // Levels go to workers largest first, each to the least loaded worker (by pixel
+            // count), so the workers finish together; each worker keeps its buffers in `pool`.
+            let t = rayon::current_num_threads().min(self.levels.len());
+            if self.pool.len() < t {
+                self.pool.resize_with(t, Scratch::default);
+            }
+            let mut load = [0usize; 64];
+            let t = t.min(load.len());
+            self.assign.clear();
+            for l in &self.levels {
+                let g = (0..t).min_by_key(|&g| load[g]).unwrap_or(0);
+                load[g] += l.width * l.height;
+                self.assign.push(g);
+            }
+            let (levels, assign) = (&self.levels, &self.assign);
+            self.pool[..t].par_iter_mut().enumerate().for_each(|(g, s)| {
+                s.hits.clear();
+                s.counts.clear();
+                for (l, _) in levels.iter().zip(assign).filter(|(_, &a)| a == g) {
+                    let before = s.hits.len();
                     job.run_level(l, s);
-                    s.hits.clone()
-                })
-                .collect();
-            for v in per_level {
-                self.raw.extend(v);
+                    s.counts.push(s.hits.len() - before);
+                }
+            });
+            // Hits in level order, as the sequential scan gives them.
+            let mut next = [(0usize, 0usize); 64]; // per worker: (count index, hit index)
+            for &g in &self.assign {
+                let s = &self.pool[g];
+                let (ci, hi) = next[g];
+                let n = s.counts[ci];
+                self.raw.extend_from_slice(&s.hits[hi..hi + n]);
+                next[g] = (ci + 1, hi + n);
             }
             return Ok(());
         }
