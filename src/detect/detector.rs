@@ -97,7 +97,7 @@ impl HaarOpt {
     fn calc(&self, d: &[i32]) -> f32 {
         let s = |k: usize| {
             let o = &self.ofs[k];
-            at(d, o[0]) - at(d, o[1]) - at(d, o[2]) + at(d, o[3])
+            rect_sum(at(d, o[0]), at(d, o[1]), at(d, o[2]), at(d, o[3]))
         };
         let mut v = self.w[0] * s(0) as f32 + self.w[1] * s(1) as f32;
         if self.three {
@@ -105,6 +105,14 @@ impl HaarOpt {
         }
         v
     }
+}
+
+/// `p0 − p1 − p2 + p3`, the sum of a rectangle from its four integral corners. Computed with
+/// wrapping arithmetic, as OpenCV's `int` arithmetic does in practice: intermediate values of
+/// an image near 8 Mpx can leave i32, the result never does.
+#[inline(always)]
+fn rect_sum(p0: i32, p1: i32, p2: i32, p3: i32) -> i32 {
+    p0.wrapping_sub(p1).wrapping_sub(p2).wrapping_add(p3)
 }
 
 /// `d[i]` without a bounds check in release builds.
@@ -137,7 +145,7 @@ impl LbpOpt {
     #[inline(always)]
     fn calc(&self, d: &[i32]) -> usize {
         let o = &self.ofs;
-        let s = |a: usize, b: usize, c: usize, e: usize| at(d, o[a]) - at(d, o[b]) - at(d, o[c]) + at(d, o[e]);
+        let s = |a: usize, b: usize, c: usize, e: usize| rect_sum(at(d, o[a]), at(d, o[b]), at(d, o[c]), at(d, o[e]));
         let c = s(5, 6, 9, 10);
         // Clockwise from the top-left cell, most significant bit first.
         ((s(0, 1, 4, 5) >= c) as usize) << 7
@@ -540,7 +548,7 @@ impl Job<'_> {
                         // 5. Window normalisation.
                         let n = &k.norm;
                         let d = &data[p..];
-                        let vs = d[n[0] as usize] - d[n[1] as usize] - d[n[2] as usize] + d[n[3] as usize];
+                        let vs = rect_sum(d[n[0] as usize], d[n[1] as usize], d[n[2] as usize], d[n[3] as usize]);
                         let q = &sq[p..];
                         let vq = (q[n[0] as usize] + q[n[3] as usize]).wrapping_sub(q[n[1] as usize] + q[n[2] as usize])
                             as u32;

@@ -122,7 +122,8 @@ impl Integrals {
                 } else {
                     0
                 };
-                t[r + x] = left + right - t[r2 + x] + apex;
+                // Wrapping: `left + right` can exceed i32 on huge images; the result fits.
+                t[r + x] = left.wrapping_add(right).wrapping_sub(t[r2 + x]).wrapping_add(apex);
             }
         }
     }
@@ -193,5 +194,18 @@ mod tests {
         ii.compute(&img, 320, 240, 0, 0, false);
         assert_eq!(ii.sqsum_at(320, 240), 320 * 240 * 255 * 255);
         assert!(ii.sqsum_at(320, 240) > u32::MAX as u64);
+    }
+
+    #[test]
+    fn the_largest_allowed_white_image_does_not_overflow() {
+        // 8 Mpx of 255 is the detector's limit: the sum is just below i32::MAX.
+        let (w, h) = (4096, 2048);
+        let img = vec![255u8; w * h];
+        let mut ii = Integrals::new();
+        ii.compute(&img, w, h, 0, 0, true);
+        assert_eq!(ii.sum_at(w, h) as i64, 255 * (w * h) as i64);
+        // The tilted triangle with apex at the bottom centre covers h rows of widths 1, 3, 5, …
+        let full: i64 = (0..h as i64).map(|r| 2 * r + 1).sum::<i64>() * 255;
+        assert_eq!(ii.tilted_at(w / 2, h) as i64, full);
     }
 }
