@@ -139,7 +139,7 @@ fn stock_cascades_have_the_expected_shape() {
 }
 
 #[test]
-fn every_stock_cascade_loads_in_well_under_a_second() {
+fn every_stock_cascade_loads_in_under_a_second() {
     for dir in [HAAR, LBP] {
         let Ok(entries) = std::fs::read_dir(dir) else {
             eprintln!("skipped: {dir} not installed");
@@ -150,8 +150,10 @@ fn every_stock_cascade_loads_in_well_under_a_second() {
             let c = Cascade::from_file(e.path()).unwrap_or_else(|err| panic!("{err}"));
             let ms = t0.elapsed().as_secs_f64() * 1e3;
             assert!(c.stage_count() > 0);
-            // frontalface_default (930 kB) takes ~15–30 ms in release builds.
-            assert!(ms < 500.0, "{}: {ms:.0} ms", e.path().display());
+            // frontalface_default (930 kB) takes ~15–30 ms and the largest stock file,
+            // frontalface_alt_tree (3.6 MB), ~100 ms in release builds; debug builds are ~10× slower.
+            let limit = if cfg!(debug_assertions) { 10_000.0 } else { 1_000.0 };
+            assert!(ms < limit, "{}: {ms:.0} ms", e.path().display());
         }
     }
 }
