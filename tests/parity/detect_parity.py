@@ -6,7 +6,7 @@ Both run on the same greyscale images with the cascades Debian's opencv-data ins
 
   * real photos from scikit-image's sample data (pip package), some resized to 320x240 and
     640x480, and images this script generates (textured scenes with pasted, scaled, brightened
-    face crops and noise, seeded);
+    face crops and noise, seeded; small face crops from 24x24 up, odd sizes and thin strips);
   * cascades: frontalface_default (stumps), frontalface_alt (stumps) and the same cascade
     converted here to the old `opencv-haar-classifier` format (Debian ships none of the face
     cascades in that format; the file is written to a temp dir and never committed),
@@ -129,6 +129,18 @@ def generated(count):
     return out
 
 
+def tiny():
+    """Small crops around the astronaut's face: sizes at and just above the 24x24 window, odd
+    sizes and thin strips, where the scale list and the level sizes have their edge cases."""
+    import skimage.data as d
+    g = cv2.cvtColor(d.astronaut(), cv2.COLOR_RGB2GRAY)
+    out = []
+    for (w, h) in [(24, 24), (25, 26), (31, 40), (48, 48), (61, 37), (99, 24), (24, 99), (120, 90)]:
+        face = cv2.resize(g[40:240, 140:320], (w, h), interpolation=cv2.INTER_AREA)
+        out.append((f"tiny_{w}x{h}", face))
+    return out
+
+
 def match(ref, ours):
     """Greedy IoU matching; returns (matched pairs, unmatched ref, unmatched ours)."""
     def iou(a, b):
@@ -162,7 +174,7 @@ def main():
                 LBP + "lbpcascade_frontalface_improved.xml"]
     if QUICK:
         cascades = cascades[:5]
-    images = photos() + generated(6 if QUICK else 20)
+    images = photos() + generated(6 if QUICK else 20) + tiny()
     paths = []
     for name, im in images:
         p = os.path.join(tmp, name + ".png")
