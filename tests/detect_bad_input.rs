@@ -235,6 +235,10 @@ fn bad_parameters_are_errors() {
             "{sf}"
         );
     }
+    assert!(matches!(
+        d.detect_gray(&[0u8; 10], 20, 20, &DetectParams::default()),
+        Err(DetectError::BufferTooSmall { len: 10, .. })
+    ));
     let big = GrayImage::new(5000, 5000);
     assert_eq!(
         d.detect(&big, &DetectParams::default()),

@@ -80,6 +80,16 @@ pub enum DetectError {
     /// The image is too large for 32-bit integral images.
     #[error("image {0}x{1} is too large (at most 8 megapixels)")]
     ImageTooLarge(u32, u32),
+    /// The pixel buffer holds fewer than `width * height` bytes.
+    #[error("pixel buffer of {len} bytes is too small for {width}x{height}")]
+    BufferTooSmall {
+        /// Bytes given.
+        len: usize,
+        /// Claimed width.
+        width: usize,
+        /// Claimed height.
+        height: usize,
+    },
 }
 
 /// A feature compiled to offsets from a window's top-left integral element.
@@ -369,7 +379,13 @@ impl Detector {
         if width.saturating_mul(height) > 8 << 20 || width > 1 << 16 || height > 1 << 16 {
             return Err(DetectError::ImageTooLarge(width as u32, height as u32));
         }
-        assert!(img.len() >= width * height, "image buffer smaller than width*height");
+        if img.len() < width * height {
+            return Err(DetectError::BufferTooSmall {
+                len: img.len(),
+                width,
+                height,
+            });
+        }
         let (cw, ch) = (self.cascade.width, self.cascade.height);
         if width < cw as usize || height < ch as usize {
             return Ok(());
