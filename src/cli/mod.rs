@@ -3,3 +3,6 @@
 
 pub mod common;
 pub mod config;
+pub mod replay;
+pub mod synth;
+pub mod timer;

@@ -223,8 +223,8 @@ impl LaneScene {
 /// left curve, a right curve, a stretch where the left line is missing, and noise throughout.
 pub fn sample_sequence() -> Vec<LaneScene> {
     let mut v = Vec::new();
-    for i in 0..12 {
-        let t = i as f64 / 11.0;
+    for i in 0..10 {
+        let t = i as f64 / 9.0;
         v.push(LaneScene {
             offset_m: 0.04 * (t - 0.5),
             heading_rad: 0.03 * (0.5 - t),
@@ -232,25 +232,25 @@ pub fn sample_sequence() -> Vec<LaneScene> {
             ..Default::default()
         });
     }
-    for i in 0..10 {
+    for i in 0..8 {
         v.push(LaneScene {
-            radius_m: 1.6 - 0.05 * i as f64,
+            radius_m: 3.5 - 0.12 * i as f64,
             offset_m: -0.01,
-            heading_rad: 0.02 * i as f64 / 10.0,
+            heading_rad: -0.03,
             seed: 200 + i,
             ..Default::default()
         });
     }
-    for i in 0..10 {
+    for i in 0..8 {
         v.push(LaneScene {
-            radius_m: -1.5 - 0.05 * i as f64,
-            offset_m: 0.015,
-            heading_rad: -0.02,
+            radius_m: -3.5 + 0.12 * i as f64,
+            offset_m: 0.01,
+            heading_rad: 0.03,
             seed: 300 + i,
             ..Default::default()
         });
     }
-    for i in 0..6 {
+    for i in 0..4 {
         v.push(LaneScene {
             left_visible: false,
             offset_m: 0.01 * i as f64 - 0.02,
@@ -258,7 +258,7 @@ pub fn sample_sequence() -> Vec<LaneScene> {
             ..Default::default()
         });
     }
-    for i in 0..4 {
+    for i in 0..2 {
         v.push(LaneScene {
             noise: 12.0,
             offset_m: -0.02,
