@@ -4,5 +4,6 @@
 pub mod common;
 pub mod config;
 pub mod replay;
+pub mod stages;
 pub mod synth;
 pub mod timer;
