@@ -142,6 +142,10 @@ pub struct WarpConfig {
     pub out_width: u32,
     /// Height of the bird's-eye image, pixels.
     pub out_height: u32,
+    /// Interpolate each colour channel and then convert to grey, exactly as OpenCV's
+    /// `warpPerspective` + `cvtColor` (bit-identical), instead of grey first (3× faster, within
+    /// one grey level).
+    pub exact: bool,
 }
 
 impl Default for WarpConfig {
@@ -152,6 +156,7 @@ impl Default for WarpConfig {
             src: [[93.72, 78.96], [225.28, 78.96], [308.75, 150.02], [10.25, 150.02]],
             out_width: 320,
             out_height: 240,
+            exact: false,
         }
     }
 }
