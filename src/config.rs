@@ -57,8 +57,13 @@ pub enum ConfigError {
     #[error("bad override `{0}`: expected key=value, e.g. steering.kp=0.8")]
     BadOverride(String),
     /// One or more values outside their allowed range.
-    #[error("{}", .0.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("\n"))]
-    Invalid(Vec<InvalidValue>),
+    #[error("{}", .errors.iter().map(|e| format!("{origin}: {e}")).collect::<Vec<_>>().join("\n"))]
+    Invalid {
+        /// The file(s) the values came from.
+        origin: String,
+        /// Every bad value.
+        errors: Vec<InvalidValue>,
+    },
 }
 
 /// One value outside its allowed range or inconsistent with another.
@@ -379,7 +384,7 @@ impl Config {
         if c.0.is_empty() {
             Ok(())
         } else {
-            Err(ConfigError::Invalid(c.0))
+            Err(ConfigError::Invalid { origin: "config".into(), errors: c.0 })
         }
     }
 
@@ -428,10 +433,13 @@ impl Config {
         // serde_path_to_error remembers which key was being read when a type is wrong.
         let cfg: Config =
             serde_path_to_error::deserialize(toml::Value::Table(merged)).map_err(|e| ConfigError::Type {
-                origin,
+                origin: origin.clone(),
                 message: format!("`{}`: {}", e.path(), e.inner().message().trim()),
             })?;
-        cfg.validate()?;
+        cfg.validate().map_err(|e| match e {
+            ConfigError::Invalid { errors, .. } => ConfigError::Invalid { origin, errors },
+            other => other,
+        })?;
         Ok(cfg)
     }
 
@@ -606,7 +614,7 @@ mod tests {
         let e = Config::from_toml_str("[steering]\nkp = -3.0\n", "t.toml")
             .unwrap_err()
             .to_string();
-        assert_eq!(e, "steering.kp = -3 is out of range (allowed: 0 ..= 20)");
+        assert_eq!(e, "t.toml: steering.kp = -3 is out of range (allowed: 0 ..= 20)");
     }
 
     #[test]
