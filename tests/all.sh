@@ -42,8 +42,17 @@ stage() {
   local rc=${PIPESTATUS[0]}
   # cargo: "test result: ok. 12 passed; 0 failed"; others: "N passed, N failed"
   local p f
-  p=$(grep -aoE '([0-9]+) passed' "$log" | awk '{s+=$1} END {print s+0}')
-  f=$(grep -aoE '([0-9]+) failed' "$log" | awk '{s+=$1} END {print s+0}')
+  if grep -aq '^test result:' "$log"; then
+    # cargo: add up every test binary's "test result" line
+    p=$(grep -a '^test result:' "$log" | grep -aoE '[0-9]+ passed' | awk '{s+=$1} END {print s+0}')
+    f=$(grep -a '^test result:' "$log" | grep -aoE '[0-9]+ failed' | awk '{s+=$1} END {print s+0}')
+  else
+    # scripts: their closing "N passed, N failed" line
+    local last
+    last=$(grep -aE '[0-9]+ passed, [0-9]+ failed' "$log" | tail -1)
+    p=$(echo "$last" | grep -aoE '[0-9]+ passed' | awk '{print $1+0}'); p=${p:-0}
+    f=$(echo "$last" | grep -aoE '[0-9]+ failed' | awk '{print $1+0}'); f=${f:-0}
+  fi
   if [ "$rc" -ne 0 ] && [ "$f" -eq 0 ]; then f=1; fi
   PASSED=$((PASSED + p)); FAILED=$((FAILED + f))
   [ "$rc" -ne 0 ] && FAILED_STAGES+=("$name")
