@@ -384,7 +384,10 @@ impl Config {
         if c.0.is_empty() {
             Ok(())
         } else {
-            Err(ConfigError::Invalid { origin: "config".into(), errors: c.0 })
+            Err(ConfigError::Invalid {
+                origin: "config".into(),
+                errors: c.0,
+            })
         }
     }
 

@@ -21,6 +21,7 @@ pub mod config;
 pub mod control;
 pub mod lane;
 pub mod pipeline;
+pub mod ranging;
 pub mod sink;
 pub mod source;
 pub mod telemetry;
