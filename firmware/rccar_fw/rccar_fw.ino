@@ -4,9 +4,8 @@
 //
 // - UART0 at 115200 baud, interrupt driven, with 128-byte rings (overruns counted);
 // - Timer1 fast PWM, 50 Hz (ICR1 = 39999, prescaler 8, 0.5 us per tick): D9 = OC1A = steering
-//   servo, D10 = OC1B = ESC. New widths are loaded in the overflow interrupt, i.e. at the start
-//   of a period, so a pulse is never cut short (the hardware double-buffers OCR1x anyway; doing
-//   it here also keeps simavr's pin timing exact);
+//   servo, D10 = OC1B = ESC. In fast PWM the hardware double-buffers OCR1x (loaded at BOTTOM),
+//   so a new width starts with the next period and a pulse is never cut short;
 // - power-up: disarmed, servo centre, ESC neutral; failsafe after failsafe_ms without a valid
 //   DRIVE; the AVR watchdog (120 ms) resets a hung loop;
 // - configuration in EEPROM (address 0, CRC-checked; defaults when blank or corrupt), written
@@ -91,22 +90,13 @@ static void send_frame(uint8_t id, uint8_t seq, const uint8_t *payload, uint8_t 
 }
 
 // ---- Timer1 servo / ESC pulses ---------------------------------------------------------------
-static volatile uint16_t pending_a, pending_b;
-
-ISR(TIMER1_OVF_vect) {
-    OCR1A = pending_a;
-    OCR1B = pending_b;
-}
-
 static void pwm_init(uint16_t servo_us, uint16_t esc_us) {
     TCCR1B = 0;
     TCCR1A = _BV(COM1A1) | _BV(COM1B1) | _BV(WGM11);  // fast PWM, TOP = ICR1, clear on match
     ICR1 = 39999;                                      // 20 ms at 0.5 us per tick
-    pending_a = OCR1A = (uint16_t)(servo_us * 2);
-    pending_b = OCR1B = (uint16_t)(esc_us * 2);
+    OCR1A = (uint16_t)(servo_us * 2);
+    OCR1B = (uint16_t)(esc_us * 2);
     TCNT1 = 0;
-    TIFR1 = _BV(TOV1);
-    TIMSK1 = _BV(TOIE1);
     TCCR1B = _BV(WGM13) | _BV(WGM12) | _BV(CS11);  // prescaler 8
     DDRB |= _BV(PB1) | _BV(PB2);                   // D9, D10 outputs only once the timer runs
 }
@@ -126,9 +116,9 @@ static void apply(uint16_t s_us, uint16_t e_us) {
     servo_us = s_us;
     esc_us = e_us;
     uint8_t sreg = SREG;
-    cli();
-    pending_a = (uint16_t)(s_us * 2);
-    pending_b = (uint16_t)(e_us * 2);
+    cli();  // 16-bit register writes go through the shared TEMP byte
+    OCR1A = (uint16_t)(s_us * 2);
+    OCR1B = (uint16_t)(e_us * 2);
     SREG = sreg;
 }
 

@@ -25,6 +25,7 @@
 #include <unistd.h>
 
 #include "avr_ioport.h"
+#include "avr_timer.h"
 #include "avr_uart.h"
 #include "sim_avr.h"
 #include "sim_elf.h"
@@ -40,27 +41,42 @@ static int sniff;
 
 static double t_us(void) { return (double)avr->cycle * 1e6 / (double)avr->frequency; }
 
-/* ---- pulse widths from pin edges (D9 = PB1 servo, D10 = PB2 ESC) -------------------------- */
+/* ---- pulse widths (D9 = PB1 = OC1A servo, D10 = PB2 = OC1B ESC) ------------------------------
+ * Period starts are the pins' rising edges. The width of each pulse is taken from the compare
+ * register (OCR1x + 1 ticks of 0.5 us, latched at the period start as the hardware's double
+ * buffer does): simavr 1.6 does not move the falling edge when OCR1x changes in fast PWM, so
+ * until the first OCR write has been seen the falling edge is used instead. */
 typedef struct {
     const char *name;
     avr_cycle_count_t rise;
     int high;
     double last_width;
+    long ocr; /* last OCR1x written, -1 before any */
 } pin_watch;
-static pin_watch pins[2] = {{"servo", 0, 0, -1}, {"esc", 0, 0, -1}};
+static pin_watch pins[2] = {{"servo", 0, 0, -1, -1}, {"esc", 0, 0, -1, -1}};
+
+static void report(pin_watch *p, double w, avr_cycle_count_t at) {
+    if (w < 3000.0 && (p->last_width < 0 || w > p->last_width + 0.25 || w < p->last_width - 0.25)) {
+        p->last_width = w;
+        printf("PULSE %s %.2f %.1f\n", p->name, w, (double)at * 1e6 / (double)avr->frequency);
+    }
+}
+
+static void ocr_written(struct avr_irq_t *irq, uint32_t value, void *param) {
+    (void)irq;
+    ((pin_watch *)param)->ocr = (long)value;
+}
 
 static void pin_changed(struct avr_irq_t *irq, uint32_t value, void *param) {
     (void)irq;
     pin_watch *p = (pin_watch *)param;
     int level = value & 1;
+    if (getenv("RCCAR_SIM_EDGES")) printf("EDGE %s %d %.1f\n", p->name, level, t_us());
     if (level && !p->high) {
         p->rise = avr->cycle;
-    } else if (!level && p->high && p->rise) {
-        double w = (double)(avr->cycle - p->rise) * 1e6 / (double)avr->frequency;
-        if (w < 3000.0 && (p->last_width < 0 || w > p->last_width + 0.25 || w < p->last_width - 0.25)) {
-            p->last_width = w;
-            printf("PULSE %s %.2f %.1f\n", p->name, w, (double)p->rise * 1e6 / (double)avr->frequency);
-        }
+        if (p->ocr >= 0) report(p, (double)(p->ocr + 1) * 8e6 / (double)avr->frequency, p->rise);
+    } else if (!level && p->high && p->rise && p->ocr < 0) {
+        report(p, (double)(avr->cycle - p->rise) * 1e6 / (double)avr->frequency, p->rise);
     }
     p->high = level;
 }
@@ -155,6 +171,8 @@ int main(int argc, char **argv) {
     /* 3. watchers */
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), 1), pin_changed, &pins[0]);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), 2), pin_changed, &pins[1]);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_TIMER_GETIRQ('1'), TIMER_IRQ_OUT_PWM0), ocr_written, &pins[0]);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_TIMER_GETIRQ('1'), TIMER_IRQ_OUT_PWM1), ocr_written, &pins[1]);
     rc_parser_init(&sniffer);
     if (sniff) avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT), uart_in, NULL);
 
@@ -173,6 +191,7 @@ int main(int argc, char **argv) {
         if (reset_requested) {
             reset_requested = 0;
             avr_reset(avr);
+            pins[0].ocr = pins[1].ocr = -1;
             printf("RESET %.1f\n", t_us());
         }
         if ((n & 255) == 0) {

@@ -3,3 +3,5 @@
 //! `serial` cargo feature, the transport that talks to a real port or the emulator's pty.
 
 pub mod protocol;
+#[cfg(feature = "serial")]
+pub mod transport;
