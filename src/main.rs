@@ -19,12 +19,16 @@ enum Cmd {
     /// Check and print the configuration (config/car.toml plus overrides).
     #[command(subcommand)]
     Config(cli::config::ConfigCmd),
+    /// Talk to the Arduino: handshake, live telemetry, servo sweep, trim, latency (needs the
+    /// `serial` feature).
+    Link(cli::link::LinkArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Config(c) => cli::config::run(c),
+        Cmd::Link(a) => cli::link::run(a),
     };
     match result {
         Ok(code) => code,
