@@ -385,3 +385,135 @@ fn host_recovers_when_the_port_vanishes_and_reappears() {
     let st = link.stats();
     assert!(st.reconnects >= 1 && st.handshakes >= 2, "{st:?}");
 }
+
+#[test]
+fn watchdog_resets_a_hung_firmware_and_the_host_recovers() {
+    let mut sim = Sim::start("watchdog");
+    let link = connect(&sim);
+    link.arm().expect("arm");
+    assert!(sim.wait_until(
+        Duration::from_secs(2),
+        || link.drive(0, 300),
+        |s| near(s.last_width(false), 1650.0)
+    ));
+    sim.hang();
+    let hung = |s: &Sim| {
+        s.events().iter().find_map(|e| match e {
+            Event::Hang { t_us } => Some(*t_us),
+            _ => None,
+        })
+    };
+    assert!(
+        sim.wait_until(Duration::from_secs(2), || (), |s| hung(s).is_some()),
+        "harness cannot hang this .elf"
+    );
+    let t_hang = hung(&sim).unwrap_or(f64::NAN);
+    // 1. the watchdog (WDTO_120MS: 16384 cycles of the 128 kHz oscillator = 128 ms) resets the
+    //    AVR, which boots neutral
+    assert!(sim.wait_until(
+        Duration::from_secs(2),
+        || (),
+        |s| s
+            .pulses(false)
+            .iter()
+            .any(|&(w, t)| t > t_hang && (w - 1500.0).abs() <= TOL_US)
+    ));
+    let t_neutral = sim
+        .pulses(false)
+        .into_iter()
+        .find(|&(w, t)| t > t_hang && (w - 1500.0).abs() <= TOL_US)
+        .map(|p| p.1)
+        .unwrap_or(f64::NAN);
+    let dt_ms = (t_neutral - t_hang) / 1000.0;
+    println!("watchdog: hung at {t_hang:.0} us, ESC neutral pulse at {t_neutral:.0} us: {dt_ms:.1} ms");
+    assert!(
+        dt_ms <= 128.0 + 20.0 + 10.0,
+        "ESC not neutral {dt_ms:.1} ms after the hang: {:?}",
+        sim.events()
+            .iter()
+            .filter(|e| !matches!(e, Event::Rx { .. }))
+            .collect::<Vec<_>>()
+    );
+    // 2. the host notices, handshakes again, re-arms; the firmware says it was the watchdog
+    let t = link
+        .wait_telemetry(Duration::from_secs(3), |t| t.flags & protocol::TF_WATCHDOG_RESET != 0)
+        .expect("telemetry with WATCHDOG_RESET");
+    assert!(t.uptime_ms < 3000);
+    let ok = sim.wait_until(
+        Duration::from_secs(3),
+        || link.drive(0, -400),
+        |s| near(s.last_width(false), 1300.0),
+    );
+    assert!(
+        ok,
+        "not recovered after the watchdog reset: {:?} {:?}",
+        sim.last_width(false),
+        link.stats()
+    );
+    assert!(link.stats().firmware_resets >= 1);
+}
+
+#[test]
+fn dropping_the_link_disarms_at_once_not_by_failsafe() {
+    let sim = Sim::start("dropguard");
+    let link = connect(&sim);
+    link.arm().expect("arm");
+    assert!(sim.wait_until(
+        Duration::from_secs(2),
+        || link.drive(500, 500),
+        |s| near(s.last_width(false), 1750.0)
+    ));
+    let last_drive = *sim.rx_times(protocol::id::DRIVE).last().expect("DRIVE at the UART");
+    drop(link);
+    assert!(
+        sim.wait_until(
+            Duration::from_secs(1),
+            || (),
+            |s| !s.rx_times(protocol::id::DISARM).is_empty()
+        ),
+        "no DISARM on drop"
+    );
+    let t_disarm = sim.rx_times(protocol::id::DISARM)[0];
+    std::thread::sleep(Duration::from_millis(60));
+    let (w, t) = *sim.pulses(false).last().expect("pulses");
+    assert!((w - 1500.0).abs() <= TOL_US, "ESC {w} µs after drop");
+    assert!(
+        t - t_disarm <= 20_000.0 + 100.0,
+        "neutral {:.1} ms after DISARM",
+        (t - t_disarm) / 1e3
+    );
+    assert!(
+        t_disarm - last_drive < 100_000.0,
+        "DISARM came {:.0} ms after the last DRIVE",
+        (t_disarm - last_drive) / 1e3
+    );
+}
+
+#[test]
+fn ctrl_c_on_rccar_link_disarms() {
+    let sim = Sim::start("ctrlc");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_rccar"))
+        .args(["link", "--port", &sim.tty, "--sweep"])
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("rccar link");
+    // wait for the sweep to move the servo, then Ctrl-C
+    let moving = sim.wait_until(
+        Duration::from_secs(5),
+        || (),
+        |s| s.last_width(true).is_some_and(|w| (w - 1500.5).abs() > 50.0),
+    );
+    assert!(moving, "the sweep never moved the servo");
+    // SAFETY: plain kill(2) on our own child's pid
+    unsafe {
+        libc::kill(child.id() as libc::pid_t, libc::SIGINT);
+    }
+    let code = child.wait().expect("wait").code();
+    assert_eq!(code, Some(130), "exit code after Ctrl-C");
+    assert!(!sim.rx_times(protocol::id::DISARM).is_empty(), "no DISARM after Ctrl-C");
+    assert!(
+        sim.wait_until(Duration::from_millis(500), || (), |s| near(s.last_width(true), 1500.0)),
+        "servo not centred"
+    );
+    assert!(near(sim.last_width(false), 1500.0));
+}

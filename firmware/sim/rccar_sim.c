@@ -4,10 +4,12 @@
  *
  *   PTY <path>                          the pty to open (the host's serial port)
  *   PULSE <servo|esc> <width_us> <t_us> a pulse on D9 / D10 whose width differs from the last
- *                                        one reported on that pin (edge timestamps in cycles)
+ *                                        one reported on that pin (rise time; width from OCR1x)
  *   RX <id> <seq> <t_us>                 (--sniff) a host frame fully delivered to the UART,
  *                                        decoded with the firmware's own protocol.c
  *   RESET <t_us>                         the emulator reset the AVR (stdin "reset")
+ *   HANG <t_us>                          stdin "hang": the CPU is sent into avr-libc's final
+ *                                        `cli; rjmp .` loop, i.e. a hung firmware, for the watchdog
  *
  * Usage: rccar_sim FIRMWARE.elf [--link PATH] [--sniff]. --link makes PATH a symlink to the pty
  * (each test its own path; simavr's fixed /tmp/simavr-uart0 collides between parallel runs).
@@ -35,37 +37,29 @@
 
 static avr_t *avr;
 static uart_pty_t uart;
-static volatile int reset_requested;
+static volatile int reset_requested, hang_requested;
+static uint32_t hang_pc; /* byte address of avr-libc's `_exit: cli; __stop_program: rjmp .-2` */
 static rc_parser sniffer;
 static int sniff;
 
 static double t_us(void) { return (double)avr->cycle * 1e6 / (double)avr->frequency; }
 
 /* ---- pulse widths (D9 = PB1 = OC1A servo, D10 = PB2 = OC1B ESC) ------------------------------
- * Period starts are the pins' rising edges. The width of each pulse is taken from the compare
- * register (OCR1x + 1 ticks of 0.5 us, latched at the period start as the hardware's double
- * buffer does): simavr 1.6 does not move the falling edge when OCR1x changes in fast PWM, so
- * until the first OCR write has been seen the falling edge is used instead. */
+ * A period starts at a pin's rising edge (timer BOTTOM). The width of that pulse is read from
+ * the timer registers at that instant: (OCR1x + 1) ticks of the Timer1 prescaler, which is what
+ * the hardware's double-buffered OCR1x produces. (simavr 1.6 does not move the falling edge when
+ * OCR1x changes in fast PWM, so the edges alone would show stale widths; the registers are right
+ * across resets too.) Only changes are reported, with the rise time. */
+#define R_TCCR1B 0x81
+#define R_OCR1AL 0x88
+#define R_OCR1BL 0x8A
 typedef struct {
     const char *name;
-    avr_cycle_count_t rise;
+    uint16_t ocr_reg;
     int high;
     double last_width;
-    long ocr; /* last OCR1x written, -1 before any */
 } pin_watch;
-static pin_watch pins[2] = {{"servo", 0, 0, -1, -1}, {"esc", 0, 0, -1, -1}};
-
-static void report(pin_watch *p, double w, avr_cycle_count_t at) {
-    if (w < 3000.0 && (p->last_width < 0 || w > p->last_width + 0.25 || w < p->last_width - 0.25)) {
-        p->last_width = w;
-        printf("PULSE %s %.2f %.1f\n", p->name, w, (double)at * 1e6 / (double)avr->frequency);
-    }
-}
-
-static void ocr_written(struct avr_irq_t *irq, uint32_t value, void *param) {
-    (void)irq;
-    ((pin_watch *)param)->ocr = (long)value;
-}
+static pin_watch pins[2] = {{"servo", R_OCR1AL, 0, -1}, {"esc", R_OCR1BL, 0, -1}};
 
 static void pin_changed(struct avr_irq_t *irq, uint32_t value, void *param) {
     (void)irq;
@@ -73,10 +67,14 @@ static void pin_changed(struct avr_irq_t *irq, uint32_t value, void *param) {
     int level = value & 1;
     if (getenv("RCCAR_SIM_EDGES")) printf("EDGE %s %d %.1f\n", p->name, level, t_us());
     if (level && !p->high) {
-        p->rise = avr->cycle;
-        if (p->ocr >= 0) report(p, (double)(p->ocr + 1) * 8e6 / (double)avr->frequency, p->rise);
-    } else if (!level && p->high && p->rise && p->ocr < 0) {
-        report(p, (double)(avr->cycle - p->rise) * 1e6 / (double)avr->frequency, p->rise);
+        static const unsigned prescale[8] = {0, 1, 8, 64, 256, 1024, 0, 0};
+        unsigned div = prescale[avr->data[R_TCCR1B] & 7];
+        unsigned ocr = avr->data[p->ocr_reg] | ((unsigned)avr->data[p->ocr_reg + 1] << 8);
+        double w = (double)(ocr + 1) * div * 1e6 / (double)avr->frequency;
+        if (div && w < 3000.0 && (p->last_width < 0 || w > p->last_width + 0.25 || w < p->last_width - 0.25)) {
+            p->last_width = w;
+            printf("PULSE %s %.2f %.1f\n", p->name, w, t_us());
+        }
     }
     p->high = level;
 }
@@ -96,6 +94,7 @@ static void *stdin_thread(void *arg) {
     char line[64];
     while (fgets(line, sizeof line, stdin)) {
         if (strncmp(line, "reset", 5) == 0) reset_requested = 1;
+        if (strncmp(line, "hang", 4) == 0) hang_requested = 1;
         if (strncmp(line, "quit", 4) == 0) break;
     }
     fflush(stdout);
@@ -152,6 +151,11 @@ int main(int argc, char **argv) {
     avr->sleep = no_sleep;
     avr->log = LOG_ERROR;
     avr_load_firmware(avr, &fw);
+    for (uint32_t a = 0; a + 4 <= fw.flashsize; a += 2)
+        if (fw.flash[a] == 0xF8 && fw.flash[a + 1] == 0x94 && fw.flash[a + 2] == 0xFF && fw.flash[a + 3] == 0xCF) {
+            hang_pc = a;
+            break;
+        }
 
     /* 2. UART0 <-> pty; we hold the slave side open too, so the pty survives the host closing
      *    it (uart_pty misreads the master's EIO when nobody has the slave open) */
@@ -171,8 +175,6 @@ int main(int argc, char **argv) {
     /* 3. watchers */
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), 1), pin_changed, &pins[0]);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), 2), pin_changed, &pins[1]);
-    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_TIMER_GETIRQ('1'), TIMER_IRQ_OUT_PWM0), ocr_written, &pins[0]);
-    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_TIMER_GETIRQ('1'), TIMER_IRQ_OUT_PWM1), ocr_written, &pins[1]);
     rc_parser_init(&sniffer);
     if (sniff) avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT), uart_in, NULL);
 
@@ -191,8 +193,17 @@ int main(int argc, char **argv) {
         if (reset_requested) {
             reset_requested = 0;
             avr_reset(avr);
-            pins[0].ocr = pins[1].ocr = -1;
             printf("RESET %.1f\n", t_us());
+        }
+        if (hang_requested) {
+            /* a firmware bug, as the watchdog sees it: interrupts off, spinning forever */
+            hang_requested = 0;
+            if (hang_pc) {
+                avr->pc = hang_pc;
+                printf("HANG %.1f\n", t_us());
+            } else {
+                printf("HANG unsupported\n");
+            }
         }
         if ((n & 255) == 0) {
             double ahead = (double)(avr->cycle - c0) * 1e6 / avr->frequency - (wall_us() - start);

@@ -19,6 +19,8 @@ pub enum Event {
     Rx { id: u8, seq: u8, t_us: f64 },
     /// Emulator reset at time µs.
     Reset { t_us: f64 },
+    /// The CPU was sent into a `cli; rjmp .` loop at time µs (a hung firmware).
+    Hang { t_us: f64 },
 }
 
 /// Builds the firmware and the harness once per test binary (`make -C firmware all sim`).
@@ -90,6 +92,9 @@ impl Sim {
                     ["RESET", at] => Event::Reset {
                         t_us: at.parse().unwrap_or(f64::NAN),
                     },
+                    ["HANG", at] => Event::Hang {
+                        t_us: at.parse().unwrap_or(f64::NAN),
+                    },
                     _ => continue,
                 };
                 ev.lock().unwrap().push(e);
@@ -154,6 +159,23 @@ impl Sim {
             std::thread::sleep(Duration::from_millis(20));
         }
         pred(self)
+    }
+
+    /// Hangs the firmware (interrupts off, endless loop): only the watchdog can save it.
+    pub fn hang(&mut self) {
+        let _ = writeln!(self.stdin, "hang");
+        let _ = self.stdin.flush();
+    }
+
+    /// Simulated times (µs) at which the UART received host frames with this id.
+    pub fn rx_times(&self, id: u8) -> Vec<f64> {
+        self.events()
+            .into_iter()
+            .filter_map(|e| match e {
+                Event::Rx { id: i, t_us, .. } if i == id => Some(t_us),
+                _ => None,
+            })
+            .collect()
     }
 
     /// Resets the emulated AVR (as a reset button would).
