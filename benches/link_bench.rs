@@ -43,14 +43,13 @@ fn main() {
     println!(
         "sustained: {N} DRIVEs at {rate:.1} Hz: {} written, {} superseded on the host, {accepted} accepted by the \
          firmware, {lost} lost, {} crc / {} framing errors, {} overruns",
-        st.drives_sent,
-        st.drives_superseded,
-        after.crc_errors,
-        after.framing_errors,
-        after.overruns
+        st.drives_sent, st.drives_superseded, after.crc_errors, after.framing_errors, after.overruns
     );
     let ok = st.drives_superseded == 0 && accepted as usize == N && lost == 0;
-    println!("no drops at >= 100 Hz: {}", if ok && rate >= 99.0 { "yes" } else { "NO" });
+    println!(
+        "no drops at >= 100 Hz: {}",
+        if ok && rate >= 99.0 { "yes" } else { "NO" }
+    );
 
     // DRIVE at the UART -> first pulse of the new width (PWM runs at 50 Hz, so at 100 Hz about
     // half the commands are replaced by the next one before a period starts: those are skipped)
@@ -65,7 +64,11 @@ fn main() {
     let pulses: Vec<(f64, f64)> = ev
         .iter()
         .filter_map(|e| match e {
-            Event::Pulse { servo: true, width_us, t_us } => Some((*width_us, *t_us)),
+            Event::Pulse {
+                servo: true,
+                width_us,
+                t_us,
+            } => Some((*width_us, *t_us)),
             _ => None,
         })
         .collect();

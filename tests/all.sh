@@ -58,6 +58,7 @@ stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
 stage firmware make -C firmware all sim
 stage protocol-c make -C firmware test
 stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
+stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
 stage link-hil cargo test --release --features serial --test link_hil
 
 echo

@@ -146,22 +146,24 @@ fn failsafe_goes_neutral_in_time_and_stays_until_arm_and_drive() {
         link.drive(-100, 450);
         std::thread::sleep(Duration::from_millis(20));
     }
-    std::thread::sleep(Duration::from_millis(600));
-    let events = sim.events();
-    let last_drive = events
-        .iter()
-        .filter_map(|e| match e {
-            Event::Rx { id, t_us, .. } if *id == protocol::id::DRIVE => Some(*t_us),
-            _ => None,
-        })
-        .last()
-        .expect("DRIVE seen at the UART");
-    let neutral_at = sim
-        .pulses(false)
-        .into_iter()
-        .find(|&(w, t)| t > last_drive && (w - 1500.0).abs() <= TOL_US)
-        .expect("ESC back to neutral")
-        .1;
+    // (waits are in wall time, every bound is in simulated time: a loaded machine slows the
+    // emulator down, it cannot make this test pass or fail)
+    let last_drive = |s: &Sim| s.rx_times(protocol::id::DRIVE).last().copied().unwrap_or(f64::INFINITY);
+    let neutral_after = |s: &Sim, t0: f64| {
+        s.pulses(false)
+            .into_iter()
+            .find(|&(w, t)| t > t0 && (w - 1500.0).abs() <= TOL_US)
+    };
+    assert!(
+        sim.wait_until(
+            Duration::from_secs(5),
+            || (),
+            |s| neutral_after(s, last_drive(s)).is_some()
+        ),
+        "ESC never went back to neutral"
+    );
+    let last_drive = last_drive(&sim);
+    let neutral_at = neutral_after(&sim, last_drive).map_or(f64::NAN, |p| p.1);
     let dt_ms = (neutral_at - last_drive) / 1000.0;
     println!("failsafe: last DRIVE at {last_drive:.0} us, ESC neutral pulse at {neutral_at:.0} us: {dt_ms:.1} ms");
     assert!(
@@ -474,9 +476,16 @@ fn dropping_the_link_disarms_at_once_not_by_failsafe() {
         "no DISARM on drop"
     );
     let t_disarm = sim.rx_times(protocol::id::DISARM)[0];
-    std::thread::sleep(Duration::from_millis(60));
-    let (w, t) = *sim.pulses(false).last().expect("pulses");
-    assert!((w - 1500.0).abs() <= TOL_US, "ESC {w} µs after drop");
+    let neutral = |s: &Sim| {
+        s.pulses(false)
+            .into_iter()
+            .find(|&(w, t)| t >= t_disarm && (w - 1500.0).abs() <= TOL_US)
+    };
+    assert!(
+        sim.wait_until(Duration::from_secs(2), || (), |s| neutral(s).is_some()),
+        "ESC not neutral after drop"
+    );
+    let t = neutral(&sim).map_or(f64::NAN, |p| p.1);
     assert!(
         t - t_disarm <= 20_000.0 + 100.0,
         "neutral {:.1} ms after DISARM",
