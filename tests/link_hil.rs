@@ -376,8 +376,24 @@ fn host_recovers_when_the_port_vanishes_and_reappears() {
         "link still claims a connection to a vanished port"
     );
     std::thread::sleep(Duration::from_millis(300));
-    // plug back in at the same path: a fresh firmware boot
+    // plug back in at the same path: a fresh firmware boot. The link re-handshakes and re-arms
+    // by itself, but the DRIVEs queued while the port was gone are stale: none may be sent
+    link.drive(0, 900);
+    std::thread::sleep(Duration::from_millis(200)); // older than max_drive_age (100 ms)
     let sim = Sim::start_at(&path);
+    assert!(
+        link.wait_telemetry(Duration::from_secs(5), |t| t.state == State::Armed)
+            .is_some(),
+        "not re-armed after the port came back: {:?}",
+        link.stats()
+    );
+    std::thread::sleep(Duration::from_millis(100));
+    assert!(
+        sim.rx_times(protocol::id::DRIVE).is_empty(),
+        "a stale DRIVE was sent after reconnecting"
+    );
+    assert!(near(sim.last_width(false), 1500.0), "ESC moved without a fresh DRIVE");
+    assert!(link.stats().drives_expired >= 1, "{:?}", link.stats());
     let ok = sim.wait_until(
         Duration::from_secs(5),
         || link.drive(0, 200),
@@ -525,4 +541,51 @@ fn ctrl_c_on_rccar_link_disarms() {
         "servo not centred"
     );
     assert!(near(sim.last_width(false), 1500.0));
+}
+
+#[test]
+fn config_is_stored_in_eeprom_and_survives_a_reset() {
+    let mut sim = Sim::start("eeprom");
+    let link = connect(&sim);
+    let (cfg, from_eeprom) = link.get_config().expect("config");
+    assert!(!from_eeprom, "blank EEPROM must give the defaults");
+    // invalid: refused, nothing changes
+    let bad = LinkConfig {
+        servo_min_us: 1600,
+        ..cfg
+    };
+    assert!(link.set_config(bad, true).is_err());
+    let trimmed = LinkConfig {
+        servo_center_us: 1460,
+        failsafe_ms: 300,
+        ..cfg
+    };
+    link.set_config(trimmed, true).expect("config");
+    assert!(sim.wait_until(Duration::from_secs(1), || (), |s| near(s.last_width(true), 1460.0)));
+    // give the one-byte-per-loop EEPROM writer time, then reset: the trim is still there
+    std::thread::sleep(Duration::from_millis(200));
+    let up_before = link.ping().expect("ping").0.uptime_ms;
+    sim.reset();
+    let ok = sim.wait_until(
+        Duration::from_secs(3),
+        || (),
+        |_| {
+            link.telemetry().is_some_and(|(t, _)| {
+                let want = protocol::TF_CONFIG_FROM_EEPROM | protocol::TF_HANDSHAKE_DONE;
+                t.flags & want == want && t.uptime_ms < up_before
+            })
+        },
+    );
+    assert!(
+        ok,
+        "after the reset the firmware did not load the EEPROM config: {:?}",
+        link.telemetry()
+    );
+    let (c, from_eeprom) = link.get_config().expect("config after reset");
+    assert!(from_eeprom);
+    assert_eq!(c, trimmed);
+    // configuration is refused while armed (it could move the ESC's neutral under a running car)
+    link.arm().expect("arm");
+    let err = link.set_config(cfg, false).expect_err("CONFIG_SET while armed");
+    assert!(err.to_string().contains("BUSY"), "{err}");
 }

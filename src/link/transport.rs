@@ -4,8 +4,9 @@
 //! missing; (2) handshakes (HELLO → HELLO_ACK, protocol version checked); (3) re-arms when the
 //! application had armed; (4) then loops: writes queued requests and the *newest* DRIVE only
 //! (a slot that each [`Link::drive`] overwrites, so a stale command is never queued behind a
-//! newer one, and nothing is ever repeated by the link itself: if the application stops, the
-//! firmware's failsafe stops the car), reads with a short timeout and decodes byte by byte.
+//! newer one, a DRIVE older than `max_drive_age` is dropped rather than sent late, and nothing
+//! is ever repeated by the link itself: if the application stops, the firmware's failsafe stops
+//! the car), reads with a short timeout and decodes byte by byte.
 //! A read or write error, or 500 ms without telemetry, closes the port and goes back to (1); a
 //! firmware reset (uptime going backwards, or telemetry without the handshake flag) goes back
 //! to (2). Dropping the [`Link`] writes DISARM and a neutral DRIVE before the thread ends.
@@ -65,6 +66,9 @@ pub struct LinkOptions {
     pub backoff_max: Duration,
     /// No telemetry for this long → the port is considered dead and reopened.
     pub silence_timeout: Duration,
+    /// A DRIVE not written within this age (e.g. while the port was gone) is discarded, never
+    /// sent late: the application must send a fresh one.
+    pub max_drive_age: Duration,
     /// Optional fault injection (tests).
     pub wire_fault: Option<WireFault>,
 }
@@ -77,6 +81,7 @@ impl Default for LinkOptions {
             backoff_min: Duration::from_millis(50),
             backoff_max: Duration::from_millis(1000),
             silence_timeout: Duration::from_millis(500),
+            max_drive_age: Duration::from_millis(100),
             wire_fault: None,
         }
     }
@@ -97,6 +102,8 @@ pub struct LinkStats {
     pub drives_sent: u64,
     /// DRIVEs overwritten by a newer one before they could be written.
     pub drives_superseded: u64,
+    /// DRIVEs discarded because they were older than `max_drive_age` when the port was ready.
+    pub drives_expired: u64,
     /// The host decoder's counters (firmware → host direction).
     pub rx: DecoderCounters,
     /// Telemetry frames received.
@@ -112,7 +119,7 @@ enum Reply {
 
 #[derive(Default)]
 struct Inner {
-    drive: Option<Message>,
+    drive: Option<(Message, Instant)>,
     requests: VecDeque<(u64, Message)>,
     /// (seq sent, id, ticket) awaiting an answer
     pending: Vec<(u8, u8, u64)>,
@@ -229,7 +236,7 @@ impl Link {
         if g.drive.is_some() {
             g.stats.drives_superseded += 1;
         }
-        g.drive = Some(Message::Drive { steer, throttle });
+        g.drive = Some((Message::Drive { steer, throttle }, Instant::now()));
         drop(g);
         self.shared.cv.notify_all();
     }
@@ -282,7 +289,19 @@ impl Link {
     /// re-arms after the new handshake). The ESC follows from the next DRIVE.
     pub fn arm(&self) -> Result<(), LinkError> {
         self.shared.lock().want_armed = true;
-        self.expect_ok(Message::Arm, "ARM")
+        match self.expect_ok(Message::Arm, "ARM") {
+            // the firmware has just reset and the link is handshaking again: the ARM is
+            // repeated once the handshake is done
+            Err(LinkError::Refused {
+                code: status::NO_HANDSHAKE,
+                ..
+            }) => {
+                std::thread::sleep(Duration::from_millis(50));
+                self.wait_connected(self.reply_timeout * 3)?;
+                self.expect_ok(Message::Arm, "ARM")
+            }
+            r => r,
+        }
     }
 
     /// Disarms: servo centre, ESC neutral, DRIVE ignored.
@@ -558,12 +577,15 @@ fn run(conn: &mut Conn, shared: &Shared, opt: &mut LinkOptions) -> Exit {
                 }
             }
         }
-        if let Some(d) = drive {
-            if let Err(e) = write_msg(conn, shared, opt, &d) {
+        if let Some((d, at)) = drive {
+            if at.elapsed() > opt.max_drive_age {
+                shared.lock().stats.drives_expired += 1;
+            } else if let Err(e) = write_msg(conn, shared, opt, &d) {
                 shared.lock().last_error = format!("write: {e}");
                 return Exit::Reopen;
+            } else {
+                shared.lock().stats.drives_sent += 1;
             }
-            shared.lock().stats.drives_sent += 1;
         }
         // 2. read and dispatch
         let frames = match read_frames(conn) {
