@@ -110,6 +110,7 @@ static uint8_t handshake_done, drive_fresh;
 static uint8_t last_rx_seq, drive_seq, have_rx_seq, tx_seq;
 static uint16_t servo_us, esc_us, failsafe_trips, lost_frames;
 static uint32_t last_drive_ms, last_telemetry_ms;
+static uint32_t host_frames; // host -> firmware frames accepted (TELEMETRY.rx_frames)
 static uint8_t eeprom_image[RC_EEPROM_LEN], eeprom_pos = RC_EEPROM_LEN;
 
 static void apply(uint16_t s_us, uint16_t e_us) {
@@ -150,7 +151,7 @@ static void send_telemetry(uint8_t flags) {
     t.overruns = overruns;
     t.failsafe_trips = failsafe_trips;
     t.lost_frames = lost_frames;
-    t.rx_frames = parser.counters.frames_ok;
+    t.rx_frames = host_frames;
     t.uptime_ms = millis();
     uint8_t p[26];
     send_frame(RC_TELEMETRY, tx_seq++, p, rc_pack_telemetry(p, &t));
@@ -162,6 +163,10 @@ static void send_config(void) {
 }
 
 static void handle(const rc_frame *f, uint32_t now) {
+    // 0. firmware -> host ids coming back (an echoing adapter, a loopback) are ignored without
+    //    an answer, which could otherwise ping-pong forever
+    if (f->id & 0x80) return;
+    host_frames++;
     // 1. sequence accounting: every host frame is either accepted or counted lost; HELLO starts
     //    a new session, so the gap before it is not the wire's fault
     if (f->id != RC_HELLO && have_rx_seq) lost_frames = (uint16_t)(lost_frames + (uint8_t)(f->seq - last_rx_seq - 1));

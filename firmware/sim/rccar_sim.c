@@ -18,6 +18,7 @@
  * so the host sees real-time behaviour. SIGTERM exits with _exit: uart_pty_stop can hang. */
 #define _GNU_SOURCE
 #include <fcntl.h>
+#include <termios.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
@@ -162,7 +163,14 @@ int main(int argc, char **argv) {
     uart_pty_init(avr, &uart);
     uart_pty_connect(&uart, '0');
     int keep = open(uart.pty.slavename, O_RDWR | O_NOCTTY);
-    (void)keep;
+    if (keep >= 0) {
+        /* raw from the start: a fresh pty echoes in cooked mode, which would loop the AVR's
+         * output back into its UART until the host sets its own mode */
+        struct termios tio;
+        tcgetattr(keep, &tio);
+        cfmakeraw(&tio);
+        tcsetattr(keep, TCSANOW, &tio);
+    }
     if (link) {
         unlink(link);
         if (symlink(uart.pty.slavename, link) != 0) {
