@@ -492,9 +492,35 @@ fn write_msg(conn: &mut Conn, shared: &Shared, opt: &mut LinkOptions, msg: &Mess
     if let Some(f) = opt.wire_fault.as_mut() {
         f(&mut bytes);
     }
-    conn.port.write_all(&bytes)?;
+    write_all_patiently(conn.port.as_mut(), &bytes)?;
     shared.lock().stats.tx_frames += 1;
     Ok(seq)
+}
+
+/// Writes all of `bytes`. The port's 1 ms timeout is for reads; a write that times out is
+/// back-pressure (the receiver is slower than us), not a lost port, so it is retried for up to
+/// a second before giving up.
+fn write_all_patiently(port: &mut dyn serialport::SerialPort, bytes: &[u8]) -> std::io::Result<()> {
+    let deadline = Instant::now() + Duration::from_secs(1);
+    let mut off = 0;
+    while off < bytes.len() {
+        match port.write(&bytes[off..]) {
+            Ok(0) => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::WriteZero,
+                    "port accepted no bytes",
+                ))
+            }
+            Ok(n) => off += n,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted | std::io::ErrorKind::WouldBlock
+                ) && Instant::now() < deadline => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
 }
 
 /// Reads what is there (≤ 1 ms wait) into the decoder; Err on a broken port.
