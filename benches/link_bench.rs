@@ -2,6 +2,7 @@
 //! 1. 1,000 DRIVEs at 100 Hz: no drops (every one written, accepted by the firmware, none lost)
 //!    and the latency DRIVE delivered to the UART → new pulse width on D9, in simulated time;
 //! 2. 1,000 PINGs: round trip over the pty (write → TELEMETRY decoded), wall time.
+//!
 //! Prints median and max. Run: `cargo bench --features serial --bench link_bench`.
 
 #[path = "../tests/support/sim.rs"]
