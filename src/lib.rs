@@ -20,6 +20,7 @@ pub mod camera;
 pub mod config;
 pub mod control;
 pub mod lane;
+pub mod link;
 pub mod pipeline;
 pub mod ranging;
 pub mod sink;

@@ -13,6 +13,8 @@ mkdir -p "$LOG_DIR"
 # ---- 1. Debian packages (each stage lists what it needs) -------------------------------
 DEB_PACKAGES=(
   python3-venv python3-pip fonts-dejavu-core   # OpenCV reference scripts, plot fonts
+  gcc-avr avr-libc arduino-core-avr            # firmware (make -C firmware)
+  simavr libsimavr-dev libsimavrparts1 libelf-dev  # hardware-in-the-loop harness
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   missing=()
@@ -62,6 +64,11 @@ stage() {
 stage build cargo build --release --all-targets
 stage cargo-test cargo test --release --workspace
 stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
+stage firmware make -C firmware all sim
+stage protocol-c make -C firmware test
+stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
+stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
+stage link-hil cargo test --release --features serial --test link_hil
 
 echo
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi
