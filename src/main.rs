@@ -19,6 +19,15 @@ enum Cmd {
     /// Check and print the configuration (config/car.toml plus overrides).
     #[command(subcommand)]
     Config(cli::config::ConfigCmd),
+    /// Run the pipeline over a folder of recorded frames; write telemetry and annotated frames.
+    Replay(cli::replay::ReplayArgs),
+    /// Write each lane-pipeline stage of some images (bird's-eye, edges, binary, histogram).
+    Stages(cli::stages::StagesArgs),
+    /// Write synthetic lane frames with known line positions (the project's own test data).
+    Synth(cli::synth::SynthArgs),
+    /// Talk to the Arduino: handshake, live telemetry, servo sweep, trim, latency (needs the
+    /// `serial` feature).
+    Link(cli::link::LinkArgs),
     /// Run OpenCV Haar/LBP cascades on images; print boxes as JSON, write annotated images.
     Detect(cli::detect::DetectArgs),
 }
@@ -27,6 +36,10 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Config(c) => cli::config::run(c),
+        Cmd::Replay(a) => cli::replay::run(a),
+        Cmd::Synth(a) => cli::synth::run(a),
+        Cmd::Stages(a) => cli::stages::run(a),
+        Cmd::Link(a) => cli::link::run(a),
         Cmd::Detect(a) => cli::detect::run(a),
     };
     match result {

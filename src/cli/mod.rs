@@ -4,3 +4,8 @@
 pub mod common;
 pub mod config;
 pub mod detect;
+pub mod link;
+pub mod replay;
+pub mod stages;
+pub mod synth;
+pub mod timer;
