@@ -6,7 +6,8 @@ Both run on the same greyscale images with the cascades Debian's opencv-data ins
 
   * real photos from scikit-image's sample data (pip package), some resized to 320x240 and
     640x480, and images this script generates (textured scenes with pasted, scaled, brightened
-    face crops and noise, seeded; small face crops from 24x24 up, odd sizes and thin strips);
+    face crops and noise, seeded; small face crops from 24x24 up, odd sizes and thin strips),
+    and frames of rccar's own simulated track (`rccar synth`);
   * cascades: frontalface_default (stumps), frontalface_alt (stumps) and the same cascade
     converted here to the old `opencv-haar-classifier` format (Debian ships none of the face
     cascades in that format; the file is written to a temp dir and never committed),
@@ -141,6 +142,22 @@ def tiny():
     return out
 
 
+def lane_frames(tmp, count):
+    """Frames of rccar's own simulated track (`rccar synth`, the lane tests' data), grey."""
+    out_dir = os.path.join(tmp, "synth")
+    run = subprocess.run([BIN, "synth", out_dir], cwd=ROOT, capture_output=True, text=True)
+    if run.returncode != 0:
+        print(f"  (rccar synth failed, using tests/data/lane_sample: {run.stderr.strip()[:200]})")
+        out_dir = os.path.join(ROOT, "tests", "data", "lane_sample")
+    names = sorted(n for n in os.listdir(out_dir) if n.endswith(".png"))
+    step = max(1, len(names) // count)
+    out = []
+    for n in names[::step][:count]:
+        im = cv2.imread(os.path.join(out_dir, n), cv2.IMREAD_COLOR)
+        out.append((f"synth_{n[:-4]}", cv2.cvtColor(im, cv2.COLOR_BGR2GRAY)))
+    return out
+
+
 def match(ref, ours):
     """Greedy IoU matching; returns (matched pairs, unmatched ref, unmatched ours)."""
     def iou(a, b):
@@ -174,7 +191,7 @@ def main():
                 LBP + "lbpcascade_frontalface_improved.xml"]
     if QUICK:
         cascades = cascades[:5]
-    images = photos() + generated(6 if QUICK else 20) + tiny()
+    images = photos() + generated(6 if QUICK else 20) + tiny() + lane_frames(tmp, 3 if QUICK else 10)
     paths = []
     for name, im in images:
         p = os.path.join(tmp, name + ".png")
