@@ -5,7 +5,7 @@
 use anyhow::{Context, Result};
 use clap::Args;
 use image::{Rgb, RgbImage};
-use rccar::detect::{light_state, Cascade, DetectParams, Detector, Rect};
+use rccar::detect::{gray_from_rgb, light_state, Cascade, DetectParams, Detector, Rect};
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -87,7 +87,11 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
         let rgb = img.to_rgb8();
         let gray = match &img {
             image::DynamicImage::ImageLuma8(g) => g.clone(),
-            _ => to_gray(&rgb),
+            _ => {
+                let mut g = image::GrayImage::new(0, 0);
+                gray_from_rgb(&rgb, &mut g);
+                g
+            }
         };
         let mut annotated = rgb.clone();
         let mut boxes = Vec::new();
@@ -124,14 +128,6 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// OpenCV's `cvtColor(RGB2GRAY)` in integers.
-fn to_gray(rgb: &RgbImage) -> image::GrayImage {
-    image::GrayImage::from_fn(rgb.width(), rgb.height(), |x, y| {
-        let p = rgb.get_pixel(x, y).0;
-        image::Luma([((9798 * p[0] as u32 + 19235 * p[1] as u32 + 3735 * p[2] as u32 + 16384) >> 15) as u8])
-    })
 }
 
 /// A 2-pixel outline, clipped to the image.

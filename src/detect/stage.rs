@@ -42,6 +42,20 @@ pub struct DetectedObject {
 #[derive(Debug, Clone)]
 pub struct DetectStage {
     entries: Vec<(CascadeSpec, Detector)>,
+    /// Grey copy of the last colour frame (reused).
+    gray: GrayImage,
+}
+
+/// Grey from RGB as OpenCV's `cvtColor(RGB2GRAY)` computes it for 8-bit images:
+/// `Y = (9798 R + 19235 G + 3735 B + 2^14) >> 15`, into a reused buffer.
+pub fn gray_from_rgb(rgb: &RgbImage, gray: &mut GrayImage) {
+    if gray.dimensions() != rgb.dimensions() {
+        *gray = GrayImage::new(rgb.width(), rgb.height());
+    }
+    for (g, p) in gray.pixels_mut().zip(rgb.pixels()) {
+        let [r, gg, b] = p.0;
+        g.0[0] = ((9798 * r as u32 + 19235 * gg as u32 + 3735 * b as u32 + 16384) >> 15) as u8;
+    }
 }
 
 impl DetectStage {
@@ -51,14 +65,28 @@ impl DetectStage {
             .iter()
             .map(|s| Ok((s.clone(), Detector::new(Cascade::from_file(&s.path)?))))
             .collect::<Result<_, CascadeError>>()?;
-        Ok(Self { entries })
+        Ok(Self {
+            entries,
+            gray: GrayImage::new(0, 0),
+        })
     }
 
     /// A stage from cascades already in memory (tests, the simulator).
     pub fn from_cascades(entries: Vec<(CascadeSpec, Cascade)>) -> Self {
         Self {
             entries: entries.into_iter().map(|(s, c)| (s, Detector::new(c))).collect(),
+            gray: GrayImage::new(0, 0),
         }
+    }
+
+    /// Runs every cascade on a colour frame (the pipeline's input): grey conversion into a
+    /// reused buffer, then [`DetectStage::run`] with the light reading enabled.
+    pub fn run_rgb(&mut self, rgb: &RgbImage) -> Result<Vec<DetectedObject>, DetectError> {
+        let mut gray = std::mem::take(&mut self.gray);
+        gray_from_rgb(rgb, &mut gray);
+        let out = self.run(&gray, Some(rgb));
+        self.gray = gray;
+        out
     }
 
     /// Runs every cascade on the grey frame; `rgb` (the same frame in colour) enables the
@@ -102,6 +130,17 @@ mod tests {
         </cascade></opencv_storage>"#;
 
     #[test]
+    fn grey_conversion_is_opencvs() {
+        // cv2.cvtColor(..., COLOR_RGB2GRAY) on these pixels gives 76, 150, 29, 130.
+        let rgb = RgbImage::from_fn(4, 1, |x, _| {
+            image::Rgb([[255, 0, 0], [0, 255, 0], [0, 0, 255], [12, 200, 77]][x as usize])
+        });
+        let mut g = GrayImage::new(0, 0);
+        gray_from_rgb(&rgb, &mut g);
+        assert_eq!(g.as_raw(), &vec![76, 150, 29, 130]);
+    }
+
+    #[test]
     fn labels_boxes_and_reads_lights_only_where_asked() {
         let c = Cascade::from_xml_str(BRIGHT_BELOW, "t").unwrap();
         let spec = |label: &str, light| CascadeSpec {
@@ -125,6 +164,8 @@ mod tests {
             image::Rgb([v, v, v])
         });
         let found = stage.run(&gray, Some(&rgb)).unwrap();
+        // The colour entry point converts to the same grey (a grey RGB image stays itself).
+        assert_eq!(stage.run_rgb(&rgb).unwrap(), found);
         let edge: Vec<_> = found.iter().filter(|o| o.label == "edge").collect();
         let light: Vec<_> = found.iter().filter(|o| o.label == "light").collect();
         assert!(!edge.is_empty());
