@@ -28,6 +28,8 @@ enum Cmd {
     /// Talk to the Arduino: handshake, live telemetry, servo sweep, trim, latency (needs the
     /// `serial` feature).
     Link(cli::link::LinkArgs),
+    /// Run OpenCV Haar/LBP cascades on images; print boxes as JSON, write annotated images.
+    Detect(cli::detect::DetectArgs),
 }
 
 fn main() -> ExitCode {
@@ -38,6 +40,7 @@ fn main() -> ExitCode {
         Cmd::Synth(a) => cli::synth::run(a),
         Cmd::Stages(a) => cli::stages::run(a),
         Cmd::Link(a) => cli::link::run(a),
+        Cmd::Detect(a) => cli::detect::run(a),
     };
     match result {
         Ok(code) => code,
