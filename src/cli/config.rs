@@ -35,22 +35,12 @@ pub enum ConfigCmd {
 /// Runs a config subcommand.
 pub fn run(cmd: ConfigCmd) -> Result<ExitCode> {
     match cmd {
-        ConfigCmd::Check { file, mut args } => match {
+        ConfigCmd::Check { file, mut args } => {
             if let Some(f) = file {
                 args.config = f;
             }
-            args.load()
-        } {
-            Ok(cfg) => {
-                print!("{}", cfg.to_toml());
-                eprintln!("config OK: {}", args.config.display());
-                Ok(ExitCode::SUCCESS)
-            }
-            Err(e) => {
-                eprintln!("config error:\n{e:#}");
-                Ok(ExitCode::from(1))
-            }
-        },
+            check(&args)
+        }
         ConfigCmd::Roi {
             args,
             near,
@@ -71,6 +61,21 @@ pub fn run(cmd: ConfigCmd) -> Result<ExitCode> {
                 (cfg.warp.out_height as f64 - 1.0) / (far - near)
             );
             Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+/// Loads and prints the configuration, or every error (exit code 1).
+fn check(args: &ConfigArgs) -> Result<ExitCode> {
+    match args.load() {
+        Ok(cfg) => {
+            print!("{}", cfg.to_toml());
+            eprintln!("config OK: {}", args.config.display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Err(e) => {
+            eprintln!("config error:\n{e:#}");
+            Ok(ExitCode::from(1))
         }
     }
 }

@@ -77,7 +77,7 @@ impl Pid {
     /// One step towards `setpoint` from `measurement`, `dt` seconds after the previous one.
     pub fn update_setpoint(&mut self, setpoint: f64, measurement: f64, dt: f64) -> f64 {
         let g = self.gains;
-        if !(dt > 0.0) || !dt.is_finite() || !measurement.is_finite() {
+        if dt.is_nan() || dt <= 0.0 || !dt.is_finite() || !measurement.is_finite() {
             return self.output; // no time has passed, or nothing to go on: hold
         }
         let e = setpoint - measurement;

@@ -46,16 +46,14 @@ pub struct DetectStage {
     gray: GrayImage,
 }
 
-/// Grey from RGB as OpenCV's `cvtColor(RGB2GRAY)` computes it for 8-bit images:
-/// `Y = (9798 R + 19235 G + 3735 B + 2^14) >> 15`, into a reused buffer.
+/// Grey from RGB as OpenCV's `cvtColor(RGB2GRAY)` computes it for 8-bit images
+/// (`Y = (9798 R + 19235 G + 3735 B + 2^14) >> 15`, the same conversion the lane stage uses),
+/// into a buffer reused across frames.
 pub fn gray_from_rgb(rgb: &RgbImage, gray: &mut GrayImage) {
     if gray.dimensions() != rgb.dimensions() {
         *gray = GrayImage::new(rgb.width(), rgb.height());
     }
-    for (g, p) in gray.pixels_mut().zip(rgb.pixels()) {
-        let [r, gg, b] = p.0;
-        g.0[0] = ((9798 * r as u32 + 19235 * gg as u32 + 3735 * b as u32 + 16384) >> 15) as u8;
-    }
+    crate::lane::warp::rgb_to_gray(rgb, gray);
 }
 
 impl DetectStage {
