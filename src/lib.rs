@@ -19,4 +19,5 @@ pub mod camera;
 pub mod config;
 pub mod control;
 pub mod lane;
+pub mod sim;
 pub mod sink;

@@ -1,0 +1,9 @@
+//! The closed-loop simulator: a track ([`track`]), a car ([`vehicle`]), what its camera would
+//! see ([`render`]) and the loop that feeds those frames through the same pipeline the car
+//! runs ([`run`]), scored against ground truth ([`truth`]).
+//!
+//! Units: metres, seconds, radians (degrees only in files). World frame x east, y north,
+//! z up; headings counter-clockwise from +x.
+
+pub mod track;
+pub mod vehicle;
