@@ -5,5 +5,9 @@
 //! Units: metres, seconds, radians (degrees only in files). World frame x east, y north,
 //! z up; headings counter-clockwise from +x.
 
+pub mod glyphs;
+pub mod render;
+pub mod rng;
+pub mod scene;
 pub mod track;
 pub mod vehicle;

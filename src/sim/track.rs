@@ -584,7 +584,11 @@ impl Track {
             ));
         }
         if !(f.margin_m >= 0.2 && f.margin_m <= 50.0) {
-            return Err(bad("floor.margin_m".into(), f.margin_m.to_string(), "must be 0.2..=50 m"));
+            return Err(bad(
+                "floor.margin_m".into(),
+                f.margin_m.to_string(),
+                "must be 0.2..=50 m",
+            ));
         }
         let st = spec.start;
         if !(st.x.is_finite() && st.y.is_finite() && st.heading_deg.is_finite()) {
@@ -595,7 +599,11 @@ impl Track {
             ));
         }
         if spec.segments.is_empty() {
-            return Err(bad("segments".into(), "[]".into(), "a track needs at least one segment"));
+            return Err(bad(
+                "segments".into(),
+                "[]".into(),
+                "a track needs at least one segment",
+            ));
         }
 
         // 3. Chain the pieces.
@@ -725,7 +733,11 @@ impl Track {
         for (i, o) in spec.objects.iter().enumerate() {
             let key = |k: &str| format!("objects[{i}].{k}");
             if !(o.x.is_finite() && o.y.is_finite() && o.yaw_deg.is_finite()) {
-                return Err(bad(key("x/y/yaw_deg"), format!("({}, {}, {})", o.x, o.y, o.yaw_deg), "must be finite"));
+                return Err(bad(
+                    key("x/y/yaw_deg"),
+                    format!("({}, {}, {})", o.x, o.y, o.yaw_deg),
+                    "must be finite",
+                ));
             }
             if o.x < floor_rect[0] || o.x > floor_rect[2] || o.y < floor_rect[1] || o.y > floor_rect[3] {
                 return Err(TrackError::OffMap {
@@ -764,18 +776,26 @@ impl Track {
             };
             let used = if o.kind == ObjectKind::Obstacle { 3 } else { 1 };
             if size[..used].iter().any(|v| !(*v > 0.005 && *v <= 3.0)) {
-                return Err(bad(key("size_m"), format!("{:?}", o.size_m), "sizes must be 0.005..=3 m"));
+                return Err(bad(
+                    key("size_m"),
+                    format!("{:?}", o.size_m),
+                    "sizes must be 0.005..=3 m",
+                ));
             }
             let height = o.height_m.unwrap_or(match o.kind {
-                ObjectKind::StopSign => 0.22,
-                ObjectKind::TrafficLight => 0.24,
+                ObjectKind::StopSign => 0.17,
+                ObjectKind::TrafficLight => 0.16,
                 ObjectKind::Obstacle => size[2] / 2.0,
             });
             if !(height > 0.0 && height <= 3.0) {
                 return Err(bad(key("height_m"), height.to_string(), "must be > 0 and <= 3 m"));
             }
             if o.kind == ObjectKind::TrafficLight && o.cycle_s.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
-                return Err(bad(key("cycle_s"), format!("{:?}", o.cycle_s), "every phase must last > 0 s"));
+                return Err(bad(
+                    key("cycle_s"),
+                    format!("{:?}", o.cycle_s),
+                    "every phase must last > 0 s",
+                ));
             }
             objects.push((
                 Object {
@@ -906,7 +926,10 @@ angle_deg = 180
         assert!((pr.s - 1.0).abs() < 1e-9 && (pr.lateral - 0.1).abs() < 1e-9, "{pr:?}");
         // Inside the first arc, 0.05 m towards its centre: left of travel.
         let pr = t.project([2.0 + 0.95, 1.0]);
-        assert!((pr.lateral - 0.05).abs() < 1e-9 && (pr.s - (2.0 + PI / 2.0)).abs() < 1e-9, "{pr:?}");
+        assert!(
+            (pr.lateral - 0.05).abs() < 1e-9 && (pr.s - (2.0 + PI / 2.0)).abs() < 1e-9,
+            "{pr:?}"
+        );
     }
 
     #[test]

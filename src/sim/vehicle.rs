@@ -133,13 +133,24 @@ mod tests {
             servo_delay_s: delay,
             ..VehicleConfig::default()
         };
-        Vehicle::new(&cfg, Pose { x: 0.0, y: 0.0, yaw: 0.0 }, 0.01)
+        Vehicle::new(
+            &cfg,
+            Pose {
+                x: 0.0,
+                y: 0.0,
+                yaw: 0.0,
+            },
+            0.01,
+        )
     }
 
     #[test]
     fn full_right_lock_drives_the_bicycle_circle() {
         let mut c = car(0.0);
-        let cmd = Command { steer: 1.0, throttle: 0.5 };
+        let cmd = Command {
+            steer: 1.0,
+            throttle: 0.5,
+        };
         for _ in 0..2000 {
             c.step(cmd);
         }
@@ -164,7 +175,10 @@ mod tests {
         let tau = c.config().speed_tau_s;
         let n = (tau / 0.01).round() as usize;
         for _ in 0..n {
-            c.step(Command { steer: 0.0, throttle: 1.0 });
+            c.step(Command {
+                steer: 0.0,
+                throttle: 1.0,
+            });
         }
         // After one time constant: 1 − 1/e of the target.
         assert!((c.speed - (1.0 - (-1f64).exp())).abs() < 1e-9, "{}", c.speed);
@@ -174,7 +188,10 @@ mod tests {
     #[test]
     fn servo_waits_its_dead_time_then_slews_at_its_rate() {
         let mut c = car(0.05);
-        let cmd = Command { steer: -1.0, throttle: 0.0 };
+        let cmd = Command {
+            steer: -1.0,
+            throttle: 0.0,
+        };
         for _ in 0..5 {
             c.step(cmd);
             assert_eq!(c.wheel_angle, 0.0);
