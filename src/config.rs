@@ -191,6 +191,9 @@ pub struct LaneConfig {
     /// Lane width between the two line centres in the bird's-eye image, pixels; used to
     /// estimate a lost line from the other.
     pub lane_width_px: f64,
+    /// Two lines whose distance differs from `lane_width_px` by more than this fraction are
+    /// implausible: the weaker is dropped and estimated from the stronger.
+    pub width_tolerance: f64,
     /// L_F, the car's centre in the bird's-eye image, as an offset from the image centre,
     /// pixels (positive = right). Non-zero when the camera is mounted off-centre.
     pub center_offset_px: f64,
@@ -207,6 +210,7 @@ impl Default for LaneConfig {
             band: 0.4,
             min_peak: 0.3,
             lane_width_px: 191.4,
+            width_tolerance: 0.35,
             center_offset_px: 0.0,
         }
     }
@@ -428,6 +432,7 @@ impl Config {
         c.range("lane.band", l.band, 0.01, 1.0);
         c.range("lane.min_peak", l.min_peak, 0.0, 1.0);
         c.range("lane.lane_width_px", l.lane_width_px, 1.0, w.out_width as f64);
+        c.range("lane.width_tolerance", l.width_tolerance, 0.05, 1.0);
         c.range(
             "lane.center_offset_px",
             l.center_offset_px,

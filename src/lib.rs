@@ -15,9 +15,14 @@
 //! [`control::Command`] and never talks to a sink itself. The library reads no clock: time is
 //! passed in, so every test is deterministic.
 
+pub mod annotate;
 pub mod camera;
 pub mod config;
 pub mod control;
 pub mod lane;
+pub mod pipeline;
 pub mod sim;
 pub mod sink;
+pub mod source;
+pub mod telemetry;
+pub mod timing;

@@ -19,12 +19,21 @@ enum Cmd {
     /// Check and print the configuration (config/car.toml plus overrides).
     #[command(subcommand)]
     Config(cli::config::ConfigCmd),
+    /// Run the pipeline over a folder of recorded frames; write telemetry and annotated frames.
+    Replay(cli::replay::ReplayArgs),
+    /// Write each lane-pipeline stage of some images (bird's-eye, edges, binary, histogram).
+    Stages(cli::stages::StagesArgs),
+    /// Write synthetic lane frames with known line positions (the project's own test data).
+    Synth(cli::synth::SynthArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Config(c) => cli::config::run(c),
+        Cmd::Replay(a) => cli::replay::run(a),
+        Cmd::Synth(a) => cli::synth::run(a),
+        Cmd::Stages(a) => cli::stages::run(a),
     };
     match result {
         Ok(code) => code,

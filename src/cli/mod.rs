@@ -3,3 +3,7 @@
 
 pub mod common;
 pub mod config;
+pub mod replay;
+pub mod stages;
+pub mod synth;
+pub mod timer;

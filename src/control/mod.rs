@@ -1,9 +1,15 @@
 //! Control: turns the lane measurement into a [`Command`] for the car.
 //!
-//! `pid` steers on the lane error, `throttle` picks the speed. Both take the time step as an
-//! argument and never read the clock. Behaviours (stop signs, lights, obstacles) will join
-//! here as a state machine; control never talks to the serial link: a sink delivers commands.
+//! [`pid`] steers on the lane error, [`throttle`] picks the speed, [`Controller`] combines
+//! them. Both take the time step as an argument and never read the clock. Behaviours (stop
+//! signs, lights, obstacles) will join here as a state machine; control never talks to the
+//! serial link: a sink delivers commands.
 
+pub mod pid;
+pub mod throttle;
+
+use crate::config::Config;
+use crate::lane::LaneMeasurement;
 use serde::{Deserialize, Serialize};
 
 /// What the car is told to do, both values in [−1, 1].
@@ -32,5 +38,38 @@ impl Command {
             steer: c(steer),
             throttle: c(throttle),
         }
+    }
+}
+
+/// Lane keeping: PID steering + throttle policy.
+#[derive(Debug, Clone)]
+pub struct Controller {
+    /// Steering PID.
+    pub pid: pid::Pid,
+    /// Throttle policy.
+    pub throttle: throttle::Throttle,
+}
+
+impl Controller {
+    /// The controller configured in `cfg`.
+    pub fn from_config(cfg: &Config) -> Self {
+        Self {
+            pid: pid::Pid::new((&cfg.steering).into()),
+            throttle: throttle::Throttle::new(cfg.throttle.clone()),
+        }
+    }
+
+    /// One control step, `dt` seconds after the previous one. With the lane lost the steering
+    /// is held (the PID's history is forgotten) and the throttle policy decides when to stop.
+    pub fn step(&mut self, lane: &LaneMeasurement, dt: f64) -> Command {
+        let steer = match lane.error {
+            Some(e) => self.pid.update(e, dt),
+            None => {
+                self.pid.reset();
+                self.pid.output()
+            }
+        };
+        let throttle = self.throttle.update(lane.error, dt);
+        Command::clamped(steer, throttle)
     }
 }

@@ -1,0 +1,23 @@
+//! The wall-clock stage timer the binary hands to the library (which reads no clock itself).
+
+use rccar::timing::StageTimer;
+use std::time::Instant;
+
+/// Laps measured with `Instant`.
+pub struct WallTimer(Instant);
+
+impl WallTimer {
+    /// Starts now.
+    pub fn new() -> Self {
+        Self(Instant::now())
+    }
+}
+
+impl StageTimer for WallTimer {
+    fn lap_us(&mut self) -> u32 {
+        let now = Instant::now();
+        let us = now.duration_since(self.0).as_micros().min(u32::MAX as u128) as u32;
+        self.0 = now;
+        us
+    }
+}

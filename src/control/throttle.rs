@@ -1,0 +1,85 @@
+//! Throttle policy: drive at a base speed, slower as the lane error grows (curves), and stop
+//! once the lane has been lost for a while. Time is passed in.
+
+use crate::config::ThrottleConfig;
+
+/// The throttle policy and how long the lane has been lost.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Throttle {
+    cfg: ThrottleConfig,
+    lost_for_s: f64,
+}
+
+impl Throttle {
+    /// A policy from `[throttle]`.
+    pub fn new(cfg: ThrottleConfig) -> Self {
+        Self { cfg, lost_for_s: 0.0 }
+    }
+
+    /// Throttle (0..=base) for this frame. `error` is the normalised lane error, `None` when
+    /// the lane is lost; `dt` seconds since the previous frame.
+    pub fn update(&mut self, error: Option<f64>, dt: f64) -> f64 {
+        let c = &self.cfg;
+        match error {
+            Some(e) if e.is_finite() => {
+                self.lost_for_s = 0.0;
+                (c.base - c.error_slowdown * e.abs()).clamp(c.min.min(c.base), c.base)
+            }
+            _ => {
+                if dt.is_finite() && dt > 0.0 {
+                    self.lost_for_s += dt;
+                }
+                // Creep at the minimum while hoping to see the lane again, then stop.
+                if self.lost_for_s >= c.lost_timeout_s {
+                    0.0
+                } else {
+                    c.min.min(c.base)
+                }
+            }
+        }
+    }
+
+    /// Seconds since the lane was last seen (0 while it is seen).
+    pub fn lost_for_s(&self) -> f64 {
+        self.lost_for_s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg() -> ThrottleConfig {
+        ThrottleConfig {
+            base: 0.5,
+            min: 0.2,
+            error_slowdown: 0.6,
+            lost_timeout_s: 0.5,
+        }
+    }
+
+    #[test]
+    fn slows_down_with_error_but_not_below_min() {
+        let mut t = Throttle::new(cfg());
+        assert!((t.update(Some(0.0), 0.1) - 0.5).abs() < 1e-12);
+        assert!((t.update(Some(-0.25), 0.1) - 0.35).abs() < 1e-12);
+        assert!((t.update(Some(1.0), 0.1) - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn stops_after_the_lane_is_lost_for_the_timeout() {
+        let mut t = Throttle::new(cfg());
+        let dt = 1.0 / 30.0;
+        let mut stopped_at = None;
+        for k in 1..=30 {
+            if t.update(None, dt) == 0.0 && stopped_at.is_none() {
+                stopped_at = Some(k);
+            }
+        }
+        // 0.5 s at 30 fps: the 15th lost frame reaches the timeout (within float rounding).
+        assert!(matches!(stopped_at, Some(15) | Some(16)), "{stopped_at:?}");
+        // Seeing the lane again resets the timer.
+        assert!(t.update(Some(0.0), dt) > 0.0);
+        assert_eq!(t.lost_for_s(), 0.0);
+    }
+}

@@ -1,0 +1,80 @@
+//! Telemetry: one JSON object per frame, one line each (`telemetry.jsonl`).
+//!
+//! The record is the contract between the pipeline and everything that reads its output:
+//! golden tests, plots, the simulator's scoring and (later) the dashboard. Fields are only
+//! ever added; optional ones are left out when empty.
+
+use crate::control::Command;
+use crate::lane::{LaneMeasurement, LaneStatus};
+use crate::timing::StageTimes;
+use serde::{Deserialize, Serialize};
+
+/// One frame's record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameRecord {
+    /// Frame number in the run (counting skipped frames).
+    pub frame: u64,
+    /// Source file name (replay) or a frame label.
+    pub file: String,
+    /// Time of the frame since the start of the run, seconds.
+    pub time_s: f64,
+    /// P_left, bird's-eye column of the left line, pixels.
+    pub p_left: Option<f64>,
+    /// P_right, bird's-eye column of the right line, pixels.
+    pub p_right: Option<f64>,
+    /// P_left was estimated from P_right.
+    pub left_estimated: bool,
+    /// P_right was estimated from P_left.
+    pub right_estimated: bool,
+    /// L_c, lane centre, pixels.
+    pub lane_center: Option<f64>,
+    /// L_F, car centre, pixels.
+    pub frame_center: f64,
+    /// L_c − L_F, pixels.
+    pub error_px: Option<f64>,
+    /// Normalised error, −1..1.
+    pub error: Option<f64>,
+    /// Which lines were seen.
+    pub status: LaneStatus,
+    /// Steering command, −1..1.
+    pub steer: f64,
+    /// Throttle command, −1..1.
+    pub throttle: f64,
+    /// Microseconds per stage.
+    pub stage_us: StageTimes,
+}
+
+impl FrameRecord {
+    /// The record of one processed frame.
+    pub fn new(
+        frame: u64,
+        file: &str,
+        time_s: f64,
+        lane: &LaneMeasurement,
+        cmd: &Command,
+        stage_us: StageTimes,
+    ) -> Self {
+        Self {
+            frame,
+            file: file.to_string(),
+            time_s,
+            p_left: lane.p_left,
+            p_right: lane.p_right,
+            left_estimated: lane.left_estimated,
+            right_estimated: lane.right_estimated,
+            lane_center: lane.lane_center,
+            frame_center: lane.frame_center,
+            error_px: lane.error_px,
+            error: lane.error,
+            status: lane.status,
+            steer: cmd.steer,
+            throttle: cmd.throttle,
+            stage_us,
+        }
+    }
+
+    /// The record as one JSON line (no newline).
+    pub fn to_json_line(&self) -> String {
+        serde_json::to_string(self).expect("records always serialise")
+    }
+}

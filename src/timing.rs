@@ -1,0 +1,49 @@
+//! Per-stage timing without reading the clock in the library.
+//!
+//! The library only calls [`StageTimer::lap_us`] between stages; the binary passes a timer
+//! built on `std::time::Instant`, tests pass [`NoTimer`] so their output is deterministic.
+
+use serde::{Deserialize, Serialize};
+
+/// Something that measures the time since it was last asked, in microseconds.
+pub trait StageTimer {
+    /// Microseconds since the previous lap (or since creation).
+    fn lap_us(&mut self) -> u32;
+}
+
+/// A timer that always answers 0 (deterministic tests, golden files).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct NoTimer;
+
+impl StageTimer for NoTimer {
+    fn lap_us(&mut self) -> u32 {
+        0
+    }
+}
+
+/// Microseconds spent in each stage of one frame.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StageTimes {
+    /// ROI + bird's-eye warp + grey.
+    pub warp_us: u32,
+    /// Blur + Canny.
+    pub canny_us: u32,
+    /// Threshold ∪ edges.
+    pub threshold_us: u32,
+    /// Column histogram.
+    pub histogram_us: u32,
+    /// Peaks, centre, error.
+    pub lines_us: u32,
+    /// PID + throttle.
+    pub control_us: u32,
+    /// Sum of the above.
+    pub total_us: u32,
+}
+
+impl StageTimes {
+    /// Fills `total_us` with the sum of the stages.
+    pub fn sum(&mut self) {
+        self.total_us =
+            self.warp_us + self.canny_us + self.threshold_us + self.histogram_us + self.lines_us + self.control_us;
+    }
+}
