@@ -317,7 +317,7 @@ impl Default for VehicleConfig {
             wheelbase_m: 0.26,
             track_m: 0.16,
             camera_x_m: 0.24,
-            max_steer_deg: 20.0,
+            max_steer_deg: 14.0,
             servo_rate_dps: 300.0,
             servo_delay_s: 0.03,
             max_speed_mps: 1.0,

@@ -25,6 +25,8 @@ enum Cmd {
     Stages(cli::stages::StagesArgs),
     /// Write synthetic lane frames with known line positions (the project's own test data).
     Synth(cli::synth::SynthArgs),
+    /// Drive the simulated car round a track with the pipeline in the loop; report and plot.
+    Sim(cli::sim::SimArgs),
 }
 
 fn main() -> ExitCode {
@@ -34,6 +36,7 @@ fn main() -> ExitCode {
         Cmd::Replay(a) => cli::replay::run(a),
         Cmd::Synth(a) => cli::synth::run(a),
         Cmd::Stages(a) => cli::stages::run(a),
+        Cmd::Sim(a) => cli::sim::run(a),
     };
     match result {
         Ok(code) => code,

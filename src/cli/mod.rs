@@ -4,6 +4,7 @@
 pub mod common;
 pub mod config;
 pub mod replay;
+pub mod sim;
 pub mod stages;
 pub mod synth;
 pub mod timer;

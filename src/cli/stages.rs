@@ -45,10 +45,18 @@ pub fn run(a: StagesArgs) -> Result<ExitCode> {
         let img = if img.dimensions() == (cfg.camera.width, cfg.camera.height) {
             img
         } else {
-            image::imageops::resize(&img, cfg.camera.width, cfg.camera.height, image::imageops::FilterType::Triangle)
+            image::imageops::resize(
+                &img,
+                cfg.camera.width,
+                cfg.camera.height,
+                image::imageops::FilterType::Triangle,
+            )
         };
         let lane = det.measure(&img, &mut NoTimer, &mut StageTimes::default());
-        let stem = path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default();
         let im = det.images();
         im.bird.save(a.out.join(format!("{stem}.bird.png")))?;
         im.edges.save(a.out.join(format!("{stem}.edges.png")))?;
@@ -64,6 +72,14 @@ pub fn run(a: StagesArgs) -> Result<ExitCode> {
             })
         )?;
     }
-    println!("wrote stages of {} image(s) to {}", a.images.len() - failed, a.out.display());
-    Ok(if failed > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS })
+    println!(
+        "wrote stages of {} image(s) to {}",
+        a.images.len() - failed,
+        a.out.display()
+    );
+    Ok(if failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
 }

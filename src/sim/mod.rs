@@ -6,8 +6,11 @@
 //! z up; headings counter-clockwise from +x.
 
 pub mod glyphs;
+pub mod plot;
 pub mod render;
 pub mod rng;
+pub mod run;
 pub mod scene;
 pub mod track;
+pub mod truth;
 pub mod vehicle;

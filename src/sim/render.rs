@@ -17,7 +17,7 @@
 //! object for training crops and ground truth. Units: metres, seconds, pixels.
 
 use super::rng::mix;
-use super::scene::{Prim, Scene};
+use super::scene::{Footprint, Prim, Scene};
 use super::track::{Object, ObjectKind};
 use super::vehicle::Pose;
 use crate::camera::PinholeCamera;
@@ -110,10 +110,14 @@ struct PixelGeom {
     jv: [f32; 2],
     /// Vignetting gain.
     vig: f32,
+    /// |ju| + |jv| (rotation does not change it), metres.
+    size: f32,
+    /// Texture fade for that footprint.
+    fade: f32,
 }
 
 /// Where an object appears in one frame.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ObjectBox {
     /// Index of the object in the track file.
     pub index: usize,
@@ -163,6 +167,9 @@ impl Renderer {
                         let cl = |x: f64| x.clamp(-2.0, 2.0) as f32;
                         px.ju = [cl(b.0 - a.0), cl(b.1 - a.1)];
                         px.jv = [cl(d.0 - c.0), cl(d.1 - c.1)];
+                        let size = (px.ju[0].hypot(px.ju[1]) + px.jv[0].hypot(px.jv[1])) as f64;
+                        px.size = size as f32;
+                        px.fade = Footprint::fade_for(size);
                     }
                     _ => px.g = [f32::NAN, f32::NAN],
                 }
@@ -219,7 +226,13 @@ impl Renderer {
                     let gw = rot(px.g);
                     let p = [lens[0] + gw[0], lens[1] + gw[1]];
                     if scene.on_floor(p) {
-                        scene.floor_color(p, rot(px.ju), rot(px.jv))
+                        let fp = Footprint {
+                            ju: rot(px.ju),
+                            jv: rot(px.jv),
+                            size: px.size,
+                            fade: px.fade,
+                        };
+                        scene.floor_color(p, &fp)
                     } else {
                         scene.wall_color(o, self.world_ray(pose, u as f64, v as f64))
                     }

@@ -27,6 +27,9 @@ const TEX_N: usize = 512;
 const TEX_M: f64 = 0.01;
 /// Side of one cell of the illumination map, metres.
 const ILLUM_M: f64 = 0.1;
+const INV_CELL: f64 = 1.0 / CELL_M;
+const INV_TEX: f64 = 1.0 / TEX_M;
+const INV_ILLUM: f64 = 1.0 / ILLUM_M;
 /// Height of the walls, metres.
 const WALL_H: f64 = 1.2;
 /// Height of the skirting board, metres.
@@ -46,12 +49,13 @@ pub struct Scene {
     illum_h: usize,
     /// For each grid cell: the index of the nearest piece, or `u16::MAX` when no line is near.
     grid: Vec<u16>,
+    /// For each grid cell: how far every point of the cell is from the nearest line's edge,
+    /// metres (0 when a line may touch it); a pixel whose footprint is smaller skips the lines.
+    clear: Vec<f32>,
     grid_w: usize,
     grid_h: usize,
     /// Line centre offsets, half widths, dashed flag and colour.
     lines: Vec<LinePaint>,
-    /// Largest |offset| + half width of any line, metres.
-    reach: f64,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -60,6 +64,26 @@ struct LinePaint {
     half_width: f64,
     dashed: bool,
     rgb: [f32; 3],
+}
+
+/// A pixel's footprint on the floor, world frame.
+#[derive(Debug, Clone, Copy)]
+pub struct Footprint {
+    /// World metres per pixel step in u.
+    pub ju: [f64; 2],
+    /// World metres per pixel step in v.
+    pub jv: [f64; 2],
+    /// |ju| + |jv|, metres: an upper bound of the footprint's width in any direction.
+    pub size: f32,
+    /// How much floor texture survives filtering at this footprint, 0..1.
+    pub fade: f32,
+}
+
+impl Footprint {
+    /// The fade of a texture of `TEX_M` texels under a footprint of `size` metres.
+    pub fn fade_for(size: f64) -> f32 {
+        (3.0 * TEX_M / size.max(1e-9)).min(1.0) as f32
+    }
 }
 
 /// A solid the renderer can intersect.
@@ -203,6 +227,8 @@ impl Scene {
         let grid_h = ((y1 - y0) / CELL_M).ceil() as usize + 1;
         let near = reach + CELL_M + 0.05;
         let mut grid = vec![u16::MAX; grid_w * grid_h];
+        let mut clear = vec![f32::INFINITY; grid_w * grid_h];
+        let half_diag = CELL_M * std::f64::consts::FRAC_1_SQRT_2;
         for j in 0..grid_h {
             for i in 0..grid_w {
                 let p = [x0 + (i as f64 + 0.5) * CELL_M, y0 + (j as f64 + 0.5) * CELL_M];
@@ -216,6 +242,12 @@ impl Scene {
                 }
                 if best.0 <= near * near {
                     grid[j * grid_w + i] = best.1;
+                    let (_, lat, _) = track.pieces[best.1 as usize].project(p);
+                    let c = lines
+                        .iter()
+                        .map(|l| (lat - l.offset).abs() - l.half_width)
+                        .fold(f64::INFINITY, f64::min);
+                    clear[j * grid_w + i] = (c - half_diag - 1e-4).max(0.0) as f32;
                 }
             }
         }
@@ -230,17 +262,17 @@ impl Scene {
             illum_w,
             illum_h,
             grid,
+            clear,
             grid_w,
             grid_h,
             lines,
-            reach,
         }
     }
 
     /// Texture value at a world point, −1..1 (bilinear on the tiled texture).
     #[inline]
     fn texture_at(&self, p: [f64; 2]) -> f32 {
-        let (x, y) = ((p[0] / TEX_M) as f32, (p[1] / TEX_M) as f32);
+        let (x, y) = ((p[0] * INV_TEX) as f32, (p[1] * INV_TEX) as f32);
         let (fx, fy) = (x.floor(), y.floor());
         let (ax, ay) = (x - fx, y - fy);
         let m = TEX_N as i64 - 1;
@@ -256,8 +288,8 @@ impl Scene {
     #[inline]
     pub fn illumination(&self, p: [f64; 2]) -> f32 {
         let [x0, y0, _, _] = self.track.floor_rect;
-        let x = (((p[0] - x0) / ILLUM_M) as f32).clamp(0.0, (self.illum_w - 2) as f32);
-        let y = (((p[1] - y0) / ILLUM_M) as f32).clamp(0.0, (self.illum_h - 2) as f32);
+        let x = (((p[0] - x0) * INV_ILLUM) as f32).clamp(0.0, (self.illum_w - 2) as f32);
+        let y = (((p[1] - y0) * INV_ILLUM) as f32).clamp(0.0, (self.illum_h - 2) as f32);
         let (i, j) = (x as usize, y as usize);
         let (ax, ay) = (x - i as f32, y - j as f32);
         let w = self.illum_w;
@@ -275,26 +307,29 @@ impl Scene {
     }
 
     /// Colour of the floor at world point `p`, seen by a pixel whose footprint on the floor is
-    /// spanned by `ju` and `jv` (world metres per pixel step in u and v).
+    /// `fp` (see [`Footprint`]).
     #[inline]
-    pub fn floor_color(&self, p: [f64; 2], ju: [f64; 2], jv: [f64; 2]) -> [f32; 3] {
+    pub fn floor_color(&self, p: [f64; 2], fp: &Footprint) -> [f32; 3] {
         // 1. Texture, faded out where a pixel covers many texels (no sparkle far away).
-        let fp = (ju[0].abs() + ju[1].abs() + jv[0].abs() + jv[1].abs()) as f32;
-        let fade = (3.0 * TEX_M as f32 / fp).min(1.0);
-        let tex = self.texture_at(p) * fade;
+        let tex = if fp.fade > 0.01 {
+            self.texture_at(p) * fp.fade
+        } else {
+            0.0
+        };
         let b = 1.0 + self.texture_amp * tex;
         let mut c = [self.floor_rgb[0] * b, self.floor_rgb[1] * b, self.floor_rgb[2] * b];
-        // 2. Lines.
+        // 2. Lines, only where the cell is not clear of them by more than the footprint.
         let [x0, y0, _, _] = self.track.floor_rect;
-        let gi = ((p[0] - x0) / CELL_M) as usize;
-        let gj = ((p[1] - y0) / CELL_M) as usize;
-        let k = if gi < self.grid_w && gj < self.grid_h {
-            self.grid[gj * self.grid_w + gi]
+        let gi = ((p[0] - x0) * INV_CELL) as usize;
+        let gj = ((p[1] - y0) * INV_CELL) as usize;
+        let cell = if gi < self.grid_w && gj < self.grid_h {
+            gj * self.grid_w + gi
         } else {
-            u16::MAX
+            usize::MAX
         };
-        if k != u16::MAX {
-            let piece = &self.track.pieces[k as usize];
+        if cell != usize::MAX && self.grid[cell] != u16::MAX && self.clear[cell] <= fp.size {
+            let k = self.grid[cell] as usize;
+            let piece = &self.track.pieces[k];
             let (lat, n, tan) = match *piece {
                 Piece::Line { p0, dir, .. } => {
                     let (dx, dy) = (p[0] - p0[0], p[1] - p0[1]);
@@ -309,28 +344,27 @@ impl Scene {
                     (sweep.signum() * (radius - r), n, [-n[1], n[0]])
                 }
             };
+            let (ju, jv) = (fp.ju, fp.jv);
             let fw = ((n[0] * ju[0] + n[1] * ju[1]).abs() + (n[0] * jv[0] + n[1] * jv[1]).abs()).max(1e-5);
-            if lat.abs() <= self.reach + fw {
-                let tape = 1.0 + 0.25 * self.texture_amp * tex;
-                for line in &self.lines {
-                    let d = lat - line.offset;
-                    if d.abs() > line.half_width + fw {
-                        continue;
-                    }
-                    let mut cov = box_coverage(d, fw, line.half_width);
-                    if line.dashed && cov > 0.0 {
-                        let ft = ((tan[0] * ju[0] + tan[1] * ju[1]).abs() + (tan[0] * jv[0] + tan[1] * jv[1]).abs())
-                            .max(1e-5);
-                        let (t, _, _) = piece.project(p);
-                        let s = self.track.piece_s0[k as usize] + t;
-                        let r = &self.track.spec.road;
-                        cov *= dash_coverage(s, ft, r.dash_m, r.dash_m + r.gap_m);
-                    }
-                    if cov > 0.0 {
-                        let cf = cov as f32;
-                        for ch in 0..3 {
-                            c[ch] += (line.rgb[ch] * tape - c[ch]) * cf;
-                        }
+            let tape = 1.0 + 0.25 * self.texture_amp * tex;
+            for line in &self.lines {
+                let d = lat - line.offset;
+                if d.abs() > line.half_width + fw {
+                    continue;
+                }
+                let mut cov = box_coverage(d, fw, line.half_width);
+                if line.dashed && cov > 0.0 {
+                    let ft =
+                        ((tan[0] * ju[0] + tan[1] * ju[1]).abs() + (tan[0] * jv[0] + tan[1] * jv[1]).abs()).max(1e-5);
+                    let (t, _, _) = piece.project(p);
+                    let s = self.track.piece_s0[k] + t;
+                    let r = &self.track.spec.road;
+                    cov *= dash_coverage(s, ft, r.dash_m, r.dash_m + r.gap_m);
+                }
+                if cov > 0.0 {
+                    let cf = cov as f32;
+                    for ch in 0..3 {
+                        c[ch] += (line.rgb[ch] * tape - c[ch]) * cf;
                     }
                 }
             }

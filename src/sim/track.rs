@@ -952,7 +952,7 @@ angle_deg = 180
         for k in [ObjectKind::StopSign, ObjectKind::TrafficLight, ObjectKind::Obstacle] {
             assert!(kinds.contains(&k), "{k:?} missing");
         }
-        assert!(t.tightest_lane_radius() >= 0.9, "{}", t.tightest_lane_radius());
+        assert!(t.tightest_lane_radius() >= 2.8, "{}", t.tightest_lane_radius());
     }
 
     #[test]

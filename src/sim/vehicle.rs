@@ -156,7 +156,7 @@ mod tests {
         }
         // Settled speed and wheel angle.
         assert!((c.speed - 0.5).abs() < 1e-6, "{}", c.speed);
-        let max = 20f64.to_radians();
+        let max = 14f64.to_radians();
         assert!((c.wheel_angle + max).abs() < 1e-12);
         // The rear axle is on a circle of radius L / tan δ; sample its curvature directly.
         let r = 0.26 / max.tan();
