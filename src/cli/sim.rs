@@ -76,6 +76,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     }
 
     let mut sim = Simulation::new(&cfg, &track)?;
+    // Without recording nobody looks at the frames: render only the rows the pipeline reads
+    // (the same decisions, about twice as fast).
+    sim.set_full_frames(a.record.is_some());
     if let Some(dir) = &a.record {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     }
@@ -246,6 +249,7 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
                 let r = Simulation::with_scene(&cfgs[i], scene.clone())
                     .map_err(|e| e.to_string())
                     .map(|mut sim| {
+                        sim.set_full_frames(false);
                         sim.run(&mut NoTimer, |_, _| Ok::<(), ()>(()))
                             .unwrap_or_else(|_| sim.summary())
                     });

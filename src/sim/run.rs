@@ -29,6 +29,19 @@ use image::RgbImage;
 use serde::Serialize;
 use std::sync::Arc;
 
+/// The camera rows the pipeline's bird's-eye warp reads (its ROI, bilinear taps, and the
+/// blur's reach).
+fn roi_rows(cfg: &Config) -> std::ops::Range<usize> {
+    let ys = cfg.warp.src.iter().map(|p| p[1]);
+    let lo = ys.clone().fold(f64::INFINITY, f64::min);
+    let hi = ys.fold(f64::NEG_INFINITY, f64::max);
+    let blur = (3.0 * cfg.sim.blur_px).ceil() + 2.0;
+    let h = cfg.camera.height as f64;
+    let a = (lo.floor() - blur).clamp(0.0, h) as usize;
+    let b = (hi.ceil() + blur + 1.0).clamp(0.0, h) as usize;
+    a..b
+}
+
 /// Why a simulation cannot start.
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {
@@ -123,6 +136,9 @@ pub struct Simulation {
     pipeline: Pipeline,
     vehicle: Vehicle,
     image: RgbImage,
+    /// Render every row (recording, viewing) or only the rows the pipeline reads.
+    full_frames: bool,
+    roi_rows: std::ops::Range<usize>,
     frame: u64,
     fps: f64,
     last_t: Option<f64>,
@@ -179,6 +195,8 @@ impl Simulation {
             pipeline,
             vehicle,
             image: RgbImage::new(cfg.camera.width, cfg.camera.height),
+            full_frames: true,
+            roi_rows: roi_rows(cfg),
             frame: 0,
             fps: cfg.camera.fps,
             last_t: None,
@@ -197,6 +215,13 @@ impl Simulation {
             still_s: 0.0,
             end: None,
         })
+    }
+
+    /// Renders only the image rows the lane pipeline reads (its ROI, plus the blur's reach)
+    /// when `false`; the pipeline then decides exactly as on full frames, at about half the
+    /// cost. [`Simulation::image`] then shows only those rows. Default `true`.
+    pub fn set_full_frames(&mut self, full: bool) {
+        self.full_frames = full;
     }
 
     /// The frame rendered by the last step.
@@ -228,12 +253,17 @@ impl Simulation {
     pub fn step(&mut self, timer: &mut dyn StageTimer) -> StepOutput {
         let t = self.frame as f64 / self.fps;
         let pose = self.vehicle.pose;
-        // 1. Render.
-        self.renderer.render(&pose, t, self.frame, &mut self.image);
+        // 1. Render (all rows, or only those the pipeline reads: the same decisions, faster).
+        let rows = if self.full_frames {
+            0..self.image.height() as usize
+        } else {
+            self.roi_rows.clone()
+        };
+        self.renderer.render_rows(&pose, t, self.frame, &mut self.image, rows);
         // 2. Truth.
         let v = &self.vehicle;
         let wb = self.cfg.vehicle.wheelbase_m;
-        let mut truth = self.truth.frame(&self.track.track, &pose, v.speed, v.wheel_angle, wb);
+        let mut truth = self.truth.frame(&self.track, &pose, v.speed, v.wheel_angle, wb);
         truth.objects = self.renderer.object_boxes(&pose);
         // 3. Pipeline.
         let dt = self.last_t.map_or(1.0 / self.fps, |lt| t - lt);
@@ -274,7 +304,7 @@ impl Simulation {
         let w = vcfg.track_m / 2.0;
         let out_now = [[0.0, w], [0.0, -w], [vcfg.wheelbase_m, w], [vcfg.wheelbase_m, -w]]
             .iter()
-            .any(|&p| (track.project(pose.to_world(p)).lateral - track.drive_offset).abs() > half);
+            .any(|&p| (self.track.lateral(pose.to_world(p)) - track.drive_offset).abs() > half);
         if out_now {
             self.time_outside += dt;
             if !self.outside {

@@ -876,6 +876,20 @@ impl Track {
         }
     }
 
+    /// Signed lateral offset of `p` from the nearest point of the centre line (left
+    /// positive), without the heading (cheaper than [`Track::project`]).
+    pub fn lateral(&self, p: [f64; 2]) -> f64 {
+        let mut best = (f64::INFINITY, 0.0);
+        for piece in &self.pieces {
+            let (_, lat, out) = piece.project(p);
+            let d = lat * lat + out * out;
+            if d < best.0 {
+                best = (d, lat);
+            }
+        }
+        best.1
+    }
+
     /// The tightest radius of the driven lane's centre, metres.
     pub fn tightest_lane_radius(&self) -> f64 {
         self.pieces

@@ -16,6 +16,7 @@
 //! Units: metres, radians, bird's-eye pixels.
 
 use super::render::{CameraMount, ObjectBox};
+use super::scene::Scene;
 use super::track::{wrap_pi, Track};
 use super::vehicle::Pose;
 use crate::config::Config;
@@ -94,7 +95,7 @@ impl TruthModel {
 
     /// The bird's-eye column of the line at lateral `offset` (from the road's centre line) on
     /// band row `row`, or `None` when the row does not see the floor.
-    fn column(&self, track: &Track, pose: &Pose, offset: f64, row: f64) -> Option<f64> {
+    fn column(&self, scene: &Scene, pose: &Pose, offset: f64, row: f64) -> Option<f64> {
         let cam = &self.mount.camera;
         let a = self.h_inv.apply(0.0, row)?;
         let b = self.h_inv.apply(self.out_w - 1.0, row)?;
@@ -107,7 +108,7 @@ impl TruthModel {
             [g.0, g.1]
         });
         let at = |l: f64| [ga[0] + l * (gb[0] - ga[0]), ga[1] + l * (gb[1] - ga[1])];
-        let f = |l: f64| track.project(at(l)).lateral - offset;
+        let f = |l: f64| scene.lateral(at(l)) - offset;
         // Secant iteration from the row's two ends.
         let (mut l0, mut l1) = (0.0, 1.0);
         let (mut f0, mut f1) = (f(l0), f(l1));
@@ -136,11 +137,11 @@ impl TruthModel {
     }
 
     /// Mean true column of a line over the band, and its column on the bottom row.
-    fn line_columns(&self, track: &Track, pose: &Pose, offset: f64) -> (Option<f64>, Option<f64>) {
+    fn line_columns(&self, scene: &Scene, pose: &Pose, offset: f64) -> (Option<f64>, Option<f64>) {
         let mut sum = 0.0;
         let mut near = None;
         for (i, &r) in self.rows.iter().enumerate() {
-            let c = match self.column(track, pose, offset, r) {
+            let c = match self.column(scene, pose, offset, r) {
                 Some(c) => c,
                 None => return (None, None),
             };
@@ -154,11 +155,12 @@ impl TruthModel {
 
     /// Everything about the lane for the car at `pose` (objects are filled in by the caller,
     /// who has the renderer).
-    pub fn frame(&self, track: &Track, pose: &Pose, speed: f64, wheel_angle: f64, wheelbase: f64) -> FrameTruth {
+    pub fn frame(&self, scene: &Scene, pose: &Pose, speed: f64, wheel_angle: f64, wheelbase: f64) -> FrameTruth {
+        let track = &scene.track;
         let (offset, heading, s) = Self::lane_pose(track, pose, wheelbase);
         let half = track.half_lane();
-        let (l, ln) = self.line_columns(track, pose, track.drive_offset + half);
-        let (r, rn) = self.line_columns(track, pose, track.drive_offset - half);
+        let (l, ln) = self.line_columns(scene, pose, track.drive_offset + half);
+        let (r, rn) = self.line_columns(scene, pose, track.drive_offset - half);
         FrameTruth {
             offset_m: offset,
             heading_error_rad: heading,
@@ -192,9 +194,10 @@ mod tests {
             x_m: cfg.vehicle.camera_x_m,
         };
         let tm = TruthModel::new(&cfg, mount).unwrap();
+        let scene = Scene::new(&track);
         let (p, yaw) = track.lane_pose_at(0.3);
         let pose = Pose { x: p[0], y: p[1], yaw };
-        let t = tm.frame(&track, &pose, 0.0, 0.0, cfg.vehicle.wheelbase_m);
+        let t = tm.frame(&scene, &pose, 0.0, 0.0, cfg.vehicle.wheelbase_m);
         assert!(t.offset_m.abs() < 1e-9 && t.heading_error_rad.abs() < 1e-9);
         let (l, r) = (t.left_col.unwrap(), t.right_col.unwrap());
         assert!((r - l - cfg.lane.lane_width_px).abs() < 0.2, "{l} {r}");
@@ -205,7 +208,7 @@ mod tests {
             y: pose.y + 0.02,
             yaw,
         };
-        let t2 = tm.frame(&track, &pose2, 0.0, 0.0, cfg.vehicle.wheelbase_m);
+        let t2 = tm.frame(&scene, &pose2, 0.0, 0.0, cfg.vehicle.wheelbase_m);
         assert!((t2.offset_m - 0.02).abs() < 1e-9);
         assert!(
             (t2.center_col.unwrap() - 159.5 - 0.02 * 638.0).abs() < 0.2,
