@@ -357,7 +357,7 @@ impl Default for SimConfig {
         Self {
             track: "config/tracks/default.toml".into(),
             laps: 3,
-            max_seconds: 300.0,
+            max_seconds: 600.0,
             substeps: 4,
             seed: 1,
             noise_sigma: 2.0,

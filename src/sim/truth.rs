@@ -8,10 +8,11 @@
 //! `heading_error_rad` means the car points left of the lane direction.
 //!
 //! Bird's-eye columns: each histogram-band row of the bird's-eye image is a straight line on
-//! the floor (a homography maps lines to lines). For sampled rows, that floor line is
+//! the floor (a homography maps lines to lines). For every band row, that floor line is
 //! intersected with the lane line (secant iteration on its lateral offset), and the point is
-//! mapped through the camera and the pipeline's own homography; the row columns are averaged
-//! over the band, as the column histogram sums over it.
+//! mapped through the camera and the pipeline's own homography. From these row columns come
+//! the mean column, the column nearest the car, and the peak of an ideal column histogram of
+//! the painted line (what a perfect detector measures; see `FrameTruth::center_col_hist`).
 //!
 //! Units: metres, radians, bird's-eye pixels.
 
@@ -22,9 +23,6 @@ use super::vehicle::Pose;
 use crate::config::Config;
 use crate::lane::warp::{Homography, WarpError};
 use serde::{Deserialize, Serialize};
-
-/// Rows of the band sampled for the true columns.
-const ROW_SAMPLES: usize = 13;
 
 /// The truth of one frame (the `truth` field of a telemetry record).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -50,6 +48,13 @@ pub struct FrameTruth {
     pub center_col: Option<f64>,
     /// True lane-centre column on the band's bottom row (nearest the car).
     pub center_col_near: Option<f64>,
+    /// Left line: peak of the ideal column histogram of the painted line over the band (what
+    /// a perfect detector reports as P_left; differs from `left_col` on curves).
+    pub left_col_hist: Option<f64>,
+    /// Right line: the same for P_right.
+    pub right_col_hist: Option<f64>,
+    /// The ideal L_c, the mean of the two ideal peaks: scores the pipeline's `lane_center`.
+    pub center_col_hist: Option<f64>,
     /// Every drawn object in view: distance and image box (occlusion not considered).
     pub objects: Vec<ObjectBox>,
 }
@@ -63,7 +68,9 @@ pub struct TruthModel {
     /// Bird's-eye -> camera pixels.
     h_inv: Homography,
     out_w: f64,
-    rows: Vec<f64>,
+    /// The histogram band's rows, top and bottom (inclusive).
+    band_top: u32,
+    band_bottom: u32,
 }
 
 impl TruthModel {
@@ -72,17 +79,14 @@ impl TruthModel {
         let h = Homography::from_quad_to_rect(&cfg.warp.src, cfg.warp.out_width, cfg.warp.out_height)?;
         let h_inv = h.inverse().ok_or(WarpError::Singular)?;
         let out_h = cfg.warp.out_height;
-        let band = crate::lane::lines::band_rows(out_h, cfg.lane.band) as f64;
-        let (top, bottom) = (out_h as f64 - band, out_h as f64 - 1.0);
-        let rows = (0..ROW_SAMPLES)
-            .map(|i| bottom - (bottom - top) * i as f64 / (ROW_SAMPLES - 1) as f64)
-            .collect();
+        let band = crate::lane::lines::band_rows(out_h, cfg.lane.band);
         Ok(TruthModel {
             mount,
             h,
             h_inv,
             out_w: cfg.warp.out_width as f64,
-            rows,
+            band_top: out_h - band,
+            band_bottom: out_h - 1,
         })
     }
 
@@ -93,9 +97,18 @@ impl TruthModel {
         (pr.lateral - track.drive_offset, wrap_pi(pose.yaw - pr.heading), pr.s)
     }
 
-    /// The bird's-eye column of the line at lateral `offset` (from the road's centre line) on
-    /// band row `row`, or `None` when the row does not see the floor.
-    fn column(&self, scene: &Scene, pose: &Pose, offset: f64, row: f64) -> Option<f64> {
+    /// Where the line at lateral `offset` (from the road's centre line) crosses band row
+    /// `row`: (bird's-eye column, world point, bird's-eye pixels per metre along the row).
+    /// `guess` is where along the row to start (0 = left edge, 1 = right edge); the answer's
+    /// position along the row is returned in it. `None` when the row does not see the floor.
+    fn crossing(
+        &self,
+        scene: &Scene,
+        pose: &Pose,
+        offset: f64,
+        row: f64,
+        guess: &mut f64,
+    ) -> Option<(f64, [f64; 2], f64)> {
         let cam = &self.mount.camera;
         let a = self.h_inv.apply(0.0, row)?;
         let b = self.h_inv.apply(self.out_w - 1.0, row)?;
@@ -109,10 +122,10 @@ impl TruthModel {
         });
         let at = |l: f64| [ga[0] + l * (gb[0] - ga[0]), ga[1] + l * (gb[1] - ga[1])];
         let f = |l: f64| scene.lateral(at(l)) - offset;
-        // Secant iteration from the row's two ends.
-        let (mut l0, mut l1) = (0.0, 1.0);
+        // Secant iteration from the guess and a point 5% of the row away.
+        let (mut l0, mut l1) = (*guess, *guess + 0.05);
         let (mut f0, mut f1) = (f(l0), f(l1));
-        for _ in 0..6 {
+        for _ in 0..8 {
             if (f1 - f0).abs() < 1e-12 {
                 break;
             }
@@ -127,30 +140,68 @@ impl TruthModel {
         if f1.abs() > 1e-4 {
             return None;
         }
+        *guess = l1;
         // Back through the camera and the pipeline's homography.
         let p = at(l1);
         let (s, c) = pose.yaw.sin_cos();
         let (dx, dy) = (p[0] - pose.x, p[1] - pose.y);
         let local = [c * dx + s * dy - self.mount.x_m, -s * dx + c * dy, 0.0];
         let (u, v) = cam.project(local)?;
-        self.h.apply(u, v).map(|q| q.0)
+        let col = self.h.apply(u, v)?.0;
+        let len = (gb[0] - ga[0]).hypot(gb[1] - ga[1]);
+        Some((col, p, (self.out_w - 1.0) / len.max(1e-9)))
     }
 
-    /// Mean true column of a line over the band, and its column on the bottom row.
-    fn line_columns(&self, scene: &Scene, pose: &Pose, offset: f64) -> (Option<f64>, Option<f64>) {
-        let mut sum = 0.0;
-        let mut near = None;
-        for (i, &r) in self.rows.iter().enumerate() {
-            let c = match self.column(scene, pose, offset, r) {
-                Some(c) => c,
-                None => return (None, None),
+    /// One line over the band: (mean column over all band rows, column on the bottom row,
+    /// peak of an ideal column histogram of the painted line).
+    ///
+    /// The ideal histogram counts, row by row, the bird's-eye pixels whose centres lie on
+    /// the paint (dashes included), and its peak is found by the pipeline's own
+    /// [`crate::lane::lines::peak`]. On a curve a line crosses the band slanted, and the
+    /// histogram peak lies nearer the car than the mean column; this is the number a perfect
+    /// detector would report, so it scores the detector and not the definition.
+    fn line_truth(
+        &self,
+        scene: &Scene,
+        pose: &Pose,
+        offset: f64,
+        dashed: bool,
+    ) -> (Option<f64>, Option<f64>, Option<f64>) {
+        let track = &scene.track;
+        let road = &track.spec.road;
+        let hw = road.line_width_m / 2.0;
+        let w = self.out_w as usize;
+        let mut hist = vec![0u16; w];
+        let (mut sum, mut n, mut near, mut all) = (0.0, 0usize, None, true);
+        let mut guess = 0.5;
+        for r in self.band_top..=self.band_bottom {
+            let Some((col, p, ppm)) = self.crossing(scene, pose, offset, r as f64, &mut guess) else {
+                all = false;
+                continue;
             };
-            if i == 0 {
-                near = Some(c);
+            if r == self.band_bottom {
+                near = Some(col);
             }
-            sum += c;
+            sum += col;
+            n += 1;
+            if dashed {
+                let s = track.project(p).s;
+                let period = road.dash_m + road.gap_m;
+                if s.rem_euclid(period) >= road.dash_m {
+                    continue;
+                }
+            }
+            let (a, b) = ((col - hw * ppm).ceil(), (col + hw * ppm).floor());
+            let (a, b) = (a.max(0.0) as usize, b.min(w as f64 - 1.0));
+            if b >= 0.0 {
+                for c in hist.iter_mut().take(b as usize + 1).skip(a) {
+                    *c += 1;
+                }
+            }
         }
-        (Some(sum / self.rows.len() as f64), near)
+        let mean = (all && n > 0).then(|| sum / n as f64);
+        let peak = crate::lane::lines::peak(&hist, 0..w, 1);
+        (mean, near, peak)
     }
 
     /// Everything about the lane for the car at `pose` (objects are filled in by the caller,
@@ -159,8 +210,11 @@ impl TruthModel {
         let track = &scene.track;
         let (offset, heading, s) = Self::lane_pose(track, pose, wheelbase);
         let half = track.half_lane();
-        let (l, ln) = self.line_columns(scene, pose, track.drive_offset + half);
-        let (r, rn) = self.line_columns(scene, pose, track.drive_offset - half);
+        // The lane's lines; the one at the road's centre line (offset 0) may be dashed.
+        let dashed = |o: f64| track.lines.iter().any(|&(lo, d)| d && (lo - o).abs() < 1e-9);
+        let (lo, ro) = (track.drive_offset + half, track.drive_offset - half);
+        let (l, ln, lh) = self.line_truth(scene, pose, lo, dashed(lo));
+        let (r, rn, rh) = self.line_truth(scene, pose, ro, dashed(ro));
         FrameTruth {
             offset_m: offset,
             heading_error_rad: heading,
@@ -172,6 +226,9 @@ impl TruthModel {
             right_col: r,
             center_col: l.zip(r).map(|(a, b)| (a + b) / 2.0),
             center_col_near: ln.zip(rn).map(|(a, b)| (a + b) / 2.0),
+            left_col_hist: lh,
+            right_col_hist: rh,
+            center_col_hist: lh.zip(rh).map(|(a, b)| (a + b) / 2.0),
             objects: Vec::new(),
         }
     }
