@@ -152,8 +152,8 @@ pub fn path_plot(s: &Series, scene: &Scene) -> Result<RgbImage, PlotError> {
     RgbImage::from_raw(w, h, buf).ok_or_else(|| PlotError("buffer size".into()))
 }
 
-/// RMS and max cross-track error against the swept value; runs that did not finish their
-/// laps are marked with a cross.
+/// RMS and max cross-track error against the swept value; runs that left the lane or
+/// stalled are marked with a cross.
 pub fn sweep_plot(key: &str, rows: &[(f64, Summary)]) -> Result<RgbImage, PlotError> {
     let (w, h) = (900u32, 500u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
@@ -182,7 +182,13 @@ pub fn sweep_plot(key: &str, rows: &[(f64, Summary)]) -> Result<RgbImage, PlotEr
             .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED));
         c.draw_series(
             rows.iter()
-                .filter(|r| r.1.lane_departures > 0 || r.1.end != super::run::EndReason::LapsDone)
+                .filter(|r| {
+                    r.1.lane_departures > 0
+                        || matches!(
+                            r.1.end,
+                            super::run::EndReason::LeftTheRoad | super::run::EndReason::Stalled
+                        )
+                })
                 .map(|r| Cross::new((r.0, r.1.xte_rms_m), 6, BLACK.stroke_width(2))),
         )
         .map_err(err)?;

@@ -92,6 +92,8 @@ pub struct Summary {
     pub steer_reversals_per_s: f64,
     /// Frames where the pipeline lost the lane.
     pub lane_lost_frames: u64,
+    /// Where each departure began, metres along the track's centre line.
+    pub departures_at_m: Vec<f64>,
     /// Lane width, metres (to read the RMS against).
     pub lane_width_m: f64,
     /// Why the run ended.
@@ -149,6 +151,7 @@ pub struct Simulation {
     xte_max: f64,
     outside: bool,
     departures: u32,
+    departures_at: Vec<f64>,
     time_outside: f64,
     lap_times: Vec<f64>,
     last_lap_t: f64,
@@ -206,6 +209,7 @@ impl Simulation {
             xte_max: 0.0,
             outside: false,
             departures: 0,
+            departures_at: Vec::new(),
             time_outside: 0.0,
             lap_times: Vec::new(),
             last_lap_t: 0.0,
@@ -215,6 +219,22 @@ impl Simulation {
             still_s: 0.0,
             end: None,
         })
+    }
+
+    /// Puts the car, at rest, on the lane centre at `s` metres along the track (before the
+    /// first step; laps are then counted from there).
+    pub fn place_at(&mut self, s: f64) {
+        let track = &self.track.track;
+        let (p, yaw) = track.lane_pose_at(s);
+        let half = self.cfg.vehicle.wheelbase_m / 2.0;
+        let pose = Pose {
+            x: p[0] - half * yaw.cos(),
+            y: p[1] - half * yaw.sin(),
+            yaw,
+        };
+        let dt = 1.0 / (self.cfg.camera.fps * self.cfg.sim.substeps as f64);
+        self.vehicle = Vehicle::new(&self.cfg.vehicle, pose, dt);
+        self.last_s = TruthModel::lane_pose(track, &pose, self.cfg.vehicle.wheelbase_m).2;
     }
 
     /// Renders only the image rows the lane pipeline reads (its ROI, plus the blur's reach)
@@ -309,6 +329,7 @@ impl Simulation {
             self.time_outside += dt;
             if !self.outside {
                 self.departures += 1;
+                self.departures_at.push(truth.s_m);
             }
         }
         self.outside = out_now;
@@ -383,6 +404,7 @@ impl Simulation {
             xte_rms_m: (self.sq_sum / n).sqrt(),
             xte_max_m: self.xte_max,
             lane_departures: self.departures,
+            departures_at_m: self.departures_at.clone(),
             time_outside_s: self.time_outside,
             steer_reversals_per_s: self.reversals as f64 / seconds.max(1e-9),
             lane_lost_frames: self.lost,
