@@ -25,6 +25,9 @@ enum Cmd {
     Stages(cli::stages::StagesArgs),
     /// Write synthetic lane frames with known line positions (the project's own test data).
     Synth(cli::synth::SynthArgs),
+    /// Talk to the Arduino: handshake, live telemetry, servo sweep, trim, latency (needs the
+    /// `serial` feature).
+    Link(cli::link::LinkArgs),
     /// Drive the simulated car round a track with the pipeline in the loop; report and plot.
     Sim(cli::sim::SimArgs),
 }
@@ -36,6 +39,7 @@ fn main() -> ExitCode {
         Cmd::Replay(a) => cli::replay::run(a),
         Cmd::Synth(a) => cli::synth::run(a),
         Cmd::Stages(a) => cli::stages::run(a),
+        Cmd::Link(a) => cli::link::run(a),
         Cmd::Sim(a) => cli::sim::run(a),
     };
     match result {

@@ -13,6 +13,8 @@ mkdir -p "$LOG_DIR"
 # ---- 1. Debian packages (each stage lists what it needs) -------------------------------
 DEB_PACKAGES=(
   python3-venv python3-pip fonts-dejavu-core   # OpenCV reference scripts, plot fonts
+  gcc-avr avr-libc arduino-core-avr            # firmware (make -C firmware)
+  simavr libsimavr-dev libsimavrparts1 libelf-dev  # hardware-in-the-loop harness
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   missing=()
@@ -42,8 +44,17 @@ stage() {
   local rc=${PIPESTATUS[0]}
   # cargo: "test result: ok. 12 passed; 0 failed"; others: "N passed, N failed"
   local p f
-  p=$(grep -aoE '([0-9]+) passed' "$log" | awk '{s+=$1} END {print s+0}')
-  f=$(grep -aoE '([0-9]+) failed' "$log" | awk '{s+=$1} END {print s+0}')
+  if grep -aq '^test result:' "$log"; then
+    # cargo: add up every test binary's "test result" line
+    p=$(grep -a '^test result:' "$log" | grep -aoE '[0-9]+ passed' | awk '{s+=$1} END {print s+0}')
+    f=$(grep -a '^test result:' "$log" | grep -aoE '[0-9]+ failed' | awk '{s+=$1} END {print s+0}')
+  else
+    # scripts: their closing "N passed, N failed" line
+    local last
+    last=$(grep -aE '[0-9]+ passed, [0-9]+ failed' "$log" | tail -1)
+    p=$(echo "$last" | grep -aoE '[0-9]+ passed' | awk '{print $1+0}'); p=${p:-0}
+    f=$(echo "$last" | grep -aoE '[0-9]+ failed' | awk '{print $1+0}'); f=${f:-0}
+  fi
   if [ "$rc" -ne 0 ] && [ "$f" -eq 0 ]; then f=1; fi
   PASSED=$((PASSED + p)); FAILED=$((FAILED + f))
   [ "$rc" -ne 0 ] && FAILED_STAGES+=("$name")
@@ -53,6 +64,11 @@ stage() {
 stage build cargo build --release --all-targets
 stage cargo-test cargo test --release --workspace
 stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
+stage firmware make -C firmware all sim
+stage protocol-c make -C firmware test
+stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
+stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
+stage link-hil cargo test --release --features serial --test link_hil
 
 echo
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi

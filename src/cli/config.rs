@@ -11,6 +11,8 @@ use std::process::ExitCode;
 pub enum ConfigCmd {
     /// Load, merge and validate the configuration; print it resolved, or every error.
     Check {
+        /// The file to check (default: --config, i.e. config/car.toml).
+        file: Option<std::path::PathBuf>,
         #[command(flatten)]
         args: ConfigArgs,
     },
@@ -33,7 +35,12 @@ pub enum ConfigCmd {
 /// Runs a config subcommand.
 pub fn run(cmd: ConfigCmd) -> Result<ExitCode> {
     match cmd {
-        ConfigCmd::Check { args } => match args.load() {
+        ConfigCmd::Check { file, mut args } => match {
+            if let Some(f) = file {
+                args.config = f;
+            }
+            args.load()
+        } {
             Ok(cfg) => {
                 print!("{}", cfg.to_toml());
                 eprintln!("config OK: {}", args.config.display());

@@ -87,6 +87,9 @@ fn reflect101(i: isize, n: isize) -> usize {
 }
 
 /// Step 1: 5×5 Gaussian blur of `src` into the interior of `s.padded`.
+///
+/// Both passes are written over shifted sub-slices zipped together, so the compiler turns them
+/// into SIMD code; only the two columns at each end take the reflected slow path.
 fn blur5_into_padded(src: &GrayImage, s: &mut CannyScratch) {
     let (w, h) = (s.w, s.h);
     let px: &[u8] = src.as_raw();
@@ -95,13 +98,19 @@ fn blur5_into_padded(src: &GrayImage, s: &mut CannyScratch) {
         let row = &px[y * w..(y + 1) * w];
         let out = &mut s.hblur[y * w..(y + 1) * w];
         if w >= 5 {
-            for x in 2..w - 2 {
-                let r = &row[x - 2..x + 3];
-                out[x] = r[0] as u16 + 4 * r[1] as u16 + 6 * r[2] as u16 + 4 * r[3] as u16 + r[4] as u16;
+            let n = w - 4;
+            let (a, b, c, d, e) = (
+                &row[0..n],
+                &row[1..n + 1],
+                &row[2..n + 2],
+                &row[3..n + 3],
+                &row[4..n + 4],
+            );
+            for (o, ((((a, b), c), d), e)) in out[2..w - 2].iter_mut().zip(a.iter().zip(b).zip(c).zip(d).zip(e)) {
+                *o = *a as u16 + 4 * *b as u16 + 6 * *c as u16 + 4 * *d as u16 + *e as u16;
             }
         }
-        let edge_cols = (0..w.min(2)).chain(w.saturating_sub(2).max(2.min(w))..w);
-        for x in edge_cols {
+        for x in (0..w.min(2)).chain(w.saturating_sub(2).max(2.min(w))..w) {
             let g = |d: isize| row[reflect101(x as isize + d, w as isize)] as u16;
             out[x] = g(-2) + 4 * g(-1) + 6 * g(0) + 4 * g(1) + g(2);
         }
@@ -109,18 +118,15 @@ fn blur5_into_padded(src: &GrayImage, s: &mut CannyScratch) {
     // Vertical pass into the padded buffer, rounding (sum + 128) / 256.
     let pw = w + 2;
     for y in 0..h {
-        let rows: [&[u16]; 5] = std::array::from_fn(|k| {
-            let yy = reflect101(y as isize + k as isize - 2, h as isize);
+        let r = |k: isize| {
+            let yy = reflect101(y as isize + k, h as isize);
             &s.hblur[yy * w..(yy + 1) * w]
-        });
+        };
+        let (a, b, c, d, e) = (r(-2), r(-1), r(0), r(1), r(2));
         let out = &mut s.padded[(y + 1) * pw + 1..(y + 1) * pw + 1 + w];
-        for x in 0..w {
-            let v = rows[0][x] as u32
-                + 4 * rows[1][x] as u32
-                + 6 * rows[2][x] as u32
-                + 4 * rows[3][x] as u32
-                + rows[4][x] as u32;
-            out[x] = ((v + 128) >> 8) as u8;
+        for (o, ((((a, b), c), d), e)) in out.iter_mut().zip(a.iter().zip(b).zip(c).zip(d).zip(e)) {
+            let v = *a as u32 + 4 * *b as u32 + 6 * *c as u32 + 4 * *d as u32 + *e as u32;
+            *o = ((v + 128) >> 8) as u8;
         }
     }
 }
@@ -163,7 +169,8 @@ pub fn canny(src: &GrayImage, opts: &CannyOptions, s: &mut CannyScratch, edges: 
     }
     replicate_border(s);
 
-    // 2. Sobel dx, dy and the L1 magnitude (zero border around `mag`).
+    // 2. Sobel dx, dy and the L1 magnitude (zero border around `mag`), over shifted row
+    //    slices so that it vectorises.
     for y in 0..h {
         let up = &s.padded[y * pw..y * pw + pw];
         let mid = &s.padded[(y + 1) * pw..(y + 1) * pw + pw];
@@ -171,15 +178,23 @@ pub fn canny(src: &GrayImage, opts: &CannyOptions, s: &mut CannyScratch, edges: 
         let dxr = &mut s.dx[y * w..(y + 1) * w];
         let dyr = &mut s.dy[y * w..(y + 1) * w];
         let magr = &mut s.mag[(y + 1) * pw + 1..(y + 1) * pw + 1 + w];
-        for x in 0..w {
-            let (a, b, c) = (up[x] as i16, up[x + 1] as i16, up[x + 2] as i16);
-            let (d, f) = (mid[x] as i16, mid[x + 2] as i16);
-            let (g, hh, i) = (dn[x] as i16, dn[x + 1] as i16, dn[x + 2] as i16);
+        let cols = up[..w]
+            .iter()
+            .zip(&up[1..w + 1])
+            .zip(&up[2..])
+            .zip(mid[..w].iter().zip(&mid[2..]))
+            .zip(dn[..w].iter().zip(&dn[1..w + 1]).zip(&dn[2..]));
+        for ((((((a, b), c), (d, f)), ((g, hh), i)), gx_o), (gy_o, m_o)) in
+            cols.zip(dxr.iter_mut()).zip(dyr.iter_mut().zip(magr.iter_mut()))
+        {
+            let (a, b, c, d, f, g, hh, i) = (
+                *a as i16, *b as i16, *c as i16, *d as i16, *f as i16, *g as i16, *hh as i16, *i as i16,
+            );
             let gx = (c - a) + 2 * (f - d) + (i - g);
             let gy = (g - a) + 2 * (hh - b) + (i - c);
-            dxr[x] = gx;
-            dyr[x] = gy;
-            magr[x] = (gx.unsigned_abs() + gy.unsigned_abs()) as u16;
+            *gx_o = gx;
+            *gy_o = gy;
+            *m_o = gx.unsigned_abs() + gy.unsigned_abs();
         }
     }
 
@@ -187,38 +202,43 @@ pub fn canny(src: &GrayImage, opts: &CannyOptions, s: &mut CannyScratch, edges: 
     let (low, high) = (opts.low as i32, opts.high as i32);
     s.stack.clear();
     for y in 0..h {
-        let row = (y + 1) * pw + 1;
+        let row = (y + 1) * pw;
+        let (prev, cur, next) = (
+            &s.mag[row - pw..row],
+            &s.mag[row..row + pw],
+            &s.mag[row + pw..row + 2 * pw],
+        );
+        let (dxr, dyr) = (&s.dx[y * w..(y + 1) * w], &s.dy[y * w..(y + 1) * w]);
+        let map = &mut s.map[row..row + pw];
         for x in 0..w {
-            let i = row + x;
-            let m = s.mag[i] as i32;
-            let mut keep = false;
-            if m > low {
-                let xs = s.dx[y * w + x] as i32;
-                let ys = s.dy[y * w + x] as i32;
-                let ax = xs.abs();
-                let ay = ys.abs() << CANNY_SHIFT;
-                let tg22x = ax * TG22;
-                keep = if ay < tg22x {
-                    // gradient near horizontal: compare left and right
-                    m > s.mag[i - 1] as i32 && m >= s.mag[i + 1] as i32
-                } else {
-                    let tg67x = tg22x + (ax << (CANNY_SHIFT + 1));
-                    if ay > tg67x {
-                        // near vertical: compare up and down
-                        m > s.mag[i - pw] as i32 && m >= s.mag[i + pw] as i32
-                    } else {
-                        // diagonal: the sign of dx·dy picks which diagonal
-                        let sgn: isize = if (xs ^ ys) < 0 { -1 } else { 1 };
-                        let up = (i as isize - pw as isize - sgn) as usize;
-                        let dn = (i as isize + pw as isize + sgn) as usize;
-                        m > s.mag[up] as i32 && m > s.mag[dn] as i32
-                    }
-                };
+            let j = x + 1; // index in the padded rows
+            let m = cur[j] as i32;
+            if m <= low {
+                map[j] = 1;
+                continue;
             }
-            s.map[i] = if !keep {
+            let (xs, ys) = (dxr[x] as i32, dyr[x] as i32);
+            let ax = xs.abs();
+            let ay = ys.abs() << CANNY_SHIFT;
+            let tg22x = ax * TG22;
+            let keep = if ay < tg22x {
+                // gradient near horizontal: compare left and right
+                m > cur[j - 1] as i32 && m >= cur[j + 1] as i32
+            } else {
+                let tg67x = tg22x + (ax << (CANNY_SHIFT + 1));
+                if ay > tg67x {
+                    // near vertical: compare up and down
+                    m > prev[j] as i32 && m >= next[j] as i32
+                } else {
+                    // diagonal: the sign of dx·dy picks which diagonal
+                    let (up, dn) = if (xs ^ ys) < 0 { (j + 1, j - 1) } else { (j - 1, j + 1) };
+                    m > prev[up] as i32 && m > next[dn] as i32
+                }
+            };
+            map[j] = if !keep {
                 1
             } else if m > high {
-                s.stack.push(i as u32);
+                s.stack.push((row + j) as u32);
                 2
             } else {
                 0

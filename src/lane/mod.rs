@@ -80,6 +80,8 @@ pub struct LaneDetector {
     map: WarpMap,
     opts: LaneOptions,
     scratch: CannyScratch,
+    gray_frame: GrayImage,
+    exact_warp: bool,
     images: LaneImages,
 }
 
@@ -99,6 +101,8 @@ impl LaneDetector {
             map,
             opts,
             scratch: CannyScratch::new(out_w, out_h),
+            gray_frame: GrayImage::new(frame_w, frame_h),
+            exact_warp: false,
             images: LaneImages {
                 bird: GrayImage::new(out_w, out_h),
                 edges: GrayImage::new(out_w, out_h),
@@ -112,22 +116,30 @@ impl LaneDetector {
 
     /// The detector configured in `cfg` (frames of `[camera]` size).
     pub fn from_config(cfg: &Config) -> Result<Self, WarpError> {
-        Self::new(
+        let mut d = Self::new(
             cfg.camera.width,
             cfg.camera.height,
             &cfg.warp.src,
             cfg.warp.out_width,
             cfg.warp.out_height,
             LaneOptions::from_config(cfg),
-        )
+        )?;
+        d.exact_warp = cfg.warp.exact;
+        Ok(d)
     }
 
     /// Measures the lane in one frame (of the size given to [`LaneDetector::new`]).
     /// `timer` is lapped after each stage and the laps are written into `times`.
     pub fn measure(&mut self, frame: &RgbImage, timer: &mut dyn StageTimer, times: &mut StageTimes) -> LaneMeasurement {
         let im = &mut self.images;
-        // 1. ROI + bird's-eye, fused with the grey conversion.
-        self.map.warp_gray(frame, &mut im.bird);
+        // 1. Grey, then ROI + bird's-eye (one channel to interpolate instead of three), or
+        //    OpenCV's exact order (colour warp, then grey).
+        if self.exact_warp {
+            self.map.warp_rgb_to_gray(frame, &mut im.bird);
+        } else {
+            warp::rgb_to_gray_rows(frame, &mut self.gray_frame, self.map.src_rows());
+            self.map.warp(&self.gray_frame, &mut im.bird);
+        }
         times.warp_us = timer.lap_us();
         // 2. Canny on the grey bird's-eye image.
         edges::canny(&im.bird, &self.opts.canny, &mut self.scratch, &mut im.edges);

@@ -7,7 +7,9 @@ For every input frame, rccar (`rccar stages`) and OpenCV each compute:
   -> binary threshold (cv2.threshold, strictly greater) OR edges -> column histogram of the band
   -> P_left / P_right (the same peak rule, ported below) -> L_c.
 It prints per-stage pixel differences and both sides' lane positions, and passes an image when
-P_left and P_right agree within 1 px. Inputs: the shipped sample frames (tests/data/lane_sample)
+P_left and P_right agree within 1 px. It runs three variants of the configuration: the default
+(grey first, then warp: within one grey level of OpenCV), `warp.exact=true` (colour warp then
+grey, which must match OpenCV bit for bit in every stage) and exact with Otsu and no blur. Inputs: the shipped sample frames (tests/data/lane_sample)
 and real photos from scikit-image's bundled data, resized to the camera size.
 
 Usage: python tests/parity/lane_parity.py [--rccar target/release/rccar] [--config config/car.toml]
@@ -114,6 +116,81 @@ def real_photos(size):
     return out
 
 
+VARIANTS = [
+    ("default", []),
+    ("exact", ["warp.exact=true"]),
+    ("exact-otsu-noblur", ["warp.exact=true", "lane.threshold_mode=otsu", "lane.blur=false"]),
+]
+
+
+def exact_required(sets):
+    return "warp.exact=true" in sets
+
+
+def apply(cfg, sets):
+    """The config dict with `key=value` overrides applied (values parsed as TOML)."""
+    import copy
+    cfg = copy.deepcopy(cfg)
+    for kv in sets:
+        key, value = kv.split("=", 1)
+        sec, name = key.split(".")
+        cfg[sec][name] = tomllib.loads(f"v = {value}")["v"] if value not in ("otsu", "fixed") else value
+    return cfg
+
+
+def run_variant(args, cfg, size, tmp, inputs, label, sets):
+    """Runs rccar and OpenCV on every input with one configuration variant; (passed, failed)."""
+    out = tmp / f"stages_{label}"
+    r = subprocess.run([args.rccar, "stages", "--config", args.config, "--local", "/nonexistent", "--out", str(out)]
+                       + [a for kv in sets for a in ("--set", kv)] + [str(p) for p in inputs],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        print(r.stdout, r.stderr)
+        return 0, 1
+    recs = [json.loads(l) for l in (out / "stages.jsonl").read_text().splitlines()]
+    cfg = apply(cfg, sets)
+    print(f"\n== variant {label}: {' '.join(sets) or 'config/car.toml as is'}")
+    passed = failed = 0
+    totals = {"bird": 0, "edges": 0, "binary": 0, "pixels": 0, "max": 0}
+    print(f"{'image':28} {'bird≠':>6} {'max':>4} {'edges≠':>7} {'binary≠':>8} {'hist≠':>6}"
+          f" {'P_L ours':>9} {'P_L cv':>9} {'P_R ours':>9} {'P_R cv':>9} {'ΔL_c':>6}")
+    for rec in recs:
+        rgb = cv2.cvtColor(cv2.imread(rec["image"], cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        if (rgb.shape[1], rgb.shape[0]) != size:
+            rgb = cv2.resize(rgb, size, interpolation=cv2.INTER_LINEAR)
+        bird, edges, binary, hist, level = opencv_stages(rgb, rec, cfg)
+        stem = rec["stem"]
+        ours = {k: cv2.imread(str(out / f"{stem}.{k}.png"), cv2.IMREAD_GRAYSCALE) for k in ["bird", "edges", "binary"]}
+        d_bird = np.abs(ours["bird"].astype(int) - bird.astype(int))
+        n_bird, n_edges = int((d_bird > 0).sum()), int((ours["edges"] != edges).sum())
+        n_bin = int((ours["binary"] != binary).sum())
+        n_hist = int((np.array(rec["hist"]) != hist).sum())
+        for k, v in [("bird", n_bird), ("edges", n_edges), ("binary", n_bin), ("pixels", bird.size)]:
+            totals[k] += v
+        totals["max"] = max(totals["max"], int(d_bird.max()))
+        l_cv, r_cv, c_cv = measure(hist, rec["band_rows"], cfg["lane"])
+        lane = rec["lane"]
+        l_us, r_us, c_us = lane["p_left"], lane["p_right"], lane["lane_center"]
+
+        def same(a, b):
+            return (a is None and b is None) or (a is not None and b is not None and abs(a - b) <= 1.0)
+
+        ok = same(l_us, l_cv) and same(r_us, r_cv) and level == rec["level"]
+        if exact_required(sets):
+            ok = ok and n_bird == 0 and n_edges == 0 and n_bin == 0 and n_hist == 0
+        fmt = lambda v: "-" if v is None else f"{v:.2f}"
+        dc = "-" if (c_us is None or c_cv is None) else f"{abs(c_us - c_cv):.2f}"
+        print(f"{stem[:28]:28} {n_bird:6d} {int(d_bird.max()):4d} {n_edges:7d} {n_bin:8d} {n_hist:6d}"
+              f" {fmt(l_us):>9} {fmt(l_cv):>9} {fmt(r_us):>9} {fmt(r_cv):>9} {dc:>6} {'ok' if ok else 'FAIL'}")
+        passed += ok
+        failed += not ok
+    px = totals["pixels"]
+    print(f"variant {label}: differing pixels over {len(recs)} images ({px} px per stage): "
+          f"bird's-eye {totals['bird']} (max {totals['max']} grey levels), edges {totals['edges']}, "
+          f"binary {totals['binary']}; {passed} passed, {failed} failed")
+    return passed, failed
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rccar", default=str(ROOT / "target/release/rccar"))
@@ -130,50 +207,11 @@ def main():
             p = tmp / f"{name}.png"
             cv2.imwrite(str(p), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
             inputs.append(p)
-        out = tmp / "stages"
-        r = subprocess.run([args.rccar, "stages", "--config", args.config, "--local", "/nonexistent",
-                            "--out", str(out)] + [str(p) for p in inputs], capture_output=True, text=True)
-        if r.returncode != 0:
-            print(r.stdout, r.stderr)
-            print("lane-parity: 0 passed, 1 failed")
-            return 1
-        recs = [json.loads(l) for l in (out / "stages.jsonl").read_text().splitlines()]
-
         passed = failed = 0
-        totals = {"bird": 0, "edges": 0, "binary": 0, "pixels": 0}
-        print(f"{'image':28} {'bird≠':>6} {'max':>4} {'edges≠':>7} {'binary≠':>8} {'hist≠':>6}"
-              f" {'P_L ours':>9} {'P_L cv':>9} {'P_R ours':>9} {'P_R cv':>9} {'ΔL_c':>6}")
-        for rec in recs:
-            rgb = cv2.cvtColor(cv2.imread(rec["image"], cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-            if (rgb.shape[1], rgb.shape[0]) != size:
-                rgb = cv2.resize(rgb, size, interpolation=cv2.INTER_LINEAR)
-            bird, edges, binary, hist, level = opencv_stages(rgb, rec, cfg)
-            stem = rec["stem"]
-            ours = {k: cv2.imread(str(out / f"{stem}.{k}.png"), cv2.IMREAD_GRAYSCALE) for k in ["bird", "edges", "binary"]}
-            d_bird = np.abs(ours["bird"].astype(int) - bird.astype(int))
-            n_bird, n_edges, n_bin = int((d_bird > 0).sum()), int((ours["edges"] != edges).sum()), int((ours["binary"] != binary).sum())
-            totals["bird"] += n_bird
-            totals["edges"] += n_edges
-            totals["binary"] += n_bin
-            totals["pixels"] += bird.size
-            n_hist = int((np.array(rec["hist"]) != hist).sum())
-            l_cv, r_cv, c_cv = measure(hist, rec["band_rows"], cfg["lane"])
-            lane = rec["lane"]
-            l_us, r_us, c_us = lane["p_left"], lane["p_right"], lane["lane_center"]
-
-            def same(a, b):
-                return (a is None and b is None) or (a is not None and b is not None and abs(a - b) <= 1.0)
-
-            ok = same(l_us, l_cv) and same(r_us, r_cv) and level == rec["level"]
-            fmt = lambda v: "-" if v is None else f"{v:.2f}"
-            dc = "-" if (c_us is None or c_cv is None) else f"{abs(c_us - c_cv):.2f}"
-            print(f"{stem[:28]:28} {n_bird:6d} {int(d_bird.max()):4d} {n_edges:7d} {n_bin:8d} {n_hist:6d}"
-                  f" {fmt(l_us):>9} {fmt(l_cv):>9} {fmt(r_us):>9} {fmt(r_cv):>9} {dc:>6} {'ok' if ok else 'FAIL'}")
-            passed += ok
-            failed += not ok
-        px = totals["pixels"]
-        print(f"differing pixels over {len(recs)} images ({px} px per stage): bird's-eye {totals['bird']}, "
-              f"edges {totals['edges']}, binary {totals['binary']}")
+        for label, sets in VARIANTS:
+            p, f = run_variant(args, cfg, size, tmp, inputs, label, sets)
+            passed += p
+            failed += f
     print(f"lane-parity: {passed} passed, {failed} failed")
     return 0 if failed == 0 else 1
 

@@ -1,0 +1,145 @@
+//! `rccar link --port PATH`: the students' bench tool for the Arduino link. Handshake and
+//! versions, then one of: live telemetry (default), a servo sweep (`--sweep`), trim editing
+//! (`--trim-us`, `--save` to store it in EEPROM), round-trip latency (`--latency N`).
+//! Every exit path disarms: the `Link` sends DISARM + neutral when dropped, and Ctrl-C only
+//! raises a flag that ends the loops so that drop runs.
+
+use clap::Args;
+use std::process::ExitCode;
+
+/// Flags of `rccar link`.
+#[derive(Args, Debug)]
+pub struct LinkArgs {
+    /// Serial port of the Arduino (e.g. /dev/ttyACM0) or the emulator's pty.
+    #[arg(long)]
+    pub port: String,
+    /// How long to show live telemetry, seconds.
+    #[arg(long, default_value_t = 5.0)]
+    pub seconds: f64,
+    /// Arm and sweep the steering servo full left ↔ full right twice (throttle stays 0).
+    #[arg(long)]
+    pub sweep: bool,
+    /// Set the servo centre (trim), µs, e.g. 1480. Shown on the wheels at once.
+    #[arg(long)]
+    pub trim_us: Option<u16>,
+    /// With --trim-us: store the new configuration in the Arduino's EEPROM.
+    #[arg(long)]
+    pub save: bool,
+    /// Measure the PING → TELEMETRY round trip N times and print median and max.
+    #[arg(long)]
+    pub latency: Option<usize>,
+}
+
+#[cfg(not(feature = "serial"))]
+pub fn run(_args: LinkArgs) -> anyhow::Result<ExitCode> {
+    anyhow::bail!("this rccar was built without the serial link: cargo build --release --features serial")
+}
+
+#[cfg(feature = "serial")]
+pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
+    use anyhow::Context;
+    use rccar::link::protocol::status;
+    use rccar::link::transport::{Link, LinkOptions};
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::{Duration, Instant};
+
+    static STOP: AtomicBool = AtomicBool::new(false);
+    extern "C" fn on_sigint(_: libc::c_int) {
+        STOP.store(true, Ordering::SeqCst);
+    }
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    unsafe {
+        libc::signal(libc::SIGINT, on_sigint as *const () as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_sigint as *const () as libc::sighandler_t);
+    }
+    let stopped = || STOP.load(Ordering::SeqCst);
+
+    let link = Link::open(&args.port, LinkOptions::default());
+    let hello = link
+        .wait_connected(Duration::from_secs(3))
+        .with_context(|| format!("no firmware answering on {}", args.port))?;
+    println!(
+        "connected to {}: protocol {}, firmware {}.{}.{} ({})",
+        args.port,
+        hello.protocol_version,
+        hello.fw_major,
+        hello.fw_minor,
+        hello.fw_patch,
+        status::name(hello.status)
+    );
+    let (mut cfg, from_eeprom) = link.get_config()?;
+    println!("config ({}): {cfg:?}", if from_eeprom { "EEPROM" } else { "defaults" });
+
+    if let Some(us) = args.trim_us {
+        cfg.servo_center_us = us;
+        anyhow::ensure!(
+            cfg.is_valid(),
+            "--trim-us {us}: must lie strictly between servo_min_us {} and servo_max_us {}",
+            cfg.servo_min_us,
+            cfg.servo_max_us
+        );
+        link.set_config(cfg, args.save)?;
+        println!(
+            "servo centre = {us} µs{}",
+            if args.save { " (saved to EEPROM)" } else { "" }
+        );
+    }
+    if let Some(n) = args.latency {
+        let mut rtts = Vec::with_capacity(n);
+        for _ in 0..n {
+            if stopped() {
+                break;
+            }
+            rtts.push(link.ping()?.1.as_secs_f64() * 1e3);
+        }
+        rtts.sort_by(f64::total_cmp);
+        if !rtts.is_empty() {
+            println!(
+                "round trip PING -> TELEMETRY over {} pings: median {:.2} ms, max {:.2} ms",
+                rtts.len(),
+                rtts[rtts.len() / 2],
+                rtts[rtts.len() - 1]
+            );
+        }
+    }
+    if args.sweep {
+        link.arm()?;
+        let t0 = Instant::now();
+        while !stopped() && t0.elapsed() < Duration::from_secs(4) {
+            // triangle wave, 2 s per full left -> right -> left
+            let ph = (t0.elapsed().as_secs_f64() / 2.0).fract();
+            let steer = if ph < 0.5 { -1.0 + 4.0 * ph } else { 3.0 - 4.0 * ph };
+            link.drive((steer * 1000.0) as i16, 0);
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        link.disarm()?;
+        println!("sweep done");
+    }
+    if args.trim_us.is_none() && !args.sweep && args.latency.is_none() {
+        let t0 = Instant::now();
+        while !stopped() && t0.elapsed().as_secs_f64() < args.seconds {
+            if let Some((t, n)) = link.telemetry() {
+                println!(
+                    "#{n:<5} {:?} servo {} µs esc {} µs | crc {} framing {} overrun {} lost {} failsafe {} | up {:.1} s",
+                    t.state,
+                    t.servo_us,
+                    t.esc_us,
+                    t.crc_errors,
+                    t.framing_errors,
+                    t.overruns,
+                    t.lost_frames,
+                    t.failsafe_trips,
+                    f64::from(t.uptime_ms) / 1e3
+                );
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    }
+    // dropping `link` disarms and sends a neutral DRIVE
+    drop(link);
+    Ok(if stopped() {
+        ExitCode::from(130)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
