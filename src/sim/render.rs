@@ -211,7 +211,7 @@ impl Renderer {
         // Triangular noise (two uniform bytes), standard deviation `noise_sigma`.
         let n = 3 * w * h + NOISE_SLACK;
         let a = opts.noise_sigma * 6f64.sqrt() / 255.0;
-        let mut rng = SplitMix64::new(opts.seed ^ 0x6E6F_6973_65);
+        let mut rng = SplitMix64::new(opts.seed ^ 0x006E_6F69_7365);
         let noise = if opts.noise_sigma > 0.0 {
             (0..n)
                 .map(|_| {
@@ -341,8 +341,8 @@ impl Renderer {
                         let d = self.world_ray((sy, cy), u as f64 + du, v as f64 + dv);
                         let t_floor = if d[2] < 0.0 { o[2] / -d[2] } else { f64::INFINITY };
                         if let Some(hit) = scene.intersect(&self.prims, o, d, t_floor) {
-                            for ch in 0..3 {
-                                sum[ch] += hit.rgb[ch];
+                            for (acc, c) in sum.iter_mut().zip(hit.rgb) {
+                                *acc += c;
                             }
                             hits += 1;
                         }

@@ -374,8 +374,8 @@ impl Scene {
                 }
                 if cov > 0.0 {
                     let cf = cov as f32;
-                    for ch in 0..3 {
-                        c[ch] += (line.rgb[ch] * tape - c[ch]) * cf;
+                    for (ch, lc) in c.iter_mut().zip(line.rgb) {
+                        *ch += (lc * tape - *ch) * cf;
                     }
                 }
             }

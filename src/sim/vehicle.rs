@@ -61,7 +61,7 @@ impl Vehicle {
             wheel_angle: 0.0,
             cfg: cfg.clone(),
             dt,
-            delay: std::iter::repeat_n(0.0, n).collect(),
+            delay: vec![0.0; n].into(),
         }
     }
 
