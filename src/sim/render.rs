@@ -574,6 +574,50 @@ mod tests {
             .unwrap();
     }
 
+    /// The ground-truth image box of the stop sign holds every pixel the sign changes, and
+    /// not much more.
+    #[test]
+    fn object_box_is_tight_around_the_drawn_sign() {
+        let (mut r, track) = setup();
+        let pose = Pose {
+            x: 3.2,
+            y: -0.15,
+            yaw: 0.0,
+        };
+        let with = r.render_new(&pose, 0.0, 0);
+        let mut bare_track = track.clone();
+        for o in &mut bare_track.objects {
+            if o.0.kind == ObjectKind::StopSign {
+                o.1 = false;
+            }
+        }
+        let mut bare = Renderer::new(Arc::new(Scene::new(&bare_track)), *r.mount(), RenderOptions::clean());
+        let without = bare.render_new(&pose, 0.0, 0);
+        let boxes = r.object_boxes(&pose);
+        let sign = boxes
+            .iter()
+            .find(|b| b.kind == ObjectKind::StopSign)
+            .expect("sign in view");
+        let mut diff = [u32::MAX, u32::MAX, 0, 0];
+        for (x, y, p) in with.enumerate_pixels() {
+            if p != without.get_pixel(x, y) {
+                diff = [diff[0].min(x), diff[1].min(y), diff[2].max(x), diff[3].max(y)];
+            }
+        }
+        let b = sign.bbox;
+        assert!(
+            diff[0] as f64 >= b[0] - 1.0
+                && diff[1] as f64 >= b[1] - 1.0
+                && diff[2] as f64 <= b[2] + 1.0
+                && diff[3] as f64 <= b[3] + 1.0,
+            "drawn {diff:?} outside box {b:?}"
+        );
+        let area = |w: f64, h: f64| w * h;
+        let drawn = area((diff[2] - diff[0] + 1) as f64, (diff[3] - diff[1] + 1) as f64);
+        let boxed = area(b[2] - b[0] + 1.0, b[3] - b[1] + 1.0);
+        assert!(boxed < 1.5 * drawn, "box {b:?} much larger than drawn {diff:?}");
+    }
+
     #[test]
     fn same_seed_same_frame() {
         let (_, track) = setup();

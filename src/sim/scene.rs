@@ -504,18 +504,14 @@ impl Scene {
         }
     }
 
-    /// The corners of a box that contains the object, world metres (for screen bounds and
-    /// ground-truth image boxes).
+    /// The corners of the smallest upright box (turned with the object) that contains it,
+    /// world metres: screen bounds for rendering and ground-truth image boxes.
     pub fn object_bounds(o: &Object) -> [[f64; 3]; 8] {
-        let (r, top) = match o.kind {
-            ObjectKind::StopSign => (o.size[0] * 0.55, o.height + o.size[0] * 0.55),
-            ObjectKind::TrafficLight => (o.size[0] * 0.3, o.height + o.size[0] * 0.55),
-            ObjectKind::Obstacle => (0.0, o.size[2]),
-        };
-        let (hx, hy) = if o.kind == ObjectKind::Obstacle {
-            (o.size[0] / 2.0, o.size[1] / 2.0)
-        } else {
-            (r, r)
+        // Half extents along the facing direction and across it, and the top.
+        let (hx, hy, top) = match o.kind {
+            ObjectKind::StopSign => (0.015, o.size[0] / 2.0, o.height + o.size[0] / 2.0),
+            ObjectKind::TrafficLight => (o.size[0] * 0.17, o.size[0] * 0.19, o.height + o.size[0] / 2.0),
+            ObjectKind::Obstacle => (o.size[0] / 2.0, o.size[1] / 2.0, o.size[2]),
         };
         let (s, c) = o.yaw.sin_cos();
         let mut out = [[0.0; 3]; 8];
