@@ -154,6 +154,8 @@ pub struct Renderer {
     prims: Vec<Prim>,
     /// Scratch: one row's lighting samples.
     light: Vec<f32>,
+    /// Scratch: one row's texture samples.
+    tex: Vec<f32>,
     /// (sin, cos) of the camera's tilt.
     tilt_sc: (f64, f64),
 }
@@ -232,6 +234,7 @@ impl Renderer {
             noise,
             prims: Vec::new(),
             light: Vec::new(),
+            tex: Vec::new(),
             tilt_sc: cam.tilt_rad.sin_cos(),
         }
     }
@@ -286,13 +289,27 @@ impl Renderer {
             let ju = dg;
             let jv0 = rot(row.jv0[0], row.jv0[1]);
             let djv = rot(row.djv[0], row.djv[1]);
-            // The lighting every LIGHT_STEP columns, interpolated between.
+            // The lighting every LIGHT_STEP columns, and the texture about once per texel
+            // (where it is not faded out), interpolated between.
+            let tstep = (Footprint::TEXEL_M / row.dg[0].hypot(row.dg[1]))
+                .floor()
+                .clamp(1.0, 16.0) as usize;
+            let textured = row.floor && row.fade > 0.01;
             if row.floor {
                 self.light.clear();
                 for k in 0..=(w - 1) / LIGHT_STEP + 1 {
                     let uf = (k * LIGHT_STEP) as f64;
                     self.light
                         .push(scene.illumination([lens[0] + g0[0] + uf * dg[0], lens[1] + g0[1] + uf * dg[1]]));
+                }
+                self.tex.clear();
+                if textured {
+                    for k in 0..=(w - 1) / tstep + 1 {
+                        let uf = (k * tstep) as f64;
+                        self.tex.push(
+                            scene.texture_at([lens[0] + g0[0] + uf * dg[0], lens[1] + g0[1] + uf * dg[1]]) * row.fade,
+                        );
+                    }
                 }
             }
             for u in 0..w {
@@ -307,7 +324,13 @@ impl Renderer {
                     };
                     let (k, f) = (u / LIGHT_STEP, (u % LIGHT_STEP) as f32 * (1.0 / LIGHT_STEP as f32));
                     let light = self.light[k] + (self.light[k + 1] - self.light[k]) * f;
-                    scene.floor_color(p, &fp, light)
+                    let tex = if textured {
+                        let (k, f) = (u / tstep, (u % tstep) as f32 / tstep as f32);
+                        self.tex[k] + (self.tex[k + 1] - self.tex[k]) * f
+                    } else {
+                        0.0
+                    };
+                    scene.floor_color(p, &fp, light, tex)
                 } else {
                     scene.wall_color(o, self.world_ray((sy, cy), uf, v as f64))
                 };

@@ -50,6 +50,8 @@ pub struct Scene {
     illum_h: usize,
     /// For each grid cell: the index of the nearest piece, or `u16::MAX` when no line is near.
     grid: Vec<u16>,
+    /// For each piece: the unit vector from an arc's centre to its middle ([1, 0] for lines).
+    arc_mid: Vec<[f64; 2]>,
     /// For each grid cell: how far every point of the cell is from the nearest line's edge,
     /// metres (0 when a line may touch it); a pixel whose footprint is smaller skips the lines.
     clear: Vec<f32>,
@@ -81,6 +83,9 @@ pub struct Footprint {
 }
 
 impl Footprint {
+    /// Size of one texture texel, metres.
+    pub const TEXEL_M: f64 = TEX_M;
+
     /// The fade of a texture of `TEX_M` texels under a footprint of `size` metres.
     pub fn fade_for(size: f64) -> f32 {
         (3.0 * TEX_M / size.max(1e-9)).min(1.0) as f32
@@ -264,6 +269,17 @@ impl Scene {
             illum_w,
             illum_h,
             grid,
+            arc_mid: track
+                .pieces
+                .iter()
+                .map(|p| match *p {
+                    Piece::Arc { a0, sweep, .. } => {
+                        let (s, c) = (a0 + sweep / 2.0).sin_cos();
+                        [c, s]
+                    }
+                    Piece::Line { .. } => [1.0, 0.0],
+                })
+                .collect(),
             clear,
             grid_w,
             grid_h,
@@ -273,7 +289,7 @@ impl Scene {
 
     /// Texture value at a world point, −1..1 (bilinear on the tiled texture).
     #[inline]
-    fn texture_at(&self, p: [f64; 2]) -> f32 {
+    pub fn texture_at(&self, p: [f64; 2]) -> f32 {
         // Shift to positive coordinates so truncation is floor (the tile repeats anyway).
         const SHIFT: f64 = (TEX_N * 1024) as f64;
         let (x, y) = (p[0] * INV_TEX + SHIFT, p[1] * INV_TEX + SHIFT);
@@ -320,13 +336,12 @@ impl Scene {
     /// `fp` (see [`Footprint`]), lit by `light` (see [`Scene::illumination`]; smooth, so the
     /// renderer interpolates it along a row).
     #[inline]
-    pub fn floor_color(&self, p: [f64; 2], fp: &Footprint, light: f32) -> [f32; 3] {
-        // 1. Texture, faded out where a pixel covers many texels (no sparkle far away).
-        let tex = if fp.fade > 0.01 {
-            self.texture_at(p) * fp.fade
-        } else {
-            0.0
-        };
+    ///
+    /// `tex` is the texture there, already faded for the footprint (see
+    /// [`Scene::texture_at`] and [`Footprint::fade`]); the renderer samples it about once
+    /// per texel along a row and interpolates, which is what bilinear filtering does anyway.
+    pub fn floor_color(&self, p: [f64; 2], fp: &Footprint, light: f32, tex: f32) -> [f32; 3] {
+        // 1. Texture.
         let b = 1.0 + self.texture_amp * tex;
         let mut c = [self.floor_rgb[0] * b, self.floor_rgb[1] * b, self.floor_rgb[2] * b];
         // 2. Lines, only where the cell is not clear of them by more than the footprint.
@@ -367,7 +382,16 @@ impl Scene {
                 if line.dashed && cov > 0.0 {
                     let ft =
                         ((tan[0] * ju[0] + tan[1] * ju[1]).abs() + (tan[0] * jv[0] + tan[1] * jv[1]).abs()).max(1e-5);
-                    let (t, _, _) = piece.project(p);
+                    // Distance along the piece; on an arc the angle from the arc's middle by a
+                    // fast atan2 (the exact one costs more than the rest of the pixel).
+                    let t = match *piece {
+                        Piece::Line { p0, dir, .. } => (p[0] - p0[0]) * dir[0] + (p[1] - p0[1]) * dir[1],
+                        Piece::Arc { radius, sweep, .. } => {
+                            let m = self.arc_mid[k];
+                            let rel = fast_atan2(m[0] * n[1] - m[1] * n[0], m[0] * n[0] + m[1] * n[1]);
+                            (sweep.signum() * rel + sweep.abs() / 2.0) * radius
+                        }
+                    };
                     let s = self.track.piece_s0[k] + t;
                     let r = &self.track.spec.road;
                     cov *= dash_coverage(s, ft, r.dash_m, r.dash_m + r.gap_m);
@@ -666,6 +690,31 @@ impl Scene {
     }
 }
 
+/// atan2 to within 2e-4 rad (a cubic-in-a² polynomial for atan on [0, 1] and octant folding):
+/// 0.6 mm along a 3 m arc, plenty for the phase of a dash.
+#[inline]
+pub fn fast_atan2(y: f64, x: f64) -> f64 {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let (ax, ay) = (x.abs(), y.abs());
+    let (a, swap) = if ay > ax {
+        (ax / ay, true)
+    } else {
+        (ay / ax.max(1e-300), false)
+    };
+    let s = a * a;
+    let mut r = ((-0.046_496_474_9 * s + 0.159_314_22) * s - 0.327_622_764) * s * a + a;
+    if swap {
+        r = FRAC_PI_2 - r;
+    }
+    if x < 0.0 {
+        r = PI - r;
+    }
+    if y < 0.0 {
+        r = -r;
+    }
+    r
+}
+
 /// Lambert shading of a face with normal `n` under a fixed high light, plus ambient.
 fn shade(n: [f64; 3]) -> f32 {
     const L: [f64; 3] = [0.32, 0.42, 0.85];
@@ -696,6 +745,19 @@ pub fn dash_coverage(s: f64, w: f64, dash: f64, period: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fast_atan2_is_close() {
+        let mut worst = 0.0f64;
+        for i in 0..3600 {
+            let a = (i as f64 / 10.0 - 180.0).to_radians();
+            for r in [0.01, 1.0, 30.0] {
+                let (y, x) = (r * a.sin(), r * a.cos());
+                worst = worst.max((fast_atan2(y, x) - y.atan2(x)).abs());
+            }
+        }
+        assert!(worst < 3e-4, "{worst}");
+    }
 
     #[test]
     fn coverage_filters() {
