@@ -312,7 +312,7 @@ impl Renderer {
                     }
                 }
             }
-            for u in 0..w {
+            for (u, (px, &vg)) in out.chunks_exact_mut(3).zip(vig).enumerate() {
                 let uf = u as f64;
                 let p = [lens[0] + g0[0] + uf * dg[0], lens[1] + g0[1] + uf * dg[1]];
                 let c = if row.floor && scene.on_floor(p) {
@@ -334,8 +334,7 @@ impl Renderer {
                 } else {
                     scene.wall_color(o, self.world_ray((sy, cy), uf, v as f64))
                 };
-                let k = gain * vig[u];
-                let px = &mut out[3 * u..3 * u + 3];
+                let k = gain * vg;
                 // `as u8` saturates (and maps NaN to 0): no clamp needed.
                 px[0] = (c[0] * k) as u8;
                 px[1] = (c[1] * k) as u8;

@@ -48,13 +48,13 @@ pub struct Scene {
     illum: Vec<f32>,
     illum_w: usize,
     illum_h: usize,
-    /// For each grid cell: the index of the nearest piece, or `u16::MAX` when no line is near.
-    grid: Vec<u16>,
+    /// For each grid cell: the index of the nearest piece (`u16::MAX` when no line is near),
+    /// and how far every point of the cell is from the nearest line's edge, in 0.1 mm (0 when
+    /// a line may touch it; a pixel whose footprint is smaller skips the lines). One 4-byte
+    /// load per pixel.
+    grid: Vec<(u16, u16)>,
     /// For each piece: the unit vector from an arc's centre to its middle ([1, 0] for lines).
     arc_mid: Vec<[f64; 2]>,
-    /// For each grid cell: how far every point of the cell is from the nearest line's edge,
-    /// metres (0 when a line may touch it); a pixel whose footprint is smaller skips the lines.
-    clear: Vec<f32>,
     grid_w: usize,
     grid_h: usize,
     /// Line centre offsets, half widths, dashed flag and colour.
@@ -233,8 +233,7 @@ impl Scene {
         let grid_w = ((x1 - x0) / CELL_M).ceil() as usize + 1;
         let grid_h = ((y1 - y0) / CELL_M).ceil() as usize + 1;
         let near = reach + CELL_M + 0.05;
-        let mut grid = vec![u16::MAX; grid_w * grid_h];
-        let mut clear = vec![f32::INFINITY; grid_w * grid_h];
+        let mut grid = vec![(u16::MAX, u16::MAX); grid_w * grid_h];
         let half_diag = CELL_M * std::f64::consts::FRAC_1_SQRT_2;
         for j in 0..grid_h {
             for i in 0..grid_w {
@@ -248,13 +247,13 @@ impl Scene {
                     }
                 }
                 if best.0 <= near * near {
-                    grid[j * grid_w + i] = best.1;
+                    grid[j * grid_w + i].0 = best.1;
                     let (_, lat, _) = track.pieces[best.1 as usize].project(p);
                     let c = lines
                         .iter()
                         .map(|l| (lat - l.offset).abs() - l.half_width)
                         .fold(f64::INFINITY, f64::min);
-                    clear[j * grid_w + i] = (c - half_diag - 1e-4).max(0.0) as f32;
+                    grid[j * grid_w + i].1 = ((c - half_diag - 1e-4).max(0.0) * 1e4).floor().min(65535.0) as u16;
                 }
             }
         }
@@ -280,7 +279,6 @@ impl Scene {
                     Piece::Line { .. } => [1.0, 0.0],
                 })
                 .collect(),
-            clear,
             grid_w,
             grid_h,
             lines,
@@ -353,8 +351,13 @@ impl Scene {
         } else {
             usize::MAX
         };
-        if cell != usize::MAX && self.grid[cell] != u16::MAX && self.clear[cell] <= fp.size {
-            let k = self.grid[cell] as usize;
+        let (k, clear) = if cell != usize::MAX {
+            self.grid[cell]
+        } else {
+            (u16::MAX, 0)
+        };
+        if k != u16::MAX && clear as f32 <= fp.size * 1e4 {
+            let k = k as usize;
             let piece = &self.track.pieces[k];
             let (lat, n, tan) = match *piece {
                 Piece::Line { p0, dir, .. } => {
@@ -416,7 +419,7 @@ impl Scene {
         let [x0, y0, _, _] = self.track.floor_rect;
         let (gi, gj) = (((p[0] - x0) * INV_CELL), ((p[1] - y0) * INV_CELL));
         if gi >= 0.0 && gj >= 0.0 && (gi as usize) < self.grid_w && (gj as usize) < self.grid_h {
-            let k = self.grid[gj as usize * self.grid_w + gi as usize];
+            let k = self.grid[gj as usize * self.grid_w + gi as usize].0;
             if k != u16::MAX {
                 return match self.track.pieces[k as usize] {
                     Piece::Line { p0, dir, .. } => dir[0] * (p[1] - p0[1]) - dir[1] * (p[0] - p0[0]),
