@@ -19,6 +19,7 @@ pub mod annotate;
 pub mod camera;
 pub mod config;
 pub mod control;
+pub mod detect;
 pub mod lane;
 pub mod link;
 pub mod pipeline;

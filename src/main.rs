@@ -28,6 +28,8 @@ enum Cmd {
     /// Talk to the Arduino: handshake, live telemetry, servo sweep, trim, latency (needs the
     /// `serial` feature).
     Link(cli::link::LinkArgs),
+    /// Run OpenCV Haar/LBP cascades on images; print boxes as JSON, write annotated images.
+    Detect(cli::detect::DetectArgs),
     /// Drive the simulated car round a track with the pipeline in the loop; report and plot.
     Sim(cli::sim::SimArgs),
 }
@@ -40,6 +42,7 @@ fn main() -> ExitCode {
         Cmd::Synth(a) => cli::synth::run(a),
         Cmd::Stages(a) => cli::stages::run(a),
         Cmd::Link(a) => cli::link::run(a),
+        Cmd::Detect(a) => cli::detect::run(a),
         Cmd::Sim(a) => cli::sim::run(a),
     };
     match result {

@@ -3,6 +3,7 @@
 
 pub mod common;
 pub mod config;
+pub mod detect;
 pub mod link;
 pub mod replay;
 pub mod sim;

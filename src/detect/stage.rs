@@ -1,0 +1,181 @@
+//! The pipeline's detection stage: several labelled cascades (stop sign, traffic light,
+//! obstacle, …) run on one frame, with the traffic-light state read inside the boxes of the
+//! cascades marked as lights (Rivera & Andaluz 2021, Sec. 3.2 iii–iv).
+//!
+//! Cascades are loaded once ([`DetectStage::load`]); [`DetectStage::run`] is called per frame
+//! and reuses every detector's buffers. Units: pixels of the frame.
+
+use super::cascade::{Cascade, CascadeError};
+use super::detector::{DetectError, DetectParams, Detector};
+use super::group::Rect;
+use super::light::{light_state, LightReading};
+use image::{GrayImage, RgbImage};
+use std::path::PathBuf;
+
+/// One cascade to run: what it finds and how.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CascadeSpec {
+    /// Label of the objects it finds, e.g. `stop`, `light`, `obstacle`.
+    pub label: String,
+    /// The cascade XML file.
+    pub path: PathBuf,
+    /// Read the traffic-light state inside its boxes.
+    pub traffic_light: bool,
+    /// Detection options.
+    pub params: DetectParams,
+}
+
+/// One object found in a frame.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DetectedObject {
+    /// The label of the cascade that found it.
+    pub label: String,
+    /// Box in frame pixels.
+    pub rect: Rect,
+    /// Raw hits merged into the box.
+    pub neighbors: u32,
+    /// Traffic-light reading, for cascades marked `traffic_light` when a colour frame was given.
+    pub light: Option<LightReading>,
+}
+
+/// Labelled detectors, loaded once and run on every frame.
+#[derive(Debug, Clone)]
+pub struct DetectStage {
+    entries: Vec<(CascadeSpec, Detector)>,
+    /// Grey copy of the last colour frame (reused).
+    gray: GrayImage,
+}
+
+/// Grey from RGB as OpenCV's `cvtColor(RGB2GRAY)` computes it for 8-bit images:
+/// `Y = (9798 R + 19235 G + 3735 B + 2^14) >> 15`, into a reused buffer.
+pub fn gray_from_rgb(rgb: &RgbImage, gray: &mut GrayImage) {
+    if gray.dimensions() != rgb.dimensions() {
+        *gray = GrayImage::new(rgb.width(), rgb.height());
+    }
+    for (g, p) in gray.pixels_mut().zip(rgb.pixels()) {
+        let [r, gg, b] = p.0;
+        g.0[0] = ((9798 * r as u32 + 19235 * gg as u32 + 3735 * b as u32 + 16384) >> 15) as u8;
+    }
+}
+
+impl DetectStage {
+    /// Loads every cascade (the only filesystem access of the stage).
+    pub fn load(specs: &[CascadeSpec]) -> Result<Self, CascadeError> {
+        let entries = specs
+            .iter()
+            .map(|s| Ok((s.clone(), Detector::new(Cascade::from_file(&s.path)?))))
+            .collect::<Result<_, CascadeError>>()?;
+        Ok(Self {
+            entries,
+            gray: GrayImage::new(0, 0),
+        })
+    }
+
+    /// A stage from cascades already in memory (tests, the simulator).
+    pub fn from_cascades(entries: Vec<(CascadeSpec, Cascade)>) -> Self {
+        Self {
+            entries: entries.into_iter().map(|(s, c)| (s, Detector::new(c))).collect(),
+            gray: GrayImage::new(0, 0),
+        }
+    }
+
+    /// Runs every cascade on a colour frame (the pipeline's input): grey conversion into a
+    /// reused buffer, then [`DetectStage::run`] with the light reading enabled.
+    pub fn run_rgb(&mut self, rgb: &RgbImage) -> Result<Vec<DetectedObject>, DetectError> {
+        let mut gray = std::mem::take(&mut self.gray);
+        gray_from_rgb(rgb, &mut gray);
+        let out = self.run(&gray, Some(rgb));
+        self.gray = gray;
+        out
+    }
+
+    /// Runs every cascade on the grey frame; `rgb` (the same frame in colour) enables the
+    /// traffic-light reading.
+    pub fn run(&mut self, gray: &GrayImage, rgb: Option<&RgbImage>) -> Result<Vec<DetectedObject>, DetectError> {
+        let mut out = Vec::new();
+        for (spec, det) in &mut self.entries {
+            for d in det.detect(gray, &spec.params)? {
+                out.push(DetectedObject {
+                    label: spec.label.clone(),
+                    rect: d.rect,
+                    neighbors: d.neighbors,
+                    light: match rgb {
+                        Some(img) if spec.traffic_light => Some(light_state(img, d.rect)),
+                        _ => None,
+                    },
+                });
+            }
+        }
+        Ok(out)
+    }
+
+    /// The labels, in run order.
+    pub fn labels(&self) -> impl Iterator<Item = &str> {
+        self.entries.iter().map(|(s, _)| s.label.as_str())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 4×4 cascade that fires on windows whose top half is darker than the bottom half.
+    const BRIGHT_BELOW: &str = r#"<opencv_storage><cascade><stageType>BOOST</stageType>
+        <featureType>HAAR</featureType><height>4</height><width>4</width>
+        <featureParams><maxCatCount>0</maxCatCount></featureParams>
+        <stages><_><stageThreshold>0</stageThreshold><weakClassifiers>
+          <_><internalNodes>0 -1 0 0.1</internalNodes><leafValues>-1 1</leafValues></_>
+        </weakClassifiers></_></stages>
+        <features><_><rects><_>0 0 4 4 -1.</_><_>0 2 4 2 2.</_></rects><tilted>0</tilted></_></features>
+        </cascade></opencv_storage>"#;
+
+    #[test]
+    fn grey_conversion_is_opencvs() {
+        // cv2.cvtColor(..., COLOR_RGB2GRAY) on these pixels gives 76, 150, 29, 130.
+        let rgb = RgbImage::from_fn(4, 1, |x, _| {
+            image::Rgb([[255, 0, 0], [0, 255, 0], [0, 0, 255], [12, 200, 77]][x as usize])
+        });
+        let mut g = GrayImage::new(0, 0);
+        gray_from_rgb(&rgb, &mut g);
+        assert_eq!(g.as_raw(), &vec![76, 150, 29, 130]);
+    }
+
+    #[test]
+    fn labels_boxes_and_reads_lights_only_where_asked() {
+        let c = Cascade::from_xml_str(BRIGHT_BELOW, "t").unwrap();
+        let spec = |label: &str, light| CascadeSpec {
+            label: label.into(),
+            path: PathBuf::new(),
+            traffic_light: light,
+            params: DetectParams {
+                min_neighbors: 0,
+                max_size: (4, 4),
+                ..Default::default()
+            },
+        };
+        let mut stage = DetectStage::from_cascades(vec![(spec("edge", false), c.clone()), (spec("light", true), c)]);
+        assert_eq!(stage.labels().collect::<Vec<_>>(), ["edge", "light"]);
+        // Dark above, bright below, with a little texture so no window is flat.
+        let gray = GrayImage::from_fn(8, 8, |x, y| {
+            image::Luma([if y < 4 { 10 + x as u8 } else { 200 + x as u8 }])
+        });
+        let rgb = RgbImage::from_fn(8, 8, |x, y| {
+            let v = gray.get_pixel(x, y).0[0];
+            image::Rgb([v, v, v])
+        });
+        let found = stage.run(&gray, Some(&rgb)).unwrap();
+        // The colour entry point converts to the same grey (a grey RGB image stays itself).
+        assert_eq!(stage.run_rgb(&rgb).unwrap(), found);
+        let edge: Vec<_> = found.iter().filter(|o| o.label == "edge").collect();
+        let light: Vec<_> = found.iter().filter(|o| o.label == "light").collect();
+        assert!(!edge.is_empty());
+        assert_eq!(edge.len(), light.len());
+        assert!(edge.iter().all(|o| o.light.is_none()));
+        assert!(light.iter().all(|o| o.light.is_some()));
+        // Every hit straddles the dark/bright boundary at row 4.
+        assert!(
+            edge.iter().all(|o| o.rect.y < 4 && o.rect.y + o.rect.height > 4),
+            "{edge:?}"
+        );
+    }
+}
