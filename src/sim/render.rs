@@ -307,6 +307,11 @@ impl Renderer {
                     lerp_fill(&mut self.tex, w, tstep, |u| scene.texture_at(at(u)) * row.fade);
                 }
             }
+            // Columns before `probe_from` are known to be clear of every line (see
+            // `Scene::floor_color`): the distance to a line shrinks by at most one step per
+            // column.
+            let step_len = row.dg[0].hypot(row.dg[1]) as f32;
+            let mut probe_from = 0usize;
             for (u, (px, &vg)) in out.chunks_exact_mut(3).zip(vig).enumerate() {
                 let uf = u as f64;
                 let p = [lens[0] + g0[0] + uf * dg[0], lens[1] + g0[1] + uf * dg[1]];
@@ -319,7 +324,12 @@ impl Renderer {
                     };
                     let light = self.light[u];
                     let tex = if textured { self.tex[u] } else { 0.0 };
-                    scene.floor_color(p, &fp, light, tex)
+                    let probe = u >= probe_from;
+                    let (c, clear) = scene.floor_color(p, &fp, light, tex, probe);
+                    if probe && clear > row.size {
+                        probe_from = u + 1 + ((clear - row.size) / step_len.max(1e-9)).min(w as f32) as usize;
+                    }
+                    c
                 } else {
                     scene.wall_color(o, self.world_ray((sy, cy), uf, v as f64))
                 };
