@@ -250,7 +250,7 @@ impl Default for SteeringConfig {
     fn default() -> Self {
         Self {
             kp: 1.0,
-            ki: 0.1,
+            ki: 0.0,
             kd: 0.05,
             integral_limit: 0.3,
             max_steer: 1.0,

@@ -1,10 +1,9 @@
 //! The closed loop on the default track (issue 5's "must show"): clean laps, gains that
 //! matter, and the lane measurement scored against ground truth.
 //!
-//! These runs use `steering.ki = 0`: with the shipped `ki = 0.1` the integral of the
-//! look-ahead error winds up in every long curve and pulls the car ~5 cm to the inside
-//! (RMS 15% of the lane, 8 departures in 3 laps), see docs/sim.md. Everything else is the
-//! shipped configuration.
+//! These runs use the shipped configuration. (It ships `steering.ki = 0`: with `ki = 0.1` the
+//! integral of the look-ahead error winds up in every long curve and pulls the car ~5 cm to
+//! the inside, RMS 15% of the lane with 8 departures in 3 laps; see docs/sim.md.)
 
 use rccar::config::Config;
 use rccar::sim::run::{EndReason, Simulation, StepOutput, Summary};
@@ -17,7 +16,7 @@ fn track() -> Track {
 }
 
 fn cfg() -> Config {
-    Config::default().with_override("steering.ki=0").unwrap()
+    Config::default()
 }
 
 /// Runs `cfg` (optionally from `start` metres along the track) and keeps every step.
