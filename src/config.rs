@@ -103,6 +103,10 @@ pub struct Config {
     pub throttle: ThrottleConfig,
     /// Replay of recorded frames.
     pub replay: ReplayConfig,
+    /// The simulated car's chassis (kinematic bicycle model).
+    pub vehicle: VehicleConfig,
+    /// The closed-loop simulator: track, run length, camera effects.
+    pub sim: SimConfig,
 }
 
 /// `[camera]`: the image the pipeline works on and the camera's pose on the car.
@@ -295,6 +299,86 @@ impl Default for ReplayConfig {
     }
 }
 
+/// `[vehicle]`: the simulated car, a kinematic bicycle (rear-axle reference point).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VehicleConfig {
+    /// Distance between the front and rear axles, metres.
+    pub wheelbase_m: f64,
+    /// Distance between the left and right wheels' centres, metres (lane-departure check).
+    pub track_m: f64,
+    /// How far the camera lens is ahead of the rear axle, metres.
+    pub camera_x_m: f64,
+    /// Front-wheel angle at full steering command (|steer| = 1), degrees.
+    pub max_steer_deg: f64,
+    /// Fastest the steering servo turns the wheels, degrees per second.
+    pub servo_rate_dps: f64,
+    /// Dead time between a steering command and the servo starting to move, seconds.
+    pub servo_delay_s: f64,
+    /// Speed at full throttle, metres per second.
+    pub max_speed_mps: f64,
+    /// Time constant of the speed's first-order response to the throttle, seconds (0 = instant).
+    pub speed_tau_s: f64,
+}
+
+impl Default for VehicleConfig {
+    fn default() -> Self {
+        Self {
+            wheelbase_m: 0.26,
+            track_m: 0.16,
+            camera_x_m: 0.24,
+            max_steer_deg: 14.0,
+            servo_rate_dps: 300.0,
+            servo_delay_s: 0.03,
+            max_speed_mps: 1.0,
+            speed_tau_s: 0.3,
+        }
+    }
+}
+
+/// `[sim]`: the closed-loop simulator (`rccar sim`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimConfig {
+    /// Track file, relative to the working directory.
+    pub track: String,
+    /// Laps to drive before the run ends.
+    pub laps: u32,
+    /// The run ends after this much simulated time even if the laps are not done, seconds.
+    pub max_seconds: f64,
+    /// Vehicle-model steps per camera frame (the physics step is 1 / (fps × substeps)).
+    pub substeps: u32,
+    /// Seed of every random choice (camera noise); the same seed gives the same run.
+    pub seed: i64,
+    /// Standard deviation of the camera's pixel noise, grey levels (0 = none).
+    pub noise_sigma: f64,
+    /// Gaussian blur of the rendered frame, sigma in pixels (0 = sharp).
+    pub blur_px: f64,
+    /// Exposure gain on the rendered frame (1 = as lit).
+    pub exposure: f64,
+    /// Peak relative change of the scene's brightness over time (0 = steady lighting).
+    pub light_variation: f64,
+    /// Period of the brightness change, seconds.
+    pub light_period_s: f64,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            track: "config/tracks/default.toml".into(),
+            laps: 3,
+            max_seconds: 600.0,
+            substeps: 4,
+            seed: 1,
+            noise_sigma: 2.0,
+            blur_px: 0.0,
+            exposure: 1.0,
+            light_variation: 0.0,
+            light_period_s: 10.0,
+        }
+    }
+}
+
 /// Checks that collect every out-of-range value instead of stopping at the first.
 struct Checker(Vec<InvalidValue>);
 
@@ -380,6 +464,30 @@ impl Config {
         c.range("throttle.min", t.min, 0.0, t.base.max(0.0));
         c.range("throttle.error_slowdown", t.error_slowdown, 0.0, 5.0);
         c.range("throttle.lost_timeout_s", t.lost_timeout_s, 0.0, 60.0);
+
+        let v = &self.vehicle;
+        c.range("vehicle.wheelbase_m", v.wheelbase_m, 0.02, 2.0);
+        c.range("vehicle.track_m", v.track_m, 0.02, 2.0);
+        c.range("vehicle.camera_x_m", v.camera_x_m, -2.0, 2.0);
+        c.range("vehicle.max_steer_deg", v.max_steer_deg, 1.0, 60.0);
+        c.range("vehicle.servo_rate_dps", v.servo_rate_dps, 1.0, 10000.0);
+        c.range("vehicle.servo_delay_s", v.servo_delay_s, 0.0, 1.0);
+        c.range("vehicle.max_speed_mps", v.max_speed_mps, 0.01, 20.0);
+        c.range("vehicle.speed_tau_s", v.speed_tau_s, 0.0, 10.0);
+
+        let m = &self.sim;
+        if m.track.trim().is_empty() {
+            c.fail("sim.track", format!("{:?}", m.track), "a path to a track file");
+        }
+        c.range("sim.laps", m.laps, 0, 1000);
+        c.range("sim.max_seconds", m.max_seconds, 0.1, 36000.0);
+        c.range("sim.substeps", m.substeps, 1, 100);
+        c.range("sim.seed", m.seed, 0, i64::MAX);
+        c.range("sim.noise_sigma", m.noise_sigma, 0.0, 64.0);
+        c.range("sim.blur_px", m.blur_px, 0.0, 3.0);
+        c.range("sim.exposure", m.exposure, 0.1, 4.0);
+        c.range("sim.light_variation", m.light_variation, 0.0, 0.9);
+        c.range("sim.light_period_s", m.light_period_s, 0.1, 3600.0);
 
         if c.0.is_empty() {
             Ok(())

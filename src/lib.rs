@@ -24,6 +24,7 @@ pub mod lane;
 pub mod link;
 pub mod pipeline;
 pub mod ranging;
+pub mod sim;
 pub mod sink;
 pub mod source;
 pub mod telemetry;

@@ -30,6 +30,8 @@ enum Cmd {
     Link(cli::link::LinkArgs),
     /// Run OpenCV Haar/LBP cascades on images; print boxes as JSON, write annotated images.
     Detect(cli::detect::DetectArgs),
+    /// Drive the simulated car round a track with the pipeline in the loop; report and plot.
+    Sim(cli::sim::SimArgs),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +43,7 @@ fn main() -> ExitCode {
         Cmd::Stages(a) => cli::stages::run(a),
         Cmd::Link(a) => cli::link::run(a),
         Cmd::Detect(a) => cli::detect::run(a),
+        Cmd::Sim(a) => cli::sim::run(a),
     };
     match result {
         Ok(code) => code,

@@ -42,6 +42,9 @@ pub struct FrameRecord {
     pub throttle: f64,
     /// Microseconds per stage.
     pub stage_us: StageTimes,
+    /// Ground truth (simulator only): true offset, heading error, line columns, objects.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth: Option<crate::sim::truth::FrameTruth>,
 }
 
 impl FrameRecord {
@@ -70,6 +73,7 @@ impl FrameRecord {
             steer: cmd.steer,
             throttle: cmd.throttle,
             stage_us,
+            truth: None,
         }
     }
 

@@ -6,6 +6,7 @@ pub mod config;
 pub mod detect;
 pub mod link;
 pub mod replay;
+pub mod sim;
 pub mod stages;
 pub mod synth;
 pub mod timer;

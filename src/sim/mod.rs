@@ -1,0 +1,19 @@
+//! The closed-loop simulator: a track ([`track`]), a car ([`vehicle`]), what its camera would
+//! see ([`render`]) and the loop that feeds those frames through the same pipeline the car
+//! runs ([`run`]), scored against ground truth ([`truth`]). [`scene`] holds what the camera
+//! looks at (floor, lines, walls, objects), [`glyphs`] the stroke letters of the signs,
+//! [`plot`] the run's plots, [`rng`] the seeded generator. Usage and the track format:
+//! `docs/sim.md`.
+//!
+//! Units: metres, seconds, radians (degrees only in files). World frame x east, y north,
+//! z up; headings counter-clockwise from +x.
+
+pub mod glyphs;
+pub mod plot;
+pub mod render;
+pub mod rng;
+pub mod run;
+pub mod scene;
+pub mod track;
+pub mod truth;
+pub mod vehicle;
