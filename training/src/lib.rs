@@ -13,8 +13,10 @@
 //! Usage: `training/README.md`, `docs/training.md`.
 
 pub mod boost;
+pub mod evaluate;
 pub mod features;
 pub mod model;
 pub mod samples;
 pub mod scan;
+pub mod simgen;
 pub mod train;

@@ -2,9 +2,11 @@
 
 use anyhow::{bail, Context};
 use clap::{Parser, Subcommand};
+use rccar_train::evaluate;
 use rccar_train::features::HaarMode;
 use rccar_train::model::{BoostType, ModelParams};
 use rccar_train::samples;
+use rccar_train::simgen;
 use rccar_train::train::{self, Progress, StageLog, TrainOptions};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -23,6 +25,173 @@ struct Cli {
 enum Cmd {
     /// Train a cascade (opencv_traincascade's job).
     Train(TrainArgs),
+    /// Render positives, negatives or held-out frames with the simulator.
+    Gen(GenArgs),
+    /// Recall, precision, FP per frame and the recall–FP curve on labelled frames.
+    Evaluate(EvalArgs),
+}
+
+#[derive(clap::Args)]
+struct EvalArgs {
+    /// Cascade XML.
+    #[arg(long)]
+    cascade: PathBuf,
+    /// Labelled frames (info.dat).
+    #[arg(long)]
+    info: PathBuf,
+    /// Output folder for report.json and curve.png (default: next to the cascade).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// minNeighbors whose numbers are printed as the operating point.
+    #[arg(long, default_value_t = 3)]
+    min_neighbors: u32,
+    /// Scale factor.
+    #[arg(long, default_value_t = 1.1)]
+    scale_factor: f64,
+    /// IoU for a match.
+    #[arg(long, default_value_t = 0.5)]
+    iou: f64,
+    /// Title of the curve.
+    #[arg(long)]
+    title: Option<String>,
+}
+
+const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
+
+fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
+    let cascade = rccar::detect::Cascade::from_file(&a.cascade)?;
+    let (lines, skipped) = samples::read_info(&a.info)?;
+    for s in &skipped {
+        eprintln!("{s}");
+    }
+    let mut frames = Vec::new();
+    for l in lines {
+        match samples::load_gray(&l.path) {
+            Ok(img) => frames.push((l.path.display().to_string(), img, l.boxes)),
+            Err(e) => eprintln!("{}:{}: skipped: {e}", a.info.display(), l.line),
+        }
+    }
+    if frames.is_empty() {
+        bail!("{}: no readable frames", a.info.display());
+    }
+    let mns: Vec<u32> = (0..=10).collect();
+    let rep = evaluate::evaluate(
+        cascade,
+        &a.cascade.display().to_string(),
+        &frames,
+        a.scale_factor,
+        a.iou,
+        &mns,
+        a.min_neighbors,
+    )?;
+    let out = a
+        .out
+        .unwrap_or_else(|| a.cascade.parent().map(|p| p.to_path_buf()).unwrap_or_default());
+    std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
+    let json = out.join("report.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&rep)?).with_context(|| json.display().to_string())?;
+    if let Ok(bytes) = std::fs::read(FONT) {
+        rccar::sim::plot::register_font(Box::leak(bytes.into_boxed_slice()));
+        let title = a
+            .title
+            .clone()
+            .unwrap_or_else(|| format!("{} on {}", a.cascade.display(), a.info.display()));
+        let img = evaluate::curve_png(&rep, &title).map_err(anyhow::Error::msg)?;
+        let png = out.join("curve.png");
+        img.save(&png).with_context(|| png.display().to_string())?;
+    } else {
+        eprintln!("{FONT} not found (Debian fonts-dejavu-core): no curve.png");
+    }
+    println!("{} frames, {} boxes, IoU >= {}", rep.frames, rep.boxes, rep.iou);
+    println!("minNeighbors  recall  precision  FP/frame   TP   FP  miss");
+    for p in &rep.points {
+        println!(
+            "{:>12}  {:.4}  {:>9.4}  {:>8.4}  {:>3}  {:>3}  {:>4}{}",
+            p.min_neighbors,
+            p.recall,
+            p.precision,
+            p.fp_per_frame,
+            p.true_positives,
+            p.false_positives,
+            p.misses,
+            if p.min_neighbors == a.min_neighbors { "  <-" } else { "" }
+        );
+    }
+    println!(
+        "time per {}x{} frame: median {:.2} ms, mean {:.2} ms, max {:.2} ms",
+        rep.frame_size.0, rep.frame_size.1, rep.ms_median, rep.ms_mean, rep.ms_max
+    );
+    println!("wrote {} and curve.png", json.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+#[derive(clap::Args)]
+struct GenArgs {
+    /// stop_sign | traffic_light | obstacle.
+    #[arg(long)]
+    kind: String,
+    /// What to make.
+    #[arg(long, value_enum)]
+    split: simgen::Split,
+    /// Samples (positives) or frames.
+    #[arg(long, default_value_t = 1000)]
+    count: usize,
+    /// Seed (use different seeds for training and held-out data).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Track file the objects are placed on.
+    #[arg(long, default_value = "config/tracks/default.toml")]
+    track: PathBuf,
+    /// Window WxH (default per kind: stop 16x16, light 8x20, obstacle 20x16).
+    #[arg(long)]
+    window: Option<String>,
+    /// Object placements to spread the frames over.
+    #[arg(long, default_value_t = 20)]
+    scenes: usize,
+    /// Nearest object distance, metres.
+    #[arg(long, default_value_t = 0.2)]
+    min_distance: f64,
+    /// Farthest object distance, metres.
+    #[arg(long, default_value_t = 1.5)]
+    max_distance: f64,
+}
+
+fn parse_wh(s: &str) -> anyhow::Result<(u32, u32)> {
+    let (a, b) = s.split_once('x').with_context(|| format!("`{s}`: expected WxH"))?;
+    Ok((a.trim().parse()?, b.trim().parse()?))
+}
+
+fn run_gen(a: GenArgs) -> anyhow::Result<ExitCode> {
+    let kind = simgen::parse_kind(&a.kind)
+        .with_context(|| format!("--kind `{}`: expected stop_sign, traffic_light or obstacle", a.kind))?;
+    let window = match &a.window {
+        Some(s) => parse_wh(s)?,
+        None => simgen::default_window(kind),
+    };
+    let g = simgen::SimGen::new(&a.track, rccar::config::Config::default())?;
+    let opts = simgen::GenOptions {
+        kind,
+        split: a.split,
+        count: a.count,
+        seed: a.seed,
+        distance_m: (a.min_distance, a.max_distance),
+        window,
+        scenes: a.scenes,
+    };
+    let t = std::time::Instant::now();
+    let bar = indicatif::ProgressBar::new(a.count as u64);
+    let list = g.generate(&opts, &a.out, &mut |n| bar.set_position(n as u64))?;
+    bar.finish_and_clear();
+    eprintln!(
+        "{}: {} items in {:.1} s",
+        list.display(),
+        a.count,
+        t.elapsed().as_secs_f64()
+    );
+    Ok(ExitCode::SUCCESS)
 }
 
 #[derive(clap::Args)]
@@ -191,6 +360,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let r = match cli.cmd {
         Cmd::Train(a) => run_train(a),
+        Cmd::Gen(a) => run_gen(a),
+        Cmd::Evaluate(a) => run_evaluate(a),
     };
     match r {
         Ok(c) => c,
