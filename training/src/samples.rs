@@ -215,7 +215,7 @@ pub struct Background {
     pub name: String,
     /// Grey pixels.
     pub img: GrayImage,
-    /// Object boxes: windows overlapping one of them (IoU ≥ 0.4) are not negatives.
+    /// Object boxes: windows overlapping one of them (IoU ≥ 0.3, `scan::AVOID_IOU`) are not negatives.
     pub avoid: Vec<Rect>,
 }
 

@@ -17,6 +17,9 @@ use rccar::detect::resize::Resizer;
 use rccar::detect::{Cascade, Rect};
 use rccar::sim::rng::SplitMix64;
 
+/// Windows overlapping an object box by at least this IoU are not negatives.
+pub const AVOID_IOU: f64 = 0.3;
+
 /// What scanning one image gave.
 #[derive(Debug, Clone, Default)]
 pub struct ScanResult {
@@ -125,7 +128,7 @@ pub fn scan(
                         ww,
                         wh,
                     );
-                    if !bg.avoid.iter().any(|a| a.iou(&r) >= 0.4) {
+                    if !bg.avoid.iter().any(|a| a.iou(&r) >= AVOID_IOU) {
                         res.hits += 1;
                         // Reservoir sampling of `cap` windows.
                         let slot = if res.kept.len() < cap {

@@ -247,9 +247,9 @@ impl SimGen {
             .collect();
         for i in 0..8 {
             let k = others[i % others.len()];
-            // Two near the target, the rest anywhere.
+            // Two near the target (views that hide it are not used), the rest anywhere.
             let s = if i < 2 {
-                s_t + uniform(rng, 0.3, 1.2) * if rng.next_f64() < 0.5 { -1.0 } else { 1.0 }
+                s_t + uniform(rng, 0.4, 1.5) * if rng.next_f64() < 0.5 { -1.0 } else { 1.0 }
             } else {
                 uniform(rng, 0.0, base.length)
             };
@@ -347,6 +347,17 @@ impl SimGen {
             let Some(b) = target_box(&self.mount, &pose, t, aspect) else {
                 continue;
             };
+            // Nothing nearer may cover it (the ground truth knows no occlusion).
+            let dist = |p: [f64; 2]| (p[0] - lens[0]).hypot(p[1] - lens[1]);
+            let covered = placed.scene.track.enabled_objects().any(|ob| {
+                ob.index != t.index
+                    && dist(ob.pos) < dist(t.pos) + 0.15
+                    && bounds_box(&self.mount, &pose, ob)
+                        .is_none_or(|o| o[0] < b[2] && o[2] > b[0] && o[1] < b[3] && o[3] > b[1])
+            });
+            if covered {
+                continue;
+            }
             let inside =
                 b[0] >= 0.0 && b[1] >= 0.0 && b[2] <= cam.width as f64 - 1.0 && b[3] <= cam.height as f64 - 1.0;
             if !inside || b[2] - b[0] < o.window.0 as f64 || b[3] - b[1] < o.window.1 as f64 {
@@ -402,12 +413,12 @@ impl SimGen {
                             let r = round_box(b);
                             format!("{name} 1 {} {} {} {}", r[0], r[1], r[2], r[3])
                         } else {
-                            // Jitter: ±4% shift, ±5% size; then a crop 1.5× the box.
+                            // Jitter: ±6% shift, ±7% size (the detector's grid: 2 px steps, 1.1× scales); then a crop 1.5× the box.
                             let (w, h) = (b[2] - b[0], b[3] - b[1]);
-                            let k = uniform(&mut rng, 0.95, 1.05);
+                            let k = uniform(&mut rng, 0.93, 1.07);
                             let (cx, cy) = (
-                                (b[0] + b[2]) / 2.0 + uniform(&mut rng, -0.04, 0.04) * w,
-                                (b[1] + b[3]) / 2.0 + uniform(&mut rng, -0.04, 0.04) * h,
+                                (b[0] + b[2]) / 2.0 + uniform(&mut rng, -0.06, 0.06) * w,
+                                (b[1] + b[3]) / 2.0 + uniform(&mut rng, -0.06, 0.06) * h,
                             );
                             let (w, h) = (w * k, h * k);
                             let jb = [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0];
@@ -497,6 +508,16 @@ impl SimGen {
     pub fn config(&self) -> &Config {
         &self.cfg
     }
+}
+
+/// The projected bounding box of a whole object, or `None` if a corner is behind the camera.
+fn bounds_box(mount: &CameraMount, pose: &Pose, ob: &Object) -> Option<[f64; 4]> {
+    let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    for p in Scene::object_bounds(ob) {
+        let (u, v) = mount.project_world(pose, p)?;
+        bb = [bb[0].min(u), bb[1].min(v), bb[2].max(u), bb[3].max(v)];
+    }
+    Some(bb)
 }
 
 /// [x0, y0, x1, y1] → integer (x, y, w, h).
