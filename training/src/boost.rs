@@ -69,21 +69,20 @@ impl FeatureMatrix {
         F: Fn(usize, usize) -> f32 + Sync,
     {
         let step = (n / subsample.max(1)).max(1);
-        let rows: Vec<(Vec<u8>, Vec<f32>)> = features
-            .par_iter()
-            .map(|&f| {
+        // Written in place, one row per feature: the budget holds the bins once.
+        let mut bins = vec![0u8; features.len() * n];
+        let edges: Vec<Vec<f32>> = bins
+            .par_chunks_mut(n.max(1))
+            .zip(features.par_iter())
+            .map(|(row, &f)| {
                 let vals: Vec<f32> = (0..n).map(|i| value(f, i)).collect();
                 let edges = edges_of(vals.iter().step_by(step).copied().collect());
-                let bins = vals.iter().map(|v| edges.partition_point(|e| *e <= *v) as u8).collect();
-                (bins, edges)
+                for (b, v) in row.iter_mut().zip(&vals) {
+                    *b = edges.partition_point(|e| *e <= *v) as u8;
+                }
+                edges
             })
             .collect();
-        let mut bins = Vec::with_capacity(features.len() * n);
-        let mut edges = Vec::with_capacity(features.len());
-        for (b, e) in rows {
-            bins.extend_from_slice(&b);
-            edges.push(e);
-        }
         FeatureMatrix {
             n,
             features,

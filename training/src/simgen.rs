@@ -1,7 +1,9 @@
 //! Training and held-out data rendered by rccar's simulator (`rccar::sim::render`): the car's
 //! camera looking at stop signs, traffic lights (red or green lit) and obstacles at 0.2–1.5 m,
 //! from varied angles, under varied exposure, noise and blur, on the default track with the
-//! other kinds of objects standing around as distractors.
+//! other kinds of objects standing around as distractors. Obstacles get random colours at
+//! least 30 grey levels away from the floor's (a box as grey as the floor has no Haar
+//! features to find).
 //!
 //! Per object kind and seed:
 //! * `positives`: crops around the object's *target box* (below) with a small seeded jitter,
@@ -13,7 +15,7 @@
 //!   an `info.dat` of its box (the held-out set: use seeds not used for training).
 //!
 //! The target box is what the cascade window covers: the sign's face square, the light's
-//! housing, the obstacle's projected bounding box, widened to the window's aspect ratio about
+//! housing, the obstacle's projected bounding box with a 20% margin, widened to the window's aspect ratio about
 //! its centre. Every random choice comes from a [`SplitMix64`] seeded by the `seed` argument.
 //! Units: metres, radians, pixels.
 
@@ -51,6 +53,14 @@ fn io_err(path: &Path, e: impl std::fmt::Display) -> GenError {
         path: path.into(),
         message: e.to_string(),
     }
+}
+
+/// An obstacle's target box is its projected bounding box times this (floor around it).
+pub const OBSTACLE_MARGIN: f64 = 1.2;
+
+/// OpenCV's integer BT.601 grey of a colour.
+fn grey(c: [u8; 3]) -> f64 {
+    ((9798 * c[0] as u32 + 19235 * c[1] as u32 + 3735 * c[2] as u32 + 16384) >> 15) as f64
 }
 
 /// Window aspect (width / height) the target box is widened to.
@@ -105,6 +115,11 @@ pub fn target_box(mount: &CameraMount, pose: &Pose, ob: &Object, aspect: f64) ->
     }
     let (cx, cy) = ((bb[0] + bb[2]) / 2.0, (bb[1] + bb[3]) / 2.0);
     let (mut w, mut h) = (bb[2] - bb[0], bb[3] - bb[1]);
+    if ob.kind == ObjectKind::Obstacle {
+        // A margin of floor around the box: its outline is what the features see.
+        w *= OBSTACLE_MARGIN;
+        h *= OBSTACLE_MARGIN;
+    }
     if w / h > aspect {
         h = w / aspect;
     } else {
@@ -203,6 +218,7 @@ impl SimGen {
         spec_file.floor.seed = rng.next_u64() % 1000;
         let fl = uniform(rng, 0.8, 1.15);
         spec_file.floor.color = self.base.floor.color.map(|c| (c as f64 * fl).clamp(0.0, 255.0) as u8);
+        let spec_file_floor = spec_file.floor.color;
         let half_road = base.spec.road.lane_width_m * base.spec.road.lanes as f64 / 2.0;
         let verge = |rng: &mut SplitMix64, s: f64, kind: ObjectKind| -> ObjectSpec {
             let (p, hd) = base.pose_at(s);
@@ -229,7 +245,15 @@ impl SimGen {
                         uniform(rng, 0.10, 0.18),
                         uniform(rng, 0.08, 0.14),
                     ];
-                    o.color = [0, 1, 2].map(|_| (rng.next_u64() % 220) as u8 + 20);
+                    // A box as grey as the floor is invisible to a grey-level cascade (the
+                    // detector skips windows with a grey std dev ≤ 10): keep 30 levels apart.
+                    let fg = grey(spec_file_floor);
+                    loop {
+                        o.color = [0, 1, 2].map(|_| (rng.next_u64() % 220) as u8 + 20);
+                        if (grey(o.color) - fg).abs() >= 30.0 {
+                            break;
+                        }
+                    }
                 }
                 ObjectKind::StopSign => o.size_m = vec![uniform(rng, 0.095, 0.105)],
                 ObjectKind::TrafficLight => {
@@ -451,9 +475,18 @@ impl SimGen {
                         }
                     }
                     Split::Negatives => {
-                        // Driving along the lane (70%) or looking at some object.
+                        // Driving along the lane (40%), looking at the target (40%: its
+                        // surroundings are the hardest negatives) or at some other object.
                         let track = &placed.scene.track;
-                        let pose = if rng.next_f64() < 0.7 {
+                        let r = rng.next_f64();
+                        let near_target = if r >= 0.4 && r < 0.8 {
+                            self.view_of_target(&placed, o, &mut rng).map(|v| v.0)
+                        } else {
+                            None
+                        };
+                        let pose = if let Some(p) = near_target {
+                            p
+                        } else if r < 0.4 {
                             let s = uniform(&mut rng, 0.0, track.length);
                             let (p, hd) = track.lane_pose_at(s);
                             let lat = uniform(&mut rng, -0.12, 0.12);

@@ -387,7 +387,8 @@ pub fn train(
         let n = np + nn;
         // 5. Feature matrix within the budget.
         let t1 = Instant::now();
-        let fit = (budget / n.max(1)).max(1);
+        // Per feature: one bin byte per sample and up to 255 f32 edges.
+        let fit = (budget / (n + 1024)).max(1);
         let mut feats: Vec<usize> = (0..model.pool.len()).collect();
         if feats.len() > fit {
             let mut frng = SplitMix64::new(mix(opts.seed ^ 0xFEA7 ^ si as u64));
@@ -405,7 +406,7 @@ pub fn train(
             .map(|f| features::Compiled::new(f, w + 1, tofs))
             .collect();
         let sample = |i: usize| if i < np { pos[i] } else { &neg[i - np] };
-        let matrix = FeatureMatrix::build(feats, n, 2048, |f, i| sample(i).value(&compiled_feats[f]));
+        let matrix = FeatureMatrix::build(feats, n, 1024, |f, i| sample(i).value(&compiled_feats[f]));
         let t_pre = t1.elapsed().as_secs_f64();
         // 6. Boosting until the stage's false-alarm target.
         let t2 = Instant::now();
