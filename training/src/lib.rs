@@ -4,6 +4,7 @@
 //!
 //! ```text
 //! simgen    render positives / negatives / held-out frames with the simulator  (simgen.rs)
+//! distort   template images distorted over backgrounds                       (distort.rs)
 //! samples   info.dat positives, bg.txt negatives                                 (samples.rs)
 //! train     stage loop: mine hard negatives, precompute, boost, save            (train.rs)
 //!           features.rs (Haar pool), boost.rs (Gentle/Real/Discrete/Logit), model.rs (XML)
@@ -13,6 +14,7 @@
 //! Usage: `training/README.md`, `docs/training.md`.
 
 pub mod boost;
+pub mod distort;
 pub mod evaluate;
 pub mod features;
 pub mod model;

@@ -29,6 +29,70 @@ enum Cmd {
     Gen(GenArgs),
     /// Recall, precision, FP per frame and the recall–FP curve on labelled frames.
     Evaluate(EvalArgs),
+    /// Positives from template images, distorted over backgrounds (opencv_createsamples -img).
+    Distort(DistortArgs),
+}
+
+#[derive(clap::Args)]
+struct DistortArgs {
+    /// Template images (PNG with alpha: transparent pixels show the background).
+    #[arg(long = "template", required = true)]
+    templates: Vec<PathBuf>,
+    /// Backgrounds (bg.txt).
+    #[arg(long = "bg", required = true)]
+    bg: Vec<PathBuf>,
+    /// Samples.
+    #[arg(long, default_value_t = 1000)]
+    count: usize,
+    /// Seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Window WxH.
+    #[arg(long, default_value = "24x24")]
+    window: String,
+    /// Output folder (PNG crops + info.dat).
+    #[arg(long)]
+    out: PathBuf,
+    /// Largest rotation, degrees.
+    #[arg(long, default_value_t = 15.0)]
+    max_angle_deg: f64,
+    /// Largest corner displacement (perspective), fraction of the object size.
+    #[arg(long, default_value_t = 0.12)]
+    max_skew: f64,
+    /// Object size range, multiples of the window.
+    #[arg(long, default_value_t = 1.0)]
+    min_scale: f64,
+    /// Object size range, multiples of the window.
+    #[arg(long, default_value_t = 3.0)]
+    max_scale: f64,
+}
+
+fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
+    let mut templates = Vec::new();
+    for t in &a.templates {
+        templates.push(
+            image::open(t)
+                .with_context(|| format!("{}: cannot read template", t.display()))?
+                .to_rgba8(),
+        );
+    }
+    let (bgs, skipped) = samples::load_backgrounds(&a.bg)?;
+    for s in &skipped {
+        eprintln!("{s}");
+    }
+    let o = rccar_train::distort::DistortOptions {
+        count: a.count,
+        seed: a.seed,
+        window: parse_wh(&a.window)?,
+        max_angle: a.max_angle_deg.to_radians(),
+        max_skew: a.max_skew,
+        scale: (a.min_scale, a.max_scale),
+        ..Default::default()
+    };
+    let imgs: Vec<image::GrayImage> = bgs.into_iter().map(|b| b.img).collect();
+    let list = rccar_train::distort::generate(&templates, &imgs, &o, &a.out).map_err(anyhow::Error::msg)?;
+    eprintln!("{}: {} samples", list.display(), a.count);
+    Ok(ExitCode::SUCCESS)
 }
 
 #[derive(clap::Args)]
@@ -362,6 +426,7 @@ fn main() -> ExitCode {
         Cmd::Train(a) => run_train(a),
         Cmd::Gen(a) => run_gen(a),
         Cmd::Evaluate(a) => run_evaluate(a),
+        Cmd::Distort(a) => run_distort(a),
     };
     match r {
         Ok(c) => c,
