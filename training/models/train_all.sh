@@ -17,11 +17,11 @@ for kind in stop_sign traffic_light obstacle; do
   rm -rf "$d"
   # 1. Data: positives seed 1, backgrounds seed 2, held-out frames seed 1001.
   $B gen --kind $kind --split positives --count 3000 --seed 1 --min-distance 0.18 --max-distance 1.6 --out $d/pos
-  $B gen --kind $kind --split negatives --count 800 --seed 2 --out $d/neg
+  $B gen --kind $kind --split negatives --count 1000 --seed 2 --out $d/neg
   $B gen --kind $kind --split eval --count 300 --seed 1001 --out $d/eval
   # 2. Train.
   /usr/bin/time -v $B train --out $d/model --pos $d/pos/info.dat --bg $d/neg/bg.txt -W $w -H $h \
-    --num-stages 16 --num-pos 2000 --num-neg 2000 --min-hit-rate 0.998 --max-false-alarm 0.5 \
+    --num-stages 22 --num-pos 2000 --num-neg 2000 --min-hit-rate 0.998 --max-false-alarm 0.5 \
     --mode basic --boost gentle --mem-mb $MEM_MB --seed 1 2> >(tee $d/train.log >&2)
   # 3. Evaluate on the held-out frames; keep the report.
   mkdir -p training/models/$kind config/cascades
@@ -31,4 +31,4 @@ for kind in stop_sign traffic_light obstacle; do
   grep -E "^stage|Maximum resident|Elapsed" $d/train.log > training/models/$kind/train_summary.txt || true
   cp $d/model/cascade.xml config/cascades/$kind.xml
 done
-echo "all three trained and evaluated in $(( $(date +%s) - T0 )) s"
+echo "all three generated, trained and evaluated in $(( $(date +%s) - T0 )) s"
