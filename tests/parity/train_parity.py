@@ -7,7 +7,7 @@ detectMultiScale boxes are compared with `rccar detect`'s: every OpenCV box must
 box with IoU >= 0.9 (>= 99% of them), and the recall against the ground truth is printed for
 both. Prints "N passed, N failed" (one check per model and parameter set).
 
-    python3 tests/parity/train_parity.py [--quick]
+    python3 tests/parity/train_parity.py [--quick] [stop_sign traffic_light obstacle]
 Env: RCCAR_BIN (default target/release/rccar), RCCAR_TRAIN_BIN (target/release/rccar-train),
 RCCAR_TRAIN_OUT (default out/training: where the held-out frames are, made if missing).
 """
@@ -34,6 +34,7 @@ def iou(a, b):
 
 def main():
     quick = "--quick" in sys.argv
+    kinds = [a for a in sys.argv[1:] if not a.startswith("--")] or KINDS
     rccar = os.environ.get("RCCAR_BIN", os.path.join(ROOT, "target/release/rccar"))
     trainer = os.environ.get("RCCAR_TRAIN_BIN", os.path.join(ROOT, "target/release/rccar-train"))
     out = os.environ.get("RCCAR_TRAIN_OUT", os.path.join(ROOT, "out/training"))
@@ -43,7 +44,7 @@ def main():
     cv2.setNumThreads(1)
     passed = failed = 0
     count = 60 if quick else 300
-    for kind in KINDS:
+    for kind in kinds:
         xml = os.path.join(ROOT, "config/cascades", kind + ".xml")
         c = cv2.CascadeClassifier(xml)
         if c.empty():
