@@ -357,4 +357,31 @@ mod tests {
         assert_eq!(c.haar_features[0], m.pool[5]);
         assert_eq!(c.haar_features[1], m.pool[300]);
     }
+
+    #[test]
+    fn every_feature_of_the_all_pool_passes_the_loaders_window_checks() {
+        // The loader refuses rectangles (upright or tilted) that leave the window, so a
+        // cascade using every feature of the pool, tilted ones included, must load.
+        let mut m = Model::new(ModelParams {
+            width: 12,
+            height: 10,
+            mode: HaarMode::All,
+            ..params()
+        });
+        let weaks: Vec<Weak> = (0..m.pool.len())
+            .map(|f| Weak {
+                splits: vec![Split {
+                    feature: f,
+                    threshold: 0.0,
+                    left: 0,
+                    right: -1,
+                }],
+                leaves: vec![-1.0, 1.0],
+            })
+            .collect();
+        m.stages.push(StageModel { threshold: 0.0, weaks });
+        let c = m.to_cascade().expect("every feature inside the window");
+        assert!(c.has_tilted);
+        assert_eq!(c.haar_features.len(), m.pool.len());
+    }
 }
