@@ -178,7 +178,7 @@ pub fn evaluate(
     })
 }
 
-/// Recall against false positives per frame, one point per minNeighbors (labelled).
+/// Recall against false positives per frame, one point per minNeighbors ≥ 1 (labelled).
 pub fn curve_png(r: &Report, title: &str) -> Result<RgbImage, String> {
     let (w, h) = (800u32, 500u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
@@ -186,8 +186,10 @@ pub fn curve_png(r: &Report, title: &str) -> Result<RgbImage, String> {
         let e = |e: &dyn std::fmt::Display| e.to_string();
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|x| e(&x))?;
-        let xmax = r.points.iter().map(|p| p.fp_per_frame).fold(0.1, f64::max) * 1.1;
-        let ymin = r.points.iter().map(|p| p.recall).fold(1.0, f64::min).min(0.9) - 0.02;
+        // minNeighbors 0 (raw hits, tens of FP per frame) would squash the axis: left out.
+        let pts_all: Vec<&Point> = r.points.iter().filter(|p| p.min_neighbors > 0).collect();
+        let xmax = pts_all.iter().map(|p| p.fp_per_frame).fold(0.1, f64::max) * 1.1;
+        let ymin = pts_all.iter().map(|p| p.recall).fold(1.0, f64::min).min(0.9) - 0.02;
         let mut c = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 18))
             .margin(12)
@@ -200,11 +202,11 @@ pub fn curve_png(r: &Report, title: &str) -> Result<RgbImage, String> {
             .y_desc("recall")
             .draw()
             .map_err(|x| e(&x))?;
-        let pts: Vec<(f64, f64)> = r.points.iter().map(|p| (p.fp_per_frame, p.recall)).collect();
+        let pts: Vec<(f64, f64)> = pts_all.iter().map(|p| (p.fp_per_frame, p.recall)).collect();
         c.draw_series(LineSeries::new(pts.clone(), &BLUE)).map_err(|x| e(&x))?;
         c.draw_series(pts.iter().map(|&p| Circle::new(p, 4, BLUE.filled())))
             .map_err(|x| e(&x))?;
-        c.draw_series(r.points.iter().map(|p| {
+        c.draw_series(pts_all.iter().map(|p| {
             Text::new(
                 format!("mn={}", p.min_neighbors),
                 (p.fp_per_frame, p.recall),
