@@ -62,7 +62,7 @@ stage() {
   return 0
 }
 
-stage build cargo build --release --all-targets
+stage build cargo build --release --workspace --all-targets
 stage cargo-test cargo test --release --workspace
 stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
 stage firmware make -C firmware all sim
