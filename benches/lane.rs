@@ -80,7 +80,7 @@ fn main() {
         "histogram",
         "lines",
     ];
-    let mut ours: Vec<Vec<f64>> = vec![Vec::with_capacity(reps); names.len() + 1];
+    let mut ours: Vec<Vec<f64>> = (0..=names.len()).map(|_| Vec::with_capacity(reps)).collect();
     let mut times = StageTimes::default();
     for f in &frames {
         det.measure(f, &mut Warm, &mut times); // warm up
