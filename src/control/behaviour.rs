@@ -126,6 +126,8 @@ pub struct Decision {
     pub throttle: Option<f64>,
     /// `Some(s)`: steer `s` instead of following the lane (lane change).
     pub steer: Option<f64>,
+    /// Upper limit on whatever throttle results (1 = none).
+    pub throttle_cap: f64,
 }
 
 /// Speed and distance from the commanded throttle through the `[vehicle]` model (no encoder).
@@ -398,6 +400,7 @@ impl Behaviour {
         // 3. What the new state asks for.
         let c = &self.cfg;
         let driven = odo - self.since_odo;
+        let mut throttle_cap = 1.0;
         let (throttle, steer) = match self.mode {
             Mode::Cruise => (None, None),
             Mode::StopSign | Mode::RedLight | Mode::Obstacle => (Some(0.0), None),
@@ -419,15 +422,18 @@ impl Behaviour {
                 };
                 (Some(c.pass_throttle), Some(s))
             }
+            // A cap, so the lane controller's own lost-lane policy still applies when stricter.
             Mode::LaneLost => {
                 let lost = self.lane_lost_since.map_or(0.0, |t0| now - t0);
-                (Some(if lost >= c.lost_stop_s { 0.0 } else { c.lost_throttle }), None)
+                throttle_cap = if lost >= c.lost_stop_s { 0.0 } else { c.lost_throttle };
+                (None, None)
             }
         };
         Decision {
             mode: self.mode,
             throttle,
             steer,
+            throttle_cap,
         }
     }
 }
@@ -462,7 +468,7 @@ mod tests {
             o.speed_mps = self.car.speed_mps;
             o.odometry_m = self.car.odometry_m;
             let d = self.b.step(&o, self.t);
-            let thr = d.throttle.unwrap_or(0.5);
+            let thr = d.throttle.unwrap_or(0.5).min(d.throttle_cap);
             self.car.advance(thr, DT);
             self.t += DT;
             self.log.push((self.t, d.mode, self.car.speed_mps));
@@ -802,13 +808,13 @@ mod tests {
         let lost = Observations::default();
         let mut t = 0.0;
         let d = b.step(&lost, t);
-        assert_eq!((d.mode, d.throttle), (Mode::LaneLost, Some(0.2)));
+        assert_eq!((d.mode, d.throttle_cap), (Mode::LaneLost, 0.2));
         while t < 0.9 {
             t += DT;
-            assert_eq!(b.step(&lost, t).throttle, Some(0.2));
+            assert_eq!(b.step(&lost, t).throttle_cap, 0.2);
         }
         t += 0.2;
-        assert_eq!(b.step(&lost, t).throttle, Some(0.0));
+        assert_eq!(b.step(&lost, t).throttle_cap, 0.0);
         let d = b.step(&lane(), t + DT);
         assert_eq!((d.mode, d.throttle), (Mode::Cruise, None));
         assert_eq!(b.last_transition().unwrap().reason, "lane seen again");
