@@ -539,6 +539,7 @@ impl Config {
         c.range("behaviour.light_lost_s", b.light_lost_s, 0.0, 600.0);
         c.range("behaviour.obstacle_stop_m", b.obstacle_stop_m, 0.05, 10.0);
         c.range("behaviour.obstacle_lane_half_m", b.obstacle_lane_half_m, 0.0, 2.0);
+        c.range("behaviour.pass_trigger_m", b.pass_trigger_m, 0.05, 10.0);
         c.range("behaviour.pass_wait_s", b.pass_wait_s, 0.0, 60.0);
         c.range("behaviour.pass_steer", b.pass_steer, 0.05, 1.0);
         c.range("behaviour.pass_turn_m", b.pass_turn_m, 0.05, 5.0);
@@ -914,6 +915,8 @@ pub struct BehaviourConfig {
     pub obstacle_lane_half_m: f64,
     /// Pass a blocking obstacle through the other (left) lane.
     pub pass_enabled: bool,
+    /// With passing enabled, stop this far before an obstacle instead (room to swing out), metres.
+    pub pass_trigger_m: f64,
     /// Stand this long before starting to pass, seconds.
     pub pass_wait_s: f64,
     /// Steering used for each half of the lane change (0..1).
@@ -949,6 +952,7 @@ impl Default for BehaviourConfig {
             obstacle_stop_m: 0.45,
             obstacle_lane_half_m: 0.12,
             pass_enabled: false,
+            pass_trigger_m: 0.85,
             pass_wait_s: 1.0,
             pass_steer: 0.8,
             pass_turn_m: 0.6,

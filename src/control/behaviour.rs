@@ -90,6 +90,11 @@ pub enum Mode {
 }
 
 impl Mode {
+    /// One of the three passing states (the car may be in the other lane).
+    pub fn is_passing(self) -> bool {
+        matches!(self, Mode::PassOut | Mode::PassAlong | Mode::PassBack)
+    }
+
     /// The name used in telemetry.
     pub fn name(self) -> &'static str {
         match self {
@@ -294,9 +299,15 @@ impl Behaviour {
         };
         self.red_w.push(red_near);
         self.green_w.push(green);
+        // Passing needs room to swing out: then the car stops further back.
+        let stop_m = if c.pass_enabled {
+            c.obstacle_stop_m.max(c.pass_trigger_m)
+        } else {
+            c.obstacle_stop_m
+        };
         let blocking = obs
             .obstacle
-            .is_some_and(|o| o.distance_m < c.obstacle_stop_m && o.lateral_m.abs() <= c.obstacle_lane_half_m);
+            .is_some_and(|o| o.distance_m < stop_m && o.lateral_m.abs() <= c.obstacle_lane_half_m);
         self.obstacle_w.push(blocking);
         let stop_ok = self.confirmed(self.stop_w);
         let red_ok = self.confirmed(self.red_w);

@@ -388,8 +388,6 @@ impl Simulation {
     fn score(&mut self, truth: &FrameTruth, out: &FrameOutput, dt: f64, t: f64) {
         let track = &self.track.track;
         let e = truth.offset_m;
-        self.sq_sum += e * e;
-        self.xte_max = self.xte_max.max(e.abs());
         // Wheels: rebuild them for the rendered pose.
         let half = track.half_lane();
         let vcfg = &self.cfg.vehicle;
@@ -399,9 +397,28 @@ impl Simulation {
             yaw: truth.pose[2],
         };
         let w = vcfg.track_m / 2.0;
+        // While passing an obstacle (behaviour) the car may use the other lane: then only
+        // leaving the road counts, and the distance is to the nearer lane's centre.
+        let passing = out.mode.is_passing();
+        let lane_centre = |lat: f64| {
+            if passing && (lat + track.drive_offset).abs() < (lat - track.drive_offset).abs() {
+                -track.drive_offset
+            } else {
+                track.drive_offset
+            }
+        };
         let out_now = [[0.0, w], [0.0, -w], [vcfg.wheelbase_m, w], [vcfg.wheelbase_m, -w]]
             .iter()
-            .any(|&p| (self.track.lateral(pose.to_world(p)) - track.drive_offset).abs() > half);
+            .any(|&p| {
+                let lat = self.track.lateral(pose.to_world(p));
+                (lat - lane_centre(lat)).abs() > half
+            });
+        let e = if passing {
+            let lat = self.track.lateral(pose.to_world([vcfg.wheelbase_m / 2.0, 0.0]));
+            lat - lane_centre(lat)
+        } else {
+            e
+        };
         if out_now {
             self.time_outside += dt;
             if !self.outside {
@@ -410,6 +427,8 @@ impl Simulation {
             }
         }
         self.outside = out_now;
+        self.sq_sum += e * e;
+        self.xte_max = self.xte_max.max(e.abs());
         // Steering reversals: sign changes beyond a small dead band.
         let s = out.command.steer;
         if s.abs() > 0.05 {
