@@ -152,9 +152,9 @@ pub struct Renderer {
     /// Camera noise, one signed value per channel, reused at a random offset per frame.
     noise: Vec<i8>,
     prims: Vec<Prim>,
-    /// Scratch: one row's lighting samples.
+    /// Scratch: one row's lighting, per pixel.
     light: Vec<f32>,
-    /// Scratch: one row's texture samples.
+    /// Scratch: one row's texture (faded), per pixel.
     tex: Vec<f32>,
     /// (sin, cos) of the camera's tilt.
     tilt_sc: (f64, f64),
@@ -295,42 +295,41 @@ impl Renderer {
                 .floor()
                 .clamp(1.0, 16.0) as usize;
             let textured = row.floor && row.fade > 0.01;
+            let at = |u: usize| [lens[0] + g0[0] + u as f64 * dg[0], lens[1] + g0[1] + u as f64 * dg[1]];
+            // The row is a straight segment and the floor a rectangle: both ends on it means
+            // every pixel is.
+            let all_floor = row.floor && scene.on_floor(at(0)) && scene.on_floor(at(w - 1));
             if row.floor {
-                self.light.clear();
-                for k in 0..=(w - 1) / LIGHT_STEP + 1 {
-                    let uf = (k * LIGHT_STEP) as f64;
-                    self.light
-                        .push(scene.illumination([lens[0] + g0[0] + uf * dg[0], lens[1] + g0[1] + uf * dg[1]]));
-                }
-                self.tex.clear();
+                // Samples, then per-pixel values by linear interpolation (simple loops the
+                // compiler vectorises; no division per pixel).
+                lerp_fill(&mut self.light, w, LIGHT_STEP, |u| scene.illumination(at(u)));
                 if textured {
-                    for k in 0..=(w - 1) / tstep + 1 {
-                        let uf = (k * tstep) as f64;
-                        self.tex.push(
-                            scene.texture_at([lens[0] + g0[0] + uf * dg[0], lens[1] + g0[1] + uf * dg[1]]) * row.fade,
-                        );
-                    }
+                    lerp_fill(&mut self.tex, w, tstep, |u| scene.texture_at(at(u)) * row.fade);
                 }
             }
+            // Columns before `probe_from` are known to be clear of every line (see
+            // `Scene::floor_color`): the distance to a line shrinks by at most one step per
+            // column.
+            let step_len = row.dg[0].hypot(row.dg[1]) as f32;
+            let mut probe_from = 0usize;
             for (u, (px, &vg)) in out.chunks_exact_mut(3).zip(vig).enumerate() {
                 let uf = u as f64;
                 let p = [lens[0] + g0[0] + uf * dg[0], lens[1] + g0[1] + uf * dg[1]];
-                let c = if row.floor && scene.on_floor(p) {
+                let c = if all_floor || (row.floor && scene.on_floor(p)) {
                     let fp = Footprint {
                         ju,
                         jv: [jv0[0] + uf * djv[0], jv0[1] + uf * djv[1]],
                         size: row.size,
                         fade: row.fade,
                     };
-                    let (k, f) = (u / LIGHT_STEP, (u % LIGHT_STEP) as f32 * (1.0 / LIGHT_STEP as f32));
-                    let light = self.light[k] + (self.light[k + 1] - self.light[k]) * f;
-                    let tex = if textured {
-                        let (k, f) = (u / tstep, (u % tstep) as f32 / tstep as f32);
-                        self.tex[k] + (self.tex[k + 1] - self.tex[k]) * f
-                    } else {
-                        0.0
-                    };
-                    scene.floor_color(p, &fp, light, tex)
+                    let light = self.light[u];
+                    let tex = if textured { self.tex[u] } else { 0.0 };
+                    let probe = u >= probe_from;
+                    let (c, clear) = scene.floor_color(p, &fp, light, tex, probe);
+                    if probe && clear > row.size {
+                        probe_from = u + 1 + ((clear - row.size) / step_len.max(1e-9)).min(w as f32) as usize;
+                    }
+                    c
                 } else {
                     scene.wall_color(o, self.world_ray((sy, cy), uf, v as f64))
                 };
@@ -464,6 +463,23 @@ impl Renderer {
             .enabled_objects()
             .filter_map(|ob| self.object_box(pose, ob))
             .collect()
+    }
+}
+
+/// Fills `out[0..w]` with `f` sampled every `step` columns (and one past the end) and
+/// linearly interpolated between.
+fn lerp_fill(out: &mut Vec<f32>, w: usize, step: usize, f: impl Fn(usize) -> f32) {
+    out.clear();
+    out.resize(w + step, 0.0);
+    let inv = 1.0 / step as f32;
+    let mut a = f(0);
+    for k in 0..w.div_ceil(step) {
+        let b = f((k + 1) * step);
+        let d = (b - a) * inv;
+        for (j, o) in out[k * step..(k + 1) * step].iter_mut().enumerate() {
+            *o = a + d * j as f32;
+        }
+        a = b;
     }
 }
 

@@ -53,6 +53,9 @@ pub struct Scene {
     /// a line may touch it; a pixel whose footprint is smaller skips the lines). One 4-byte
     /// load per pixel.
     grid: Vec<(u16, u16)>,
+    /// Lower bound of the distance from any point of a cell with no piece near to the nearest
+    /// line's edge, metres.
+    far_clear: f32,
     /// For each piece: the unit vector from an arc's centre to its middle ([1, 0] for lines).
     arc_mid: Vec<[f64; 2]>,
     grid_w: usize,
@@ -268,6 +271,7 @@ impl Scene {
             illum_w,
             illum_h,
             grid,
+            far_clear: (near - reach - half_diag).max(0.0) as f32,
             arc_mid: track
                 .pieces
                 .iter()
@@ -333,16 +337,24 @@ impl Scene {
     /// Colour of the floor at world point `p`, seen by a pixel whose footprint on the floor is
     /// `fp` (see [`Footprint`]), lit by `light` (see [`Scene::illumination`]; smooth, so the
     /// renderer interpolates it along a row).
-    #[inline]
     ///
     /// `tex` is the texture there, already faded for the footprint (see
     /// [`Scene::texture_at`] and [`Footprint::fade`]); the renderer samples it about once
     /// per texel along a row and interpolates, which is what bilinear filtering does anyway.
-    pub fn floor_color(&self, p: [f64; 2], fp: &Footprint, light: f32, tex: f32) -> [f32; 3] {
+    ///
+    /// With `probe` false the lines are not looked up (the caller knows none is within the
+    /// footprint). Also returns a lower bound of the distance from `p` to the nearest line's
+    /// edge, metres, when it exceeds the footprint (else 0): every floor point within that
+    /// distance minus the footprint needs no probe either.
+    #[inline]
+    pub fn floor_color(&self, p: [f64; 2], fp: &Footprint, light: f32, tex: f32, probe: bool) -> ([f32; 3], f32) {
         // 1. Texture.
         let b = 1.0 + self.texture_amp * tex;
         let mut c = [self.floor_rgb[0] * b, self.floor_rgb[1] * b, self.floor_rgb[2] * b];
         // 2. Lines, only where the cell is not clear of them by more than the footprint.
+        if !probe {
+            return ([c[0] * light, c[1] * light, c[2] * light], 0.0);
+        }
         let [x0, y0, _, _] = self.track.floor_rect;
         let gi = ((p[0] - x0) * INV_CELL) as usize;
         let gj = ((p[1] - y0) * INV_CELL) as usize;
@@ -356,7 +368,19 @@ impl Scene {
         } else {
             (u16::MAX, 0)
         };
-        if k != u16::MAX && clear as f32 <= fp.size * 1e4 {
+        let clear_m = if k == u16::MAX {
+            if cell == usize::MAX {
+                0.0
+            } else {
+                self.far_clear
+            }
+        } else {
+            clear as f32 * 1e-4
+        };
+        if clear_m > fp.size {
+            return ([c[0] * light, c[1] * light, c[2] * light], clear_m);
+        }
+        if k != u16::MAX {
             let k = k as usize;
             let piece = &self.track.pieces[k];
             let (lat, n, tan) = match *piece {
@@ -408,7 +432,7 @@ impl Scene {
             }
         }
         // 3. Light.
-        [c[0] * light, c[1] * light, c[2] * light]
+        ([c[0] * light, c[1] * light, c[2] * light], 0.0)
     }
 
     /// Signed lateral offset of a floor point from the road's centre line (left positive),
