@@ -16,6 +16,7 @@ use rccar::ranging::{fit, BoxRanging, FitOptions, ObjectClass, Pair, TiltRanging
 use rccar::sim::run::Simulation;
 use rccar::sim::track::{ObjectKind, Track};
 use rccar::timing::NoTimer;
+use std::path::{Path, PathBuf};
 
 /// A straight with one object of `kind` on the driven lane's centre, 3 m ahead of the start.
 fn track(kind: &str) -> Track {
@@ -168,4 +169,112 @@ fn sim_lab_calibration_recovers_tilt_within_half_a_degree() {
     );
     assert!(err < 0.5, "tilt error {err}°");
     let _: &[Pair] = &pairs;
+}
+
+/// The same sweep with the detector's boxes, for each class whose cascade exists
+/// (config/cascades/*.xml, or the directory in `RCCAR_CASCADES`): the detector's box nearest
+/// the true one, ranged, against the true forward distance. Reports the detection rate; the
+/// accuracy bound is asserted on the distances where the object was found.
+///
+/// Ignored by default: with a preview of the trained stop-sign cascade (21:30) the detector's
+/// box bottom stands for z = 0.114 m, not the face's 0.120 m, so the configured height gives
+/// −7.2% median error; even with 0.114 m the scale-step jitter of the box bottom leaves a 5.8%
+/// maximum at 1.5 m, where a sign 0.12 m up is only 0.08 m below the lens. Run it with
+/// `cargo test --release --test ranging_sim -- --ignored --nocapture`.
+#[test]
+#[ignore = "fails with the preview stop-sign cascade: max 5.8% > 5% (see the doc comment)"]
+fn ranging_accuracy_with_the_detectors_boxes() {
+    use rccar::detect::{CascadeSpec, DetectParams, DetectStage};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = std::env::var("RCCAR_CASCADES").map_or(root.join("config/cascades"), PathBuf::from);
+    let cfg = Config::default();
+
+    let ranging = BoxRanging::from_config(&cfg.camera, &cfg.ranging);
+    let ds: Vec<f64> = (0..=26).map(|k| (0.2 + 0.05 * k as f64).max(0.21)).collect();
+    let mut any = false;
+    for (kind, class) in [
+        ("obstacle", ObjectClass::Obstacle),
+        ("stop_sign", ObjectClass::StopSign),
+        ("traffic_light", ObjectClass::TrafficLight),
+    ] {
+        let path = dir.join(format!("{kind}.xml"));
+        if !path.is_file() {
+            println!("{kind:>13}: no cascade at {}", path.display());
+            continue;
+        }
+        any = true;
+        let mut stage = DetectStage::load(&[CascadeSpec {
+            label: kind.into(),
+            path,
+            traffic_light: false,
+            params: DetectParams::default(),
+        }])
+        .unwrap();
+        let t = track(kind);
+        let ob = t.enabled_objects().next().unwrap().clone();
+        let near = if ob.kind == ObjectKind::Obstacle {
+            ob.size[0] / 2.0
+        } else {
+            0.0
+        };
+        let mut rel = vec![];
+        let mut zs = vec![];
+        for &d in &ds {
+            let mut sim = Simulation::new(&cfg, &t).unwrap();
+            let lens_ahead = cfg.vehicle.camera_x_m - cfg.vehicle.wheelbase_m / 2.0;
+            sim.place_at(3.0 - near - d - lens_ahead);
+            let step = sim.step(&mut NoTimer);
+            let Some(truth) = step.truth.objects.first() else {
+                continue;
+            };
+            let found = stage.run_rgb(sim.image()).unwrap();
+            // The box whose centre column is nearest the true box's.
+            let uc = (truth.bbox[0] + truth.bbox[2]) / 2.0;
+            let Some(b) = found.iter().min_by(|a, b| {
+                let ca = (a.rect.x as f64 + a.rect.width as f64 / 2.0 - uc).abs();
+                let cb = (b.rect.x as f64 + b.rect.width as f64 / 2.0 - uc).abs();
+                ca.total_cmp(&cb)
+            }) else {
+                continue;
+            };
+            let r = b.rect;
+            let bbox = [
+                r.x as f64 - 0.5,
+                r.y as f64 - 0.5,
+                (r.x + r.width) as f64 - 0.5,
+                (r.y + r.height) as f64 - 0.5,
+            ];
+            let Some((rd, _)) = ranging.range(class, bbox) else {
+                continue;
+            };
+            let [x, y, yaw] = step.truth.pose;
+            let (s, c) = yaw.sin_cos();
+            let lens = [x + c * cfg.vehicle.camera_x_m, y + s * cfg.vehicle.camera_x_m];
+            let fwd = c * (ob.pos[0] - lens[0]) + s * (ob.pos[1] - lens[1]) - near;
+            rel.push((fwd, (rd - fwd) / fwd));
+            // The height the box bottom really stands for: z = h − d·tan(α + atan((v − v0)/a_y)).
+            let tr = ranging.tilt;
+            zs.push(tr.h - fwd * (tr.alpha + ((bbox[3] - tr.v0) / tr.a_y).atan()).tan());
+        }
+        let signed_med = median(rel.iter().map(|r| r.1).collect());
+        let abs: Vec<f64> = rel.iter().map(|r| r.1.abs()).collect();
+        let med = median(abs.clone());
+        let max = abs.iter().copied().fold(0.0, f64::max);
+        println!(
+            "{kind:>13} (detector): found at {}/{} distances ({:.2}..{:.2} m); relative error median {:.2}% (signed {:+.2}%), max {:.2}%; box bottom stands for z = {:.4} m (configured {})",
+            rel.len(),
+            ds.len(),
+            rel.first().map_or(f64::NAN, |r| r.0),
+            rel.last().map_or(f64::NAN, |r| r.0),
+            100.0 * med,
+            100.0 * signed_med,
+            100.0 * max,
+            median(zs.clone()),
+            ranging.bottom_of(class)
+        );
+        assert!(med <= 0.03 && max <= 0.05, "{kind}: median {med}, max {max}");
+    }
+    if !any {
+        println!("ranging with the detector's boxes: no cascades yet (see ranging_accuracy_over_0_2_to_1_5_m_from_ground_truth)");
+    }
 }
