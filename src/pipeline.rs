@@ -20,7 +20,7 @@ use crate::control::behaviour::{Behaviour, DeadReckoning, Decision, LightColor, 
 use crate::control::{Command, Controller};
 use crate::detect::cascade::CascadeError;
 use crate::detect::detector::DetectParams;
-use crate::detect::light::LightState;
+use crate::detect::light::{LightReading, LightState};
 use crate::detect::stage::{CascadeSpec, DetectStage};
 use crate::lane::warp::WarpError;
 use crate::lane::{LaneDetector, LaneMeasurement};
@@ -224,12 +224,7 @@ impl Pipeline {
                                 (r.x + r.width) as f64 - 0.5,
                                 (r.y + r.height) as f64 - 0.5,
                             ];
-                            let light = d.light.map(|l| match l.state {
-                                LightState::Red => LightColor::Red,
-                                LightState::Amber => LightColor::Amber,
-                                LightState::Green => LightColor::Green,
-                                LightState::Unknown => LightColor::Unknown,
-                            });
+                            let light = d.light.as_ref().map(|l| light_color(l, frame, r));
                             push_ranged(&mut self.objects, &self.ranging, class, bbox, light);
                         }
                     }
@@ -353,6 +348,58 @@ fn push_ranged(
         lateral_m: r.map(|x| x.1),
         light,
     });
+}
+
+/// The colour of a traffic light in box `r`: the hue of the most saturated bright pixel (the
+/// lit lamp). `detect::light_state` takes the brightest spot, which in a trained cascade's
+/// box that reaches past the housing can be the bright wall behind it (grey, so no hue; then
+/// its position in the box decides, wrongly). Falls back to that reading when no pixel is
+/// both bright (V ≥ 120) and saturated (S ≥ 0.4).
+fn light_color(l: &LightReading, img: &RgbImage, r: crate::detect::Rect) -> LightColor {
+    let (w, h) = (img.width() as i32, img.height() as i32);
+    let (x0, y0) = (r.x.clamp(0, w), r.y.clamp(0, h));
+    let (x1, y1) = ((r.x + r.width).clamp(0, w), (r.y + r.height).clamp(0, h));
+    // 1. The pixel with the largest V·S.
+    let mut best = (0.0f32, [0u8; 3]);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let p = img.get_pixel(x as u32, y as u32).0;
+            let mx = p[0].max(p[1]).max(p[2]) as f32;
+            let mn = p[0].min(p[1]).min(p[2]) as f32;
+            if mx < 120.0 || (mx - mn) < 0.4 * mx {
+                continue;
+            }
+            let score = mx * (mx - mn) / mx;
+            if score > best.0 {
+                best = (score, p);
+            }
+        }
+    }
+    if best.0 > 0.0 {
+        // 2. Its hue, degrees.
+        let [r, g, b] = best.1.map(|v| v as f32);
+        let (mx, mn) = (r.max(g).max(b), r.min(g).min(b));
+        let d = mx - mn;
+        let hue = if mx == r {
+            (60.0 * (g - b) / d).rem_euclid(360.0)
+        } else if mx == g {
+            60.0 * (b - r) / d + 120.0
+        } else {
+            60.0 * (r - g) / d + 240.0
+        };
+        return match hue {
+            h if !(20.0..330.0).contains(&h) => LightColor::Red,
+            h if h < 70.0 => LightColor::Amber,
+            h if h < 200.0 => LightColor::Green,
+            _ => LightColor::Unknown,
+        };
+    }
+    match l.state {
+        LightState::Red => LightColor::Red,
+        LightState::Amber => LightColor::Amber,
+        LightState::Green => LightColor::Green,
+        LightState::Unknown => LightColor::Unknown,
+    }
 }
 
 /// The lane controller's command with the behaviour's throttle and steering applied.

@@ -4,7 +4,9 @@
 //! the in-lane obstacle switched on).
 //!
 //! Boxes: the pipeline runs the shipped cascades config/cascades/{stop_sign,traffic_light,
-//! obstacle}.xml when all three exist. Until then (or with `RCCAR_SCENARIO_BOXES=truth`) the
+//! obstacle}.xml when all three exist (`RCCAR_CASCADES=DIR` takes them from DIR;
+//! `RCCAR_SCENARIO_BOXES=detector` uses whichever exist). Until then (or with
+//! `RCCAR_SCENARIO_BOXES=truth`) the
 //! behaviours get the objects' true image boxes (`Simulation::set_truth_boxes`), and every
 //! test prints `SCENARIO BOXES: ground truth` so nobody mistakes it for a detector result.
 //!
@@ -24,6 +26,9 @@ const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 /// overridden) or ground-truth boxes.
 fn use_detector(cfg: &Config) -> bool {
     let forced_truth = std::env::var("RCCAR_SCENARIO_BOXES").is_ok_and(|v| v == "truth");
+    if std::env::var("RCCAR_SCENARIO_BOXES").is_ok_and(|v| v == "detector") {
+        return true;
+    }
     let all = [&cfg.detect.stop_sign, &cfg.detect.traffic_light, &cfg.detect.obstacle]
         .iter()
         .all(|p| Path::new(ROOT).join(p).is_file());
@@ -31,7 +36,15 @@ fn use_detector(cfg: &Config) -> bool {
 }
 
 fn cfg() -> Config {
-    Config::default().with_override("steering.ki=0").unwrap()
+    let mut c = Config::default().with_override("steering.ki=0").unwrap();
+    // Cascades from elsewhere (e.g. a training run not yet committed).
+    if let Ok(dir) = std::env::var("RCCAR_CASCADES") {
+        let d = Path::new(&dir);
+        c.detect.stop_sign = d.join("stop_sign.xml").display().to_string();
+        c.detect.traffic_light = d.join("traffic_light.xml").display().to_string();
+        c.detect.obstacle = d.join("obstacle.xml").display().to_string();
+    }
+    c
 }
 
 fn track(edit: impl Fn(String) -> String) -> Track {
@@ -48,7 +61,10 @@ fn run(cfg: &Config, track: &Track, start: f64, seconds: f64) -> (Summary, Vec<S
     if use_detector(&cfg) {
         eprintln!("SCENARIO BOXES: detector (config/cascades/*.xml)");
         let (det, missing) = rccar::pipeline::load_detector(&cfg.detect, Path::new(ROOT)).unwrap();
-        assert!(missing.is_empty() && det.is_some());
+        if !missing.is_empty() {
+            eprintln!("SCENARIO BOXES: detector WITHOUT {missing:?}");
+        }
+        assert!(det.is_some());
         sim.set_detector(det);
     } else {
         eprintln!("SCENARIO BOXES: ground truth (cascades missing or RCCAR_SCENARIO_BOXES=truth)");
@@ -157,7 +173,20 @@ fn red_light_stop_and_go_within_half_a_second_of_green() {
         .find(|o| o.kind == ObjectKind::TrafficLight)
         .unwrap()
         .clone();
-    let (sum, steps, _) = run(&cfg, &t, 34.0, 16.0);
+    let (sum, steps, sim) = run(&cfg, &t, 34.0, 16.0);
+    if std::env::var("RCCAR_SCENARIO_DEBUG").is_ok() {
+        sim.image().save("/tmp/light_last.png").unwrap();
+        for s in steps.iter().step_by(10) {
+            eprintln!(
+                "{:.2} {:?} {:?} {:?} {:?}",
+                s.time_s,
+                s.out.mode,
+                light.light_state(s.time_s),
+                s.out.observations.light,
+                s.objects
+            );
+        }
+    }
     let st = stops(&steps, cfg.behaviour.standstill_mps);
     assert_eq!(st.len(), 1, "one stop: {st:?}");
     let (a, z) = st[0];

@@ -90,6 +90,11 @@ pub enum Mode {
 }
 
 impl Mode {
+    /// A state in which standing still is intended (stop sign, red light, obstacle).
+    pub fn is_waiting(self) -> bool {
+        matches!(self, Mode::StopSign | Mode::RedLight | Mode::Obstacle)
+    }
+
     /// One of the three passing states (the car may be in the other lane).
     pub fn is_passing(self) -> bool {
         matches!(self, Mode::PassOut | Mode::PassAlong | Mode::PassBack)

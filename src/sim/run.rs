@@ -67,7 +67,8 @@ pub enum EndReason {
     TimeUp,
     /// More than a lane width off the lane centre.
     LeftTheRoad,
-    /// Stood still for 5 s.
+    /// Stood still for 5 s (not counting waits the behaviour chose: stop sign, red light,
+    /// obstacle).
     Stalled,
 }
 
@@ -464,7 +465,8 @@ impl Simulation {
         if e.abs() > 2.0 * half {
             self.end.get_or_insert(EndReason::LeftTheRoad);
         }
-        if self.vehicle.speed.abs() < 0.005 && t > 1.0 {
+        // Standing at a stop sign, a red light or an obstacle is the behaviour's choice.
+        if self.vehicle.speed.abs() < 0.005 && t > 1.0 && !out.mode.is_waiting() {
             self.still_s += dt;
             if self.still_s >= 5.0 {
                 self.end.get_or_insert(EndReason::Stalled);
