@@ -1,5 +1,5 @@
-//! The whole frame with detection in the loop (issue 7): lane + three Haar cascades + ranging
-//! + behaviour + control per 320×240 frame, side by side with the same work in OpenCV in the
+//! The whole frame with detection in the loop (issue 7): lane, three Haar cascades, ranging,
+//! behaviour and control per 320×240 frame, side by side with the same work in OpenCV in the
 //! same run.
 //!
 //! `cargo bench --bench full_frame [-- --reps N]`

@@ -111,7 +111,7 @@ pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectSt
                 label: label.into(),
                 path,
                 traffic_light: light,
-                params: params.clone(),
+                params,
             });
         } else {
             missing.push(path);
@@ -284,7 +284,7 @@ impl Pipeline {
             match ob.class {
                 ObjectClass::StopSign => o.stop_sign = nearer(o.stop_sign, r),
                 ObjectClass::TrafficLight => {
-                    if o.light.is_none_or(|(c, _)| c.distance_m > d) {
+                    if o.light.map_or(true, |(c, _)| c.distance_m > d) {
                         o.light = Some((r, ob.light.unwrap_or(LightColor::Unknown)));
                     }
                 }
