@@ -942,7 +942,7 @@ impl Default for BehaviourConfig {
             window_frames: 5,
             standstill_mps: 0.01,
             stop_trigger_m: 0.9,
-            stop_window_m: [0.45, 0.9],
+            stop_window_m: [0.5, 1.0],
             stop_hold_s: 5.0,
             stop_ignore_m: 1.0,
             stop_ignore_s: 2.0,
