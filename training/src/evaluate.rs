@@ -1,0 +1,243 @@
+//! Evaluation of a cascade on labelled frames (an info.dat: simulator ground truth or hand
+//! labels): recall, precision and false positives per frame for each `minNeighbors`, the
+//! recall–FP curve over them, and the detection time per frame.
+//!
+//! A detection matches a labelled box when their IoU is at least `iou` (0.5, PASCAL VOC);
+//! matching is greedy, best IoU first, one-to-one. Unmatched detections are false positives,
+//! unmatched boxes misses. Detection is rccar's own (`rccar::detect::Detector`), with the raw
+//! hits computed once per frame and grouped for every `minNeighbors` the way
+//! `detectMultiScale` groups them (`groupRectangles(hits, minNeighbors, 0.2)`, then clipped).
+
+use image::{GrayImage, RgbImage};
+use plotters::prelude::*;
+use rccar::detect::{group_rectangles, Cascade, DetectParams, Detector, Rect};
+use std::time::Instant;
+
+/// Numbers at one `minNeighbors`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Point {
+    /// The grouping threshold.
+    pub min_neighbors: u32,
+    /// Labelled boxes found.
+    pub true_positives: usize,
+    /// Detections matching no box.
+    pub false_positives: usize,
+    /// Boxes not found.
+    pub misses: usize,
+    /// TP / boxes.
+    pub recall: f64,
+    /// TP / detections (1 when there are none).
+    pub precision: f64,
+    /// FP / frames.
+    pub fp_per_frame: f64,
+}
+
+/// A whole evaluation.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Report {
+    /// Cascade file.
+    pub cascade: String,
+    /// Frames evaluated.
+    pub frames: usize,
+    /// Labelled boxes.
+    pub boxes: usize,
+    /// IoU needed for a match.
+    pub iou: f64,
+    /// Scale factor used.
+    pub scale_factor: f64,
+    /// One point per minNeighbors.
+    pub points: Vec<Point>,
+    /// Median / mean / max time of a full `detect` call per frame, ms.
+    pub ms_median: f64,
+    /// Mean.
+    pub ms_mean: f64,
+    /// Max.
+    pub ms_max: f64,
+    /// Frame size the times are for.
+    pub frame_size: (u32, u32),
+    /// Per-frame details at the reporting minNeighbors: (file, found, false positives).
+    pub frames_detail: Vec<(String, usize, usize)>,
+}
+
+/// Greedy one-to-one matching; returns (TP, FP, misses).
+pub fn match_boxes(dets: &[Rect], truth: &[Rect], iou: f64) -> (usize, usize, usize) {
+    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+    for (i, d) in dets.iter().enumerate() {
+        for (j, t) in truth.iter().enumerate() {
+            let v = d.iou(t);
+            if v >= iou {
+                pairs.push((v, i, j));
+            }
+        }
+    }
+    pairs.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let (mut du, mut tu) = (vec![false; dets.len()], vec![false; truth.len()]);
+    let mut tp = 0;
+    for (_, i, j) in pairs {
+        if !du[i] && !tu[j] {
+            du[i] = true;
+            tu[j] = true;
+            tp += 1;
+        }
+    }
+    (tp, dets.len() - tp, truth.len() - tp)
+}
+
+/// Groups raw hits as `detectMultiScale` does for `min_neighbors` and clips them to the frame.
+pub fn group(raw: &[Rect], min_neighbors: u32, w: u32, h: u32) -> Vec<Rect> {
+    let g: Vec<Rect> = if min_neighbors > 0 {
+        group_rectangles(raw, min_neighbors as i32, rccar::detect::detector::GROUP_EPS)
+            .into_iter()
+            .map(|(r, _)| r)
+            .collect()
+    } else {
+        raw.to_vec()
+    };
+    let frame = Rect::new(0, 0, w as i32, h as i32);
+    g.into_iter()
+        .map(|r| r.intersect(&frame))
+        .filter(|r| r.area() > 0)
+        .collect()
+}
+
+/// Evaluates `cascade` on `(name, frame, boxes)` items at every minNeighbors in `mns`;
+/// `report_mn` picks the per-frame detail.
+pub fn evaluate(
+    cascade: Cascade,
+    name: &str,
+    frames: &[(String, GrayImage, Vec<Rect>)],
+    scale_factor: f64,
+    iou: f64,
+    mns: &[u32],
+    report_mn: u32,
+) -> Result<Report, rccar::detect::DetectError> {
+    let mut det = Detector::new(cascade);
+    let params = DetectParams {
+        scale_factor,
+        min_neighbors: 0,
+        ..DetectParams::default()
+    };
+    let mut acc = vec![(0usize, 0usize, 0usize); mns.len()];
+    let mut times = Vec::new();
+    let mut detail = Vec::new();
+    let mut boxes = 0;
+    let mut size = (0, 0);
+    for (fname, img, truth) in frames {
+        boxes += truth.len();
+        size = img.dimensions();
+        // The time of a full detect call (scan + grouping at the reporting minNeighbors).
+        let t = Instant::now();
+        det.detect(
+            img,
+            &DetectParams {
+                min_neighbors: report_mn,
+                ..params
+            },
+        )?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+        let raw = det.raw_hits().to_vec();
+        for (k, &mn) in mns.iter().enumerate() {
+            let d = group(&raw, mn, img.width(), img.height());
+            let (tp, fp, miss) = match_boxes(&d, truth, iou);
+            acc[k].0 += tp;
+            acc[k].1 += fp;
+            acc[k].2 += miss;
+            if mn == report_mn {
+                detail.push((fname.clone(), tp, fp));
+            }
+        }
+    }
+    let n = frames.len().max(1) as f64;
+    let points = mns
+        .iter()
+        .zip(&acc)
+        .map(|(&mn, &(tp, fp, miss))| Point {
+            min_neighbors: mn,
+            true_positives: tp,
+            false_positives: fp,
+            misses: miss,
+            recall: tp as f64 / boxes.max(1) as f64,
+            precision: if tp + fp > 0 { tp as f64 / (tp + fp) as f64 } else { 1.0 },
+            fp_per_frame: fp as f64 / n,
+        })
+        .collect();
+    let mut sorted = times.clone();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    Ok(Report {
+        cascade: name.to_string(),
+        frames: frames.len(),
+        boxes,
+        iou,
+        scale_factor,
+        points,
+        ms_median: sorted.get(sorted.len() / 2).copied().unwrap_or(0.0),
+        ms_mean: times.iter().sum::<f64>() / times.len().max(1) as f64,
+        ms_max: sorted.last().copied().unwrap_or(0.0),
+        frame_size: size,
+        frames_detail: detail,
+    })
+}
+
+/// Recall against false positives per frame, one point per minNeighbors ≥ 1 (labelled).
+pub fn curve_png(r: &Report, title: &str) -> Result<RgbImage, String> {
+    let (w, h) = (800u32, 500u32);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let e = |e: &dyn std::fmt::Display| e.to_string();
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|x| e(&x))?;
+        // minNeighbors 0 (raw hits, tens of FP per frame) would squash the axis: left out.
+        let pts_all: Vec<&Point> = r.points.iter().filter(|p| p.min_neighbors > 0).collect();
+        let xmax = pts_all.iter().map(|p| p.fp_per_frame).fold(0.1, f64::max) * 1.1;
+        let ymin = pts_all.iter().map(|p| p.recall).fold(1.0, f64::min).min(0.9) - 0.02;
+        let mut c = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(55)
+            .build_cartesian_2d(0.0..xmax, ymin..1.005)
+            .map_err(|x| e(&x))?;
+        c.configure_mesh()
+            .x_desc("false positives per frame")
+            .y_desc("recall")
+            .draw()
+            .map_err(|x| e(&x))?;
+        let pts: Vec<(f64, f64)> = pts_all.iter().map(|p| (p.fp_per_frame, p.recall)).collect();
+        c.draw_series(LineSeries::new(pts.clone(), &BLUE)).map_err(|x| e(&x))?;
+        c.draw_series(pts.iter().map(|&p| Circle::new(p, 4, BLUE.filled())))
+            .map_err(|x| e(&x))?;
+        c.draw_series(pts_all.iter().map(|p| {
+            Text::new(
+                format!("mn={}", p.min_neighbors),
+                (p.fp_per_frame, p.recall),
+                ("sans-serif", 12).into_font(),
+            )
+        }))
+        .map_err(|x| e(&x))?;
+        // The target: recall ≥ 0.95 at ≤ 0.05 FP per frame.
+        c.draw_series(LineSeries::new(
+            [(0.0, 0.95), (0.05, 0.95), (0.05, 1.005)],
+            RED.stroke_width(1),
+        ))
+        .map_err(|x| e(&x))?;
+        root.present().map_err(|x| e(&x))?;
+    }
+    RgbImage::from_raw(w, h, buf).ok_or_else(|| "plot buffer".to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn matching_is_one_to_one_best_first() {
+        let t = [Rect::new(0, 0, 10, 10)];
+        let d = [
+            Rect::new(1, 0, 10, 10),
+            Rect::new(0, 0, 10, 10),
+            Rect::new(50, 50, 10, 10),
+        ];
+        assert_eq!(match_boxes(&d, &t, 0.5), (1, 2, 0));
+        assert_eq!(match_boxes(&[], &t, 0.5), (0, 0, 1));
+    }
+}

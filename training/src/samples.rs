@@ -1,0 +1,264 @@
+//! Training samples from files: positives from OpenCV `info.dat` annotation files (what
+//! `opencv_createsamples -info` read: `path count x y w h [x y w h …]` per line, paths relative
+//! to the file), negatives from background lists (OpenCV's `bg.txt`: one image path per line;
+//! here a line may also carry boxes in the info.dat way, which are then kept out of the
+//! negatives — e.g. rendered frames that show the object).
+//!
+//! Bad lines never stop a run: a missing or unreadable image, a malformed line, a box outside
+//! its image or smaller than the window is skipped with a [`Skipped`] note naming the file,
+//! line and reason. Boxes are cut out and resized to the window with OpenCV's bit-exact
+//! bilinear resize (`INTER_LINEAR_EXACT`, `rccar::detect::resize`), the same the detector's
+//! pyramid uses. Units: pixels.
+
+use image::GrayImage;
+use rccar::detect::resize::Resizer;
+use rccar::detect::Rect;
+use std::path::{Path, PathBuf};
+
+/// Why a whole file could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum SampleError {
+    /// The list file itself could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+}
+
+/// A line or box that was skipped, and why.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Skipped {
+    /// The list file.
+    pub file: String,
+    /// 1-based line number.
+    pub line: usize,
+    /// What was wrong.
+    pub reason: String,
+}
+
+impl std::fmt::Display for Skipped {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}: skipped: {}", self.file, self.line, self.reason)
+    }
+}
+
+/// One line of an info.dat / bg.txt file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InfoLine {
+    /// Image path (resolved against the list file's folder).
+    pub path: PathBuf,
+    /// Boxes (x, y, w, h), pixels.
+    pub boxes: Vec<Rect>,
+    /// 1-based line number.
+    pub line: usize,
+}
+
+/// Parses an info.dat (or bg.txt) file. Malformed lines are returned in the skip list.
+pub fn read_info(path: &Path) -> Result<(Vec<InfoLine>, Vec<Skipped>), SampleError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SampleError::Io {
+        path: path.into(),
+        source,
+    })?;
+    Ok(parse_info(&text, path))
+}
+
+/// Parses info.dat text; `origin` names the file and gives the folder paths are relative to.
+pub fn parse_info(text: &str, origin: &Path) -> (Vec<InfoLine>, Vec<Skipped>) {
+    let dir = origin.parent().unwrap_or(Path::new("."));
+    let file = origin.display().to_string();
+    let mut out = Vec::new();
+    let mut skipped = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = i + 1;
+        let t = raw.trim();
+        if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        let mut it = t.split_whitespace();
+        let Some(p) = it.next() else { continue };
+        let rest: Vec<&str> = it.collect();
+        let skip = |reason: String| Skipped {
+            file: file.clone(),
+            line,
+            reason,
+        };
+        let mut boxes = Vec::new();
+        if !rest.is_empty() {
+            let nums: Result<Vec<i64>, _> = rest.iter().map(|s| s.parse::<i64>()).collect();
+            let Ok(nums) = nums else {
+                skipped.push(skip(format!(
+                    "`{}` has a count or box number that is not an integer",
+                    t
+                )));
+                continue;
+            };
+            let count = nums[0];
+            if count < 0 || nums.len() as i64 != 1 + 4 * count {
+                skipped.push(skip(format!(
+                    "count {count} needs {} numbers after it, found {}",
+                    4 * count.max(0),
+                    nums.len() - 1
+                )));
+                continue;
+            }
+            for b in nums[1..].chunks(4) {
+                if b.iter().any(|v| v.abs() > 1 << 20) {
+                    skipped.push(skip(format!("box {b:?} is out of range")));
+                    continue;
+                }
+                boxes.push(Rect::new(b[0] as i32, b[1] as i32, b[2] as i32, b[3] as i32));
+            }
+        }
+        out.push(InfoLine {
+            path: dir.join(p),
+            boxes,
+            line,
+        });
+    }
+    (out, skipped)
+}
+
+/// Loads an image as grey (OpenCV's integer BT.601 for colour files).
+pub fn load_gray(path: &Path) -> Result<GrayImage, String> {
+    let img = image::open(path).map_err(|e| format!("{}: cannot read image: {e}", path.display()))?;
+    let rgb = img.to_rgb8();
+    let mut g = GrayImage::new(rgb.width(), rgb.height());
+    rccar::detect::gray_from_rgb(&rgb, &mut g);
+    Ok(g)
+}
+
+/// Cuts `r` out of `img` and resizes it to `w` × `h` (bilinear, exact).
+pub fn crop_resize(img: &GrayImage, r: Rect, w: usize, h: usize, rs: &mut Resizer) -> Vec<u8> {
+    let (iw, _) = img.dimensions();
+    let mut crop = Vec::with_capacity((r.width * r.height) as usize);
+    for y in r.y..r.y + r.height {
+        let row = (y as u32 * iw) as usize;
+        crop.extend_from_slice(&img.as_raw()[row + r.x as usize..row + (r.x + r.width) as usize]);
+    }
+    let mut out = vec![0u8; w * h];
+    rs.resize(&crop, r.width as usize, r.height as usize, &mut out, w, h);
+    out
+}
+
+/// Positive windows (`w` × `h` each, row-major) from info.dat files, with the skip notes.
+pub fn load_positives(files: &[PathBuf], w: usize, h: usize) -> Result<(Vec<Vec<u8>>, Vec<Skipped>), SampleError> {
+    let mut out = Vec::new();
+    let mut skipped = Vec::new();
+    let mut rs = Resizer::new();
+    for f in files {
+        let (lines, mut sk) = read_info(f)?;
+        skipped.append(&mut sk);
+        let file = f.display().to_string();
+        for l in lines {
+            let img = match load_gray(&l.path) {
+                Ok(i) => i,
+                Err(e) => {
+                    skipped.push(Skipped {
+                        file: file.clone(),
+                        line: l.line,
+                        reason: e,
+                    });
+                    continue;
+                }
+            };
+            let (iw, ih) = (img.width() as i32, img.height() as i32);
+            if l.boxes.is_empty() {
+                skipped.push(Skipped {
+                    file: file.clone(),
+                    line: l.line,
+                    reason: format!("{}: no boxes on the line (count 0)", l.path.display()),
+                });
+            }
+            for b in l.boxes {
+                let reason = if b.width <= 0 || b.height <= 0 {
+                    Some(format!("box {b:?} is empty"))
+                } else if b.x < 0 || b.y < 0 || b.x + b.width > iw || b.y + b.height > ih {
+                    Some(format!(
+                        "box ({}, {}, {}, {}) is outside the {iw}x{ih} image {}",
+                        b.x,
+                        b.y,
+                        b.width,
+                        b.height,
+                        l.path.display()
+                    ))
+                } else if (b.width as usize) < w || (b.height as usize) < h {
+                    Some(format!(
+                        "box {}x{} is smaller than the {w}x{h} window (would be upscaled): {}",
+                        b.width,
+                        b.height,
+                        l.path.display()
+                    ))
+                } else {
+                    None
+                };
+                match reason {
+                    Some(reason) => skipped.push(Skipped {
+                        file: file.clone(),
+                        line: l.line,
+                        reason,
+                    }),
+                    None => out.push(crop_resize(&img, b, w, h, &mut rs)),
+                }
+            }
+        }
+    }
+    Ok((out, skipped))
+}
+
+/// A background image to mine negatives from, with boxes to keep out.
+#[derive(Debug, Clone)]
+pub struct Background {
+    /// Where it came from (for messages).
+    pub name: String,
+    /// Grey pixels.
+    pub img: GrayImage,
+    /// Object boxes: windows overlapping one of them (IoU ≥ 0.3, `scan::AVOID_IOU`) are not negatives.
+    pub avoid: Vec<Rect>,
+}
+
+/// Background images from bg.txt / info.dat files, with the skip notes.
+pub fn load_backgrounds(files: &[PathBuf]) -> Result<(Vec<Background>, Vec<Skipped>), SampleError> {
+    let mut out = Vec::new();
+    let mut skipped = Vec::new();
+    for f in files {
+        let (lines, mut sk) = read_info(f)?;
+        skipped.append(&mut sk);
+        for l in lines {
+            match load_gray(&l.path) {
+                Ok(img) => out.push(Background {
+                    name: l.path.display().to_string(),
+                    img,
+                    avoid: l.boxes,
+                }),
+                Err(reason) => skipped.push(Skipped {
+                    file: f.display().to_string(),
+                    line: l.line,
+                    reason,
+                }),
+            }
+        }
+    }
+    Ok((out, skipped))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn info_lines_parse_and_bad_ones_are_named() {
+        let text = "a.png 1 0 0 10 10\n\n# c\nb.png 2 1 2 3 4 5 6 7 8\nc.png 2 1 2 3 4\nd.png x 1\ne.png\n";
+        let (lines, skipped) = parse_info(text, Path::new("dir/info.dat"));
+        assert_eq!(lines.len(), 3);
+        assert_eq!(lines[0].path, Path::new("dir/a.png"));
+        assert_eq!(lines[1].boxes[1], Rect::new(5, 6, 7, 8));
+        assert!(lines[2].boxes.is_empty());
+        assert_eq!(skipped.len(), 2);
+        assert_eq!(skipped[0].line, 5);
+        assert!(skipped[0].to_string().contains("dir/info.dat:5"), "{}", skipped[0]);
+        assert_eq!(skipped[1].line, 6);
+    }
+}

@@ -1,0 +1,484 @@
+//! The cascade training loop, as OpenCV's `CvCascadeClassifier::train` runs it (Viola & Jones
+//! 2001, Sec. 4; Lienhart, Kuranov & Pisarevsky 2003):
+//!
+//! For each stage i:
+//! 1. positives: up to `num_pos` samples the cascade so far accepts (OpenCV's
+//!    `updateTrainingSet`); too few is an error;
+//! 2. negatives: `num_neg` windows of the backgrounds the cascade so far wrongly accepts
+//!    ([`crate::scan`]); none left means the cascade is done, not failed;
+//! 3. feature values of all samples, precomputed and binned ([`crate::boost::FeatureMatrix`])
+//!    within the `--mem-mb` budget (a seeded random part of the pool when the whole pool does
+//!    not fit);
+//! 4. weak learners are added ([`crate::boost::Booster`]) until, with the stage threshold set
+//!    so that `min_hit_rate` of the positives pass (threshold = the score at index
+//!    `⌊(1 − minHitRate)·numPos⌋` of the sorted positive scores), at most `max_false_alarm` of
+//!    the negatives pass;
+//! 5. the stage is appended, `cascade.xml` and `stages.json` (parameters, stages, per-stage
+//!    log) rewritten atomically, so an interrupted run resumes from its last finished stage.
+//!
+//! The clock is read only for the per-stage times in the log.
+
+use crate::boost::{Booster, FeatureMatrix};
+use crate::features::{self, SampleIntegral};
+use crate::model::{Model, ModelParams, StageModel};
+use crate::samples::Background;
+use crate::scan;
+use rayon::prelude::*;
+use rccar::detect::integral::Integrals;
+use rccar::detect::Cascade;
+use rccar::sim::rng::{mix, SplitMix64};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Why training stopped with an error.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// Reading or writing the output folder failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A bad parameter or data set.
+    #[error("{0}")]
+    Invalid(String),
+    /// The resume file does not fit this run.
+    #[error("{path}: cannot resume: {message}")]
+    Resume {
+        /// The stages.json.
+        path: PathBuf,
+        /// What differs.
+        message: String,
+    },
+    /// The written cascade did not load (a bug).
+    #[error("the trained cascade does not load: {0}")]
+    Cascade(#[from] rccar::detect::CascadeError),
+}
+
+/// Training options beyond the model's parameters.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct TrainOptions {
+    /// Cascade parameters.
+    pub params: ModelParams,
+    /// Positives per stage.
+    pub num_pos: usize,
+    /// Negatives per stage.
+    pub num_neg: usize,
+    /// Budget for the precomputed feature values, MiB.
+    pub mem_mb: usize,
+    /// Seed of every random choice.
+    pub seed: u64,
+    /// Scale step when mining negatives (the detector's `scaleFactor`).
+    pub scale_factor: f64,
+}
+
+/// One finished stage's record in `stages.json`.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct StageLog {
+    /// Stage index.
+    pub stage: usize,
+    /// Weak classifiers in it.
+    pub weak_count: usize,
+    /// Hit rate on this stage's positives.
+    pub hit_rate: f64,
+    /// False-alarm rate on this stage's negatives.
+    pub false_alarm: f64,
+    /// Positives used.
+    pub num_pos: usize,
+    /// Negatives used.
+    pub num_neg: usize,
+    /// Background windows scanned while mining the negatives.
+    pub windows_scanned: u64,
+    /// Of those, accepted by the cascade before this stage.
+    pub windows_accepted: u64,
+    /// `windows_accepted / windows_scanned`: the cascade's false-alarm rate per window so far
+    /// (OpenCV's "acceptanceRatio").
+    pub acceptance_ratio: f64,
+    /// Features in the precomputed matrix (all of the pool unless the budget cut it).
+    pub features_used: usize,
+    /// Bytes of the matrix.
+    pub matrix_bytes: usize,
+    /// Seconds: mining, precomputing, boosting, total.
+    pub seconds_mining: f64,
+    /// Seconds precomputing.
+    pub seconds_precompute: f64,
+    /// Seconds boosting.
+    pub seconds_boost: f64,
+    /// Seconds for the whole stage.
+    pub seconds: f64,
+}
+
+/// `stages.json`: everything needed to resume, plus the log.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct StageFile {
+    /// The options the run started with.
+    pub options: TrainOptions,
+    /// Finished stages.
+    pub stages: Vec<StageModel>,
+    /// Their logs.
+    pub log: Vec<StageLog>,
+    /// Why training ended (`null` while it runs).
+    pub finished: Option<String>,
+    /// Positives available (scannable) at the start.
+    pub positives_total: usize,
+    /// Backgrounds available.
+    pub backgrounds_total: usize,
+}
+
+/// Progress callbacks (the binary draws bars; tests pass [`NoProgress`]).
+pub trait Progress {
+    /// A stage starts.
+    fn stage_start(&mut self, stage: usize, max_weak: usize);
+    /// A weak learner was added.
+    fn weak(&mut self, count: usize, hit: f64, fa: f64);
+    /// A stage ended.
+    fn stage_end(&mut self, log: &StageLog);
+    /// A note (skipped input, stop reason).
+    fn note(&mut self, msg: &str);
+}
+
+/// Silent progress.
+pub struct NoProgress;
+
+impl Progress for NoProgress {
+    fn stage_start(&mut self, _: usize, _: usize) {}
+    fn weak(&mut self, _: usize, _: f64, _: f64) {}
+    fn stage_end(&mut self, _: &StageLog) {}
+    fn note(&mut self, _: &str) {}
+}
+
+fn write_atomic(path: &Path, text: &str) -> Result<(), TrainError> {
+    let tmp = path.with_extension("tmp");
+    let io = |source| TrainError::Io {
+        path: path.into(),
+        source,
+    };
+    std::fs::write(&tmp, text).map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(io)
+}
+
+/// How a run ended.
+#[derive(Debug, Clone)]
+pub struct TrainOutcome {
+    /// The cascade file.
+    pub xml: PathBuf,
+    /// Stages in it.
+    pub stages: usize,
+    /// Why it stopped.
+    pub reason: String,
+}
+
+/// Trains (or resumes) a cascade into `out_dir` (`cascade.xml`, `stages.json`).
+pub fn train(
+    opts: &TrainOptions,
+    positives: &[Vec<u8>],
+    backgrounds: &[Background],
+    out_dir: &Path,
+    resume: bool,
+    progress: &mut dyn Progress,
+) -> Result<TrainOutcome, TrainError> {
+    let p = &opts.params;
+    let (w, h) = (p.width as usize, p.height as usize);
+    // 0. Checks.
+    if !(3..=256).contains(&w) || !(3..=256).contains(&h) {
+        return Err(TrainError::Invalid(format!(
+            "window {w}x{h}: each side must be 3..=256 px"
+        )));
+    }
+    if !(p.min_hit_rate > 0.0 && p.min_hit_rate <= 1.0) || !(p.max_false_alarm > 0.0 && p.max_false_alarm < 1.0) {
+        return Err(TrainError::Invalid(format!(
+            "min hit rate {} must be in (0, 1] and max false alarm {} in (0, 1)",
+            p.min_hit_rate, p.max_false_alarm
+        )));
+    }
+    if !(1..=2).contains(&p.max_depth) {
+        return Err(TrainError::Invalid(format!("max depth {} must be 1 or 2", p.max_depth)));
+    }
+    if opts.num_pos == 0 || opts.num_neg == 0 {
+        return Err(TrainError::Invalid("num_pos and num_neg must be > 0".into()));
+    }
+    if backgrounds.is_empty() {
+        return Err(TrainError::Invalid(
+            "no background images: negatives are mined from them (--bg)".into(),
+        ));
+    }
+    if let Some(b) = positives.iter().find(|s| s.len() != w * h) {
+        return Err(TrainError::Invalid(format!(
+            "a positive has {} pixels, the window {w}x{h} needs {}",
+            b.len(),
+            w * h
+        )));
+    }
+    std::fs::create_dir_all(out_dir).map_err(|source| TrainError::Io {
+        path: out_dir.into(),
+        source,
+    })?;
+    let xml_path = out_dir.join("cascade.xml");
+    let log_path = out_dir.join("stages.json");
+
+    // 1. Positives' integrals; windows the detector would never look at are left out.
+    let mut ii = Integrals::new();
+    let pos_all: Vec<SampleIntegral> = positives
+        .iter()
+        .map(|s| SampleIntegral::new(s, w, h, &mut ii))
+        .collect();
+    let flat = pos_all.iter().filter(|s| !s.scannable).count();
+    if flat > 0 {
+        progress.note(&format!(
+            "{flat} of {} positives are too flat for the detector (grey std dev ≤ 10): left out",
+            pos_all.len()
+        ));
+    }
+    let mut pos_pool: Vec<SampleIntegral> = pos_all.into_iter().filter(|s| s.scannable).collect();
+    // Seeded order, so each stage takes the first accepted ones.
+    let mut rng = SplitMix64::new(opts.seed);
+    for i in (1..pos_pool.len()).rev() {
+        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+        pos_pool.swap(i, j);
+    }
+
+    // 2. Resume.
+    let mut model = Model::new(p.clone());
+    let mut file = StageFile {
+        options: opts.clone(),
+        stages: vec![],
+        log: vec![],
+        finished: None,
+        positives_total: pos_pool.len(),
+        backgrounds_total: backgrounds.len(),
+    };
+    if resume && log_path.exists() {
+        let text = std::fs::read_to_string(&log_path).map_err(|source| TrainError::Io {
+            path: log_path.clone(),
+            source,
+        })?;
+        let old: StageFile = serde_json::from_str(&text).map_err(|e| TrainError::Resume {
+            path: log_path.clone(),
+            message: format!("not a stages.json: {e}"),
+        })?;
+        if old.options.params.width != p.width
+            || old.options.params.height != p.height
+            || old.options.params.mode != p.mode
+        {
+            return Err(TrainError::Resume {
+                path: log_path.clone(),
+                message: format!(
+                    "it was trained with window {}x{} mode {:?}, this run asks for {}x{} {:?}",
+                    old.options.params.width,
+                    old.options.params.height,
+                    old.options.params.mode,
+                    p.width,
+                    p.height,
+                    p.mode
+                ),
+            });
+        }
+        if let Some(bad) = old
+            .stages
+            .iter()
+            .flat_map(|s| s.weaks.iter().flat_map(|w| w.splits.iter()))
+            .find(|s| s.feature >= model.pool.len())
+        {
+            return Err(TrainError::Resume {
+                path: log_path.clone(),
+                message: format!("feature {} is outside the pool", bad.feature),
+            });
+        }
+        model.stages = old.stages.clone();
+        file.stages = old.stages;
+        file.log = old.log;
+        progress.note(&format!("resuming after stage {}", model.stages.len()));
+        if model.stages.len() >= p.num_stages as usize {
+            let reason = old.finished.unwrap_or_else(|| "all stages trained".into());
+            return Ok(TrainOutcome {
+                xml: xml_path,
+                stages: model.stages.len(),
+                reason,
+            });
+        }
+    }
+
+    let budget = opts.mem_mb.saturating_mul(1 << 20);
+    let reason;
+    loop {
+        let si = model.stages.len();
+        if si >= p.num_stages as usize {
+            reason = format!("all {} stages trained", p.num_stages);
+            break;
+        }
+        let t0 = Instant::now();
+        let cascade: Option<Cascade> = if si == 0 { None } else { Some(model.to_cascade()?) };
+        // 3. Positives the cascade so far accepts.
+        let compiled = cascade.as_ref().map(|c| scan::compile_for_samples(c, w, h));
+        let pos: Vec<&SampleIntegral> = pos_pool
+            .iter()
+            .filter(|s| scan::passes(s, compiled.as_ref()))
+            .take(opts.num_pos)
+            .collect();
+        if pos.len() < 10 {
+            return Err(TrainError::Invalid(format!(
+                "stage {si}: only {} positives pass the cascade so far (of {}); need at least 10",
+                pos.len(),
+                pos_pool.len()
+            )));
+        }
+        // 4. Negatives: hard ones from the backgrounds, in a seeded order.
+        let mut order: Vec<usize> = (0..backgrounds.len()).collect();
+        let mut orng = SplitMix64::new(mix(opts.seed ^ (si as u64 + 1) * 0x9E37));
+        for i in (1..order.len()).rev() {
+            let j = (orng.next_u64() % (i as u64 + 1)) as usize;
+            order.swap(i, j);
+        }
+        let cap = (2 * opts.num_neg).div_ceil(backgrounds.len()).max(2);
+        let mut negs: Vec<Vec<u8>> = Vec::new();
+        let (mut scanned, mut accepted) = (0u64, 0u64);
+        for chunk in order.chunks(rayon::current_num_threads().max(1) * 4) {
+            let results: Vec<scan::ScanResult> = chunk
+                .par_iter()
+                .map(|&bi| {
+                    scan::scan(
+                        &backgrounds[bi],
+                        cascade.as_ref(),
+                        w,
+                        h,
+                        opts.scale_factor,
+                        cap,
+                        mix(opts.seed ^ ((si as u64) << 32) ^ bi as u64),
+                    )
+                })
+                .collect();
+            for r in results {
+                scanned += r.windows;
+                accepted += r.hits;
+                for k in r.kept {
+                    if negs.len() < opts.num_neg {
+                        negs.push(k);
+                    }
+                }
+            }
+            if negs.len() >= opts.num_neg {
+                break;
+            }
+        }
+        let t_mine = t0.elapsed().as_secs_f64();
+        if negs.is_empty() {
+            if si == 0 {
+                return Err(TrainError::Invalid(format!(
+                    "no negative windows in the {} background images (each must be at least {w}x{h} and not flat)",
+                    backgrounds.len()
+                )));
+            }
+            reason =
+                format!("done after {si} stages: the cascade accepts no window of the backgrounds ({scanned} scanned)");
+            break;
+        }
+        let min_neg = (opts.num_neg / 50).max(10);
+        if negs.len() < min_neg {
+            reason = format!(
+                "done after {si} stages: only {} false alarms left in {scanned} background windows (< {min_neg})",
+                negs.len()
+            );
+            break;
+        }
+        let neg: Vec<SampleIntegral> = negs.iter().map(|s| SampleIntegral::new(s, w, h, &mut ii)).collect();
+        let (np, nn) = (pos.len(), neg.len());
+        let n = np + nn;
+        // 5. Feature matrix within the budget.
+        let t1 = Instant::now();
+        // Per feature: one bin byte per sample and up to 255 f32 edges.
+        let fit = (budget / (n + 1024)).max(1);
+        let mut feats: Vec<usize> = (0..model.pool.len()).collect();
+        if feats.len() > fit {
+            let mut frng = SplitMix64::new(mix(opts.seed ^ 0xFEA7 ^ si as u64));
+            for i in 0..fit {
+                let j = i + (frng.next_u64() % (feats.len() - i) as u64) as usize;
+                feats.swap(i, j);
+            }
+            feats.truncate(fit);
+            feats.sort_unstable();
+        }
+        let tofs = features::tilted_offset(w, h);
+        let compiled_feats: Vec<features::Compiled> = model
+            .pool
+            .iter()
+            .map(|f| features::Compiled::new(f, w + 1, tofs))
+            .collect();
+        let sample = |i: usize| if i < np { pos[i] } else { &neg[i - np] };
+        let matrix = FeatureMatrix::build(feats, n, 1024, |f, i| sample(i).value(&compiled_feats[f]));
+        let t_pre = t1.elapsed().as_secs_f64();
+        // 6. Boosting until the stage's false-alarm target.
+        let t2 = Instant::now();
+        progress.stage_start(si, p.max_weak_count as usize);
+        let mut booster = Booster::new(p.boost, np, nn);
+        let mut stage = StageModel {
+            threshold: 0.0,
+            weaks: vec![],
+        };
+        let (mut hit, mut fa) = (0.0, 1.0);
+        while stage.weaks.len() < p.max_weak_count as usize {
+            let Some(weak) = booster.add_weak(&matrix, p.max_depth) else {
+                break;
+            };
+            stage.weaks.push(weak);
+            let mut ps: Vec<f64> = booster.score[..np].to_vec();
+            ps.sort_by(|a, b| a.total_cmp(b));
+            let idx = (((1.0 - p.min_hit_rate) * np as f64) as usize).min(np - 1);
+            stage.threshold = ps[idx] as f32;
+            // The detector's test: reject when sum < threshold − 1e-5 (in f32, then widened).
+            let eff = (stage.threshold - rccar::detect::cascade::THRESHOLD_EPS) as f64;
+            hit = booster.score[..np].iter().filter(|&&s| s >= eff).count() as f64 / np as f64;
+            fa = booster.score[np..].iter().filter(|&&s| s >= eff).count() as f64 / nn as f64;
+            progress.weak(stage.weaks.len(), hit, fa);
+            if fa <= p.max_false_alarm {
+                break;
+            }
+        }
+        if stage.weaks.is_empty() {
+            reason = format!("done after {si} stages: no feature separates the remaining samples");
+            break;
+        }
+        let t_boost = t2.elapsed().as_secs_f64();
+        // 7. Save.
+        model.stages.push(stage.clone());
+        let log = StageLog {
+            stage: si,
+            weak_count: stage.weaks.len(),
+            hit_rate: hit,
+            false_alarm: fa,
+            num_pos: np,
+            num_neg: nn,
+            windows_scanned: scanned,
+            windows_accepted: accepted,
+            acceptance_ratio: if scanned > 0 {
+                accepted as f64 / scanned as f64
+            } else {
+                0.0
+            },
+            features_used: matrix.features.len(),
+            matrix_bytes: matrix.bytes(),
+            seconds_mining: t_mine,
+            seconds_precompute: t_pre,
+            seconds_boost: t_boost,
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        progress.stage_end(&log);
+        file.stages.push(stage);
+        file.log.push(log);
+        write_atomic(&xml_path, &model.to_xml())?;
+        write_atomic(&log_path, &serde_json::to_string_pretty(&file).unwrap_or_default())?;
+    }
+    progress.note(&reason);
+    file.finished = Some(reason.clone());
+    if model.stages.is_empty() {
+        return Err(TrainError::Invalid(format!("no stage could be trained: {reason}")));
+    }
+    write_atomic(&xml_path, &model.to_xml())?;
+    write_atomic(&log_path, &serde_json::to_string_pretty(&file).unwrap_or_default())?;
+    Ok(TrainOutcome {
+        xml: xml_path,
+        stages: model.stages.len(),
+        reason,
+    })
+}
