@@ -176,13 +176,15 @@ fn sim_lab_calibration_recovers_tilt_within_half_a_degree() {
 /// the true one, ranged, against the true forward distance. Reports the detection rate; the
 /// accuracy bound is asserted on the distances where the object was found.
 ///
-/// Ignored by default: with a preview of the trained stop-sign cascade (21:30) the detector's
-/// box bottom stands for z = 0.114 m, not the face's 0.120 m, so the configured height gives
-/// −7.2% median error; even with 0.114 m the scale-step jitter of the box bottom leaves a 5.8%
-/// maximum at 1.5 m, where a sign 0.12 m up is only 0.08 m below the lens. Run it with
+/// Ignored by default, because it fails with the shipped cascades (issue 6, merged 22:00): their
+/// boxes reach below the objects (training margin), so with the configured contact heights
+/// the errors are −10.6% (obstacle), −6.7% (stop sign), −14.2% (light) median; the box bottoms
+/// stand for z = −0.024, 0.114, 0.084 m. With those heights the medians drop to 0.9%, 2.2%,
+/// 2.6%, but the maxima stay at 4.5%, 13.1%, 20.6% (box-bottom jitter of the detector's scale
+/// steps; worst for signs and lights high up). Run it with
 /// `cargo test --release --test ranging_sim -- --ignored --nocapture`.
 #[test]
-#[ignore = "fails with the preview stop-sign cascade: max 5.8% > 5% (see the doc comment)"]
+#[ignore = "fails with the shipped cascades: loose box bottoms (see the doc comment)"]
 fn ranging_accuracy_with_the_detectors_boxes() {
     use rccar::detect::{CascadeSpec, DetectParams, DetectStage};
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -192,6 +194,7 @@ fn ranging_accuracy_with_the_detectors_boxes() {
     let ranging = BoxRanging::from_config(&cfg.camera, &cfg.ranging);
     let ds: Vec<f64> = (0..=26).map(|k| (0.2 + 0.05 * k as f64).max(0.21)).collect();
     let mut any = false;
+    let mut failed = vec![];
     for (kind, class) in [
         ("obstacle", ObjectClass::Obstacle),
         ("stop_sign", ObjectClass::StopSign),
@@ -272,8 +275,11 @@ fn ranging_accuracy_with_the_detectors_boxes() {
             median(zs.clone()),
             ranging.bottom_of(class)
         );
-        assert!(med <= 0.03 && max <= 0.05, "{kind}: median {med}, max {max}");
+        if !(med <= 0.03 && max <= 0.05) {
+            failed.push(format!("{kind}: median {med:.4}, max {max:.4}"));
+        }
     }
+    assert!(failed.is_empty(), "{failed:?}");
     if !any {
         println!("ranging with the detector's boxes: no cascades yet (see ranging_accuracy_over_0_2_to_1_5_m_from_ground_truth)");
     }
