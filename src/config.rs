@@ -107,6 +107,12 @@ pub struct Config {
     pub vehicle: VehicleConfig,
     /// The closed-loop simulator: track, run length, camera effects.
     pub sim: SimConfig,
+    /// Object detection: which cascades the pipeline runs.
+    pub detect: DetectConfig,
+    /// Monocular tilt ranging of detected boxes: calibration corrections, contact heights.
+    pub ranging: RangingConfig,
+    /// The behaviour state machine: stop signs, lights, obstacles, lane lost.
+    pub behaviour: BehaviourConfig,
 }
 
 /// `[camera]`: the image the pipeline works on and the camera's pose on the car.
@@ -489,6 +495,60 @@ impl Config {
         c.range("sim.light_variation", m.light_variation, 0.0, 0.9);
         c.range("sim.light_period_s", m.light_period_s, 0.1, 3600.0);
 
+        let d = &self.detect;
+        c.range("detect.scale_factor", d.scale_factor, 1.01, 2.0);
+        c.range("detect.min_neighbors", d.min_neighbors, 0, 100);
+        c.range("detect.min_size_px", d.min_size_px, 0, 4096);
+
+        let r = &self.ranging;
+        c.range("ranging.v0_offset_px", r.v0_offset_px, -200.0, 200.0);
+        c.range("ranging.a_y_scale", r.a_y_scale, 0.5, 2.0);
+        c.range("ranging.stop_sign_bottom_m", r.stop_sign_bottom_m, 0.0, 3.0);
+        c.range("ranging.traffic_light_bottom_m", r.traffic_light_bottom_m, 0.0, 3.0);
+        c.range("ranging.obstacle_bottom_m", r.obstacle_bottom_m, 0.0, 3.0);
+        if r.stop_sign_bottom_m >= self.camera.height_m || r.traffic_light_bottom_m >= self.camera.height_m {
+            c.fail(
+                "ranging.stop_sign_bottom_m",
+                format!("{} / {}", r.stop_sign_bottom_m, r.traffic_light_bottom_m),
+                "box bottoms below camera.height_m (a ray through them must go down)",
+            );
+        }
+
+        let b = &self.behaviour;
+        c.range("behaviour.window_frames", b.window_frames, 1, 32);
+        c.range(
+            "behaviour.confirm_frames",
+            b.confirm_frames,
+            1,
+            b.window_frames.clamp(1, 32),
+        );
+        c.range("behaviour.standstill_mps", b.standstill_mps, 0.0, 1.0);
+        c.range("behaviour.stop_trigger_m", b.stop_trigger_m, 0.05, 10.0);
+        c.range(
+            "behaviour.stop_window_m[0]",
+            b.stop_window_m[0],
+            0.0,
+            b.stop_window_m[1],
+        );
+        c.range("behaviour.stop_window_m[1]", b.stop_window_m[1], 0.0, 10.0);
+        c.range("behaviour.stop_hold_s", b.stop_hold_s, 0.0, 600.0);
+        c.range("behaviour.stop_ignore_m", b.stop_ignore_m, 0.0, 100.0);
+        c.range("behaviour.stop_ignore_s", b.stop_ignore_s, 0.0, 600.0);
+        c.range("behaviour.light_trigger_m", b.light_trigger_m, 0.05, 10.0);
+        c.range("behaviour.green_confirm_frames", b.green_confirm_frames, 1, 32);
+        c.range("behaviour.light_lost_s", b.light_lost_s, 0.0, 600.0);
+        c.range("behaviour.obstacle_stop_m", b.obstacle_stop_m, 0.05, 10.0);
+        c.range("behaviour.obstacle_lane_half_m", b.obstacle_lane_half_m, 0.0, 2.0);
+        c.range("behaviour.pass_trigger_m", b.pass_trigger_m, 0.05, 10.0);
+        c.range("behaviour.pass_wait_s", b.pass_wait_s, 0.0, 60.0);
+        c.range("behaviour.pass_steer", b.pass_steer, 0.05, 1.0);
+        c.range("behaviour.pass_turn_m", b.pass_turn_m, 0.05, 5.0);
+        c.range("behaviour.pass_along_m", b.pass_along_m, 0.0, 10.0);
+        c.range("behaviour.pass_throttle", b.pass_throttle, 0.0, 1.0);
+        c.range("behaviour.pass_return_m", b.pass_return_m, 0.1, 50.0);
+        c.range("behaviour.lost_throttle", b.lost_throttle, 0.0, 1.0);
+        c.range("behaviour.lost_stop_s", b.lost_stop_s, 0.0, 60.0);
+
         if c.0.is_empty() {
             Ok(())
         } else {
@@ -755,5 +815,152 @@ mod tests {
         assert_eq!(cfg.lane.threshold_mode, ThresholdMode::Otsu);
         assert!(Config::default().with_override("steering.kq=1").is_err());
         assert!(Config::default().with_override("nonsense").is_err());
+    }
+}
+
+/// `[detect]`: the cascades the pipeline runs on every frame (docs/detect.md). A missing file
+/// switches that detector off (the pipeline says so once and keeps lane keeping).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DetectConfig {
+    /// Run detection at all.
+    pub enabled: bool,
+    /// Stop-sign cascade (OpenCV XML), relative to the working directory.
+    pub stop_sign: String,
+    /// Traffic-light cascade; the light's state is read inside its boxes.
+    pub traffic_light: String,
+    /// Obstacle cascade.
+    pub obstacle: String,
+    /// Ratio between successive detection scales (> 1; OpenCV's scaleFactor).
+    pub scale_factor: f64,
+    /// A box needs more than this many raw hits (OpenCV's minNeighbors).
+    pub min_neighbors: u32,
+    /// Smallest window, pixels (both sides; 0 = the cascade's own size).
+    pub min_size_px: u32,
+}
+
+impl Default for DetectConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            stop_sign: "config/cascades/stop_sign.xml".into(),
+            traffic_light: "config/cascades/traffic_light.xml".into(),
+            obstacle: "config/cascades/obstacle.xml".into(),
+            scale_factor: 1.1,
+            min_neighbors: 3,
+            min_size_px: 0,
+        }
+    }
+}
+
+/// `[ranging]`: distance of each detected box by tilt ranging (src/ranging.rs, docs/ranging.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RangingConfig {
+    /// Calibrated principal-point row minus the image centre row, pixels
+    /// (`rccar calibrate ranging` writes it).
+    pub v0_offset_px: f64,
+    /// Calibrated a_y divided by the nominal focal length from camera.hfov_deg.
+    pub a_y_scale: f64,
+    /// Height above the floor of a stop sign box's bottom edge (the face's lower edge), metres.
+    pub stop_sign_bottom_m: f64,
+    /// Height of a traffic-light box's bottom edge (the housing's lower edge), metres.
+    pub traffic_light_bottom_m: f64,
+    /// Height of an obstacle box's bottom edge, metres (0: it stands on the floor).
+    pub obstacle_bottom_m: f64,
+}
+
+impl Default for RangingConfig {
+    fn default() -> Self {
+        Self {
+            v0_offset_px: 0.0,
+            a_y_scale: 1.0,
+            stop_sign_bottom_m: 0.12,
+            traffic_light_bottom_m: 0.10,
+            obstacle_bottom_m: 0.0,
+        }
+    }
+}
+
+/// `[behaviour]`: the state machine of src/control/behaviour.rs (docs/behaviour.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BehaviourConfig {
+    /// A detection is confirmed when seen in `confirm_frames` of the last `window_frames`.
+    pub confirm_frames: u32,
+    /// Length of the confirmation window, frames.
+    pub window_frames: u32,
+    /// Below this estimated speed the car counts as stopped, m/s.
+    pub standstill_mps: f64,
+    /// Stop for a stop sign once it is confirmed nearer than this, metres (forward distance).
+    pub stop_trigger_m: f64,
+    /// Where the car should come to rest before a stop sign, metres from the lens [near, far]
+    /// (the simulator's scenario score).
+    pub stop_window_m: [f64; 2],
+    /// How long to stand at a stop sign, counted from standstill, seconds.
+    pub stop_hold_s: f64,
+    /// After leaving a stop sign, ignore stop signs until the car has driven this far, metres...
+    pub stop_ignore_m: f64,
+    /// ...and for at least this long, seconds.
+    pub stop_ignore_s: f64,
+    /// Stop for a red (or amber) light confirmed nearer than this, metres.
+    pub light_trigger_m: f64,
+    /// Green seen in this many consecutive frames releases a red-light stop.
+    pub green_confirm_frames: u32,
+    /// A red-light stop also ends when no light has been seen for this long, seconds.
+    pub light_lost_s: f64,
+    /// Stop while an obstacle in the lane is nearer than this, metres.
+    pub obstacle_stop_m: f64,
+    /// An obstacle counts as in the lane when its centre is within this of the car's axis, metres.
+    pub obstacle_lane_half_m: f64,
+    /// Pass a blocking obstacle through the other (left) lane.
+    pub pass_enabled: bool,
+    /// With passing enabled, stop this far before an obstacle instead (room to swing out), metres.
+    pub pass_trigger_m: f64,
+    /// Stand this long before starting to pass, seconds.
+    pub pass_wait_s: f64,
+    /// Steering used for each half of the lane change (0..1).
+    pub pass_steer: f64,
+    /// Distance driven for each half of the lane change, metres.
+    pub pass_turn_m: f64,
+    /// Distance driven in the other lane (lane keeping) before changing back, metres.
+    pub pass_along_m: f64,
+    /// Throttle while passing.
+    pub pass_throttle: f64,
+    /// The car must be back in its lane within this distance from the start of the pass, metres.
+    pub pass_return_m: f64,
+    /// Throttle while the lane is lost, before stopping.
+    pub lost_throttle: f64,
+    /// Stop after the lane has been lost this long, seconds.
+    pub lost_stop_s: f64,
+}
+
+impl Default for BehaviourConfig {
+    fn default() -> Self {
+        Self {
+            confirm_frames: 3,
+            window_frames: 5,
+            standstill_mps: 0.01,
+            stop_trigger_m: 0.9,
+            stop_window_m: [0.5, 1.0],
+            stop_hold_s: 5.0,
+            stop_ignore_m: 1.0,
+            stop_ignore_s: 2.0,
+            light_trigger_m: 1.0,
+            green_confirm_frames: 2,
+            light_lost_s: 3.0,
+            obstacle_stop_m: 0.45,
+            obstacle_lane_half_m: 0.12,
+            pass_enabled: false,
+            pass_trigger_m: 0.85,
+            pass_wait_s: 1.0,
+            pass_steer: 0.8,
+            pass_turn_m: 0.6,
+            pass_along_m: 0.3,
+            pass_throttle: 0.35,
+            pass_return_m: 3.5,
+            lost_throttle: 0.2,
+            lost_stop_s: 1.0,
+        }
     }
 }

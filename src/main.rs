@@ -32,6 +32,9 @@ enum Cmd {
     Detect(cli::detect::DetectArgs),
     /// Drive the simulated car round a track with the pipeline in the loop; report and plot.
     Sim(cli::sim::SimArgs),
+    /// Calibrate the car: `calibrate ranging PAIRS.csv` fits the camera tilt for ranging.
+    #[command(subcommand)]
+    Calibrate(cli::calibrate::CalibrateCmd),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +47,7 @@ fn main() -> ExitCode {
         Cmd::Link(a) => cli::link::run(a),
         Cmd::Detect(a) => cli::detect::run(a),
         Cmd::Sim(a) => cli::sim::run(a),
+        Cmd::Calibrate(c) => cli::calibrate::run(c),
     };
     match result {
         Ok(code) => code,

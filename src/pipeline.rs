@@ -1,12 +1,34 @@
-//! The one pipeline the car, replay and the simulator all run: frame → lane measurement →
-//! command. Nothing in here knows which of the three is calling.
+//! The one pipeline the car, replay and the simulator all run: frame → lane measurement +
+//! detections → ranges → behaviour → command. Nothing in here knows which of the three is
+//! calling.
+//!
+//! One frame (`dt` seconds after the previous one):
+//! 1. lane: bird's-eye warp, edges, histogram → `LaneMeasurement` (src/lane);
+//! 2. detect: the `[detect]` cascades on the frame (src/detect), or boxes handed in
+//!    ([`Pipeline::step_with`], the simulator's ground-truth switch), light state per light box;
+//! 3. ranging: each box's forward distance and side from its bottom row (src/ranging.rs,
+//!    Eq. 5 at the class's contact height);
+//! 4. dead reckoning: speed and distance from the previous command through `[vehicle]`;
+//! 5. behaviour: the state machine (src/control/behaviour.rs) on these observations;
+//! 6. control: lane PID + throttle policy, overridden or capped by the behaviour's decision.
+//!
+//! Without a detector (none loaded, or the cascade files missing) steps 2–3 find nothing and
+//! the car keeps its lane; the behaviour machine still handles a lost lane.
 
-use crate::config::Config;
+use crate::config::{Config, DetectConfig};
+use crate::control::behaviour::{Behaviour, DeadReckoning, Decision, LightColor, Mode, Observations, Ranged};
 use crate::control::{Command, Controller};
+use crate::detect::cascade::CascadeError;
+use crate::detect::detector::DetectParams;
+use crate::detect::light::{LightReading, LightState};
+use crate::detect::stage::{CascadeSpec, DetectStage};
 use crate::lane::warp::WarpError;
 use crate::lane::{LaneDetector, LaneMeasurement};
+use crate::ranging::{BoxRanging, ObjectClass};
 use crate::timing::{StageTimer, StageTimes};
 use image::RgbImage;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
 
 /// Why a pipeline cannot be built from a configuration.
 #[derive(Debug, thiserror::Error)]
@@ -14,6 +36,9 @@ pub enum PipelineError {
     /// The ROI does not define a bird's-eye view.
     #[error("warp.src: {0}")]
     Warp(#[from] WarpError),
+    /// A cascade file exists but cannot be read or parsed.
+    #[error("detect: {0}")]
+    Cascade(#[from] CascadeError),
 }
 
 /// What one frame produced.
@@ -25,26 +50,124 @@ pub struct FrameOutput {
     pub command: Command,
     /// Microseconds per stage (zeros with `NoTimer`).
     pub stage_us: StageTimes,
+    /// Detection + ranging + behaviour, microseconds (0 with `NoTimer`).
+    pub detect_us: u32,
+    /// The behaviour state after this frame.
+    pub mode: Mode,
+    /// What the behaviour machine was given.
+    pub observations: Observations,
 }
 
-/// Lane detection + control, with all buffers allocated once.
+/// A box handed to the pipeline instead of the detector's (the simulator's ground truth).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GivenBox {
+    /// What it is.
+    pub class: ObjectClass,
+    /// [left, top, right, bottom], pixel-centre coordinates.
+    pub bbox: [f64; 4],
+    /// A traffic light's colour.
+    pub light: Option<LightColor>,
+}
+
+/// One object of a frame, ranged (a telemetry field).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RangedObject {
+    /// What it is.
+    pub class: ObjectClass,
+    /// [left, top, right, bottom], pixels.
+    pub bbox: [f64; 4],
+    /// Forward distance from the lens, metres (`None` above the horizon).
+    pub distance_m: Option<f64>,
+    /// Lateral offset, metres, left positive.
+    pub lateral_m: Option<f64>,
+    /// A traffic light's colour.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light: Option<LightColor>,
+}
+
+/// Loads the `[detect]` cascades that exist (paths relative to `base`). Returns the stage
+/// (`None` when no file exists or detection is off) and the files that were missing.
+/// This is the pipeline's only filesystem access; callers report the missing files once.
+pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectStage>, Vec<PathBuf>), CascadeError> {
+    if !cfg.enabled {
+        return Ok((None, Vec::new()));
+    }
+    let params = DetectParams {
+        scale_factor: cfg.scale_factor,
+        min_neighbors: cfg.min_neighbors,
+        min_size: (cfg.min_size_px, cfg.min_size_px),
+        ..Default::default()
+    };
+    let mut specs = Vec::new();
+    let mut missing = Vec::new();
+    for (label, file, light) in [
+        ("stop_sign", &cfg.stop_sign, false),
+        ("traffic_light", &cfg.traffic_light, true),
+        ("obstacle", &cfg.obstacle, false),
+    ] {
+        let path = base.join(file);
+        if path.is_file() {
+            specs.push(CascadeSpec {
+                label: label.into(),
+                path,
+                traffic_light: light,
+                params,
+            });
+        } else {
+            missing.push(path);
+        }
+    }
+    if specs.is_empty() {
+        return Ok((None, missing));
+    }
+    Ok((Some(DetectStage::load(&specs)?), missing))
+}
+
+/// Lane detection, detection, ranging, behaviour and control, with buffers allocated once.
 #[derive(Debug, Clone)]
 pub struct Pipeline {
     lane: LaneDetector,
     control: Controller,
     width: u32,
     height: u32,
+    detect: Option<DetectStage>,
+    ranging: BoxRanging,
+    behaviour: Behaviour,
+    dead: DeadReckoning,
+    obstacle_lane_half_m: f64,
+    time_s: f64,
+    last_throttle: f64,
+    objects: Vec<RangedObject>,
 }
 
 impl Pipeline {
-    /// Builds the pipeline for `cfg` (precomputes the warp map).
+    /// Builds the pipeline for `cfg` (precomputes the warp map), without a detector: see
+    /// [`Pipeline::set_detector`] and [`load_detector`].
     pub fn new(cfg: &Config) -> Result<Self, PipelineError> {
         Ok(Self {
             lane: LaneDetector::from_config(cfg)?,
             control: Controller::from_config(cfg),
             width: cfg.camera.width,
             height: cfg.camera.height,
+            detect: None,
+            ranging: BoxRanging::from_config(&cfg.camera, &cfg.ranging),
+            behaviour: Behaviour::new(cfg.behaviour.clone()),
+            dead: DeadReckoning::new(&cfg.vehicle),
+            obstacle_lane_half_m: cfg.behaviour.obstacle_lane_half_m,
+            time_s: 0.0,
+            last_throttle: 0.0,
+            objects: Vec::with_capacity(16),
         })
+    }
+
+    /// Installs (or removes) the detection stage.
+    pub fn set_detector(&mut self, detect: Option<DetectStage>) {
+        self.detect = detect;
+    }
+
+    /// Whether a detector is installed.
+    pub fn has_detector(&self) -> bool {
+        self.detect.is_some()
     }
 
     /// Frame size the pipeline expects, pixels.
@@ -52,9 +175,22 @@ impl Pipeline {
         (self.width, self.height)
     }
 
-    /// Processes one frame taken `dt_s` seconds after the previous one. A frame of another
-    /// size is resized first (that allocates; sources should deliver the configured size).
+    /// Processes one frame taken `dt_s` seconds after the previous one, with the installed
+    /// detector. A frame of another size is resized first (that allocates; sources should
+    /// deliver the configured size).
     pub fn step(&mut self, image: &RgbImage, dt_s: f64, timer: &mut dyn StageTimer) -> FrameOutput {
+        self.step_with(image, dt_s, timer, None)
+    }
+
+    /// Like [`Pipeline::step`], but with `given` boxes instead of the detector's when `Some`
+    /// (the simulator's ground-truth switch).
+    pub fn step_with(
+        &mut self,
+        image: &RgbImage,
+        dt_s: f64,
+        timer: &mut dyn StageTimer,
+        given: Option<&[GivenBox]>,
+    ) -> FrameOutput {
         let mut stage_us = StageTimes::default();
         let resized;
         let frame = if image.dimensions() == (self.width, self.height) {
@@ -64,15 +200,106 @@ impl Pipeline {
             &resized
         };
         timer.lap_us();
+        // 1. Lane.
         let lane = self.lane.measure(frame, timer, &mut stage_us);
-        let command = self.control.step(&lane, dt_s);
+        // 2.–3. Detections and their ranges.
+        self.objects.clear();
+        match given {
+            Some(boxes) => {
+                for b in boxes {
+                    push_ranged(&mut self.objects, &self.ranging, b.class, b.bbox, b.light);
+                }
+            }
+            None => {
+                if let Some(det) = &mut self.detect {
+                    if let Ok(found) = det.run_rgb(frame) {
+                        for d in &found {
+                            let Some(class) = ObjectClass::from_label(&d.label) else {
+                                continue;
+                            };
+                            let r = d.rect;
+                            let bbox = [
+                                r.x as f64 - 0.5,
+                                r.y as f64 - 0.5,
+                                (r.x + r.width) as f64 - 0.5,
+                                (r.y + r.height) as f64 - 0.5,
+                            ];
+                            let light = d.light.as_ref().map(|l| light_color(l, frame, r));
+                            push_ranged(&mut self.objects, &self.ranging, class, bbox, light);
+                        }
+                    }
+                }
+            }
+        }
+        // 4. Dead reckoning: the previous command, held since the previous frame.
+        if dt_s.is_finite() && dt_s > 0.0 {
+            self.dead.advance(self.last_throttle, dt_s);
+            self.time_s += dt_s;
+        }
+        // 5. Behaviour.
+        let obs = self.observations(lane.error.is_some());
+        let decision = self.behaviour.step(&obs, self.time_s);
+        let detect_us = timer.lap_us();
+        // 6. Control, then the behaviour's overrides.
+        let mut command = self.control.step(&lane, dt_s);
+        command = apply(command, &decision);
+        if decision.steer.is_some() {
+            // The lane error means nothing during a lane change: start afresh afterwards.
+            self.control.pid.reset();
+        }
+        self.last_throttle = command.throttle;
         stage_us.control_us = timer.lap_us();
         stage_us.sum();
         FrameOutput {
             lane,
             command,
             stage_us,
+            detect_us,
+            mode: decision.mode,
+            observations: obs,
         }
+    }
+
+    /// The nearest object of each class (for obstacles, the nearest in the lane if any).
+    fn observations(&self, lane_seen: bool) -> Observations {
+        let mut o = Observations {
+            lane_seen,
+            speed_mps: self.dead.speed_mps,
+            odometry_m: self.dead.odometry_m,
+            ..Default::default()
+        };
+        let nearer = |cur: Option<Ranged>, r: Ranged| match cur {
+            Some(c) if c.distance_m <= r.distance_m => Some(c),
+            _ => Some(r),
+        };
+        let mut obstacle_any = None;
+        for ob in &self.objects {
+            let (Some(d), Some(l)) = (ob.distance_m, ob.lateral_m) else {
+                continue;
+            };
+            let r = Ranged {
+                distance_m: d,
+                lateral_m: l,
+            };
+            match ob.class {
+                ObjectClass::StopSign => o.stop_sign = nearer(o.stop_sign, r),
+                ObjectClass::TrafficLight => {
+                    if o.light.map_or(true, |(c, _)| c.distance_m > d) {
+                        o.light = Some((r, ob.light.unwrap_or(LightColor::Unknown)));
+                    }
+                }
+                ObjectClass::Obstacle => {
+                    if l.abs() <= self.obstacle_lane_half_m {
+                        o.obstacle = nearer(o.obstacle, r);
+                    }
+                    obstacle_any = nearer(obstacle_any, r);
+                }
+            }
+        }
+        if o.obstacle.is_none() {
+            o.obstacle = obstacle_any;
+        }
+        o
     }
 
     /// The lane detector (its intermediate images, for annotation).
@@ -84,4 +311,100 @@ impl Pipeline {
     pub fn controller(&self) -> &Controller {
         &self.control
     }
+
+    /// The behaviour machine (its state and last transition).
+    pub fn behaviour(&self) -> &Behaviour {
+        &self.behaviour
+    }
+
+    /// The objects of the last frame, ranged.
+    pub fn objects(&self) -> &[RangedObject] {
+        &self.objects
+    }
+
+    /// The dead-reckoned speed and distance.
+    pub fn dead_reckoning(&self) -> &DeadReckoning {
+        &self.dead
+    }
+
+    /// The box ranging in use.
+    pub fn ranging(&self) -> &BoxRanging {
+        &self.ranging
+    }
+}
+
+fn push_ranged(
+    out: &mut Vec<RangedObject>,
+    ranging: &BoxRanging,
+    class: ObjectClass,
+    bbox: [f64; 4],
+    light: Option<LightColor>,
+) {
+    let r = ranging.range(class, bbox);
+    out.push(RangedObject {
+        class,
+        bbox,
+        distance_m: r.map(|x| x.0),
+        lateral_m: r.map(|x| x.1),
+        light,
+    });
+}
+
+/// The colour of a traffic light in box `r`: the hue of the most saturated bright pixel (the
+/// lit lamp). `detect::light_state` takes the brightest spot, which in a trained cascade's
+/// box that reaches past the housing can be the bright wall behind it (grey, so no hue; then
+/// its position in the box decides, wrongly). Falls back to that reading when no pixel is
+/// both bright (V ≥ 120) and saturated (S ≥ 0.4).
+fn light_color(l: &LightReading, img: &RgbImage, r: crate::detect::Rect) -> LightColor {
+    let (w, h) = (img.width() as i32, img.height() as i32);
+    let (x0, y0) = (r.x.clamp(0, w), r.y.clamp(0, h));
+    let (x1, y1) = ((r.x + r.width).clamp(0, w), (r.y + r.height).clamp(0, h));
+    // 1. The pixel with the largest V·S.
+    let mut best = (0.0f32, [0u8; 3]);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let p = img.get_pixel(x as u32, y as u32).0;
+            let mx = p[0].max(p[1]).max(p[2]) as f32;
+            let mn = p[0].min(p[1]).min(p[2]) as f32;
+            if mx < 120.0 || (mx - mn) < 0.4 * mx {
+                continue;
+            }
+            let score = mx * (mx - mn) / mx;
+            if score > best.0 {
+                best = (score, p);
+            }
+        }
+    }
+    if best.0 > 0.0 {
+        // 2. Its hue, degrees.
+        let [r, g, b] = best.1.map(|v| v as f32);
+        let (mx, mn) = (r.max(g).max(b), r.min(g).min(b));
+        let d = mx - mn;
+        let hue = if mx == r {
+            (60.0 * (g - b) / d).rem_euclid(360.0)
+        } else if mx == g {
+            60.0 * (b - r) / d + 120.0
+        } else {
+            60.0 * (r - g) / d + 240.0
+        };
+        return match hue {
+            h if !(20.0..330.0).contains(&h) => LightColor::Red,
+            h if h < 70.0 => LightColor::Amber,
+            h if h < 200.0 => LightColor::Green,
+            _ => LightColor::Unknown,
+        };
+    }
+    match l.state {
+        LightState::Red => LightColor::Red,
+        LightState::Amber => LightColor::Amber,
+        LightState::Green => LightColor::Green,
+        LightState::Unknown => LightColor::Unknown,
+    }
+}
+
+/// The lane controller's command with the behaviour's throttle and steering applied.
+fn apply(cmd: Command, d: &Decision) -> Command {
+    let throttle = d.throttle.unwrap_or(cmd.throttle).min(d.throttle_cap);
+    let steer = d.steer.unwrap_or(cmd.steer);
+    Command::clamped(steer, throttle)
 }

@@ -261,6 +261,78 @@ pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, 
     })
 }
 
+/// The kinds of objects the pipeline ranges, each with its own box-bottom height.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObjectClass {
+    /// A stop sign (box = the face).
+    StopSign,
+    /// A traffic light (box = the housing).
+    TrafficLight,
+    /// An obstacle standing on the floor.
+    Obstacle,
+}
+
+impl ObjectClass {
+    /// The class of a detector label (`stop_sign`, `traffic_light`, `obstacle`).
+    pub fn from_label(label: &str) -> Option<ObjectClass> {
+        match label {
+            "stop_sign" | "stop" => Some(ObjectClass::StopSign),
+            "traffic_light" | "light" => Some(ObjectClass::TrafficLight),
+            "obstacle" => Some(ObjectClass::Obstacle),
+            _ => None,
+        }
+    }
+}
+
+/// Ranges image boxes: Eq. 5 on the box bottom at the class's contact height for the
+/// distance, and the camera ray through the bottom centre, cut at that height, for the
+/// lateral position.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoxRanging {
+    /// Eq. 5 with the calibrated tilt, v0 and a_y.
+    pub tilt: TiltRanging,
+    /// The camera with the same calibration (for the lateral position).
+    pub camera: PinholeCamera,
+    /// Box-bottom heights above the floor: stop sign, traffic light, obstacle, metres.
+    pub bottom_m: [f64; 3],
+}
+
+impl BoxRanging {
+    /// From `[camera]` (tilt, possibly calibrated) and `[ranging]` (v0 offset, a_y scale,
+    /// contact heights).
+    pub fn from_config(cam: &crate::config::CameraConfig, r: &crate::config::RangingConfig) -> Self {
+        let mut camera = PinholeCamera::from_config(cam);
+        camera.v0 += r.v0_offset_px;
+        camera.f_px *= r.a_y_scale;
+        Self {
+            tilt: TiltRanging::from_camera(&camera),
+            camera,
+            bottom_m: [r.stop_sign_bottom_m, r.traffic_light_bottom_m, r.obstacle_bottom_m],
+        }
+    }
+
+    /// The contact height of a class's box bottom, metres.
+    pub fn bottom_of(&self, class: ObjectClass) -> f64 {
+        self.bottom_m[class as usize]
+    }
+
+    /// Forward distance and lateral offset (left positive) from the lens of an object of
+    /// `class` whose box is `[left, top, right, bottom]` (pixel-centre coordinates; a detector
+    /// box of rows y..y+h−1 has its bottom edge at y + h − 0.5). `None` above the horizon.
+    pub fn range(&self, class: ObjectClass, bbox: [f64; 4]) -> Option<(f64, f64)> {
+        let z = self.bottom_of(class);
+        // 1. Eq. 5 on the bottom row gives the forward distance to the plane at height z.
+        let d = self.tilt.distance(bbox[3], z)?;
+        // 2. The ray through the bottom centre, scaled to that forward distance, gives the side.
+        let r = self.camera.ray((bbox[0] + bbox[2]) / 2.0, bbox[3]);
+        if r[0] <= 1e-9 {
+            return None;
+        }
+        Some((d, self.camera.lateral_m + d * r[1] / r[0]))
+    }
+}
+
 /// Parses `row,distance[,height]` lines (a header line and `#` comments are skipped). Errors
 /// name the line.
 pub fn parse_pairs_csv(text: &str, origin: &str) -> Result<Vec<Pair>, String> {

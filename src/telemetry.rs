@@ -4,8 +4,10 @@
 //! golden tests, plots, the simulator's scoring and (later) the dashboard. Fields are only
 //! ever added; optional ones are left out when empty.
 
+use crate::control::behaviour::{Mode, Transition};
 use crate::control::Command;
 use crate::lane::{LaneMeasurement, LaneStatus};
+use crate::pipeline::{FrameOutput, Pipeline, RangedObject};
 use crate::timing::StageTimes;
 use serde::{Deserialize, Serialize};
 
@@ -45,6 +47,24 @@ pub struct FrameRecord {
     /// Ground truth (simulator only): true offset, heading error, line columns, objects.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub truth: Option<crate::sim::truth::FrameTruth>,
+    /// Behaviour state after this frame.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub behaviour: Option<Mode>,
+    /// The behaviour transition made in this frame, with its reason.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transition: Option<Transition>,
+    /// Detected (or, in the simulator's ground-truth mode, given) objects, ranged.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub objects: Vec<RangedObject>,
+    /// Dead-reckoned speed, m/s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed_est_mps: Option<f64>,
+    /// Dead-reckoned distance driven, metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odometry_m: Option<f64>,
+    /// Detection + ranging + behaviour time, microseconds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub detect_us: Option<u32>,
 }
 
 impl FrameRecord {
@@ -74,7 +94,25 @@ impl FrameRecord {
             throttle: cmd.throttle,
             stage_us,
             truth: None,
+            behaviour: None,
+            transition: None,
+            objects: Vec::new(),
+            speed_est_mps: None,
+            odometry_m: None,
+            detect_us: None,
         }
+    }
+
+    /// Adds the behaviour, its transition, the ranged objects and the dead reckoning of the
+    /// frame `out` that `pipeline` just produced.
+    pub fn with_pipeline(mut self, out: &FrameOutput, pipeline: &Pipeline) -> Self {
+        self.behaviour = Some(out.mode);
+        self.transition = pipeline.behaviour().last_transition().cloned();
+        self.objects = pipeline.objects().to_vec();
+        self.speed_est_mps = Some(out.observations.speed_mps);
+        self.odometry_m = Some(out.observations.odometry_m);
+        self.detect_us = Some(out.detect_us);
+        self
     }
 
     /// The record as one JSON line (no newline).

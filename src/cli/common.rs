@@ -30,3 +30,22 @@ impl ConfigArgs {
         Ok(Config::load(&self.config, &locals, &self.set)?)
     }
 }
+
+/// Loads the `[detect]` cascades that exist and says once, on stderr, which are missing (the
+/// pipeline then runs without them: lane keeping only when none exists).
+pub fn load_detector(cfg: &Config) -> Result<Option<rccar::detect::DetectStage>> {
+    let (stage, missing) = rccar::pipeline::load_detector(&cfg.detect, std::path::Path::new("."))?;
+    if !missing.is_empty() {
+        let names: Vec<String> = missing.iter().map(|p| p.display().to_string()).collect();
+        eprintln!(
+            "detect: missing {}; {}",
+            names.join(", "),
+            if stage.is_some() {
+                "running without them"
+            } else {
+                "running lane-only"
+            }
+        );
+    }
+    Ok(stage)
+}

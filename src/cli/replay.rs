@@ -46,6 +46,7 @@ struct Summary {
 pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
     let mut pipeline = Pipeline::new(&cfg)?;
+    pipeline.set_detector(super::common::load_detector(&cfg)?);
     let (w, h) = pipeline.frame_size();
     // Frames smaller than the ROI's extent are refused instead of being blown up.
     let min_size = {
@@ -102,7 +103,8 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
             &out.lane,
             &out.command,
             out.stage_us,
-        );
+        )
+        .with_pipeline(&out, &pipeline);
         writeln!(tel, "{}", rec.to_json_line())?;
         s.frames += 1;
         s.status[out.lane.status as usize] += 1;

@@ -47,6 +47,9 @@ pub struct SimArgs {
     /// Write zeros instead of measured stage times (reproducible telemetry).
     #[arg(long)]
     pub no_timing: bool,
+    /// Give the behaviours the objects' true image boxes instead of running the cascades.
+    #[arg(long)]
+    pub truth_boxes: bool,
     #[command(flatten)]
     pub config: ConfigArgs,
 }
@@ -76,6 +79,12 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     }
 
     let mut sim = Simulation::new(&cfg, &track)?;
+    if a.truth_boxes {
+        println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
+        sim.set_truth_boxes(true);
+    } else {
+        sim.set_detector(super::common::load_detector(&cfg)?);
+    }
     // Without recording nobody looks at the frames: render only the rows the pipeline reads
     // (the same decisions, about twice as fast).
     sim.set_full_frames(a.record.is_some());
@@ -106,6 +115,15 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             sim.image()
                 .save(&p)
                 .with_context(|| format!("{}: cannot write", p.display()))?;
+        }
+        if let Some(tr) = &step.transition {
+            println!(
+                "  t={:7.2} s  {} -> {}: {}",
+                step.time_s,
+                tr.from.name(),
+                tr.to.name(),
+                tr.reason
+            );
         }
         writeln!(tel, "{}", step.record(&name).to_json_line())?;
         series.push(step);

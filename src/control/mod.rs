@@ -1,10 +1,11 @@
 //! Control: turns the lane measurement into a [`Command`] for the car.
 //!
 //! [`pid`] steers on the lane error, [`throttle`] picks the speed, [`Controller`] combines
-//! them. Both take the time step as an argument and never read the clock. Behaviours (stop
-//! signs, lights, obstacles) will join here as a state machine; control never talks to the
-//! serial link: a sink delivers commands.
+//! them. Both take the time step as an argument and never read the clock. [`behaviour`] is
+//! the state machine for stop signs, lights, obstacles and a lost lane on top of them; control
+//! never talks to the serial link: a sink delivers commands.
 
+pub mod behaviour;
 pub mod pid;
 pub mod throttle;
 

@@ -15,14 +15,18 @@
 //!
 //! Units: metres, seconds, radians.
 
+use super::render::ObjectBox;
 use super::render::{CameraMount, RenderOptions, Renderer};
 use super::scene::Scene;
 use super::track::Track;
+use super::track::{LightState as TrackLight, ObjectKind};
 use super::truth::{FrameTruth, TruthModel};
 use super::vehicle::{Pose, Vehicle};
 use crate::camera::PinholeCamera;
 use crate::config::Config;
-use crate::pipeline::{FrameOutput, Pipeline, PipelineError};
+use crate::control::behaviour::LightColor;
+use crate::pipeline::{FrameOutput, GivenBox, Pipeline, PipelineError};
+use crate::ranging::ObjectClass;
 use crate::telemetry::FrameRecord;
 use crate::timing::StageTimer;
 use image::RgbImage;
@@ -63,7 +67,8 @@ pub enum EndReason {
     TimeUp,
     /// More than a lane width off the lane centre.
     LeftTheRoad,
-    /// Stood still for 5 s.
+    /// Stood still for 5 s (not counting waits the behaviour chose: stop sign, red light,
+    /// obstacle).
     Stalled,
 }
 
@@ -111,6 +116,10 @@ pub struct StepOutput {
     pub frame: u64,
     /// Time of the frame, seconds.
     pub time_s: f64,
+    /// The behaviour transition made in this frame.
+    pub transition: Option<crate::control::behaviour::Transition>,
+    /// The objects the pipeline ranged this frame.
+    pub objects: Vec<crate::pipeline::RangedObject>,
 }
 
 impl StepOutput {
@@ -125,6 +134,12 @@ impl StepOutput {
             self.out.stage_us,
         );
         r.truth = Some(self.truth.clone());
+        r.behaviour = Some(self.out.mode);
+        r.transition = self.transition.clone();
+        r.objects = self.objects.clone();
+        r.speed_est_mps = Some(self.out.observations.speed_mps);
+        r.odometry_m = Some(self.out.observations.odometry_m);
+        r.detect_us = Some(self.out.detect_us);
         r
     }
 }
@@ -141,6 +156,9 @@ pub struct Simulation {
     /// Render every row (recording, viewing) or only the rows the pipeline reads.
     full_frames: bool,
     roi_rows: std::ops::Range<usize>,
+    /// Hand the pipeline the true object boxes instead of running its detector.
+    truth_boxes: bool,
+    given: Vec<GivenBox>,
     frame: u64,
     fps: f64,
     last_t: Option<f64>,
@@ -200,6 +218,8 @@ impl Simulation {
             image: RgbImage::new(cfg.camera.width, cfg.camera.height),
             full_frames: true,
             roi_rows: roi_rows(cfg),
+            truth_boxes: false,
+            given: Vec::new(),
             frame: 0,
             fps: cfg.camera.fps,
             last_t: None,
@@ -244,6 +264,25 @@ impl Simulation {
         self.full_frames = full;
     }
 
+    /// Installs the pipeline's detector (see [`crate::pipeline::load_detector`]).
+    pub fn set_detector(&mut self, detect: Option<crate::detect::DetectStage>) {
+        self.pipeline.set_detector(detect);
+    }
+
+    /// `true`: the pipeline gets the objects' true image boxes (a sign's face, a light's
+    /// housing, an obstacle's box; bottom-clipped boxes left out) with the true light colour,
+    /// instead of its detector's boxes. For testing behaviours without trained cascades.
+    /// Objects then need full frames (rendering is not needed for them, but the detector's
+    /// absence makes row-limited rendering safe either way).
+    pub fn set_truth_boxes(&mut self, on: bool) {
+        self.truth_boxes = on;
+    }
+
+    /// The pipeline.
+    pub fn pipeline(&self) -> &Pipeline {
+        &self.pipeline
+    }
+
     /// The frame rendered by the last step.
     pub fn image(&self) -> &RgbImage {
         &self.image
@@ -274,7 +313,7 @@ impl Simulation {
         let t = self.frame as f64 / self.fps;
         let pose = self.vehicle.pose;
         // 1. Render (all rows, or only those the pipeline reads: the same decisions, faster).
-        let rows = if self.full_frames {
+        let rows = if self.full_frames || (self.pipeline.has_detector() && !self.truth_boxes) {
             0..self.image.height() as usize
         } else {
             self.roi_rows.clone()
@@ -288,7 +327,17 @@ impl Simulation {
         // 3. Pipeline.
         let dt = self.last_t.map_or(1.0 / self.fps, |lt| t - lt);
         self.last_t = Some(t);
-        let out = self.pipeline.step(&self.image, dt, timer);
+        let out = if self.truth_boxes {
+            self.given.clear();
+            for b in &truth.objects {
+                if let Some(g) = self.given_box(&pose, b, t) {
+                    self.given.push(g);
+                }
+            }
+            self.pipeline.step_with(&self.image, dt, timer, Some(&self.given))
+        } else {
+            self.pipeline.step(&self.image, dt, timer)
+        };
         // 4. Vehicle.
         for _ in 0..self.cfg.sim.substeps {
             self.vehicle.step(out.command);
@@ -300,6 +349,8 @@ impl Simulation {
             truth,
             frame: self.frame,
             time_s: t,
+            transition: self.pipeline.behaviour().last_transition().cloned(),
+            objects: self.pipeline.objects().to_vec(),
         };
         self.frame += 1;
         if self.end.is_none() && self.frame as f64 / self.fps >= self.cfg.sim.max_seconds {
@@ -308,11 +359,36 @@ impl Simulation {
         step
     }
 
+    /// The box a perfect detector would report for `b`: for a sign or light only its face or
+    /// housing (the truth box reaches down the post to the floor).
+    fn given_box(&self, pose: &Pose, b: &ObjectBox, t: f64) -> Option<GivenBox> {
+        let h = self.cfg.camera.height as f64 - 1.0;
+        let ob = &self.track.track.objects.iter().find(|o| o.0.index == b.index)?.0;
+        let mount = self.renderer.mount();
+        let (class, bottom_z) = match b.kind {
+            ObjectKind::StopSign => (ObjectClass::StopSign, ob.height - ob.size[0] / 2.0),
+            ObjectKind::TrafficLight => (ObjectClass::TrafficLight, ob.height - ob.size[0] / 2.0),
+            ObjectKind::Obstacle => (ObjectClass::Obstacle, 0.0),
+        };
+        let mut bbox = b.bbox;
+        if b.kind != ObjectKind::Obstacle {
+            let (_, v) = mount.project_world(pose, [ob.pos[0], ob.pos[1], bottom_z])?;
+            bbox[3] = v;
+        }
+        if bbox[3] >= h || bbox[3] <= bbox[1] {
+            return None;
+        }
+        let light = (b.kind == ObjectKind::TrafficLight).then(|| match ob.light_state(t) {
+            TrackLight::Red => LightColor::Red,
+            TrackLight::Amber => LightColor::Amber,
+            TrackLight::Green => LightColor::Green,
+        });
+        Some(GivenBox { class, bbox, light })
+    }
+
     fn score(&mut self, truth: &FrameTruth, out: &FrameOutput, dt: f64, t: f64) {
         let track = &self.track.track;
         let e = truth.offset_m;
-        self.sq_sum += e * e;
-        self.xte_max = self.xte_max.max(e.abs());
         // Wheels: rebuild them for the rendered pose.
         let half = track.half_lane();
         let vcfg = &self.cfg.vehicle;
@@ -322,9 +398,28 @@ impl Simulation {
             yaw: truth.pose[2],
         };
         let w = vcfg.track_m / 2.0;
+        // While passing an obstacle (behaviour) the car may use the other lane: then only
+        // leaving the road counts, and the distance is to the nearer lane's centre.
+        let passing = out.mode.is_passing();
+        let lane_centre = |lat: f64| {
+            if passing && (lat + track.drive_offset).abs() < (lat - track.drive_offset).abs() {
+                -track.drive_offset
+            } else {
+                track.drive_offset
+            }
+        };
         let out_now = [[0.0, w], [0.0, -w], [vcfg.wheelbase_m, w], [vcfg.wheelbase_m, -w]]
             .iter()
-            .any(|&p| (self.track.lateral(pose.to_world(p)) - track.drive_offset).abs() > half);
+            .any(|&p| {
+                let lat = self.track.lateral(pose.to_world(p));
+                (lat - lane_centre(lat)).abs() > half
+            });
+        let e = if passing {
+            let lat = self.track.lateral(pose.to_world([vcfg.wheelbase_m / 2.0, 0.0]));
+            lat - lane_centre(lat)
+        } else {
+            e
+        };
         if out_now {
             self.time_outside += dt;
             if !self.outside {
@@ -333,6 +428,8 @@ impl Simulation {
             }
         }
         self.outside = out_now;
+        self.sq_sum += e * e;
+        self.xte_max = self.xte_max.max(e.abs());
         // Steering reversals: sign changes beyond a small dead band.
         let s = out.command.steer;
         if s.abs() > 0.05 {
@@ -368,7 +465,8 @@ impl Simulation {
         if e.abs() > 2.0 * half {
             self.end.get_or_insert(EndReason::LeftTheRoad);
         }
-        if self.vehicle.speed.abs() < 0.005 && t > 1.0 {
+        // Standing at a stop sign, a red light or an obstacle is the behaviour's choice.
+        if self.vehicle.speed.abs() < 0.005 && t > 1.0 && !out.mode.is_waiting() {
             self.still_s += dt;
             if self.still_s >= 5.0 {
                 self.end.get_or_insert(EndReason::Stalled);

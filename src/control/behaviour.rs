@@ -1,0 +1,855 @@
+//! The behaviour state machine: what the car does about stop signs, traffic lights, obstacles
+//! and a lost lane, on top of lane keeping (the seed paper's Sec. 3.3 behaviours, written as
+//! an explicit machine instead of flags and blocking delays in the firmware).
+//!
+//! ```text
+//!            stop sign confirmed < stop_trigger_m          standstill + stop_hold_s
+//!   Cruise ─────────────────────────────────► StopSign ───────────────────────────► Cruise
+//!     │  ▲  red/amber confirmed < light_trigger_m            (ignore signs for stop_ignore_m / _s)
+//!     │  └───────────────────────────────────── RedLight ◄── green in green_confirm_frames
+//!     │  obstacle in lane < obstacle_stop_m                   (or no light for light_lost_s)
+//!     ├─────────────────────────────────────► Obstacle ──(pass_enabled, stood pass_wait_s)──►
+//!     │                                         PassOut → PassAlong → PassBack → Cruise
+//!     └── lane lost ──► LaneLost (lost_throttle, then 0 after lost_stop_s) ── lane seen ──► Cruise
+//! ```
+//!
+//! Priorities: an obstacle in the lane beats everything but a pass under way; a red light
+//! beats a stop sign. A stop sign confirmed while passing is remembered and obeyed as soon as
+//! the car is back in its lane (it never stops in the other lane).
+//!
+//! Time and observations are passed in ([`Behaviour::step`]); the machine never reads a clock,
+//! so every test is deterministic. The car has no wheel encoder: speed and distance come from
+//! [`DeadReckoning`], the commanded throttle run through the `[vehicle]` speed model
+//! (`v̇ = (throttle · max_speed − v) / τ`).
+//!
+//! Units: metres, seconds, m/s; distances are forward distances from the lens.
+
+use crate::config::{BehaviourConfig, VehicleConfig};
+use serde::{Deserialize, Serialize};
+
+/// A traffic light's colour as the detector read it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LightColor {
+    /// Stop.
+    Red,
+    /// Stop if you can (treated as red).
+    Amber,
+    /// Go.
+    Green,
+    /// A light is there but its lamp could not be read.
+    Unknown,
+}
+
+/// One ranged object.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Ranged {
+    /// Forward distance from the lens, metres.
+    pub distance_m: f64,
+    /// Lateral offset from the car's axis, metres, positive = left.
+    pub lateral_m: f64,
+}
+
+/// What the car perceives and knows in one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Observations {
+    /// The lane was measured this frame.
+    pub lane_seen: bool,
+    /// The nearest stop sign, if any.
+    pub stop_sign: Option<Ranged>,
+    /// The nearest traffic light and its colour, if any.
+    pub light: Option<(Ranged, LightColor)>,
+    /// The nearest obstacle, if any (the machine decides whether it is in the lane).
+    pub obstacle: Option<Ranged>,
+    /// Estimated speed, m/s (from [`DeadReckoning`]).
+    pub speed_mps: f64,
+    /// Estimated distance driven since the start, metres.
+    pub odometry_m: f64,
+}
+
+/// The states of the machine (no data: the timers live in [`Behaviour`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// Lane keeping.
+    Cruise,
+    /// Stopping for, or standing at, a stop sign.
+    StopSign,
+    /// Stopping for, or waiting at, a red light.
+    RedLight,
+    /// Standing before an obstacle in the lane.
+    Obstacle,
+    /// Changing into the other lane (an S: left, then right).
+    PassOut,
+    /// Lane keeping in the other lane, past the obstacle.
+    PassAlong,
+    /// Changing back (right, then left).
+    PassBack,
+    /// The lane is not seen: slow, then stop.
+    LaneLost,
+}
+
+impl Mode {
+    /// A state in which standing still is intended (stop sign, red light, obstacle).
+    pub fn is_waiting(self) -> bool {
+        matches!(self, Mode::StopSign | Mode::RedLight | Mode::Obstacle)
+    }
+
+    /// One of the three passing states (the car may be in the other lane).
+    pub fn is_passing(self) -> bool {
+        matches!(self, Mode::PassOut | Mode::PassAlong | Mode::PassBack)
+    }
+
+    /// The name used in telemetry.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Cruise => "cruise",
+            Mode::StopSign => "stop_sign",
+            Mode::RedLight => "red_light",
+            Mode::Obstacle => "obstacle",
+            Mode::PassOut => "pass_out",
+            Mode::PassAlong => "pass_along",
+            Mode::PassBack => "pass_back",
+            Mode::LaneLost => "lane_lost",
+        }
+    }
+}
+
+/// A change of state and why.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Transition {
+    /// State left.
+    pub from: Mode,
+    /// State entered.
+    pub to: Mode,
+    /// Why, for people reading telemetry.
+    pub reason: String,
+}
+
+/// What the machine asks of the controller this frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decision {
+    /// The state after this step.
+    pub mode: Mode,
+    /// `Some(t)`: drive with throttle `t` instead of the lane controller's; `None`: lane
+    /// controller's throttle.
+    pub throttle: Option<f64>,
+    /// `Some(s)`: steer `s` instead of following the lane (lane change).
+    pub steer: Option<f64>,
+    /// Upper limit on whatever throttle results (1 = none).
+    pub throttle_cap: f64,
+}
+
+/// Speed and distance from the commanded throttle through the `[vehicle]` model (no encoder).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DeadReckoning {
+    max_speed: f64,
+    tau: f64,
+    /// Estimated speed, m/s.
+    pub speed_mps: f64,
+    /// Estimated distance driven, metres.
+    pub odometry_m: f64,
+}
+
+impl DeadReckoning {
+    /// At rest, with the speed model of `[vehicle]`.
+    pub fn new(v: &VehicleConfig) -> Self {
+        Self {
+            max_speed: v.max_speed_mps,
+            tau: v.speed_tau_s,
+            speed_mps: 0.0,
+            odometry_m: 0.0,
+        }
+    }
+
+    /// The throttle `throttle` was held for `dt` seconds: the exact solution of the first-order
+    /// lag over the step, and the distance it covers.
+    pub fn advance(&mut self, throttle: f64, dt: f64) {
+        if !(dt.is_finite() && dt > 0.0) {
+            return;
+        }
+        let target = throttle.clamp(-1.0, 1.0) * self.max_speed;
+        let v0 = self.speed_mps;
+        if self.tau > 0.0 {
+            let e = (-dt / self.tau).exp();
+            let v1 = target + (v0 - target) * e;
+            // ∫ v dt over the step.
+            self.odometry_m += (target * dt + (v0 - target) * self.tau * (1.0 - e)).abs();
+            self.speed_mps = v1;
+        } else {
+            self.odometry_m += (target * dt).abs();
+            self.speed_mps = target;
+        }
+    }
+}
+
+/// A bit per frame: was the condition true in the last frames?
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+struct Window(u32);
+
+impl Window {
+    fn push(&mut self, hit: bool) {
+        self.0 = (self.0 << 1) | hit as u32;
+    }
+    /// Hits among the last `m` frames.
+    fn count(self, m: u32) -> u32 {
+        let mask = if m >= 32 { u32::MAX } else { (1u32 << m) - 1 };
+        (self.0 & mask).count_ones()
+    }
+    /// The last `n` frames were all hits.
+    fn last_all(self, n: u32) -> bool {
+        self.count(n) == n.min(32)
+    }
+}
+
+/// The behaviour state machine.
+#[derive(Debug, Clone)]
+pub struct Behaviour {
+    cfg: BehaviourConfig,
+    mode: Mode,
+    /// When the current mode was entered, seconds.
+    since: f64,
+    /// Odometry when the current mode was entered, metres.
+    since_odo: f64,
+    /// When the car came to rest in the current stop, seconds.
+    standstill_since: Option<f64>,
+    /// Stop signs are ignored until both have passed.
+    ignore_until_s: f64,
+    ignore_until_odo: f64,
+    /// A stop sign was confirmed while passing: obey it when back in the lane.
+    pending_stop: bool,
+    /// Last time a traffic light was seen, seconds.
+    light_seen_at: f64,
+    lane_lost_since: Option<f64>,
+    stop_w: Window,
+    red_w: Window,
+    green_w: Window,
+    obstacle_w: Window,
+    /// The transition of the last step.
+    last: Option<Transition>,
+}
+
+impl Behaviour {
+    /// A machine in `Cruise` at time 0.
+    pub fn new(cfg: BehaviourConfig) -> Self {
+        Self {
+            cfg,
+            mode: Mode::Cruise,
+            since: 0.0,
+            since_odo: 0.0,
+            standstill_since: None,
+            ignore_until_s: f64::NEG_INFINITY,
+            ignore_until_odo: f64::NEG_INFINITY,
+            pending_stop: false,
+            light_seen_at: f64::NEG_INFINITY,
+            lane_lost_since: None,
+            stop_w: Window::default(),
+            red_w: Window::default(),
+            green_w: Window::default(),
+            obstacle_w: Window::default(),
+            last: None,
+        }
+    }
+
+    /// The current state.
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// The transition made by the last [`Behaviour::step`], if any.
+    pub fn last_transition(&self) -> Option<&Transition> {
+        self.last.as_ref()
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &BehaviourConfig {
+        &self.cfg
+    }
+
+    fn go(&mut self, to: Mode, now: f64, odo: f64, reason: String) {
+        self.last = Some(Transition {
+            from: self.mode,
+            to,
+            reason,
+        });
+        self.mode = to;
+        self.since = now;
+        self.since_odo = odo;
+        self.standstill_since = None;
+    }
+
+    fn confirmed(&self, w: Window) -> bool {
+        w.count(self.cfg.window_frames) >= self.cfg.confirm_frames
+    }
+
+    /// One step at time `now` (seconds, any origin, non-decreasing) with this frame's
+    /// observations. Returns what the controller should do.
+    pub fn step(&mut self, obs: &Observations, now: f64) -> Decision {
+        let c = &self.cfg;
+        self.last = None;
+        let odo = obs.odometry_m;
+        // 1. Per-frame evidence into the confirmation windows.
+        let ignoring = now < self.ignore_until_s || odo < self.ignore_until_odo;
+        let stop_near = obs.stop_sign.is_some_and(|s| s.distance_m < c.stop_trigger_m);
+        self.stop_w.push(stop_near && !ignoring);
+        let (red_near, green) = match obs.light {
+            Some((r, col)) => {
+                self.light_seen_at = now;
+                (
+                    matches!(col, LightColor::Red | LightColor::Amber) && r.distance_m < c.light_trigger_m,
+                    col == LightColor::Green,
+                )
+            }
+            None => (false, false),
+        };
+        self.red_w.push(red_near);
+        self.green_w.push(green);
+        // Passing needs room to swing out: then the car stops further back.
+        let stop_m = if c.pass_enabled {
+            c.obstacle_stop_m.max(c.pass_trigger_m)
+        } else {
+            c.obstacle_stop_m
+        };
+        let blocking = obs
+            .obstacle
+            .is_some_and(|o| o.distance_m < stop_m && o.lateral_m.abs() <= c.obstacle_lane_half_m);
+        self.obstacle_w.push(blocking);
+        let stop_ok = self.confirmed(self.stop_w);
+        let red_ok = self.confirmed(self.red_w);
+        let green_ok = self.green_w.last_all(c.green_confirm_frames);
+        let obstacle_ok = self.confirmed(self.obstacle_w);
+        let obstacle_gone = self.obstacle_w.count(c.window_frames) == 0;
+        let still = obs.speed_mps.abs() < c.standstill_mps;
+        if still && self.standstill_since.is_none() {
+            self.standstill_since = Some(now);
+        }
+        if !still {
+            self.standstill_since = None;
+        }
+        self.lane_lost_since = if obs.lane_seen {
+            None
+        } else {
+            Some(self.lane_lost_since.unwrap_or(now))
+        };
+        let in_pass = matches!(self.mode, Mode::PassOut | Mode::PassAlong | Mode::PassBack);
+        if in_pass && stop_ok {
+            self.pending_stop = true;
+        }
+
+        // 2. Transitions: the obstacle first (safety), then each state's own exits.
+        if obstacle_ok && !in_pass && self.mode != Mode::Obstacle {
+            let d = obs.obstacle.map_or(f64::NAN, |o| o.distance_m);
+            self.go(Mode::Obstacle, now, odo, format!("obstacle in lane at {d:.2} m"));
+        } else {
+            match self.mode {
+                Mode::Cruise | Mode::LaneLost => {
+                    if red_ok {
+                        let d = obs.light.map_or(f64::NAN, |l| l.0.distance_m);
+                        self.go(Mode::RedLight, now, odo, format!("red light at {d:.2} m"));
+                    } else if stop_ok || self.pending_stop {
+                        let why = if self.pending_stop {
+                            "stop sign seen while passing".to_string()
+                        } else {
+                            let d = obs.stop_sign.map_or(f64::NAN, |s| s.distance_m);
+                            format!("stop sign at {d:.2} m")
+                        };
+                        self.pending_stop = false;
+                        self.go(Mode::StopSign, now, odo, why);
+                    } else if self.mode == Mode::Cruise && !obs.lane_seen {
+                        self.go(Mode::LaneLost, now, odo, "lane not seen".into());
+                    } else if self.mode == Mode::LaneLost && obs.lane_seen {
+                        self.go(Mode::Cruise, now, odo, "lane seen again".into());
+                    }
+                }
+                Mode::StopSign => {
+                    // Hold counted from standstill.
+                    if let Some(t0) = self.standstill_since {
+                        if now - t0 >= c.stop_hold_s - 1e-9 {
+                            self.ignore_until_s = now + c.stop_ignore_s;
+                            self.ignore_until_odo = odo + c.stop_ignore_m;
+                            self.stop_w = Window::default();
+                            let held = now - t0;
+                            self.go(Mode::Cruise, now, odo, format!("held {held:.2} s at the stop sign"));
+                        }
+                    }
+                }
+                Mode::RedLight => {
+                    if green_ok {
+                        self.red_w = Window::default();
+                        self.go(Mode::Cruise, now, odo, "green light".into());
+                    } else if now - self.light_seen_at >= c.light_lost_s {
+                        self.red_w = Window::default();
+                        self.go(
+                            Mode::Cruise,
+                            now,
+                            odo,
+                            format!("no light seen for {:.1} s", c.light_lost_s),
+                        );
+                    }
+                }
+                Mode::Obstacle => {
+                    if obstacle_gone {
+                        self.go(Mode::Cruise, now, odo, "lane clear".into());
+                    } else if c.pass_enabled && self.standstill_since.is_some_and(|t0| now - t0 >= c.pass_wait_s) {
+                        self.go(Mode::PassOut, now, odo, "passing the obstacle".into());
+                    }
+                }
+                Mode::PassOut => {
+                    if odo - self.since_odo >= 2.0 * c.pass_turn_m {
+                        self.go(Mode::PassAlong, now, odo, "in the other lane".into());
+                    }
+                }
+                Mode::PassAlong => {
+                    if odo - self.since_odo >= c.pass_along_m {
+                        self.go(Mode::PassBack, now, odo, "past the obstacle".into());
+                    }
+                }
+                Mode::PassBack => {
+                    if odo - self.since_odo >= 2.0 * c.pass_turn_m {
+                        self.obstacle_w = Window::default();
+                        self.go(Mode::Cruise, now, odo, "back in the lane".into());
+                    }
+                }
+            }
+        }
+
+        // 3. What the new state asks for.
+        let c = &self.cfg;
+        let driven = odo - self.since_odo;
+        let mut throttle_cap = 1.0;
+        let (throttle, steer) = match self.mode {
+            Mode::Cruise => (None, None),
+            Mode::StopSign | Mode::RedLight | Mode::Obstacle => (Some(0.0), None),
+            // An S: first half towards the other lane, second half straightening up.
+            Mode::PassOut => {
+                let s = if driven < c.pass_turn_m {
+                    -c.pass_steer
+                } else {
+                    c.pass_steer
+                };
+                (Some(c.pass_throttle), Some(s))
+            }
+            Mode::PassAlong => (Some(c.pass_throttle), None),
+            Mode::PassBack => {
+                let s = if driven < c.pass_turn_m {
+                    c.pass_steer
+                } else {
+                    -c.pass_steer
+                };
+                (Some(c.pass_throttle), Some(s))
+            }
+            // A cap, so the lane controller's own lost-lane policy still applies when stricter.
+            Mode::LaneLost => {
+                let lost = self.lane_lost_since.map_or(0.0, |t0| now - t0);
+                throttle_cap = if lost >= c.lost_stop_s { 0.0 } else { c.lost_throttle };
+                (None, None)
+            }
+        };
+        Decision {
+            mode: self.mode,
+            throttle,
+            steer,
+            throttle_cap,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DT: f64 = 1.0 / 30.0;
+
+    /// A scripted run: a behaviour, a dead-reckoned car and a clock.
+    struct Rig {
+        b: Behaviour,
+        car: DeadReckoning,
+        t: f64,
+        /// Distance of the scripted object from the lens at odometry 0.
+        log: Vec<(f64, Mode, f64)>,
+    }
+
+    impl Rig {
+        fn new(cfg: BehaviourConfig) -> Rig {
+            Rig {
+                b: Behaviour::new(cfg),
+                car: DeadReckoning::new(&VehicleConfig::default()),
+                t: 0.0,
+                log: Vec::new(),
+            }
+        }
+        /// One frame: `f` makes the observations from the distance driven; lane throttle 0.5.
+        fn frame(&mut self, f: impl Fn(f64) -> Observations) -> Decision {
+            let mut o = f(self.car.odometry_m);
+            o.speed_mps = self.car.speed_mps;
+            o.odometry_m = self.car.odometry_m;
+            let d = self.b.step(&o, self.t);
+            let thr = d.throttle.unwrap_or(0.5).min(d.throttle_cap);
+            self.car.advance(thr, DT);
+            self.t += DT;
+            self.log.push((self.t, d.mode, self.car.speed_mps));
+            d
+        }
+    }
+
+    fn at(d: f64) -> Ranged {
+        Ranged {
+            distance_m: d,
+            lateral_m: 0.0,
+        }
+    }
+
+    fn lane() -> Observations {
+        Observations {
+            lane_seen: true,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn dead_reckoning_matches_the_vehicle_lag() {
+        let mut c = DeadReckoning::new(&VehicleConfig::default());
+        for _ in 0..300 {
+            c.advance(0.5, 0.01);
+        }
+        // 3 s = 10 τ: at 0.5 m/s; distance = 0.5·(3 − τ(1 − e^−10)).
+        assert!((c.speed_mps - 0.5).abs() < 1e-3, "{}", c.speed_mps);
+        assert!((c.odometry_m - 0.5 * (3.0 - 0.3)).abs() < 1e-3, "{}", c.odometry_m);
+    }
+
+    #[test]
+    fn stop_sign_stop_hold_resume_and_ignore() {
+        // A sign 2 m ahead of the start, seen on every frame while in front of the car.
+        let sign = |odo: f64| Observations {
+            stop_sign: (2.0 - odo > 0.3).then(|| at(2.0 - odo)),
+            ..lane()
+        };
+        let mut r = Rig::new(BehaviourConfig::default());
+        let mut entered = None;
+        let mut left = None;
+        let mut stops = 0;
+        for _ in 0..(20.0 / DT) as usize {
+            let before = r.b.mode();
+            let d = r.frame(sign);
+            if before != Mode::StopSign && d.mode == Mode::StopSign {
+                stops += 1;
+                entered = Some(2.0 - r.car.odometry_m);
+            }
+            if before == Mode::StopSign && d.mode == Mode::Cruise {
+                left = Some(r.t);
+                assert!(r.b.last_transition().unwrap().reason.contains("held"));
+            }
+        }
+        assert_eq!(stops, 1, "stopped once for the sign");
+        // Triggered within 3 frames (≈ 5 cm) after crossing stop_trigger_m.
+        let e = entered.unwrap();
+        assert!(e < 0.9 && e > 0.8, "entered at {e} m");
+        // Stood still (estimated speed < standstill) for 5 s ± one frame.
+        let still: f64 = r
+            .log
+            .windows(2)
+            .filter(|w| w[1].2 < 0.01 && w[0].2 < 0.01)
+            .map(|w| w[1].0 - w[0].0)
+            .sum();
+        assert!((still - 5.0).abs() <= DT + 1e-9, "still {still} s");
+        assert!(left.is_some());
+        assert!(r.car.odometry_m > 2.0, "drove on past the sign");
+    }
+
+    #[test]
+    fn flicker_of_one_frame_still_confirms_but_single_hits_do_not() {
+        let cfg = BehaviourConfig::default();
+        // Seen, missed, seen, seen: 3 of the last 5 → confirmed on the 4th frame.
+        let mut b = Behaviour::new(cfg.clone());
+        let pattern = [true, false, true, true];
+        let mut modes = vec![];
+        for (k, &seen) in pattern.iter().enumerate() {
+            let o = Observations {
+                stop_sign: seen.then(|| at(0.6)),
+                speed_mps: 0.5,
+                ..lane()
+            };
+            modes.push(b.step(&o, k as f64 * DT).mode);
+        }
+        assert_eq!(modes, [Mode::Cruise, Mode::Cruise, Mode::Cruise, Mode::StopSign]);
+        // One frame in three: never confirmed.
+        let mut b = Behaviour::new(cfg);
+        for k in 0..60 {
+            let o = Observations {
+                stop_sign: (k % 3 == 0).then(|| at(0.6)),
+                speed_mps: 0.5,
+                ..lane()
+            };
+            assert_eq!(b.step(&o, k as f64 * DT).mode, Mode::Cruise, "frame {k}");
+        }
+    }
+
+    #[test]
+    fn flicker_during_the_hold_does_not_restart_it() {
+        let mut r = Rig::new(BehaviourConfig::default());
+        // The sign stays at 0.7 m (the car is scripted as if it never moves), flickering.
+        let mut k = 0usize;
+        let mut left_at = None;
+        while r.t < 10.0 {
+            k += 1;
+            let seen = k % 4 != 0;
+            let before = r.b.mode();
+            let d = r.frame(|_| Observations {
+                stop_sign: seen.then(|| at(0.7)),
+                ..lane()
+            });
+            if before == Mode::StopSign && d.mode == Mode::Cruise {
+                left_at = Some(r.t);
+                break;
+            }
+        }
+        // Standstill (< 0.01 m/s from 0.5 m/s at τ = 0.3 s) after ~1.2 s, then 5 s.
+        let t = left_at.expect("resumed");
+        let stood_from = r.log.iter().find(|l| l.1 == Mode::StopSign && l.2 < 0.01).unwrap().0;
+        assert!(
+            (t - stood_from - 5.0).abs() < 2.0 * DT,
+            "left {t}, standing from {stood_from}"
+        );
+    }
+
+    #[test]
+    fn red_light_waits_for_green_within_two_frames() {
+        let mut r = Rig::new(BehaviourConfig::default());
+        // Red until 6 s, then green; the light 1.6 m ahead of the start.
+        let mut green_at_mode = None;
+        for _ in 0..(10.0 / DT) as usize {
+            let t = r.t;
+            let col = if t < 6.0 { LightColor::Red } else { LightColor::Green };
+            let d = r.frame(|odo| Observations {
+                light: Some((at(1.6 - odo), col)),
+                ..lane()
+            });
+            if t >= 6.0 && d.mode == Mode::Cruise && green_at_mode.is_none() {
+                green_at_mode = Some(t);
+            }
+            if t < 6.0 && r.t > 3.0 {
+                assert_eq!(d.mode, Mode::RedLight, "t = {t}");
+            }
+        }
+        let g = green_at_mode.unwrap();
+        // green_confirm_frames = 2: goes on the second green frame.
+        assert!(g - 6.0 < 2.0 * DT + 1e-9 && g >= 6.0, "went at {g}");
+        assert!(1.6 - r.car.odometry_m < 0.0, "drove past the light");
+    }
+
+    #[test]
+    fn light_turning_green_while_stopping_releases_before_standstill() {
+        let mut b = Behaviour::new(BehaviourConfig::default());
+        let mut t = 0.0;
+        let mut step = |col, speed: f64| {
+            let o = Observations {
+                light: Some((at(0.8), col)),
+                speed_mps: speed,
+                ..lane()
+            };
+            t += DT;
+            b.step(&o, t)
+        };
+        for _ in 0..3 {
+            step(LightColor::Red, 0.5);
+        }
+        assert_eq!(step(LightColor::Red, 0.4).mode, Mode::RedLight);
+        // Still rolling at 0.3 m/s when it turns green.
+        assert_eq!(step(LightColor::Green, 0.3).mode, Mode::RedLight);
+        let d = step(LightColor::Green, 0.2);
+        assert_eq!(d.mode, Mode::Cruise);
+        assert_eq!(d.throttle, None);
+        // Amber on approach counts as red.
+        let mut b = Behaviour::new(BehaviourConfig::default());
+        let mut m = Mode::Cruise;
+        for k in 0..3 {
+            let o = Observations {
+                light: Some((at(0.8), LightColor::Amber)),
+                speed_mps: 0.5,
+                ..lane()
+            };
+            m = b.step(&o, k as f64 * DT).mode;
+        }
+        assert_eq!(m, Mode::RedLight);
+    }
+
+    #[test]
+    fn far_red_light_or_sign_is_ignored() {
+        let mut b = Behaviour::new(BehaviourConfig::default());
+        for k in 0..30 {
+            let o = Observations {
+                light: Some((at(1.5), LightColor::Red)),
+                stop_sign: Some(at(1.2)),
+                speed_mps: 0.5,
+                ..lane()
+            };
+            assert_eq!(b.step(&o, k as f64 * DT).mode, Mode::Cruise);
+        }
+    }
+
+    #[test]
+    fn obstacle_stops_and_waits_then_goes_when_clear() {
+        let mut b = Behaviour::new(BehaviourConfig::default());
+        let mut t = 0.0;
+        let mut step = |ob: Option<Ranged>, speed: f64| {
+            t += DT;
+            b.step(
+                &Observations {
+                    obstacle: ob,
+                    speed_mps: speed,
+                    ..lane()
+                },
+                t,
+            )
+        };
+        // Beside the lane: ignored.
+        for _ in 0..10 {
+            let side = Ranged {
+                distance_m: 0.3,
+                lateral_m: 0.3,
+            };
+            assert_eq!(step(Some(side), 0.5).mode, Mode::Cruise);
+        }
+        for _ in 0..3 {
+            step(Some(at(0.4)), 0.5);
+        }
+        let d = step(Some(at(0.38)), 0.0);
+        assert_eq!((d.mode, d.throttle), (Mode::Obstacle, Some(0.0)));
+        // Passing disabled: waits as long as it is there.
+        for _ in 0..300 {
+            assert_eq!(step(Some(at(0.38)), 0.0).mode, Mode::Obstacle);
+        }
+        // Gone for a whole window: resumes.
+        let mut m = Mode::Obstacle;
+        for _ in 0..5 {
+            m = step(None, 0.0).mode;
+        }
+        assert_eq!(m, Mode::Cruise);
+    }
+
+    #[test]
+    fn passing_is_an_s_out_a_stretch_and_an_s_back() {
+        let cfg = BehaviourConfig {
+            pass_enabled: true,
+            ..Default::default()
+        };
+        let (turn, along) = (cfg.pass_turn_m, cfg.pass_along_m);
+        let mut r = Rig::new(cfg);
+        // Obstacle 1.0 m ahead of the start; visible in the lane until the car has left it.
+        let mut steer_log = vec![];
+        for _ in 0..(15.0 / DT) as usize {
+            let passing = matches!(r.b.mode(), Mode::PassOut | Mode::PassAlong | Mode::PassBack)
+                || r.log.iter().any(|l| l.1 == Mode::PassOut);
+            let d = r.frame(|odo| Observations {
+                obstacle: (!passing && 1.0 - odo > 0.0).then(|| at(1.0 - odo)),
+                ..lane()
+            });
+            steer_log.push((r.car.odometry_m, d.mode, d.steer));
+        }
+        let first = |m: Mode| steer_log.iter().find(|l| l.1 == m).map(|l| l.0);
+        let out = first(Mode::PassOut).expect("passed");
+        let al = first(Mode::PassAlong).unwrap();
+        let back = first(Mode::PassBack).unwrap();
+        // Each phase lasts its configured distance (within one frame's travel, ≤ 1.2 cm).
+        assert!((al - out - 2.0 * turn).abs() < 0.015, "{out} {al}");
+        assert!((back - al - along).abs() < 0.015, "{al} {back}");
+        // Steering: left, right, none, right, left.
+        let signs: Vec<i32> =
+            steer_log
+                .iter()
+                .map(|l| l.2.map_or(0, |s| s.signum() as i32))
+                .fold(vec![], |mut v, s| {
+                    if v.last() != Some(&s) {
+                        v.push(s)
+                    }
+                    v
+                });
+        assert_eq!(signs, [0, -1, 1, 0, 1, -1, 0]);
+        assert_eq!(r.b.mode(), Mode::Cruise);
+    }
+
+    #[test]
+    fn a_sign_seen_while_passing_is_obeyed_after_returning() {
+        let cfg = BehaviourConfig {
+            pass_enabled: true,
+            pass_wait_s: 0.0,
+            ..Default::default()
+        };
+        let mut b = Behaviour::new(cfg.clone());
+        let mut car = DeadReckoning::new(&VehicleConfig::default());
+        let mut t = 0.0;
+        let mut modes = vec![];
+        for _ in 0..(25.0 / DT) as usize {
+            let m = b.mode();
+            let passing = matches!(m, Mode::PassOut | Mode::PassAlong | Mode::PassBack);
+            let o = Observations {
+                // The obstacle until the pass begins, a stop sign only during PassAlong.
+                obstacle: (!modes.contains(&Mode::PassOut)).then(|| at(0.4)),
+                stop_sign: (m == Mode::PassAlong).then(|| at(0.7)),
+                speed_mps: car.speed_mps,
+                odometry_m: car.odometry_m,
+                ..lane()
+            };
+            let d = b.step(&o, t);
+            if passing && matches!(d.mode, Mode::PassOut | Mode::PassAlong | Mode::PassBack) {
+                // Never stops in the other lane.
+                assert!(d.throttle.unwrap() > 0.0, "{:?}", d.mode);
+            }
+            if modes.last() != Some(&d.mode) {
+                modes.push(d.mode);
+            }
+            car.advance(d.throttle.unwrap_or(0.5), DT);
+            t += DT;
+        }
+        assert_eq!(
+            modes,
+            // Back in the lane (one frame of Cruise), then the remembered sign.
+            [
+                Mode::Cruise,
+                Mode::Obstacle,
+                Mode::PassOut,
+                Mode::PassAlong,
+                Mode::PassBack,
+                Mode::Cruise,
+                Mode::StopSign,
+                Mode::Cruise
+            ],
+            "{modes:?}"
+        );
+    }
+
+    #[test]
+    fn lane_lost_slows_then_stops_then_recovers() {
+        let mut b = Behaviour::new(BehaviourConfig::default());
+        let lost = Observations::default();
+        let mut t = 0.0;
+        let d = b.step(&lost, t);
+        assert_eq!((d.mode, d.throttle_cap), (Mode::LaneLost, 0.2));
+        while t < 0.9 {
+            t += DT;
+            assert_eq!(b.step(&lost, t).throttle_cap, 0.2);
+        }
+        t += 0.2;
+        assert_eq!(b.step(&lost, t).throttle_cap, 0.0);
+        let d = b.step(&lane(), t + DT);
+        assert_eq!((d.mode, d.throttle), (Mode::Cruise, None));
+        assert_eq!(b.last_transition().unwrap().reason, "lane seen again");
+    }
+
+    #[test]
+    fn obstacle_beats_red_light_and_sign() {
+        let mut b = Behaviour::new(BehaviourConfig::default());
+        let mut m = Mode::Cruise;
+        for k in 0..4 {
+            let o = Observations {
+                obstacle: Some(at(0.3)),
+                light: Some((at(0.5), LightColor::Red)),
+                stop_sign: Some(at(0.5)),
+                speed_mps: 0.5,
+                ..lane()
+            };
+            m = b.step(&o, k as f64 * DT).mode;
+        }
+        assert_eq!(m, Mode::Obstacle);
+    }
+}
