@@ -17,6 +17,8 @@
 
 pub mod annotate;
 pub mod camera;
+#[cfg(feature = "camera")]
+pub mod camera_source;
 pub mod config;
 pub mod control;
 pub mod detect;

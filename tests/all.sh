@@ -15,6 +15,7 @@ DEB_PACKAGES=(
   python3-venv python3-pip fonts-dejavu-core   # OpenCV reference scripts, plot fonts
   gcc-avr avr-libc arduino-core-avr            # firmware (make -C firmware)
   simavr libsimavr-dev libsimavrparts1 libelf-dev  # hardware-in-the-loop harness
+  libclang-dev                                 # the `camera` feature (nokhwa's V4L2 bindings)
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
@@ -70,6 +71,7 @@ stage protocol-c make -C firmware test
 stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
 stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
 stage link-hil cargo test --release --features serial --test link_hil
+stage camera cargo test --release --features camera --lib camera_source
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
 
