@@ -30,6 +30,9 @@ pub fn run(a: SynthArgs) -> Result<ExitCode> {
     let scenes = sample_sequence();
     for (i, scene) in scenes.iter().enumerate() {
         let f = scene.render(&cam, &h, cfg.warp.out_height, cfg.lane.band);
+        if !f.truth_center().is_finite() {
+            anyhow::bail!("warp.src: the histogram band of this ROI does not look at the floor, so there is no truth");
+        }
         let name = format!("frame_{i:03}.png");
         f.image.save(a.out.join(&name))?;
         writeln!(

@@ -58,7 +58,8 @@ impl Default for LaneScene {
 pub struct SynthFrame {
     /// What the camera sees.
     pub image: RgbImage,
-    /// True bird's-eye column of the left line's centre, averaged over the histogram band.
+    /// True bird's-eye column of the left line's centre, averaged over the histogram band (NaN
+    /// when the band does not look at the floor).
     pub truth_left: f64,
     /// True bird's-eye column of the right line's centre, averaged over the histogram band.
     pub truth_right: f64,
@@ -180,7 +181,9 @@ impl LaneScene {
                 img.put_pixel(u, v, Rgb(px));
             }
         }
-        let (truth_left, truth_right) = self.truth(cam, homography, bird_h, band);
+        let (truth_left, truth_right) = self
+            .truth(cam, homography, bird_h, band)
+            .unwrap_or((f64::NAN, f64::NAN));
         SynthFrame {
             image: img,
             truth_left,
@@ -188,25 +191,26 @@ impl LaneScene {
         }
     }
 
-    /// True bird's-eye columns of both line centres, averaged over the band's rows.
-    fn truth(&self, cam: &PinholeCamera, homography: &Homography, bird_h: u32, band: f64) -> (f64, f64) {
+    /// True bird's-eye columns of both line centres, averaged over the band's rows; `None` when
+    /// part of the band does not look at the floor (an ROI reaching above the horizon).
+    fn truth(&self, cam: &PinholeCamera, homography: &Homography, bird_h: u32, band: f64) -> Option<(f64, f64)> {
         let rows = crate::lane::lines::band_rows(bird_h, band);
-        let inv = homography.inverse().expect("a valid homography is invertible");
+        let inv = homography.inverse()?;
         let mut sums = [0.0f64; 2];
         for r in (bird_h - rows)..bird_h {
             for (side, target) in [(0usize, self.lane_width_m / 2.0), (1, -self.lane_width_m / 2.0)] {
                 // Along bird's-eye row r, find the column where the line's lateral equals target
                 // (bisection on the floor point under each column).
-                let lat_at = |bx: f64| {
-                    let (u, v) = inv.apply(bx, r as f64).expect("row maps to the camera");
-                    let (x, y) = cam.ground_of_pixel(u, v).expect("the ROI is on the floor");
-                    self.lateral_of(x, y) - target
+                let lat_at = |bx: f64| -> Option<f64> {
+                    let (u, v) = inv.apply(bx, r as f64)?;
+                    let (x, y) = cam.ground_of_pixel(u, v)?;
+                    Some(self.lateral_of(x, y) - target)
                 };
                 let (mut a, mut b) = (-400.0, 800.0);
-                let fa = lat_at(a);
+                let fa = lat_at(a)?;
                 for _ in 0..60 {
                     let m = 0.5 * (a + b);
-                    if (lat_at(m) > 0.0) == (fa > 0.0) {
+                    if (lat_at(m)? > 0.0) == (fa > 0.0) {
                         a = m;
                     } else {
                         b = m;
@@ -215,7 +219,7 @@ impl LaneScene {
                 sums[side] += 0.5 * (a + b);
             }
         }
-        (sums[0] / rows as f64, sums[1] / rows as f64)
+        Some((sums[0] / rows as f64, sums[1] / rows as f64))
     }
 }
 
@@ -281,7 +285,7 @@ mod tests {
         let cam = PinholeCamera::from_config(&cfg.camera);
         let h = Homography::from_quad_to_rect(&cfg.warp.src, 320, 240).unwrap();
         let scene = LaneScene::default();
-        let (l, r) = scene.truth(&cam, &h, 240, 0.4);
+        let (l, r) = scene.truth(&cam, &h, 240, 0.4).unwrap();
         // 0.15 m either side at 638 px/m around the centre column 159.5.
         assert!((l - (159.5 - 0.15 * 638.0)).abs() < 0.05, "{l}");
         assert!((r - (159.5 + 0.15 * 638.0)).abs() < 0.05, "{r}");
