@@ -25,9 +25,11 @@
 //! — the end of the source, a stop request, an error, a panic unwinding — sends neutral before
 //! the caller gets control back, so files are flushed *after* the motor is safe.
 
+pub mod gate;
 pub mod slot;
 pub mod stop;
 
+pub use gate::{ArmState, Gate};
 pub use slot::Latest;
 pub use stop::{StopReason, StopSignal};
 
