@@ -421,6 +421,15 @@ impl CommandSink for LinkSink {
         use rccar::link::protocol::to_permille;
         self.check_reconnect();
         if self.armed {
+            // Our own pause (a stalled camera) let the firmware's 250 ms failsafe trip: the car
+            // stood at neutral; this session armed it and still wants to drive, so arm again.
+            // (A reconnect, by contrast, disarms: see check_reconnect.)
+            if let Some((t, _)) = self.link.telemetry() {
+                if t.state == rccar::link::protocol::State::Failsafe && c != Command::NEUTRAL {
+                    eprintln!("link: firmware failsafe had tripped (no command for its timeout); arming again");
+                    self.link.arm().map_err(|e| SinkError(e.to_string()))?;
+                }
+            }
             self.link.drive(to_permille(c.steer), to_permille(c.throttle));
         }
         Ok(())
@@ -564,11 +573,8 @@ impl FrameSource for PacedSimCamera {
             }
             std::thread::sleep(Duration::from_secs_f64((due - now).min(0.002)));
         }
-        let now = self.clock.now_s();
-        // The newest tick: ticks we were too late for are dropped, never queued.
-        self.tick = ((now - self.t0) * self.fps).floor() as u64;
-        let t = now - self.t0;
         // 2. A scripted camera stall: nothing for D seconds; tell the loop every 0.5 s.
+        let t = self.clock.now_s() - self.t0;
         if let Some((at, dur)) = self.stall {
             if t >= at && t < at + dur {
                 let until = (t + 0.5).min(at + dur);
@@ -586,7 +592,11 @@ impl FrameSource for PacedSimCamera {
                 }
             }
         }
-        // 3. Render the view at the car's pose now.
+        // 3. Render the view at the car's pose now: the newest tick (ticks we were too late
+        //    for are dropped, never queued).
+        let now = self.advance_to_now();
+        self.tick = ((now - self.t0) * self.fps).floor() as u64;
+        let t = now - self.t0;
         let mut w = lock(&self.world);
         let truth = w.render(self.tick, t, &mut self.image, self.truth_rows.clone());
         drop(w);
