@@ -30,7 +30,7 @@ use rccar::telemetry::JsonlWriter;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Flags of `rccar drive`.
 #[derive(Args, Debug)]
