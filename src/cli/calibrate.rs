@@ -337,27 +337,31 @@ fn backup_name(target: &Path) -> PathBuf {
     PathBuf::from(name)
 }
 
-/// Writes `text` to a temporary file beside `path` and renames it over `path`; errors name
-/// `path` (and a full disk leaves the old file untouched).
+/// Writes `text` to `path`; errors name `path`. A regular file (or a symlink to one) is
+/// replaced atomically: the text goes to a temporary file beside the real file, which is then
+/// renamed over it, so a full disk leaves the old file untouched and a symlink stays a
+/// symlink. Anything else (a new file, a device such as /dev/null) is written directly.
 fn write_file(path: &Path, text: &str) -> Result<()> {
     use std::io::Write;
-    let mut tmp = path.as_os_str().to_owned();
+    let fail = |e: std::io::Error| anyhow::anyhow!("{}: cannot write: {e}", path.display());
+    let real = std::fs::canonicalize(path).ok().filter(|p| p.is_file());
+    let Some(real) = real else {
+        return std::fs::write(path, text).map_err(fail);
+    };
+    let mut tmp = real.as_os_str().to_owned();
     tmp.push(".tmp");
     let tmp = PathBuf::from(tmp);
     let res = (|| -> std::io::Result<()> {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(text.as_bytes())?;
         f.sync_all()?;
-        Ok(())
+        std::fs::rename(&tmp, &real)
     })();
     if let Err(e) = res {
         let _ = std::fs::remove_file(&tmp);
-        bail!("{}: cannot write: {e}", path.display());
+        return Err(fail(e));
     }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        anyhow::anyhow!("{}: cannot write: {e}", path.display())
-    })
+    Ok(())
 }
 
 /// A line diff (`-` old, `+` new, two spaces unchanged) by longest common subsequence; the

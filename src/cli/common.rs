@@ -4,7 +4,7 @@
 //! The base file is `--config FILE` when given, else `$RCCAR_CONFIG`, else `config/car.toml`
 //! in the working directory or the nearest folder above it (so `rccar` works from any
 //! subfolder of the project). Overrides: `--local FILE` (must exist when named), else
-//! `local.toml` beside the base file when it exists; then `--set key=value`. Relative paths
+//! `local.toml` beside the base file when it exists (`--no-local`: none); then `--set key=value`. Relative paths
 //! inside a file resolve against that file's folder (see `rccar::config::LoadedConfig`).
 
 use anyhow::{bail, Result};
@@ -21,8 +21,11 @@ pub struct ConfigArgs {
     pub config: Option<PathBuf>,
     /// Personal overrides layered on top (git-ignored); an error if named and missing
     /// [default: local.toml beside the configuration, when it exists].
-    #[arg(long)]
+    #[arg(long, conflicts_with = "no_local")]
     pub local: Option<PathBuf>,
+    /// Use no override file, even if local.toml exists (reproducible runs, tests).
+    #[arg(long)]
+    pub no_local: bool,
     /// Override one value, e.g. `--set steering.kp=0.8` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
@@ -42,6 +45,9 @@ impl ConfigArgs {
 
     /// The override file: `--local` (must exist), else `local.toml` beside `base` if present.
     pub fn local_file(&self, base: &Path) -> Result<Option<PathBuf>> {
+        if self.no_local {
+            return Ok(None);
+        }
         match &self.local {
             Some(p) if p.is_file() => Ok(Some(p.clone())),
             Some(p) => bail!(

@@ -119,11 +119,7 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
                 &out.lane,
                 &out.command,
             );
-            let stem = std::path::Path::new(&frame.name)
-                .file_stem()
-                .map(|s| s.to_string_lossy().to_string())
-                .unwrap_or_default();
-            let p = annotate_dir.join(format!("{stem}.png"));
+            let p = annotate_dir.join(rccar::source::output_name(&frame.name));
             img.save(&p).with_context(|| format!("{}: cannot write", p.display()))?;
         }
     }
