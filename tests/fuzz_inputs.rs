@@ -2,7 +2,7 @@
 //! shipped config and tracks, the shipped cascade, sample frames as PNG and JPEG, OpenCV's
 //! baboon.jpg when opencv-doc is installed, calibration CSVs, command-line flags); each case
 //! must end in a value or a clean error, never a panic or an abort. Every test prints how
-//! many cases ended which way. Deterministic (fixed seeds); `RCCAR_FUZZ_CASES=N` scales the
+//! many cases ended which way. Deterministic (fixed seeds); `RCCAR_FUZZ_SCALE=N` scales the
 //! counts (default 1, e.g. 10 for a longer run).
 
 use rccar::config::Config;
@@ -35,7 +35,7 @@ impl Rng {
 }
 
 fn scale() -> usize {
-    std::env::var("RCCAR_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(1).max(1)
+    std::env::var("RCCAR_FUZZ_SCALE").ok().and_then(|v| v.parse().ok()).unwrap_or(1).max(1)
 }
 
 /// Values a student (or a cat on the keyboard) might type where a number belongs.
