@@ -99,7 +99,12 @@ pub const HOW_TO_POINT: &str =
 /// against that file's folder; one given on the command line (`--set`) against the working
 /// directory; a default (a key set nowhere) against the base configuration's folder.
 /// Add a new path key here and it is resolved like the others.
-pub const PATH_KEYS: &[&str] = &["sim.track", "detect.stop_sign", "detect.traffic_light", "detect.obstacle"];
+pub const PATH_KEYS: &[&str] = &[
+    "sim.track",
+    "detect.stop_sign",
+    "detect.traffic_light",
+    "detect.obstacle",
+];
 
 /// Bounds on sizes that files and flags control, checked before anything is allocated.
 pub mod limits {
@@ -668,19 +673,18 @@ impl Config {
         }
         let origin = layers.iter().map(|l| l.origin.as_str()).collect::<Vec<_>>().join(" + ");
         // serde_path_to_error remembers which key was being read when a type is wrong.
-        let cfg: Config =
-            serde_path_to_error::deserialize(toml::Value::Table(merged.clone())).map_err(|e| {
-                let key = e.path().to_string();
-                let typed = lookup(&merged, &key).map(show_value).unwrap_or_default();
-                ConfigError::Type {
-                    origin: origin.clone(),
-                    message: if typed.is_empty() {
-                        format!("`{key}`: {}", e.inner().message().trim())
-                    } else {
-                        format!("`{key}` = {typed}: {}", e.inner().message().trim())
-                    },
-                }
-            })?;
+        let cfg: Config = serde_path_to_error::deserialize(toml::Value::Table(merged.clone())).map_err(|e| {
+            let key = e.path().to_string();
+            let typed = lookup(&merged, &key).map(show_value).unwrap_or_default();
+            ConfigError::Type {
+                origin: origin.clone(),
+                message: if typed.is_empty() {
+                    format!("`{key}`: {}", e.inner().message().trim())
+                } else {
+                    format!("`{key}` = {typed}: {}", e.inner().message().trim())
+                },
+            }
+        })?;
         cfg.validate().map_err(|e| match e {
             ConfigError::Invalid { errors, .. } => ConfigError::Invalid { origin, errors },
             other => other,
@@ -744,7 +748,11 @@ impl LoadedConfig {
             layers.push(Layer::from_assignment(o, Some(&cwd))?);
         }
         let mut cfg = Config::from_layers(&layers)?;
-        let dir = absolute(base.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new(".")));
+        let dir = absolute(
+            base.parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(Path::new(".")),
+        );
         cfg.resolve_paths(&dir);
         let mut files = vec![base.to_path_buf()];
         files.extend(override_files.iter().cloned());
@@ -869,7 +877,11 @@ impl Layer {
             path: path.into(),
             message: e.to_string().trim_end().to_string(),
         })?;
-        let dir = absolute(path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new(".")));
+        let dir = absolute(
+            path.parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(Path::new(".")),
+        );
         resolve_table_paths(&mut table, &dir);
         let layer = Layer {
             origin: path.display().to_string(),
@@ -940,7 +952,11 @@ impl Layer {
                 }),
                 toml::Value::Table(t) => {
                     for (k, v) in t {
-                        let full = if key.is_empty() { k.clone() } else { format!("{key}.{k}") };
+                        let full = if key.is_empty() {
+                            k.clone()
+                        } else {
+                            format!("{key}.{k}")
+                        };
                         walk(v, &full, origin)?;
                     }
                     Ok(())
@@ -1064,11 +1080,7 @@ mod tests {
         let cfg = Config::load(&path, &[], &[]).unwrap();
         let mut def = Config::default();
         def.resolve_paths(&Path::new(env!("CARGO_MANIFEST_DIR")).join("config"));
-        assert_eq!(
-            cfg,
-            def,
-            "config/car.toml and Config::default() drifted apart"
-        );
+        assert_eq!(cfg, def, "config/car.toml and Config::default() drifted apart");
     }
 
     #[test]

@@ -333,7 +333,10 @@ fn jpeg_damage(b: &[u8]) -> Option<String> {
             return truncated(pos, "between segments");
         }
         if b[pos] != 0xFF {
-            return Some(format!("damaged JPEG: byte {pos} should start a marker (0xFF), found 0x{:02X}", b[pos]));
+            return Some(format!(
+                "damaged JPEG: byte {pos} should start a marker (0xFF), found 0x{:02X}",
+                b[pos]
+            ));
         }
         while pos < n && b[pos] == 0xFF {
             pos += 1;
@@ -356,7 +359,9 @@ fn jpeg_damage(b: &[u8]) -> Option<String> {
         }
         let len = u16::from_be_bytes([b[pos], b[pos + 1]]) as usize;
         if len < 2 {
-            return Some(format!("damaged JPEG: segment 0xFF{code:02X} at byte {pos} has length {len}"));
+            return Some(format!(
+                "damaged JPEG: segment 0xFF{code:02X} at byte {pos} has length {len}"
+            ));
         }
         if pos + len > n {
             return truncated(pos, &format!("inside segment 0xFF{code:02X} of {len} bytes"));
@@ -412,14 +417,11 @@ fn png_damage(b: &[u8]) -> Option<String> {
                 "damaged PNG: chunk {name} at byte {pos} needs {len} bytes but the file ends at byte {n}; it was cut short"
             ));
         }
-        let crc = u32::from_be_bytes([
-            b[pos + 8 + len],
-            b[pos + 9 + len],
-            b[pos + 10 + len],
-            b[pos + 11 + len],
-        ]);
+        let crc = u32::from_be_bytes([b[pos + 8 + len], b[pos + 9 + len], b[pos + 10 + len], b[pos + 11 + len]]);
         if crc32(&b[pos + 4..pos + 8 + len]) != crc {
-            return Some(format!("damaged PNG: chunk {name} at byte {pos} fails its CRC (the bytes were changed)"));
+            return Some(format!(
+                "damaged PNG: chunk {name} at byte {pos} fails its CRC (the bytes were changed)"
+            ));
         }
         if kind == b"IEND" {
             return None;
@@ -442,7 +444,9 @@ fn crc32(data: &[u8]) -> u32 {
         }
         t
     });
-    !data.iter().fold(!0u32, |c, &x| t[((c ^ x as u32) & 0xFF) as usize] ^ (c >> 8))
+    !data
+        .iter()
+        .fold(!0u32, |c, &x| t[((c ^ x as u32) & 0xFF) as usize] ^ (c >> 8))
 }
 
 #[cfg(test)]
@@ -457,7 +461,9 @@ mod tests {
     }
 
     fn jpeg_bytes() -> Vec<u8> {
-        let img = RgbImage::from_fn(64, 48, |x, y| image::Rgb([(x * 4) as u8, (y * 5) as u8, ((x ^ y) * 3) as u8]));
+        let img = RgbImage::from_fn(64, 48, |x, y| {
+            image::Rgb([(x * 4) as u8, (y * 5) as u8, ((x ^ y) * 3) as u8])
+        });
         let mut out = std::io::Cursor::new(Vec::new());
         img.write_to(&mut out, image::ImageFormat::Jpeg).unwrap();
         out.into_inner()

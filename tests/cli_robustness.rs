@@ -53,7 +53,11 @@ fn rccar_env(cwd: &Path, args: &[&str], env: &[(&str, &str)]) -> Out {
         stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
         stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
     };
-    assert!(!out.stderr.contains("panicked"), "rccar {args:?} panicked:\n{}", out.stderr);
+    assert!(
+        !out.stderr.contains("panicked"),
+        "rccar {args:?} panicked:\n{}",
+        out.stderr
+    );
     out
 }
 
@@ -105,19 +109,39 @@ fn calibration_refuses_degenerate_pairs_and_leaves_local_toml_alone() {
             "row_px,distance_m\n150,0.8\n150,0.8\n150,0.8\n150,0.8\n",
             "4 pair(s) on only 1 distinct row(s)",
         ),
-        ("outside.csv", "150,0.8\n400,0.5\n120,1.0\n", "pair 2: row 400 px is outside the image"),
-        ("high.csv", "150,0.8,0.3\n100,1.0\n120,1.1\n", "pair 1: height 0.3 m must be >= 0 and below the camera"),
+        (
+            "outside.csv",
+            "150,0.8\n400,0.5\n120,1.0\n",
+            "pair 2: row 400 px is outside the image",
+        ),
+        (
+            "high.csv",
+            "150,0.8,0.3\n100,1.0\n120,1.1\n",
+            "pair 1: height 0.3 m must be >= 0 and below the camera",
+        ),
         ("nan.csv", "150,nan\n100,1.0\n120,1.1\n", "NaN and inf are not allowed"),
         // Rows and distances that belong to no camera: the fit's rms row error is ~55 px.
-        ("bad_rms.csv", "200,0.3\n150,2.5\n120,0.4\n100,3.0\n", "is above the bound 2 px (--max-rms-px)"),
+        (
+            "bad_rms.csv",
+            "200,0.3\n150,2.5\n120,0.4\n100,3.0\n",
+            "is above the bound 2 px (--max-rms-px)",
+        ),
     ];
     for (name, text, want) in cases {
         std::fs::write(dir.join(name), text).unwrap();
         let before = snapshot(dir, &[]);
         let o = rccar(dir, &["calibrate", "ranging", name]);
         assert_eq!(o.code, Some(2), "{name}: {}", o.all());
-        assert!(o.stderr.contains(want) && o.stderr.contains("nothing written"), "{name}: {}", o.stderr);
-        assert!(o.stderr.starts_with(&format!("error: {name}: ")), "{name}: {}", o.stderr);
+        assert!(
+            o.stderr.contains(want) && o.stderr.contains("nothing written"),
+            "{name}: {}",
+            o.stderr
+        );
+        assert!(
+            o.stderr.starts_with(&format!("error: {name}: ")),
+            "{name}: {}",
+            o.stderr
+        );
         assert_unchanged(&before, dir, &[], name);
     }
 }
@@ -133,13 +157,23 @@ fn calibration_validates_the_merged_config_before_writing() {
     let o = rccar(
         dir,
         &[
-            "calibrate", "ranging", "--from-sim", "12", "--set", "camera.hfov_deg=25",
-            "--sim-pairs-out", "narrow.csv", "--dry-run",
+            "calibrate",
+            "ranging",
+            "--from-sim",
+            "12",
+            "--set",
+            "camera.hfov_deg=25",
+            "--sim-pairs-out",
+            "narrow.csv",
+            "--dry-run",
         ],
     );
     assert_eq!(o.code, Some(0), "{}", o.all());
     let before = snapshot(dir, &[]);
-    let o = rccar(dir, &["calibrate", "ranging", "narrow.csv", "--fit-ay", "--v0-sigma-px", "0"]);
+    let o = rccar(
+        dir,
+        &["calibrate", "ranging", "narrow.csv", "--fit-ay", "--v0-sigma-px", "0"],
+    );
     assert_eq!(o.code, Some(2), "{}", o.all());
     assert!(
         o.stderr.contains("does not validate") && o.stderr.contains("ranging.a_y_scale = 2.7"),
@@ -159,7 +193,14 @@ fn calibration_keeps_comments_makes_a_backup_and_dry_run_shows_the_diff() {
     let dir = p.path();
     let local = dir.join("config/local.toml");
     std::fs::write(&local, LOCAL).unwrap();
-    let args = ["calibrate", "ranging", "--from-sim", "12", "--sim-tilt-error-deg", "1.5"];
+    let args = [
+        "calibrate",
+        "ranging",
+        "--from-sim",
+        "12",
+        "--sim-tilt-error-deg",
+        "1.5",
+    ];
     let before = snapshot(dir, &[]);
     let mut dry: Vec<&str> = args.to_vec();
     dry.push("--dry-run");
@@ -184,11 +225,20 @@ fn calibration_keeps_comments_makes_a_backup_and_dry_run_shows_the_diff() {
     let t: toml::Table = new.parse().unwrap();
     let tilt = t["camera"]["tilt_deg"].as_float().unwrap();
     assert!((tilt - 21.5).abs() < 0.3, "tilt {tilt} (true 21.5)");
-    assert_eq!(std::fs::read_to_string(dir.join("config/local.toml.bak")).unwrap(), LOCAL);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("config/local.toml.bak")).unwrap(),
+        LOCAL
+    );
     // A second calibration keeps the first backup and makes another.
     assert_eq!(rccar(dir, &args).code, Some(0));
-    assert_eq!(std::fs::read_to_string(dir.join("config/local.toml.bak")).unwrap(), LOCAL);
-    assert_eq!(std::fs::read_to_string(dir.join("config/local.toml.bak2")).unwrap(), new);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("config/local.toml.bak")).unwrap(),
+        LOCAL
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.join("config/local.toml.bak2")).unwrap(),
+        new
+    );
 }
 
 // ---------------------------------------------------------------------------------------
@@ -222,16 +272,36 @@ fn paths_in_a_config_resolve_against_its_folder() {
     let p = project();
     let elsewhere = tempfile::tempdir().unwrap();
     let car = p.path().join("config/car.toml");
-    let o = rccar(elsewhere.path(), &["config", "check", "--config", car.to_str().unwrap()]);
-    assert_eq!(o.code, Some(0), "{}", o.all());
-    let want = p.path().join("config/tracks/default.toml");
-    assert!(o.stdout.contains(&format!("track = \"{}\"", want.display())), "{}", o.stdout);
     let o = rccar(
         elsewhere.path(),
-        &["sim", "--config", car.to_str().unwrap(), "--seconds", "0.3", "--no-timing", "-o", "out"],
+        &["config", "check", "--config", car.to_str().unwrap()],
+    );
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    let want = p.path().join("config/tracks/default.toml");
+    assert!(
+        o.stdout.contains(&format!("track = \"{}\"", want.display())),
+        "{}",
+        o.stdout
+    );
+    let o = rccar(
+        elsewhere.path(),
+        &[
+            "sim",
+            "--config",
+            car.to_str().unwrap(),
+            "--seconds",
+            "0.3",
+            "--no-timing",
+            "-o",
+            "out",
+        ],
     );
     assert_eq!(o.code, Some(1), "0 of 3 laps in 0.3 s: exit 1, but it ran: {}", o.all());
-    assert!(o.stdout.contains("sim: 9 frames") && !o.stderr.contains("detect: missing"), "{}", o.all());
+    assert!(
+        o.stdout.contains("sim: 9 frames") && !o.stderr.contains("detect: missing"),
+        "{}",
+        o.all()
+    );
     // A relative path in local.toml resolves against local.toml's folder, one given with
     // --set against the working directory.
     let sub = p.path().join("mine");
@@ -239,9 +309,19 @@ fn paths_in_a_config_resolve_against_its_folder() {
     std::fs::copy(p.path().join("config/tracks/default.toml"), sub.join("t.toml")).unwrap();
     std::fs::write(sub.join("local.toml"), "[sim]\ntrack = \"t.toml\"\n").unwrap();
     let o = rccar(p.path(), &["config", "check", "--local", "mine/local.toml"]);
-    assert!(o.stdout.contains(&format!("track = \"{}\"", sub.join("t.toml").display())), "{}", o.all());
+    assert!(
+        o.stdout
+            .contains(&format!("track = \"{}\"", sub.join("t.toml").display())),
+        "{}",
+        o.all()
+    );
     let o = rccar(&sub, &["config", "check", "--set", "sim.track=t.toml"]);
-    assert!(o.stdout.contains(&format!("track = \"{}\"", sub.join("t.toml").display())), "{}", o.all());
+    assert!(
+        o.stdout
+            .contains(&format!("track = \"{}\"", sub.join("t.toml").display())),
+        "{}",
+        o.all()
+    );
 }
 
 /// Found from a subfolder, or from RCCAR_CONFIG.
@@ -252,10 +332,19 @@ fn the_config_is_found_from_a_subfolder_or_rccar_config() {
     std::fs::create_dir_all(&deep).unwrap();
     let o = rccar(&deep, &["config", "check"]);
     assert_eq!(o.code, Some(0), "{}", o.all());
-    assert!(o.stderr.contains(&format!("config OK: {}", p.path().join("config/car.toml").display())), "{}", o.stderr);
+    assert!(
+        o.stderr
+            .contains(&format!("config OK: {}", p.path().join("config/car.toml").display())),
+        "{}",
+        o.stderr
+    );
     let other = tempfile::tempdir().unwrap();
     let car = p.path().join("config/car.toml");
-    let o = rccar_env(other.path(), &["config", "check"], &[("RCCAR_CONFIG", car.to_str().unwrap())]);
+    let o = rccar_env(
+        other.path(),
+        &["config", "check"],
+        &[("RCCAR_CONFIG", car.to_str().unwrap())],
+    );
     assert_eq!(o.code, Some(0), "{}", o.all());
 }
 
@@ -265,10 +354,18 @@ fn a_named_local_that_does_not_exist_is_an_error() {
     let p = project();
     let o = rccar(p.path(), &["config", "check", "--local", "config/locl.toml"]);
     assert_eq!(o.code, Some(1));
-    assert!(o.stderr.contains("--local config/locl.toml: no such file"), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("--local config/locl.toml: no such file"),
+        "{}",
+        o.stderr
+    );
     let o = rccar(p.path(), &["sim", "--local", "config/locl.toml"]);
     assert_eq!(o.code, Some(2));
-    assert!(o.stderr.contains("--local config/locl.toml: no such file"), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("--local config/locl.toml: no such file"),
+        "{}",
+        o.stderr
+    );
 }
 
 /// An empty config passes `config check` and says every value is a default.
@@ -278,7 +375,12 @@ fn an_empty_config_says_every_value_is_a_default() {
     std::fs::write(p.path().join("empty.toml"), "").unwrap();
     let o = rccar(p.path(), &["config", "check", "empty.toml"]);
     assert_eq!(o.code, Some(0), "{}", o.all());
-    assert!(o.stderr.contains("note: no values are set in empty.toml: every value is a default"), "{}", o.stderr);
+    assert!(
+        o.stderr
+            .contains("note: no values are set in empty.toml: every value is a default"),
+        "{}",
+        o.stderr
+    );
     let o = rccar(p.path(), &["config", "check"]);
     assert!(!o.stderr.contains("every value is a default"), "{}", o.stderr);
 }
@@ -329,16 +431,35 @@ fn a_jpeg_cut_in_half_is_a_named_skip_in_replay_and_stages() {
     image::RgbImage::new(1, 1).save(frames.join("d_tiny.png")).unwrap();
     let before = {
         let mut b = before;
-        b.insert(PathBuf::from("frames/d_tiny.png"), std::fs::read(frames.join("d_tiny.png")).unwrap());
+        b.insert(
+            PathBuf::from("frames/d_tiny.png"),
+            std::fs::read(frames.join("d_tiny.png")).unwrap(),
+        );
         b
     };
     let o = rccar(
         p.path(),
-        &["stages", "frames/a_good.png", "frames/b_half.jpg", "frames/d_tiny.png", "-o", "out/st"],
+        &[
+            "stages",
+            "frames/a_good.png",
+            "frames/b_half.jpg",
+            "frames/d_tiny.png",
+            "-o",
+            "out/st",
+        ],
     );
     assert_eq!(o.code, Some(1), "{}", o.all());
-    assert!(o.stderr.contains("skipped frames/b_half.jpg: damaged JPEG"), "{}", o.stderr);
-    assert!(o.stderr.contains("skipped frames/d_tiny.png: 1×1 is smaller than the ROI"), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("skipped frames/b_half.jpg: damaged JPEG"),
+        "{}",
+        o.stderr
+    );
+    assert!(
+        o.stderr
+            .contains("skipped frames/d_tiny.png: 1×1 is smaller than the ROI"),
+        "{}",
+        o.stderr
+    );
     assert!(o.stderr.contains("2 of 3 image(s) skipped"), "{}", o.stderr);
     assert!(p.path().join("out/st/a_good.png.bird.png").is_file());
     assert_unchanged(&before, p.path(), &["out"], "replay/stages");
@@ -398,12 +519,33 @@ fn detect_goes_on_after_a_bad_image_and_fails_at_the_end() {
     std::fs::write(d.join("three.jpg"), &j[..j.len() * 2 / 3]).unwrap();
     std::fs::copy(sample_png(7), d.join("four.png")).unwrap();
     let c = cascade_path(d);
-    let o = rccar(d, &["detect", "--cascade", &c, "one.png", "two.png", "three.jpg", "four.png", "--out", "out"]);
+    let o = rccar(
+        d,
+        &[
+            "detect",
+            "--cascade",
+            &c,
+            "one.png",
+            "two.png",
+            "three.jpg",
+            "four.png",
+            "--out",
+            "out",
+        ],
+    );
     assert_eq!(o.code, Some(1), "{}", o.all());
     let lines: Vec<&str> = o.stdout.lines().collect();
     assert_eq!(lines.len(), 2, "{}", o.stdout);
-    assert!(lines[0].contains("\"one.png\"") && lines[1].contains("\"four.png\""), "{}", o.stdout);
-    assert!(o.stderr.contains("skipped two.png: not a readable image"), "{}", o.stderr);
+    assert!(
+        lines[0].contains("\"one.png\"") && lines[1].contains("\"four.png\""),
+        "{}",
+        o.stdout
+    );
+    assert!(
+        o.stderr.contains("skipped two.png: not a readable image"),
+        "{}",
+        o.stderr
+    );
     assert!(o.stderr.contains("skipped three.jpg: damaged JPEG"), "{}", o.stderr);
     assert!(o.stderr.contains("2 of 4 image(s) failed"), "{}", o.stderr);
     assert!(d.join("out/one.png.detect.png").is_file() && d.join("out/four.png.detect.png").is_file());
@@ -416,9 +558,16 @@ fn detect_refuses_a_scale_factor_that_means_a_huge_pyramid() {
     std::fs::copy(sample_png(8), p.path().join("one.png")).unwrap();
     let c = cascade_path(p.path());
     let t = std::time::Instant::now();
-    let o = rccar(p.path(), &["detect", "--cascade", &c, "--scale-factor", "1.0000001", "one.png"]);
+    let o = rccar(
+        p.path(),
+        &["detect", "--cascade", &c, "--scale-factor", "1.0000001", "one.png"],
+    );
     assert_eq!(o.code, Some(2));
-    assert!(o.stderr.contains("--scale-factor 1.0000001: must be 1.01..=4"), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("--scale-factor 1.0000001: must be 1.01..=4"),
+        "{}",
+        o.stderr
+    );
     assert!(t.elapsed().as_secs_f64() < 2.0);
 }
 
@@ -442,15 +591,35 @@ fn disk_full_errors_name_the_file() {
     std::os::unix::fs::symlink("/dev/full", d.join("st/stages.jsonl")).unwrap();
     let o = rccar(d, &["stages", "one.png", "-o", "st"]);
     assert_eq!(o.code, Some(2), "{}", o.all());
-    assert!(o.stderr.contains("st/stages.jsonl: cannot write") && o.stderr.contains("No space left"), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("st/stages.jsonl: cannot write") && o.stderr.contains("No space left"),
+        "{}",
+        o.stderr
+    );
     // calibrate: the new local.toml cannot be written; the old one is intact.
     std::fs::write(d.join("config/local.toml"), LOCAL).unwrap();
     std::os::unix::fs::symlink("/dev/full", d.join("config/local.toml.tmp")).unwrap();
     let o = rccar(d, &["calibrate", "ranging", "--from-sim", "8"]);
     assert_eq!(o.code, Some(2), "{}", o.all());
-    assert!(o.stderr.contains("config/local.toml: cannot write: No space left on device"), "{}", o.stderr);
+    assert!(
+        o.stderr
+            .contains("config/local.toml: cannot write: No space left on device"),
+        "{}",
+        o.stderr
+    );
     assert_eq!(std::fs::read_to_string(d.join("config/local.toml")).unwrap(), LOCAL);
-    let o = rccar(d, &["calibrate", "ranging", "--from-sim", "8", "--dry-run", "--sim-pairs-out", "/dev/full"]);
+    let o = rccar(
+        d,
+        &[
+            "calibrate",
+            "ranging",
+            "--from-sim",
+            "8",
+            "--dry-run",
+            "--sim-pairs-out",
+            "/dev/full",
+        ],
+    );
     assert_eq!(o.code, Some(2), "{}", o.all());
     assert!(o.stderr.contains("/dev/full: cannot write"), "{}", o.stderr);
 }
@@ -482,11 +651,19 @@ fn a_huge_track_is_refused_before_allocation() {
     let text = "[road]\nlane_width_m = 0.3\n[[segments]]\ntype = \"straight\"\nlength_m = 1e9\n";
     std::fs::write(p.path().join("long.toml"), text).unwrap();
     let o = rccar(p.path(), &["sim", "--track", "long.toml"]);
-    assert!(o.code == Some(2) && o.stderr.contains("segments[0].length_m") && o.stderr.contains("at most 50 m"), "{}", o.all());
+    assert!(
+        o.code == Some(2) && o.stderr.contains("segments[0].length_m") && o.stderr.contains("at most 50 m"),
+        "{}",
+        o.all()
+    );
     let text = "[road]\nlane_width_m = 0.3\n[floor]\nmargin_m = 30\n[[segments]]\ntype = \"arc\"\nradius_m = 1\nangle_deg = 360\n";
     std::fs::write(p.path().join("wide.toml"), text).unwrap();
     let o = rccar(p.path(), &["sim", "--track", "wide.toml"]);
-    assert!(o.code == Some(2) && o.stderr.contains("floor.margin_m") && o.stderr.contains("at most 50 × 50 m"), "{}", o.all());
+    assert!(
+        o.code == Some(2) && o.stderr.contains("floor.margin_m") && o.stderr.contains("at most 50 × 50 m"),
+        "{}",
+        o.all()
+    );
 }
 
 /// `config roi --near 1.0 --far 0.4` and `--half-width 0` are refused; `config check` refuses
@@ -497,14 +674,30 @@ fn roi_upside_down_or_degenerate_is_refused() {
     let d = p.path();
     let o = rccar(d, &["config", "roi", "--near", "1.0", "--far", "0.4"]);
     assert_eq!(o.code, Some(2));
-    assert!(o.stderr.contains("--near 1 must be less than --far 0.4"), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("--near 1 must be less than --far 0.4"),
+        "{}",
+        o.stderr
+    );
     assert!(o.stdout.is_empty());
     let o = rccar(d, &["config", "roi", "--half-width", "0"]);
     assert_eq!(o.code, Some(2));
-    assert!(o.stderr.contains("--half-width 0: must be a distance in metres, > 0"), "{}", o.stderr);
-    let o = rccar(d, &["config", "roi", "--near", "0.4", "--far", "1.0", "--half-width", "0.25"]);
+    assert!(
+        o.stderr.contains("--half-width 0: must be a distance in metres, > 0"),
+        "{}",
+        o.stderr
+    );
+    let o = rccar(
+        d,
+        &["config", "roi", "--near", "0.4", "--far", "1.0", "--half-width", "0.25"],
+    );
     assert_eq!(o.code, Some(0));
-    assert!(o.stdout.contains("[[93.72, 78.96], [225.28, 78.96], [308.75, 150.02], [10.25, 150.02]]"), "{}", o.stdout);
+    assert!(
+        o.stdout
+            .contains("[[93.72, 78.96], [225.28, 78.96], [308.75, 150.02], [10.25, 150.02]]"),
+        "{}",
+        o.stdout
+    );
     // What `config roi --near 1.0 --far 0.4` used to print, pasted into local.toml.
     std::fs::write(
         d.join("config/local.toml"),
@@ -513,7 +706,11 @@ fn roi_upside_down_or_degenerate_is_refused() {
     .unwrap();
     let o = rccar(d, &["config", "check"]);
     assert_eq!(o.code, Some(1));
-    assert!(o.stderr.contains("warp.src") && o.stderr.contains("looks at the floor upside down"), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("warp.src") && o.stderr.contains("looks at the floor upside down"),
+        "{}",
+        o.stderr
+    );
     let o = rccar(d, &["replay", "frames"]);
     assert_eq!(o.code, Some(2));
     assert!(o.stderr.contains("upside down"), "{}", o.stderr);
@@ -528,26 +725,52 @@ fn numbers_name_the_key_and_what_was_typed() {
     let o = rccar(d, &["sim", "--set", "steering.kp=1e309"]);
     assert_eq!(o.code, Some(2));
     assert!(
-        o.stderr.contains("`steering.kp` = `1e309` is not a finite number (inf and NaN are not allowed)"),
+        o.stderr
+            .contains("`steering.kp` = `1e309` is not a finite number (inf and NaN are not allowed)"),
         "{}",
         o.stderr
     );
     let o = rccar(d, &["sim", "--seconds", "nan"]);
     assert_eq!(o.code, Some(2));
-    assert!(o.stderr.contains("`sim.max_seconds` = `NaN` is not a finite number"), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("`sim.max_seconds` = `NaN` is not a finite number"),
+        "{}",
+        o.stderr
+    );
     let o = rccar(d, &["config", "check", "--set", "steering.kp=-inf"]);
     assert_eq!(o.code, Some(1));
-    assert!(o.stderr.contains("`steering.kp` = `-inf` is not a finite number"), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("`steering.kp` = `-inf` is not a finite number"),
+        "{}",
+        o.stderr
+    );
     std::fs::write(d.join("config/local.toml"), "[steering]\nkd = nan\n").unwrap();
     let o = rccar(d, &["config", "check"]);
     assert_eq!(o.code, Some(1));
-    assert!(o.stderr.contains("local.toml: `steering.kd` = `NaN` is not a finite number"), "{}", o.stderr);
+    assert!(
+        o.stderr
+            .contains("local.toml: `steering.kd` = `NaN` is not a finite number"),
+        "{}",
+        o.stderr
+    );
     std::fs::remove_file(d.join("config/local.toml")).unwrap();
     let o = rccar(d, &["config", "check", "--set", "steering.kp=fast"]);
     assert_eq!(o.code, Some(1));
-    assert!(o.stderr.contains("`steering.kp` = \"fast\": invalid type: string \"fast\", expected f64"), "{}", o.stderr);
-    let o = rccar(d, &["sim", "--laps", "0", "--seconds", "0.2", "--no-timing", "-o", "out"]);
-    assert!(o.stdout.contains("ended: TimeUp") && o.stdout.contains("laps completed:   0"), "{}", o.all());
+    assert!(
+        o.stderr
+            .contains("`steering.kp` = \"fast\": invalid type: string \"fast\", expected f64"),
+        "{}",
+        o.stderr
+    );
+    let o = rccar(
+        d,
+        &["sim", "--laps", "0", "--seconds", "0.2", "--no-timing", "-o", "out"],
+    );
+    assert!(
+        o.stdout.contains("ended: TimeUp") && o.stdout.contains("laps completed:   0"),
+        "{}",
+        o.all()
+    );
     let car = std::fs::read_to_string(d.join("config/car.toml")).unwrap();
     assert!(car.contains("0 = no lap target: drive until\n# max_seconds"));
 }
@@ -559,14 +782,32 @@ fn every_size_a_flag_or_file_controls_is_bounded() {
     let p = project();
     let d = p.path();
     let o = rccar(d, &["config", "check", "--set", "camera.width=100000"]);
-    assert!(o.code == Some(1) && o.stderr.contains("camera.width = 100000 is out of range (allowed: 16 ..= 4096)"), "{}", o.all());
+    assert!(
+        o.code == Some(1)
+            && o.stderr
+                .contains("camera.width = 100000 is out of range (allowed: 16 ..= 4096)"),
+        "{}",
+        o.all()
+    );
     let o = rccar(d, &["sim", "--sweep", "steering.kp=0:1:100000"]);
-    assert!(o.code == Some(2) && o.stderr.contains("N must be 1..=1000"), "{}", o.all());
+    assert!(
+        o.code == Some(2) && o.stderr.contains("N must be 1..=1000"),
+        "{}",
+        o.all()
+    );
     let o = rccar(d, &["calibrate", "ranging", "--from-sim", "100000000"]);
-    assert!(o.code == Some(2) && o.stderr.contains("--from-sim 100000000: must be 3..=10000"), "{}", o.all());
+    assert!(
+        o.code == Some(2) && o.stderr.contains("--from-sim 100000000: must be 3..=10000"),
+        "{}",
+        o.all()
+    );
     std::fs::write(d.join("big.png"), png_claiming(100_000, 100_000)).unwrap();
     let o = rccar(d, &["stages", "big.png", "-o", "out"]);
-    assert!(o.code == Some(1) && o.stderr.contains("100000×100000 pixels is outside the image limit"), "{}", o.all());
+    assert!(
+        o.code == Some(1) && o.stderr.contains("100000×100000 pixels is outside the image limit"),
+        "{}",
+        o.all()
+    );
 }
 
 /// A structurally whole PNG whose header claims `w × h` (one tiny IDAT).

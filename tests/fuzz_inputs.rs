@@ -35,14 +35,43 @@ impl Rng {
 }
 
 fn scale() -> usize {
-    std::env::var("RCCAR_FUZZ_SCALE").ok().and_then(|v| v.parse().ok()).unwrap_or(1).max(1)
+    std::env::var("RCCAR_FUZZ_SCALE")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1)
+        .max(1)
 }
 
 /// Values a student (or a cat on the keyboard) might type where a number belongs.
 const NASTY: &[&str] = &[
-    "0", "-1", "1", "0.5", "-0.0", "1e309", "-1e309", "nan", "inf", "-inf", "NaN", "1e-320",
-    "4294967296", "-9223372036854775809", "18446744073709551616", "99999999999", "1e3", "\"x\"",
-    "true", "[]", "[1, 2]", "{}", "\"\"", "0x10", "1_000", "'a'", "2.5e-3", "1000000",
+    "0",
+    "-1",
+    "1",
+    "0.5",
+    "-0.0",
+    "1e309",
+    "-1e309",
+    "nan",
+    "inf",
+    "-inf",
+    "NaN",
+    "1e-320",
+    "4294967296",
+    "-9223372036854775809",
+    "18446744073709551616",
+    "99999999999",
+    "1e3",
+    "\"x\"",
+    "true",
+    "[]",
+    "[1, 2]",
+    "{}",
+    "\"\"",
+    "0x10",
+    "1_000",
+    "'a'",
+    "2.5e-3",
+    "1000000",
 ];
 
 /// A random number, sometimes sane, sometimes wild.
@@ -63,7 +92,9 @@ fn edit_toml(text: &str, r: &mut Rng) -> String {
     match r.below(7) {
         0 | 1 | 2 => {
             // Replace the value of a `key = value` line (the most useful edit).
-            let keyed: Vec<usize> = (0..n).filter(|&i| lines[i].contains(" = ") && !lines[i].starts_with('#')).collect();
+            let keyed: Vec<usize> = (0..n)
+                .filter(|&i| lines[i].contains(" = ") && !lines[i].starts_with('#'))
+                .collect();
             if let Some(&i) = keyed.get(r.below(keyed.len())) {
                 let key = lines[i].split(" = ").next().unwrap_or("").to_string();
                 lines[i] = format!("{key} = {}", number(r));
@@ -118,7 +149,9 @@ fn fuzz_config_toml() {
         for _ in 0..1 + r.below(3) {
             text = edit_toml(&text, &mut r);
         }
-        match no_panic("Config::from_toml_str", &text, || Config::from_toml_str(&text, "fuzz.toml")) {
+        match no_panic("Config::from_toml_str", &text, || {
+            Config::from_toml_str(&text, "fuzz.toml")
+        }) {
             Ok(cfg) => {
                 ok += 1;
                 let p = no_panic("Pipeline::new", &text, || rccar::pipeline::Pipeline::new(&cfg));
@@ -142,7 +175,10 @@ fn fuzz_config_toml() {
             }
         }
     }
-    println!("config TOML: {} cases, {ok} loaded ({stepped} ran a frame), {err} clean errors", ok + err);
+    println!(
+        "config TOML: {} cases, {ok} loaded ({stepped} ran a frame), {err} clean errors",
+        ok + err
+    );
     assert!(ok > 100 && err > 100, "the edits should both keep and break configs");
 }
 
@@ -159,7 +195,9 @@ fn fuzz_track_toml() {
             for _ in 0..1 + r.below(2) {
                 text = edit_toml(&text, &mut r);
             }
-            match no_panic("Track::from_toml_str", &text, || rccar::sim::track::Track::from_toml_str(&text, name)) {
+            match no_panic("Track::from_toml_str", &text, || {
+                rccar::sim::track::Track::from_toml_str(&text, name)
+            }) {
                 Ok(t) => {
                     ok += 1;
                     if scenes < 12 {
@@ -174,7 +212,10 @@ fn fuzz_track_toml() {
             }
         }
     }
-    println!("track TOML: {} cases, {ok} loaded ({scenes} scenes built), {err} clean errors", ok + err);
+    println!(
+        "track TOML: {} cases, {ok} loaded ({scenes} scenes built), {err} clean errors",
+        ok + err
+    );
     assert!(ok > 50 && err > 200);
 }
 
@@ -216,13 +257,27 @@ fn fuzz_cascade_xml() {
                     .map(|(i, _)| i)
                     .collect();
                 if let Some(&i) = spots.get(r.below(spots.len())) {
-                    let end = text[i..].find(|c: char| !(c.is_ascii_digit() || c == '.' || c == 'e' || c == '-')).map_or(text.len(), |e| i + e);
-                    let v = r.pick(&["-1", "999999999", "1e309", "nan", "0", "-0", "65536", "4294967297", "3.5"]);
+                    let end = text[i..]
+                        .find(|c: char| !(c.is_ascii_digit() || c == '.' || c == 'e' || c == '-'))
+                        .map_or(text.len(), |e| i + e);
+                    let v = r.pick(&[
+                        "-1",
+                        "999999999",
+                        "1e309",
+                        "nan",
+                        "0",
+                        "-0",
+                        "65536",
+                        "4294967297",
+                        "3.5",
+                    ]);
                     text.replace_range(i..end, v);
                 }
             }
         }
-        let c = no_panic("Cascade::from_xml_str", &text, || Cascade::from_xml_str(&text, "stop_sign.xml"));
+        let c = no_panic("Cascade::from_xml_str", &text, || {
+            Cascade::from_xml_str(&text, "stop_sign.xml")
+        });
         match c {
             Ok(c) => {
                 ok += 1;
@@ -235,7 +290,10 @@ fn fuzz_cascade_xml() {
             }
         }
     }
-    println!("cascade XML: {} cases, {ok} loaded and ran, {err} clean errors", ok + err);
+    println!(
+        "cascade XML: {} cases, {ok} loaded and ran, {err} clean errors",
+        ok + err
+    );
     assert!(err > 100);
 }
 
@@ -335,7 +393,10 @@ fn fuzz_calibration_csv() {
         let pairs = no_panic("parse_pairs_csv", &text, || parse_pairs_csv(&text, "p.csv"));
         if let Ok(p) = pairs {
             for fit_ay in [false, true] {
-                let o = FitOptions { fit_ay, ..Default::default() };
+                let o = FitOptions {
+                    fit_ay,
+                    ..Default::default()
+                };
                 match no_panic("fit", &text, || fit(&p, start, o)) {
                     Ok(_) => fitted += 1,
                     Err(_) => refused += 1,
@@ -396,51 +457,103 @@ fn fuzz_cli_flags() {
         let (args, why): (Vec<String>, &str) = match i % 8 {
             0..=2 => {
                 let k = &keys[r.below(keys.len())];
-                (vec!["config".into(), "check".into(), "--no-local".into(), "--set".into(), format!("{k}={}", number(&mut r))], "config --set")
+                (
+                    vec![
+                        "config".into(),
+                        "check".into(),
+                        "--no-local".into(),
+                        "--set".into(),
+                        format!("{k}={}", number(&mut r)),
+                    ],
+                    "config --set",
+                )
             }
             3 => (
                 vec![
-                    "config".into(), "roi".into(), "--no-local".into(),
-                    "--near".into(), number(&mut r), "--far".into(), number(&mut r),
-                    "--half-width".into(), number(&mut r),
+                    "config".into(),
+                    "roi".into(),
+                    "--no-local".into(),
+                    "--near".into(),
+                    number(&mut r),
+                    "--far".into(),
+                    number(&mut r),
+                    "--half-width".into(),
+                    number(&mut r),
                 ],
                 "config roi",
             ),
             4 | 5 => (
                 vec![
-                    "detect".into(), "--no-annotate".into(), "--cascade".into(), cascade.display().to_string(),
-                    "--scale-factor".into(), number(&mut r), "--min-neighbors".into(), number(&mut r),
-                    "--min-size".into(), format!("{}x{}", number(&mut r), number(&mut r)),
+                    "detect".into(),
+                    "--no-annotate".into(),
+                    "--cascade".into(),
+                    cascade.display().to_string(),
+                    "--scale-factor".into(),
+                    number(&mut r),
+                    "--min-neighbors".into(),
+                    number(&mut r),
+                    "--min-size".into(),
+                    format!("{}x{}", number(&mut r), number(&mut r)),
                     img.display().to_string(),
                 ],
                 "detect",
             ),
             6 => {
                 // Valid run lengths are kept short; invalid ones must be refused at once.
-                let secs = if r.below(2) == 0 { format!("{:.2}", 0.05 + r.unit() * 0.1) } else { r.pick(&["nan", "inf", "-1", "0", "1e309", "x", "36001"]).into() };
+                let secs = if r.below(2) == 0 {
+                    format!("{:.2}", 0.05 + r.unit() * 0.1)
+                } else {
+                    r.pick(&["nan", "inf", "-1", "0", "1e309", "x", "36001"]).into()
+                };
                 (
                     vec![
-                        "sim".into(), "--no-local".into(), "--no-timing".into(), "--seconds".into(), secs,
-                        "--laps".into(), number(&mut r), "--seed".into(), number(&mut r),
-                        "-o".into(), t.path().join("sim").display().to_string(),
+                        "sim".into(),
+                        "--no-local".into(),
+                        "--no-timing".into(),
+                        "--seconds".into(),
+                        secs,
+                        "--laps".into(),
+                        number(&mut r),
+                        "--seed".into(),
+                        number(&mut r),
+                        "-o".into(),
+                        t.path().join("sim").display().to_string(),
                     ],
                     "sim",
                 )
             }
             _ => {
-                let n = if r.below(2) == 0 { format!("{}", 3 + r.below(10)) } else { number(&mut r) };
+                let n = if r.below(2) == 0 {
+                    format!("{}", 3 + r.below(10))
+                } else {
+                    number(&mut r)
+                };
                 (
                     vec![
-                        "calibrate".into(), "ranging".into(), "--dry-run".into(), "--no-local".into(),
-                        "--from-sim".into(), n, "--sim-tilt-error-deg".into(), number(&mut r),
-                        "--sim-tape-sigma-m".into(), number(&mut r), "--max-rms-px".into(), number(&mut r),
-                        "--v0-sigma-px".into(), number(&mut r),
+                        "calibrate".into(),
+                        "ranging".into(),
+                        "--dry-run".into(),
+                        "--no-local".into(),
+                        "--from-sim".into(),
+                        n,
+                        "--sim-tilt-error-deg".into(),
+                        number(&mut r),
+                        "--sim-tape-sigma-m".into(),
+                        number(&mut r),
+                        "--max-rms-px".into(),
+                        number(&mut r),
+                        "--v0-sigma-px".into(),
+                        number(&mut r),
                     ],
                     "calibrate",
                 )
             }
         };
-        let o = Command::new(env!("CARGO_BIN_EXE_rccar")).current_dir(ROOT).args(&args).output().unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_rccar"))
+            .current_dir(ROOT)
+            .args(&args)
+            .output()
+            .unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!err.contains("panicked"), "{why} {args:?}\n{err}");
         match o.status.code() {
@@ -448,10 +561,16 @@ fn fuzz_cli_flags() {
             c => panic!("{why} {args:?}: exit {c:?} (a signal or an abort)\n{err}"),
         }
         if o.status.code() == Some(2) {
-            assert!(err.contains("error"), "{why} {args:?}: exit 2 without an error line\n{err}");
+            assert!(
+                err.contains("error"),
+                "{why} {args:?}: exit 2 without an error line\n{err}"
+            );
         }
     }
-    println!("CLI flags: {n} runs: {} exit 0, {} exit 1, {} exit 2 (all clean)", codes[0], codes[1], codes[2]);
+    println!(
+        "CLI flags: {n} runs: {} exit 0, {} exit 1, {} exit 2 (all clean)",
+        codes[0], codes[1], codes[2]
+    );
     assert!(codes[0] > 10 && codes[1] + codes[2] > 30);
 }
 
@@ -459,7 +578,11 @@ fn fuzz_cli_flags() {
 fn numeric_keys(t: &toml::Table, prefix: &str) -> Vec<String> {
     let mut out = Vec::new();
     for (k, v) in t {
-        let full = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+        let full = if prefix.is_empty() {
+            k.clone()
+        } else {
+            format!("{prefix}.{k}")
+        };
         match v {
             toml::Value::Table(s) => out.extend(numeric_keys(s, &full)),
             toml::Value::Integer(_) | toml::Value::Float(_) | toml::Value::Array(_) => out.push(full),

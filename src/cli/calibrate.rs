@@ -13,12 +13,12 @@
 
 use super::common::ConfigArgs;
 use anyhow::{bail, Context, Result};
-use rccar::config::LoadedConfig;
-use rccar::ranging::Pair;
-use std::path::Path;
 use clap::{Args, Subcommand};
 use rccar::camera::PinholeCamera;
+use rccar::config::LoadedConfig;
+use rccar::ranging::Pair;
 use rccar::ranging::{fit, parse_pairs_csv, FitOptions, TiltRanging};
+use std::path::Path;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -87,7 +87,10 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         bail!("--max-rms-px {}: must be a finite number of pixels > 0", a.max_rms_px);
     }
     if !(a.v0_sigma_px.is_finite() && a.v0_sigma_px >= 0.0) {
-        bail!("--v0-sigma-px {}: must be a finite number of pixels >= 0 (0 = free)", a.v0_sigma_px);
+        bail!(
+            "--v0-sigma-px {}: must be a finite number of pixels >= 0 (0 = free)",
+            a.v0_sigma_px
+        );
     }
     // 1. The pairs: measured, or made in the simulator's lab.
     let pairs = match (&a.pairs, a.from_sim) {
@@ -96,7 +99,10 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
                 bail!("--from-sim {n}: must be 3..={MAX_SIM_PAIRS} pairs");
             }
             if !(a.sim_tilt_error_deg.is_finite() && a.sim_tilt_error_deg.abs() <= 30.0) {
-                bail!("--sim-tilt-error-deg {}: must be -30..=30 degrees", a.sim_tilt_error_deg);
+                bail!(
+                    "--sim-tilt-error-deg {}: must be -30..=30 degrees",
+                    a.sim_tilt_error_deg
+                );
             }
             if !(a.sim_tape_sigma_m.is_finite() && (0.0..=0.5).contains(&a.sim_tape_sigma_m)) {
                 bail!("--sim-tape-sigma-m {}: must be 0..=0.5 m", a.sim_tape_sigma_m);
@@ -216,7 +222,11 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         )
     })?;
     if a.dry_run {
-        println!("--- {} (now)\n+++ {} (after calibration)", target.display(), target.display());
+        println!(
+            "--- {} (now)\n+++ {} (after calibration)",
+            target.display(),
+            target.display()
+        );
         print!("{}", line_diff(old.as_deref().unwrap_or(""), &new));
         println!("dry run: nothing written");
         return Ok(ExitCode::SUCCESS);

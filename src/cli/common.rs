@@ -4,8 +4,9 @@
 //! The base file is `--config FILE` when given, else `$RCCAR_CONFIG`, else `config/car.toml`
 //! in the working directory or the nearest folder above it (so `rccar` works from any
 //! subfolder of the project). Overrides: `--local FILE` (must exist when named), else
-//! `local.toml` beside the base file when it exists (`--no-local`: none); then `--set key=value`. Relative paths
-//! inside a file resolve against that file's folder (see `rccar::config::LoadedConfig`).
+//! `local.toml` beside the base file when it exists (`--no-local`: none); then
+//! `--set key=value`. Relative paths inside a file resolve against that file's folder (see
+//! `rccar::config::LoadedConfig`).
 
 use anyhow::{bail, Result};
 use clap::Args;

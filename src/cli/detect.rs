@@ -153,7 +153,8 @@ fn detect_one(
                 "neighbors": d.neighbors,
             });
             if args.light {
-                b["light"] = serde_json::to_value(light_state(&rgb, d.rect)).map_err(|e| DetectFailure::Fatal(e.into()))?;
+                b["light"] =
+                    serde_json::to_value(light_state(&rgb, d.rect)).map_err(|e| DetectFailure::Fatal(e.into()))?;
             }
             boxes.push(b);
             draw_box(&mut annotated, d.rect, COLOURS[ci % COLOURS.len()]);
