@@ -19,13 +19,28 @@ use std::path::{Path, PathBuf};
 /// Everything that can go wrong while loading a configuration.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
+    /// The file could not be read. The OS error is part of the message (and not repeated as
+    /// a source, so `{:#}` prints it once).
+    #[error("{path}: cannot read: {error}")]
     Io {
         /// File that failed.
         path: PathBuf,
         /// Underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
+    },
+    /// The configuration file does not exist; the message says how to point at one.
+    #[error("{path}: cannot read: {error}; {HOW_TO_POINT}")]
+    Missing {
+        /// The file that was looked for.
+        path: PathBuf,
+        /// Underlying error (in the message, not repeated as a source).
+        error: std::io::Error,
+    },
+    /// No `config/car.toml` in the starting folder or any folder above it.
+    #[error("no config/car.toml in {start} or any folder above it; {HOW_TO_POINT}")]
+    NotFound {
+        /// Where the search started (the working directory).
+        start: PathBuf,
     },
     /// TOML syntax error (the message carries the line and column).
     #[error("{path}: {message}")]
@@ -56,6 +71,16 @@ pub enum ConfigError {
     /// A `key=value` override that cannot be parsed.
     #[error("bad override `{0}`: expected key=value, e.g. steering.kp=0.8")]
     BadOverride(String),
+    /// A number that is not finite (inf, NaN, or too large for a 64-bit float, e.g. 1e309).
+    #[error("{origin}: `{key}` = `{typed}` is not a finite number (inf and NaN are not allowed)")]
+    NotFinite {
+        /// Where the value came from (`command line` or a file).
+        origin: String,
+        /// Dotted key.
+        key: String,
+        /// What was typed.
+        typed: String,
+    },
     /// One or more values outside their allowed range.
     #[error("{}", .errors.iter().map(|e| format!("{origin}: {e}")).collect::<Vec<_>>().join("\n"))]
     Invalid {
@@ -64,6 +89,29 @@ pub enum ConfigError {
         /// Every bad value.
         errors: Vec<InvalidValue>,
     },
+}
+
+/// How to name a configuration when none is found (part of the error messages).
+pub const HOW_TO_POINT: &str =
+    "run rccar inside the project folder, or name a file with --config FILE or RCCAR_CONFIG=FILE";
+
+/// The keys whose values are file paths. A relative path written in a file is resolved
+/// against that file's folder; one given on the command line (`--set`) against the working
+/// directory; a default (a key set nowhere) against the base configuration's folder.
+/// Add a new path key here and it is resolved like the others.
+pub const PATH_KEYS: &[&str] = &[
+    "sim.track",
+    "detect.stop_sign",
+    "detect.traffic_light",
+    "detect.obstacle",
+];
+
+/// Bounds on sizes that files and flags control, checked before anything is allocated.
+pub mod limits {
+    /// Largest image a frame source, `stages` or `detect` decodes, pixels (width × height).
+    pub const MAX_IMAGE_PIXELS: u64 = 40_000_000;
+    /// Largest image side, pixels.
+    pub const MAX_IMAGE_SIDE: u32 = 16_384;
 }
 
 /// One value outside its allowed range or inconsistent with another.
@@ -346,9 +394,10 @@ impl Default for VehicleConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SimConfig {
-    /// Track file, relative to the working directory.
+    /// Track file; a relative path is relative to the folder of the config file that names it
+    /// (the default, `tracks/default.toml`, to the base config's folder).
     pub track: String,
-    /// Laps to drive before the run ends.
+    /// Laps to drive before the run ends; 0 = no lap target, drive until `max_seconds`.
     pub laps: u32,
     /// The run ends after this much simulated time even if the laps are not done, seconds.
     pub max_seconds: f64,
@@ -371,7 +420,7 @@ pub struct SimConfig {
 impl Default for SimConfig {
     fn default() -> Self {
         Self {
-            track: "config/tracks/default.toml".into(),
+            track: "tracks/default.toml".into(),
             laps: 3,
             max_seconds: 600.0,
             substeps: 4,
@@ -391,10 +440,16 @@ struct Checker(Vec<InvalidValue>);
 impl Checker {
     fn range<T: PartialOrd + fmt::Display + Copy>(&mut self, key: &str, v: T, lo: T, hi: T) {
         if !(v >= lo && v <= hi) {
+            let value = v.to_string();
+            let not_finite = matches!(value.as_str(), "inf" | "-inf" | "NaN");
             self.0.push(InvalidValue {
                 key: key.into(),
-                value: v.to_string(),
-                allowed: format!("{lo} ..= {hi}"),
+                allowed: if not_finite {
+                    format!("{lo} ..= {hi}; inf and NaN are not allowed")
+                } else {
+                    format!("{lo} ..= {hi}")
+                },
+                value,
             });
         }
     }
@@ -437,6 +492,25 @@ impl Config {
         c.range("warp.out_height", w.out_height, 16, 4096);
         if let Err(e) = crate::lane::warp::Homography::from_quad_to_rect(&w.src, w.out_width, w.out_height) {
             c.fail("warp.src", format!("{:?}", w.src), &e.to_string());
+        } else {
+            // The bird's-eye image puts src[0..2] (the far edge) at its top: a quad whose far
+            // edge is below its near edge warps the floor upside down (and mirrored when left
+            // and right are swapped); the histogram band then reads the wrong end of the lane.
+            let [tl, tr, br, bl] = w.src;
+            if !(tl[1] < bl[1] && tr[1] < br[1]) {
+                c.fail(
+                    "warp.src",
+                    format!("{:?}", w.src),
+                    "top corners [0], [1] (far edge) above the bottom corners [3], [2] (near edge); this ROI looks at the floor upside down (make one with `rccar config roi`)",
+                );
+            }
+            if !(tl[0] < tr[0] && bl[0] < br[0]) {
+                c.fail(
+                    "warp.src",
+                    format!("{:?}", w.src),
+                    "left corners [0], [3] left of the right corners [1], [2]; this ROI is mirrored (make one with `rccar config roi`)",
+                );
+            }
         }
 
         let l = &self.lane;
@@ -560,37 +634,34 @@ impl Config {
     }
 
     /// Loads `base`, then each override file, then `key=value` overrides; checks everything.
+    /// Relative path keys ([`PATH_KEYS`]) come back absolute, as [`LoadedConfig::load`].
     pub fn load(base: &Path, override_files: &[PathBuf], overrides: &[String]) -> Result<Config, ConfigError> {
-        let mut layers = vec![Layer::from_file(base)?];
-        for f in override_files {
-            layers.push(Layer::from_file(f)?);
-        }
-        for o in overrides {
-            layers.push(Layer::from_assignment(o)?);
-        }
-        Self::from_layers(&layers)
+        LoadedConfig::load(base, override_files, overrides).map(|l| l.cfg)
     }
 
-    /// Parses one TOML text (e.g. a test's inline config) on top of the defaults.
+    /// Parses one TOML text (e.g. a test's inline config) on top of the defaults. Paths are
+    /// kept as written.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Config, ConfigError> {
         let table = text.parse::<toml::Table>().map_err(|e| ConfigError::Syntax {
             path: origin.into(),
-            message: e.to_string(),
+            message: e.to_string().trim_end().to_string(),
         })?;
-        Self::from_layers(&[Layer {
+        let layer = Layer {
             origin: origin.to_string(),
             table,
-        }])
+        };
+        layer.check_numbers()?;
+        Self::from_layers(&[layer])
     }
 
     /// This config with one dotted numeric or boolean key set, e.g. `steering.kp=0.8`;
-    /// used by gain sweeps. Validated like a file.
+    /// used by gain sweeps. Validated like a file. A path value is kept as typed.
     pub fn with_override(&self, assignment: &str) -> Result<Config, ConfigError> {
         let base = Layer {
             origin: "config".into(),
             table: to_table(self),
         };
-        Self::from_layers(&[base, Layer::from_assignment(assignment)?])
+        Self::from_layers(&[base, Layer::from_assignment(assignment, None)?])
     }
 
     fn from_layers(layers: &[Layer]) -> Result<Config, ConfigError> {
@@ -602,11 +673,18 @@ impl Config {
         }
         let origin = layers.iter().map(|l| l.origin.as_str()).collect::<Vec<_>>().join(" + ");
         // serde_path_to_error remembers which key was being read when a type is wrong.
-        let cfg: Config =
-            serde_path_to_error::deserialize(toml::Value::Table(merged)).map_err(|e| ConfigError::Type {
+        let cfg: Config = serde_path_to_error::deserialize(toml::Value::Table(merged.clone())).map_err(|e| {
+            let key = e.path().to_string();
+            let typed = lookup(&merged, &key).map(show_value).unwrap_or_default();
+            ConfigError::Type {
                 origin: origin.clone(),
-                message: format!("`{}`: {}", e.path(), e.inner().message().trim()),
-            })?;
+                message: if typed.is_empty() {
+                    format!("`{key}`: {}", e.inner().message().trim())
+                } else {
+                    format!("`{key}` = {typed}: {}", e.inner().message().trim())
+                },
+            }
+        })?;
         cfg.validate().map_err(|e| match e {
             ConfigError::Invalid { errors, .. } => ConfigError::Invalid { origin, errors },
             other => other,
@@ -614,9 +692,167 @@ impl Config {
         Ok(cfg)
     }
 
+    /// Makes every relative path key ([`PATH_KEYS`]) absolute against `dir` (e.g. the folder of
+    /// the file the defaults stand for). Empty values are left alone.
+    pub fn resolve_paths(&mut self, dir: &Path) {
+        for p in [
+            &mut self.sim.track,
+            &mut self.detect.stop_sign,
+            &mut self.detect.traffic_light,
+            &mut self.detect.obstacle,
+        ] {
+            if !p.is_empty() && Path::new(p.as_str()).is_relative() {
+                *p = absolute(&dir.join(p.as_str())).display().to_string();
+            }
+        }
+    }
+
     /// The resolved configuration as TOML text.
     pub fn to_toml(&self) -> String {
         toml::to_string(self).unwrap_or_else(|e| format!("# cannot print config: {e}"))
+    }
+}
+
+/// A configuration as loaded for a command: the values (path keys absolute), the folder of
+/// the base file and every file that was read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedConfig {
+    /// The merged, validated configuration; every [`PATH_KEYS`] value is an absolute path.
+    pub cfg: Config,
+    /// The folder of the base configuration file, absolute.
+    pub dir: PathBuf,
+    /// Every file read, base first, then the override files in order.
+    pub files: Vec<PathBuf>,
+    /// How many values the files set (0: every value is a default).
+    pub values_in_files: usize,
+}
+
+impl LoadedConfig {
+    /// Loads `base`, then each override file (each must exist), then `key=value` overrides,
+    /// and checks everything. Relative paths in a file resolve against that file's folder,
+    /// those in `overrides` against the working directory, defaults against `base`'s folder.
+    pub fn load(base: &Path, override_files: &[PathBuf], overrides: &[String]) -> Result<LoadedConfig, ConfigError> {
+        let base_layer = Layer::from_file(base).map_err(|e| match e {
+            ConfigError::Io { path, error } if error.kind() == std::io::ErrorKind::NotFound => {
+                ConfigError::Missing { path, error }
+            }
+            other => other,
+        })?;
+        let mut layers = vec![base_layer];
+        for f in override_files {
+            layers.push(Layer::from_file(f)?);
+        }
+        let values_in_files = layers.iter().map(|l| count_values(&l.table)).sum();
+        let cwd = absolute(Path::new("."));
+        for o in overrides {
+            layers.push(Layer::from_assignment(o, Some(&cwd))?);
+        }
+        let mut cfg = Config::from_layers(&layers)?;
+        let dir = absolute(
+            base.parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(Path::new(".")),
+        );
+        cfg.resolve_paths(&dir);
+        let mut files = vec![base.to_path_buf()];
+        files.extend(override_files.iter().cloned());
+        Ok(LoadedConfig {
+            cfg,
+            dir,
+            files,
+            values_in_files,
+        })
+    }
+}
+
+impl LoadedConfig {
+    /// Checks what the configuration would be if the override file `path` held `text`
+    /// (before writing it): `base`, then `override_files` without `path`, then `text` as
+    /// `path`. Nothing is written.
+    pub fn check_with_text(
+        base: &Path,
+        override_files: &[PathBuf],
+        path: &Path,
+        text: &str,
+    ) -> Result<Config, ConfigError> {
+        let mut layers = vec![Layer::from_file(base)?];
+        for f in override_files.iter().filter(|f| !same_file(f, path)) {
+            layers.push(Layer::from_file(f)?);
+        }
+        layers.push(Layer::from_text(path, text)?);
+        Config::from_layers(&layers)
+    }
+}
+
+/// The same path, compared after making both absolute (the files need not exist).
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => absolute(a) == absolute(b),
+    }
+}
+
+/// Finds the configuration: `env` (the value of `RCCAR_CONFIG`, relative to `start`) when
+/// given and non-empty, else `config/car.toml` in `start` or the nearest folder above it.
+pub fn find_config(start: &Path, env: Option<&std::ffi::OsStr>) -> Result<PathBuf, ConfigError> {
+    if let Some(e) = env.filter(|e| !e.is_empty()) {
+        // Loading it reports a missing file, with the OS error and how to point elsewhere.
+        return Ok(start.join(e));
+    }
+    let start = absolute(start);
+    for dir in start.ancestors() {
+        let p = dir.join("config").join("car.toml");
+        if p.is_file() {
+            return Ok(p);
+        }
+    }
+    Err(ConfigError::NotFound { start })
+}
+
+/// `p` made absolute against the working directory (no symlinks resolved; unchanged if the
+/// working directory cannot be read).
+fn absolute(p: &Path) -> PathBuf {
+    std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
+}
+
+fn count_values(t: &toml::Table) -> usize {
+    t.values()
+        .map(|v| match v {
+            toml::Value::Table(s) => count_values(s),
+            _ => 1,
+        })
+        .sum()
+}
+
+/// The value at a serde path such as `steering.kp` or `warp.src[1][0]`.
+fn lookup<'a>(t: &'a toml::Table, path: &str) -> Option<&'a toml::Value> {
+    let mut cur: Option<&toml::Value> = None;
+    for part in path.split('.') {
+        let (name, idx) = match part.find('[') {
+            Some(i) => (&part[..i], &part[i..]),
+            None => (part, ""),
+        };
+        cur = match cur {
+            None => t.get(name),
+            Some(toml::Value::Table(s)) => s.get(name),
+            _ => None,
+        };
+        for i in idx.split(['[', ']']).filter(|s| !s.is_empty()) {
+            cur = match (cur, i.parse::<usize>()) {
+                (Some(toml::Value::Array(a)), Ok(i)) => a.get(i),
+                _ => None,
+            };
+        }
+    }
+    cur
+}
+
+fn show_value(v: &toml::Value) -> String {
+    let s = v.to_string();
+    if s.chars().count() > 60 {
+        format!("{}…", s.chars().take(60).collect::<String>())
+    } else {
+        s
     }
 }
 
@@ -628,21 +864,35 @@ struct Layer {
 
 impl Layer {
     fn from_file(path: &Path) -> Result<Layer, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Io {
             path: path.into(),
-            source,
+            error,
         })?;
-        let table = text.parse::<toml::Table>().map_err(|e| ConfigError::Syntax {
+        Self::from_text(path, &text)
+    }
+
+    /// The text of a file at `path` (relative paths in it resolve against its folder).
+    fn from_text(path: &Path, text: &str) -> Result<Layer, ConfigError> {
+        let mut table = text.parse::<toml::Table>().map_err(|e| ConfigError::Syntax {
             path: path.into(),
             message: e.to_string().trim_end().to_string(),
         })?;
-        Ok(Layer {
+        let dir = absolute(
+            path.parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(Path::new(".")),
+        );
+        resolve_table_paths(&mut table, &dir);
+        let layer = Layer {
             origin: path.display().to_string(),
             table,
-        })
+        };
+        layer.check_numbers()?;
+        Ok(layer)
     }
 
-    fn from_assignment(text: &str) -> Result<Layer, ConfigError> {
+    /// `key=value`; a relative path value resolves against `cwd` when given.
+    fn from_assignment(text: &str, cwd: Option<&Path>) -> Result<Layer, ConfigError> {
         let (key, value) = text
             .split_once('=')
             .ok_or_else(|| ConfigError::BadOverride(text.into()))?;
@@ -650,13 +900,27 @@ impl Layer {
         if key.is_empty() || key.split('.').any(str::is_empty) {
             return Err(ConfigError::BadOverride(text.into()));
         }
+        let typed = value.trim();
         // Parse the value as TOML so numbers, booleans, arrays and quoted strings all work;
-        // an unquoted word is taken as a string (`lane.threshold_mode=otsu`).
-        let value = format!("v = {}", value.trim())
+        // an unquoted word is taken as a string (`lane.threshold_mode=otsu`), unless it reads
+        // as a number that is not finite (`1e309`, `NaN`, `inf`): that is refused here.
+        let parsed = format!("v = {typed}")
             .parse::<toml::Table>()
             .ok()
-            .and_then(|mut t| t.remove("v"))
-            .unwrap_or_else(|| toml::Value::String(value.trim().to_string()));
+            .and_then(|mut t| t.remove("v"));
+        let not_finite = match &parsed {
+            Some(toml::Value::Float(f)) => !f.is_finite(),
+            Some(_) => false,
+            None => typed.parse::<f64>().is_ok_and(|f| !f.is_finite()),
+        };
+        if not_finite {
+            return Err(ConfigError::NotFinite {
+                origin: "command line".into(),
+                key: key.into(),
+                typed: typed.into(),
+            });
+        }
+        let value = parsed.unwrap_or_else(|| toml::Value::String(typed.to_string()));
         let mut table = toml::Table::new();
         let parts: Vec<&str> = key.split('.').collect();
         let mut cur = &mut table;
@@ -665,13 +929,66 @@ impl Layer {
                 .entry(p.to_string())
                 .or_insert_with(|| toml::Value::Table(toml::Table::new()))
                 .as_table_mut()
-                .expect("just inserted a table");
+                .ok_or_else(|| ConfigError::BadOverride(text.into()))?;
         }
         cur.insert(parts[parts.len() - 1].to_string(), value);
+        if let Some(cwd) = cwd {
+            resolve_table_paths(&mut table, cwd);
+        }
         Ok(Layer {
             origin: "command line".into(),
             table,
         })
+    }
+
+    /// Refuses inf and NaN anywhere (TOML allows `inf` and `nan` literals).
+    fn check_numbers(&self) -> Result<(), ConfigError> {
+        fn walk(v: &toml::Value, key: &str, origin: &str) -> Result<(), ConfigError> {
+            match v {
+                toml::Value::Float(f) if !f.is_finite() => Err(ConfigError::NotFinite {
+                    origin: origin.into(),
+                    key: key.into(),
+                    typed: f.to_string(),
+                }),
+                toml::Value::Table(t) => {
+                    for (k, v) in t {
+                        let full = if key.is_empty() {
+                            k.clone()
+                        } else {
+                            format!("{key}.{k}")
+                        };
+                        walk(v, &full, origin)?;
+                    }
+                    Ok(())
+                }
+                toml::Value::Array(a) => {
+                    for (i, v) in a.iter().enumerate() {
+                        walk(v, &format!("{key}[{i}]"), origin)?;
+                    }
+                    Ok(())
+                }
+                _ => Ok(()),
+            }
+        }
+        walk(&toml::Value::Table(self.table.clone()), "", &self.origin)
+    }
+}
+
+/// Makes the relative string values of [`PATH_KEYS`] in one layer absolute against `dir`.
+fn resolve_table_paths(table: &mut toml::Table, dir: &Path) {
+    for key in PATH_KEYS {
+        let Some((section, name)) = key.split_once('.') else {
+            continue;
+        };
+        if let Some(toml::Value::String(s)) = table
+            .get_mut(section)
+            .and_then(toml::Value::as_table_mut)
+            .and_then(|t| t.get_mut(name))
+        {
+            if !s.is_empty() && Path::new(s.as_str()).is_relative() {
+                *s = absolute(&dir.join(s.as_str())).display().to_string();
+            }
+        }
     }
 }
 
@@ -761,11 +1078,9 @@ mod tests {
     fn shipped_car_toml_equals_defaults() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/car.toml");
         let cfg = Config::load(&path, &[], &[]).unwrap();
-        assert_eq!(
-            cfg,
-            Config::default(),
-            "config/car.toml and Config::default() drifted apart"
-        );
+        let mut def = Config::default();
+        def.resolve_paths(&Path::new(env!("CARGO_MANIFEST_DIR")).join("config"));
+        assert_eq!(cfg, def, "config/car.toml and Config::default() drifted apart");
     }
 
     #[test]
@@ -825,7 +1140,8 @@ mod tests {
 pub struct DetectConfig {
     /// Run detection at all.
     pub enabled: bool,
-    /// Stop-sign cascade (OpenCV XML), relative to the working directory.
+    /// Stop-sign cascade (OpenCV XML); a relative path is relative to the folder of the config
+    /// file that names it.
     pub stop_sign: String,
     /// Traffic-light cascade; the light's state is read inside its boxes.
     pub traffic_light: String,
@@ -843,9 +1159,9 @@ impl Default for DetectConfig {
     fn default() -> Self {
         Self {
             enabled: true,
-            stop_sign: "config/cascades/stop_sign.xml".into(),
-            traffic_light: "config/cascades/traffic_light.xml".into(),
-            obstacle: "config/cascades/obstacle.xml".into(),
+            stop_sign: "cascades/stop_sign.xml".into(),
+            traffic_light: "cascades/traffic_light.xml".into(),
+            obstacle: "cascades/obstacle.xml".into(),
             scale_factor: 1.1,
             min_neighbors: 3,
             min_size_px: 0,

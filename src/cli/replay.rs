@@ -64,11 +64,7 @@ impl Observer for Summary {
                 &out.lane,
                 &out.command,
             );
-            let stem = std::path::Path::new(&ctx.frame.name)
-                .file_stem()
-                .map(|s| s.to_string_lossy().to_string())
-                .unwrap_or_default();
-            let p = dir.join(format!("{stem}.png"));
+            let p = dir.join(rccar::source::output_name(&ctx.frame.name));
             img.save(&p)
                 .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
         }
