@@ -98,10 +98,10 @@ impl GpioDevices {
             );
         }
         if let Some((trig, echo)) = sonar_pins {
-            let (logic, stop, o) = (logic.clone(), stop.clone(), opts.clone());
+            let (l, st, o) = (logic.clone(), stop.clone(), opts.clone());
             let spawned = std::thread::Builder::new()
                 .name("gpio-sonar".into())
-                .spawn(move || sonar_thread(trig, echo, &o, logic, stop));
+                .spawn(move || sonar_thread(trig, echo, &o, l, st));
             match spawned {
                 Ok(h) => threads.push(h),
                 Err(e) => {
@@ -242,6 +242,7 @@ mod tests {
         }
         let e = GpioDevices::open(&GpioOptions::default()).err().expect("no GPIO here");
         let msg = e.to_string();
+        eprintln!("{msg}");
         assert!(msg.starts_with("GPIO: cannot open") && msg.contains("gpio.enabled = false"), "{msg}");
     }
 }
