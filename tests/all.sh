@@ -72,6 +72,7 @@ stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
 stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
 stage link-hil cargo test --release --features serial --test link_hil
 stage camera cargo test --release --features camera --lib camera_source
+stage gpio cargo test --release --features gpio --lib gpio
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
 
