@@ -844,7 +844,10 @@ mod tests {
         let e = Config::from_toml_str("[gpio]\nbutton_pin = 17\nled_pin = 5\nechO_pin = 1\n", "t.toml")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("gpio.echO_pin") && e.contains("did you mean `echo_pin`"), "{e}");
+        assert!(
+            e.contains("gpio.echO_pin") && e.contains("did you mean `echo_pin`"),
+            "{e}"
+        );
         let e = Config::from_toml_str("[gpio]\nbutton_pin = 23\n", "t.toml")
             .unwrap_err()
             .to_string();
@@ -855,7 +858,10 @@ mod tests {
         let e = Config::from_toml_str("[gpio]\nled_pin = 24\ntrig_pin = 24\n", "t.toml")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("gpio.trig_pin = 24") && e.contains("used by gpio.led_pin"), "{e}");
+        assert!(
+            e.contains("gpio.trig_pin = 24") && e.contains("used by gpio.led_pin"),
+            "{e}"
+        );
         assert!(e.contains("gpio.echo_pin = 24") && e.lines().count() == 2, "{e}");
         // Without an ultrasonic sensor its pins are free for other uses.
         Config::from_toml_str("[gpio]\nultrasonic = false\nled_pin = 23\n", "t.toml").unwrap();

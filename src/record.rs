@@ -487,7 +487,10 @@ mod tests {
     fn names_sort_in_time_order() {
         assert_eq!(frame_name(7), "frame_000000007.jpg");
         assert_eq!(segment_name(12), "seg_000012");
-        let mut names: Vec<String> = [1000u64, 9, 10, 99, 100_000_000].iter().map(|&i| frame_name(i)).collect();
+        let mut names: Vec<String> = [1000u64, 9, 10, 99, 100_000_000]
+            .iter()
+            .map(|&i| frame_name(i))
+            .collect();
         names.sort();
         assert_eq!(names[0], frame_name(9));
         assert_eq!(names[4], frame_name(100_000_000));
@@ -501,13 +504,21 @@ mod tests {
         let mut r = Recorder::create(&dir, opts(500_000, 5)).unwrap();
         for k in 0..60u64 {
             r.write_frame(k, &frame(k)).unwrap();
-            r.write_telemetry_line(&format!("{{\"frame\":{k},\"steer\":0.{k:03}}}")).unwrap();
+            r.write_telemetry_line(&format!("{{\"frame\":{k},\"steer\":0.{k:03}}}"))
+                .unwrap();
             let used = disk_usage(&dir);
             assert!(used <= 500_000, "frame {k}: {used} bytes on disk > budget");
-            assert_eq!(used, r.stats().bytes_on_disk, "frame {k}: the recorder's count is the disk's");
+            assert_eq!(
+                used,
+                r.stats().bytes_on_disk,
+                "frame {k}: the recorder's count is the disk's"
+            );
         }
         let s = r.finish().unwrap();
-        eprintln!("budget 500 kB, 60 frames in segments of 5: {s:?}, left {:?}", segments(&dir));
+        eprintln!(
+            "budget 500 kB, 60 frames in segments of 5: {s:?}, left {:?}",
+            segments(&dir)
+        );
         // Every frame was written, old ones were deleted, none skipped.
         assert_eq!(s.frames_written, 60);
         assert_eq!(s.frames_over_budget, 0);
@@ -551,7 +562,11 @@ mod tests {
         assert!(s.frames_over_budget > 0, "{s:?}");
         assert_eq!(s.telemetry_lines, 30);
         let tel = std::fs::read_to_string(dir.join(TELEMETRY_FILE)).unwrap();
-        assert_eq!(tel.lines().count(), 30, "telemetry is never deleted, even past the budget");
+        assert_eq!(
+            tel.lines().count(),
+            30,
+            "telemetry is never deleted, even past the budget"
+        );
         assert_eq!(tel.len(), 30 * 2001);
     }
 
@@ -611,8 +626,13 @@ mod tests {
         let mut r = Recorder::create(&dir, RecordOptions::default()).unwrap();
         r.write_frame(0, &frame(0)).unwrap();
         r.finish().unwrap();
-        let e = Recorder::create(&dir, RecordOptions::default()).unwrap_err().to_string();
-        assert!(e.contains(&dir.display().to_string()) && e.contains("already holds a recording"), "{e}");
+        let e = Recorder::create(&dir, RecordOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&dir.display().to_string()) && e.contains("already holds a recording"),
+            "{e}"
+        );
         // Other files (notes, an empty folder) are fine.
         let other = tmp.path().join("notes");
         std::fs::create_dir(&other).unwrap();
@@ -626,8 +646,13 @@ mod tests {
         let file = tmp.path().join("a_file");
         std::fs::write(&file, "x").unwrap();
         let dir = file.join("run");
-        let e = Recorder::create(&dir, RecordOptions::default()).unwrap_err().to_string();
-        assert!(e.starts_with(&dir.display().to_string()) && e.contains("cannot create"), "{e}");
+        let e = Recorder::create(&dir, RecordOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with(&dir.display().to_string()) && e.contains("cannot create"),
+            "{e}"
+        );
         assert_eq!(e.lines().count(), 1);
     }
 
@@ -639,10 +664,19 @@ mod tests {
         std::fs::create_dir(&dir).unwrap();
         std::os::unix::fs::symlink("/dev/full", dir.join(PROBE_FILE)).unwrap();
         let e = Recorder::create(&dir, RecordOptions::default()).unwrap_err();
-        assert!(matches!(&e, RecordError::NotWritable { source, .. } if source.raw_os_error() == Some(28)), "{e:?}");
+        assert!(
+            matches!(&e, RecordError::NotWritable { source, .. } if source.raw_os_error() == Some(28)),
+            "{e:?}"
+        );
         let msg = e.to_string();
-        assert!(msg.contains(&dir.display().to_string()) && msg.contains("cannot record here"), "{msg}");
-        assert!(!dir.join(TELEMETRY_FILE).exists(), "nothing created when the check fails");
+        assert!(
+            msg.contains(&dir.display().to_string()) && msg.contains("cannot record here"),
+            "{msg}"
+        );
+        assert!(
+            !dir.join(TELEMETRY_FILE).exists(),
+            "nothing created when the check fails"
+        );
     }
 
     #[test]
@@ -703,7 +737,10 @@ mod tests {
         }
         let e = Recorder::create(&ro, RecordOptions::default()).unwrap_err().to_string();
         assert!(e.contains(&ro.display().to_string()), "{e}");
-        assert!(e.contains("Read-only file system") || e.contains("ermission denied"), "{e}");
+        assert!(
+            e.contains("Read-only file system") || e.contains("ermission denied"),
+            "{e}"
+        );
         eprintln!("read-only: {e}");
         // Full: a 128 KiB tmpfs cannot take the 256 KiB probe.
         let full = tmp.path().join("full");
@@ -712,7 +749,10 @@ mod tests {
             let e = Recorder::create(&full.join("run"), RecordOptions::default())
                 .unwrap_err()
                 .to_string();
-            assert!(e.contains("run/.rccar_write_test") && e.contains("No space left"), "{e}");
+            assert!(
+                e.contains("run/.rccar_write_test") && e.contains("No space left"),
+                "{e}"
+            );
             eprintln!("full: {e}");
         }
         // Filling up during the run: 1 MiB takes the probe and about 30 frames. With a

@@ -126,10 +126,7 @@ impl ReplayDir {
             let mut in_seg: Vec<PathBuf> = entries
                 .flatten()
                 .map(|e| e.path())
-                .filter(|p| {
-                    is_frame_file(p)
-                        && !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with('.'))
-                })
+                .filter(|p| is_frame_file(p) && !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with('.')))
                 .collect();
             in_seg.sort();
             files.extend(in_seg);

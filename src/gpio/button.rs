@@ -330,9 +330,16 @@ mod tests {
         let ev = run(opts, false, &edges, 4000.0);
         assert_eq!(
             kinds(&ev),
-            vec![ButtonEventKind::Press, ButtonEventKind::LongPress, ButtonEventKind::Release]
+            vec![
+                ButtonEventKind::Press,
+                ButtonEventKind::LongPress,
+                ButtonEventKind::Release
+            ]
         );
-        assert!((ev[1].1 - 1600.0).abs() < 1e-6, "long press 1.5 s after the press edge: {ev:?}");
+        assert!(
+            (ev[1].1 - 1600.0).abs() < 1e-6,
+            "long press 1.5 s after the press edge: {ev:?}"
+        );
         // A short press never gives a long press.
         let ev = run(opts, false, &[(100.0, true), (600.0, false)], 4000.0);
         assert_eq!(kinds(&ev), vec![ButtonEventKind::Press, ButtonEventKind::Release]);

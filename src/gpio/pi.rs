@@ -243,6 +243,9 @@ mod tests {
         let e = GpioDevices::open(&GpioOptions::default()).err().expect("no GPIO here");
         let msg = e.to_string();
         eprintln!("{msg}");
-        assert!(msg.starts_with("GPIO: cannot open") && msg.contains("gpio.enabled = false"), "{msg}");
+        assert!(
+            msg.starts_with("GPIO: cannot open") && msg.contains("gpio.enabled = false"),
+            "{msg}"
+        );
     }
 }

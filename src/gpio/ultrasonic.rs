@@ -325,11 +325,20 @@ mod tests {
         }
         assert_eq!(reading_from_edges(1.0, None, None, to), EchoReading::NoEcho);
         // A rise 8 ms late belongs to something else: no echo.
-        assert_eq!(reading_from_edges(1.0, Some(1.008), Some(1.009), to), EchoReading::NoEcho);
+        assert_eq!(
+            reading_from_edges(1.0, Some(1.008), Some(1.009), to),
+            EchoReading::NoEcho
+        );
         // A rise before the trigger ended (a stale edge): no echo.
-        assert_eq!(reading_from_edges(1.0, Some(0.999), Some(1.001), to), EchoReading::NoEcho);
+        assert_eq!(
+            reading_from_edges(1.0, Some(0.999), Some(1.001), to),
+            EchoReading::NoEcho
+        );
         // The module's own 38 ms "nothing there" pulse, or no fall at all: timeout.
-        assert_eq!(reading_from_edges(1.0, Some(1.0005), Some(1.0385), to), EchoReading::Timeout);
+        assert_eq!(
+            reading_from_edges(1.0, Some(1.0005), Some(1.0385), to),
+            EchoReading::Timeout
+        );
         assert_eq!(reading_from_edges(1.0, Some(1.0005), None, to), EchoReading::Timeout);
     }
 
@@ -386,9 +395,11 @@ mod tests {
             }
             let jitter = [0.003, -0.002, 0.0, 0.001, -0.003][k % 5];
             let r = match k {
-                12 => EchoReading::Pulse { width_s: 2.0 * 0.15 / c }, // floor reflection at 0.15 m
-                17 => EchoReading::Timeout,                          // missed echo
-                21 => EchoReading::NoEcho,                           // sensor did not answer once
+                12 => EchoReading::Pulse {
+                    width_s: 2.0 * 0.15 / c,
+                }, // floor reflection at 0.15 m
+                17 => EchoReading::Timeout, // missed echo
+                21 => EchoReading::NoEcho,  // sensor did not answer once
                 _ => EchoReading::Pulse {
                     width_s: 2.0 * (truth + jitter) / c,
                 },
@@ -433,7 +444,10 @@ mod tests {
             }
             let (t, truth) = first_brake.expect("must brake before the wall");
             if n == 1 {
-                assert!((truth - 1.28).abs() < 1e-9, "n=1 brakes on the floor reflection: {truth}");
+                assert!(
+                    (truth - 1.28).abs() < 1e-9,
+                    "n=1 brakes on the floor reflection: {truth}"
+                );
             } else {
                 // The median passes 0.30 m `lag` late, within one reading's step.
                 assert!(
