@@ -60,6 +60,45 @@ pub fn frame_name(index: u64) -> String {
     format!("frame_{index:09}.jpg")
 }
 
+/// The frame index in a recorded file name: `frame_000000123.jpg` → 123.
+pub fn frame_index(file_name: &str) -> Option<u64> {
+    let stem = file_name.strip_prefix("frame_")?.strip_suffix(".jpg")?;
+    if stem.is_empty() || !stem.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    stem.parse().ok()
+}
+
+/// The time of each recorded frame, read back from a recording's telemetry.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RecordedTimes {
+    /// Frame index → `time_s`, from every line that has a numeric `frame` and `time_s`.
+    pub times: std::collections::BTreeMap<u64, f64>,
+    /// Lines that are not JSON or lack those fields (a torn last line after a crash).
+    pub bad_lines: usize,
+}
+
+/// Reads `DIR/telemetry.jsonl` of a recording for the frames' times, so a replay can use the
+/// recorded time steps (the car skips late frames, so they are not always 1/fps apart).
+/// The drive loop must pass [`Recorder::write_frame`] the same index as the line's `frame`.
+pub fn recorded_times(dir: &Path) -> Result<RecordedTimes, RecordError> {
+    let path = dir.join(TELEMETRY_FILE);
+    let text = std::fs::read_to_string(&path).map_err(|source| RecordError::Read { path, source })?;
+    let mut out = RecordedTimes::default();
+    for line in text.lines().filter(|l| !l.trim().is_empty()) {
+        let v: Option<(u64, f64)> = serde_json::from_str::<serde_json::Value>(line)
+            .ok()
+            .and_then(|v| Some((v.get("frame")?.as_u64()?, v.get("time_s")?.as_f64()?)));
+        match v {
+            Some((frame, t)) => {
+                out.times.insert(frame, t);
+            }
+            None => out.bad_lines += 1,
+        }
+    }
+    Ok(out)
+}
+
 /// How to record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RecordOptions {
@@ -111,6 +150,14 @@ pub enum RecordError {
     /// A write during the run failed (counted; the run goes on).
     #[error("{path}: write failed: {source}")]
     Write {
+        /// The file.
+        path: PathBuf,
+        /// Underlying error.
+        source: std::io::Error,
+    },
+    /// A recording's telemetry cannot be read back.
+    #[error("{path}: cannot read: {source}")]
+    Read {
         /// The file.
         path: PathBuf,
         /// Underlying error.
@@ -494,6 +541,31 @@ mod tests {
         names.sort();
         assert_eq!(names[0], frame_name(9));
         assert_eq!(names[4], frame_name(100_000_000));
+    }
+
+    #[test]
+    fn frame_times_read_back() {
+        assert_eq!(frame_index(&frame_name(123)), Some(123));
+        assert_eq!(frame_index("frame_000.png"), None);
+        assert_eq!(frame_index("frame_.jpg"), None);
+        assert_eq!(frame_index("frame_-1.jpg"), None);
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("run");
+        let mut r = Recorder::create(&dir, RecordOptions::default()).unwrap();
+        // Frames 0, 1, 3 (frame 2 came late and was skipped), then a torn line.
+        for (k, t) in [(0u64, 0.0), (1, 0.0334), (3, 0.1002)] {
+            r.write_frame(k, &frame(k)).unwrap();
+            r.write_telemetry_line(&format!("{{\"frame\":{k},\"time_s\":{t},\"steer\":0.1}}"))
+                .unwrap();
+        }
+        r.write_telemetry_line("{\"frame\":4,\"ti").unwrap();
+        r.finish().unwrap();
+        let t = recorded_times(&dir).unwrap();
+        assert_eq!(t.times.len(), 3);
+        assert_eq!(t.times[&3], 0.1002);
+        assert_eq!(t.bad_lines, 1);
+        let e = recorded_times(tmp.path()).unwrap_err().to_string();
+        assert!(e.contains("telemetry.jsonl") && e.contains("cannot read"), "{e}");
     }
 
     #[test]

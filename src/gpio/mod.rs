@@ -31,7 +31,7 @@ pub mod ultrasonic;
 
 pub use button::{Button, ButtonEvent, ButtonEventKind, ButtonOptions, StartStop, StartStopAction};
 pub use led::{led_level, LedState};
-pub use ultrasonic::{EchoReading, EchoTimeouts, Ultrasonic, UltrasonicOptions, UltrasonicOutput};
+pub use ultrasonic::{ideal_reading, EchoReading, EchoTimeouts, Ultrasonic, UltrasonicOptions, UltrasonicOutput};
 
 /// Everything the GPIO layer needs: pins and the logic's options (from `[gpio]` in
 /// config/car.toml, see `config::GpioConfig::options`).

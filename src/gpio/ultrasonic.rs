@@ -113,6 +113,18 @@ pub fn reading_from_edges(trigger_end: f64, rise: Option<f64>, fall: Option<f64>
     }
 }
 
+/// The reading an ideal sensor gives for an obstacle `distance_m` metres away (`None`:
+/// nothing in front), at `temp_c` °C: a pulse of `2 d / c`, or a timeout beyond `timeout_s`.
+/// For the simulator, which knows the true distance, and for tests.
+pub fn ideal_reading(distance_m: Option<f64>, temp_c: f64, timeout_s: f64) -> EchoReading {
+    match distance_m.filter(|d| d.is_finite() && *d >= 0.0) {
+        Some(d) if 2.0 * d / speed_of_sound(temp_c) <= timeout_s => EchoReading::Pulse {
+            width_s: 2.0 * d / speed_of_sound(temp_c),
+        },
+        _ => EchoReading::Timeout,
+    }
+}
+
 /// Distance of one echo pulse of `width_s` seconds, metres, or `None` when it is outside
 /// the plausible range (steps 2-3).
 pub fn echo_distance(width_s: f64, opts: &UltrasonicOptions) -> Option<f64> {
@@ -312,6 +324,30 @@ mod tests {
         assert_eq!(echo_distance(0.0, &o), None);
         assert_eq!(echo_distance(-1.0, &o), None);
         assert_eq!(echo_distance(f64::NAN, &o), None);
+    }
+
+    #[test]
+    fn ideal_readings_round_trip() {
+        let o = UltrasonicOptions {
+            temp_c: 31.0,
+            ..Default::default()
+        };
+        for d in [0.05, 0.35, 1.0, 3.9] {
+            let r = ideal_reading(Some(d), o.temp_c, 0.030);
+            let back = reading_distance(r, &o).unwrap();
+            assert!((back - d).abs() < 1e-12, "{d} -> {r:?} -> {back}");
+        }
+        assert_eq!(ideal_reading(None, 20.0, 0.030), EchoReading::Timeout);
+        assert_eq!(
+            ideal_reading(Some(6.0), 20.0, 0.030),
+            EchoReading::Timeout,
+            "35 ms > 30 ms"
+        );
+        assert_eq!(
+            reading_distance(ideal_reading(Some(4.5), 20.0, 0.030), &o),
+            None,
+            "beyond 4 m"
+        );
     }
 
     #[test]
