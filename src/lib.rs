@@ -17,11 +17,13 @@
 
 pub mod annotate;
 pub mod camera;
+pub mod capture;
 #[cfg(feature = "camera")]
 pub mod camera_source;
 pub mod config;
 pub mod control;
 pub mod detect;
+pub mod drive;
 pub mod gpio;
 pub mod lane;
 pub mod link;

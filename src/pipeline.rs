@@ -312,6 +312,12 @@ impl Pipeline {
         &self.control
     }
 
+    /// The controller, to change gains between frames (a dashboard, a lab); see
+    /// [`crate::drive::Observer::before_frame`].
+    pub fn controller_mut(&mut self) -> &mut Controller {
+        &mut self.control
+    }
+
     /// The behaviour machine (its state and last transition).
     pub fn behaviour(&self) -> &Behaviour {
         &self.behaviour

@@ -4,20 +4,44 @@
 //! too small) is reported as an `Err` for that frame only, so the caller can name it, count
 //! it and go on: one bad frame never ends a run.
 
+use crate::pipeline::GivenBox;
 use image::RgbImage;
 use std::path::{Path, PathBuf};
 
 /// One frame and where it came from.
 #[derive(Debug, Clone)]
 pub struct Frame {
-    /// Position in the sequence (counting frames that failed).
+    /// Position in the sequence (counting frames that failed or were dropped).
     pub index: u64,
-    /// Time since the start of the sequence, seconds.
+    /// Time since the start of the sequence, seconds: the time the pipeline sees (dt).
     pub time_s: f64,
     /// File name or label.
     pub name: String,
     /// The image, resized to the configured camera size.
     pub image: RgbImage,
+    /// When the frame was captured on the caller's clock ([`crate::drive::Clock`]), seconds;
+    /// `None`: the loop takes the time it received the frame.
+    pub captured_s: Option<f64>,
+    /// Ground truth the source knows (the simulator), as JSON: telemetry carries it without
+    /// knowing the simulator's types.
+    pub truth: Option<serde_json::Value>,
+    /// Boxes to use instead of the detector's (the simulator's ground-truth switch).
+    pub given: Option<Vec<GivenBox>>,
+}
+
+impl Frame {
+    /// A frame with no capture time, truth or given boxes.
+    pub fn new(index: u64, time_s: f64, name: String, image: RgbImage) -> Self {
+        Self {
+            index,
+            time_s,
+            name,
+            image,
+            captured_s: None,
+            truth: None,
+            given: None,
+        }
+    }
 }
 
 /// A frame that could not be used.
@@ -30,6 +54,31 @@ pub struct FrameError {
     pub name: String,
     /// What was wrong.
     pub reason: String,
+    /// `true`: no frame arrived in time (a camera that stalled or was unplugged); the loop
+    /// sends neutral and waits. `false`: this one frame is unusable; the loop skips it.
+    pub stalled: bool,
+}
+
+impl FrameError {
+    /// One unusable frame.
+    pub fn bad(index: u64, name: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self {
+            index,
+            name: name.into(),
+            reason: reason.into(),
+            stalled: false,
+        }
+    }
+
+    /// No frame within the stall time.
+    pub fn stalled(index: u64, name: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self {
+            index,
+            name: name.into(),
+            reason: reason.into(),
+            stalled: true,
+        }
+    }
 }
 
 /// A source that cannot start at all.
@@ -187,13 +236,8 @@ impl FrameSource for ReplayDir {
             .map(|n| n.to_string_lossy().to_string())
             .unwrap_or_default();
         Some(match self.load(&path) {
-            Ok(image) => Ok(Frame {
-                index,
-                time_s: index as f64 / self.fps,
-                name,
-                image,
-            }),
-            Err(reason) => Err(FrameError { index, name, reason }),
+            Ok(image) => Ok(Frame::new(index, index as f64 / self.fps, name, image)),
+            Err(reason) => Err(FrameError::bad(index, name, reason)),
         })
     }
 

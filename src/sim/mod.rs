@@ -13,6 +13,7 @@ pub mod plot;
 pub mod render;
 pub mod rng;
 pub mod run;
+pub mod world;
 pub mod scenario_lab;
 pub mod scene;
 pub mod track;
