@@ -161,6 +161,10 @@ pub struct Config {
     pub ranging: RangingConfig,
     /// The behaviour state machine: stop signs, lights, obstacles, lane lost.
     pub behaviour: BehaviourConfig,
+    /// The Raspberry Pi's GPIO: start/stop button, status LED, HC-SR04 ultrasonic brake.
+    pub gpio: GpioConfig,
+    /// Recording on the car (`--record DIR`): JPEG quality, disk budget, segments.
+    pub record: RecordConfig,
 }
 
 /// `[camera]`: the image the pipeline works on and the camera's pose on the car.
@@ -622,6 +626,34 @@ impl Config {
         c.range("behaviour.pass_return_m", b.pass_return_m, 0.1, 50.0);
         c.range("behaviour.lost_throttle", b.lost_throttle, 0.0, 1.0);
         c.range("behaviour.lost_stop_s", b.lost_stop_s, 0.0, 60.0);
+
+        let g = &self.gpio;
+        // BCM GPIO 2..27 are on the 40-pin header; 0 and 1 are reserved for HAT EEPROMs.
+        let mut pins = vec![("gpio.button_pin", g.button_pin), ("gpio.led_pin", g.led_pin)];
+        if g.ultrasonic {
+            pins.push(("gpio.trig_pin", g.trig_pin));
+            pins.push(("gpio.echo_pin", g.echo_pin));
+        }
+        for (i, &(key, pin)) in pins.iter().enumerate() {
+            c.range(key, pin, 2, 27);
+            if let Some(&(first, _)) = pins[..i].iter().find(|(_, p)| *p == pin) {
+                c.fail(key, pin.to_string(), &format!("a pin not already used by {first}"));
+            }
+        }
+        c.range("gpio.debounce_ms", g.debounce_ms, 1.0, 500.0);
+        if g.long_press_ms != 0.0 {
+            c.range("gpio.long_press_ms", g.long_press_ms, 200.0, 10000.0);
+        }
+        c.range("gpio.brake_m", g.brake_m, 0.03, 3.9);
+        c.range("gpio.release_m", g.release_m, g.brake_m.clamp(0.03, 3.9), 4.0);
+        c.range("gpio.sensor_temp_c", g.sensor_temp_c, -20.0, 60.0);
+        c.range("gpio.median_n", g.median_n, 1, 15);
+        c.range("gpio.period_ms", g.period_ms, 60.0, 1000.0);
+
+        let r = &self.record;
+        c.range("record.jpeg_quality", r.jpeg_quality, 1, 100);
+        c.range("record.max_mb", r.max_mb, 1.0, 1_000_000.0);
+        c.range("record.segment_frames", r.segment_frames, 1, 100_000);
 
         if c.0.is_empty() {
             Ok(())
@@ -1123,6 +1155,66 @@ mod tests {
     }
 
     #[test]
+    fn gpio_pin_used_twice_names_both_keys() {
+        let e = Config::from_toml_str("[gpio]\nbutton_pin = 17\nled_pin = 5\nechO_pin = 1\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("gpio.echO_pin") && e.contains("did you mean `echo_pin`"),
+            "{e}"
+        );
+        let e = Config::from_toml_str("[gpio]\nbutton_pin = 23\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "t.toml: gpio.trig_pin = 23 is out of range (allowed: a pin not already used by gpio.button_pin)"
+        );
+        let e = Config::from_toml_str("[gpio]\nled_pin = 24\ntrig_pin = 24\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("gpio.trig_pin = 24") && e.contains("used by gpio.led_pin"),
+            "{e}"
+        );
+        assert!(e.contains("gpio.echo_pin = 24") && e.lines().count() == 2, "{e}");
+        // Without an ultrasonic sensor its pins are free for other uses.
+        Config::from_toml_str("[gpio]\nultrasonic = false\nled_pin = 23\n", "t.toml").unwrap();
+        let e = Config::from_toml_str("[gpio]\nbutton_pin = 40\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "t.toml: gpio.button_pin = 40 is out of range (allowed: 2 ..= 27)");
+    }
+
+    #[test]
+    fn gpio_and_record_ranges() {
+        let bad = [
+            ("gpio.debounce_ms=0", "gpio.debounce_ms"),
+            ("gpio.long_press_ms=50", "gpio.long_press_ms"),
+            ("gpio.release_m=0.2", "gpio.release_m"), // below brake_m
+            ("gpio.brake_m=5", "gpio.brake_m"),
+            ("gpio.sensor_temp_c=90", "gpio.sensor_temp_c"),
+            ("gpio.median_n=0", "gpio.median_n"),
+            ("gpio.period_ms=10", "gpio.period_ms"),
+            ("record.jpeg_quality=0", "record.jpeg_quality"),
+            ("record.jpeg_quality=101", "record.jpeg_quality"),
+            ("record.max_mb=0", "record.max_mb"),
+            ("record.segment_frames=0", "record.segment_frames"),
+        ];
+        for (set, key) in bad {
+            let e = Config::default().with_override(set).unwrap_err().to_string();
+            assert!(e.contains(key), "{set}: {e}");
+        }
+        let g = Config::default().gpio.options();
+        assert_eq!((g.button_pin, g.led_pin, g.trig_pin, g.echo_pin), (17, 27, 23, 24));
+        assert!((g.button.debounce_s - 0.03).abs() < 1e-12 && g.button.long_press_s.is_none());
+        assert!((g.sonar.brake_m - 0.35).abs() < 1e-12 && (g.sonar_period_s - 0.06).abs() < 1e-12);
+        let r = Config::default().record.options();
+        assert_eq!((r.jpeg_quality, r.segment_frames), (90, 300));
+        assert_eq!(r.max_bytes, 2_000_000_000);
+    }
+
+    #[test]
     fn overrides_layer_in_order() {
         let cfg = Config::default().with_override("steering.kp=2.5").unwrap();
         assert_eq!(cfg.steering.kp, 2.5);
@@ -1277,6 +1369,119 @@ impl Default for BehaviourConfig {
             pass_return_m: 3.5,
             lost_throttle: 0.2,
             lost_stop_s: 1.0,
+        }
+    }
+}
+
+/// `[gpio]`: the Raspberry Pi's GPIO (feature `gpio`, src/gpio/): a start/stop push button, a
+/// status LED and an HC-SR04 ultrasonic sensor as an emergency brake. Pins are BCM numbers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GpioConfig {
+    /// Use the GPIO at all (false on a desk computer).
+    pub enabled: bool,
+    /// Push button to ground, BCM pin (internal pull-up).
+    pub button_pin: u8,
+    /// Status LED with its resistor, BCM pin.
+    pub led_pin: u8,
+    /// An HC-SR04 is wired (false: no ultrasonic brake; its pins are not used).
+    pub ultrasonic: bool,
+    /// HC-SR04 TRIG, BCM pin.
+    pub trig_pin: u8,
+    /// HC-SR04 ECHO through a 5 V -> 3.3 V divider, BCM pin.
+    pub echo_pin: u8,
+    /// A button level must hold this long to count, milliseconds.
+    pub debounce_ms: f64,
+    /// Holding the button this long is a long press, milliseconds (0 = off).
+    pub long_press_ms: f64,
+    /// Brake when the ultrasonic distance is nearer than this, metres.
+    pub brake_m: f64,
+    /// Release the brake beyond this distance, metres (> brake_m).
+    pub release_m: f64,
+    /// Air temperature at the sensor, degrees Celsius (speed of sound).
+    pub sensor_temp_c: f64,
+    /// Ultrasonic readings in the median filter.
+    pub median_n: u32,
+    /// Time between two ultrasonic measurements, milliseconds.
+    pub period_ms: f64,
+}
+
+impl Default for GpioConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            button_pin: 17,
+            led_pin: 27,
+            ultrasonic: true,
+            trig_pin: 23,
+            echo_pin: 24,
+            debounce_ms: 30.0,
+            long_press_ms: 0.0,
+            brake_m: 0.35,
+            release_m: 0.50,
+            sensor_temp_c: 20.0,
+            median_n: 3,
+            period_ms: 60.0,
+        }
+    }
+}
+
+impl GpioConfig {
+    /// The GPIO layer's options (ms -> s; the sensor's fixed limits from its datasheet).
+    pub fn options(&self) -> crate::gpio::GpioOptions {
+        use crate::gpio::{ButtonOptions, EchoTimeouts, GpioOptions, UltrasonicOptions};
+        GpioOptions {
+            button_pin: self.button_pin,
+            led_pin: self.led_pin,
+            ultrasonic: self.ultrasonic,
+            trig_pin: self.trig_pin,
+            echo_pin: self.echo_pin,
+            button: ButtonOptions {
+                debounce_s: self.debounce_ms / 1000.0,
+                long_press_s: (self.long_press_ms > 0.0).then_some(self.long_press_ms / 1000.0),
+            },
+            sonar: UltrasonicOptions {
+                temp_c: self.sensor_temp_c,
+                median_n: self.median_n as usize,
+                brake_m: self.brake_m,
+                release_m: self.release_m,
+                ..UltrasonicOptions::default()
+            },
+            sonar_period_s: self.period_ms / 1000.0,
+            timeouts: EchoTimeouts::default(),
+        }
+    }
+}
+
+/// `[record]`: recording frames and telemetry on the car (src/record.rs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RecordConfig {
+    /// JPEG quality of recorded frames, 1..=100.
+    pub jpeg_quality: u8,
+    /// Disk budget of one recording, megabytes (10^6 bytes); the oldest frames go first.
+    pub max_mb: f64,
+    /// Frames per segment folder (the unit that is deleted when over budget).
+    pub segment_frames: u32,
+}
+
+impl Default for RecordConfig {
+    fn default() -> Self {
+        Self {
+            jpeg_quality: 90,
+            max_mb: 2000.0,
+            segment_frames: 300,
+        }
+    }
+}
+
+impl RecordConfig {
+    /// The recorder's options.
+    pub fn options(&self) -> crate::record::RecordOptions {
+        crate::record::RecordOptions {
+            jpeg_quality: self.jpeg_quality,
+            max_bytes: (self.max_mb * 1e6).round() as u64,
+            segment_frames: self.segment_frames,
         }
     }
 }

@@ -142,7 +142,8 @@ fn is_frame_file(p: &Path) -> bool {
 }
 
 impl ReplayDir {
-    /// Lists `dir`. Frames are `1/fps` seconds apart and resized to `width × height`; a frame
+    /// Lists `dir`: its PNG/JPEG files in name order, then the frames of its segment folders
+    /// `seg_*` (a recording, see `record`), folder by folder. Frames are `1/fps` seconds apart and resized to `width × height`; a frame
     /// smaller than `min_size` (the ROI's extent) is refused rather than blown up.
     pub fn open(dir: &Path, fps: f64, width: u32, height: u32, min_size: (u32, u32)) -> Result<Self, SourceError> {
         let entries = std::fs::read_dir(dir).map_err(|error| SourceError::Io {
@@ -151,6 +152,7 @@ impl ReplayDir {
         })?;
         let mut files = Vec::new();
         let mut ignored = Vec::new();
+        let mut segments = Vec::new();
         for e in entries {
             let e = e.map_err(|error| SourceError::Io {
                 path: dir.into(),
@@ -158,7 +160,14 @@ impl ReplayDir {
             })?;
             let p = e.path();
             let name = escape_name(&e.file_name());
-            if name.starts_with('.') || p.is_dir() {
+            if name.starts_with('.') {
+                continue;
+            }
+            if p.is_dir() {
+                // A recording (src/record.rs) keeps its frames in segment folders seg_NNNNNN.
+                if name.starts_with(crate::record::SEGMENT_PREFIX) {
+                    segments.push(p);
+                }
                 continue;
             }
             if is_frame_file(&p) {
@@ -167,10 +176,25 @@ impl ReplayDir {
                 ignored.push(name);
             }
         }
+        files.sort();
+        // Then each segment's frames, segments in name (= time) order.
+        segments.sort();
+        for seg in &segments {
+            let entries = std::fs::read_dir(seg).map_err(|error| SourceError::Io {
+                path: seg.clone(),
+                error,
+            })?;
+            let mut in_seg: Vec<PathBuf> = entries
+                .flatten()
+                .map(|e| e.path())
+                .filter(|p| is_frame_file(p) && !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with('.')))
+                .collect();
+            in_seg.sort();
+            files.extend(in_seg);
+        }
         if files.is_empty() {
             return Err(SourceError::Empty(dir.into()));
         }
-        files.sort();
         ignored.sort();
         Ok(Self {
             files,

@@ -76,6 +76,7 @@ stage link-hil cargo test --release --features serial --test link_hil
 # (one test at a time: each needs a core for the emulator on the wall clock; ~5 min)
 stage drive-fil cargo test --release --features serial --test drive_fil --test drive_cli -- --test-threads 1
 stage camera cargo test --release --features camera --lib camera_source
+stage gpio cargo test --release --features gpio --lib gpio
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
 
