@@ -18,6 +18,7 @@ DEB_PACKAGES=(
   libclang-dev                                 # the `camera` feature (nokhwa's V4L2 bindings)
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
   socat                                        # a silent pty pair for rccar drive's bad-port test
+  rustc-web cargo-web libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user  # cross stage (Pi)
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   missing=()
@@ -25,6 +26,8 @@ if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   if [ ${#missing[@]} -gt 0 ]; then
     echo "== installing Debian packages: ${missing[*]}"
     SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO=sudo
+    # :arm64 packages need arm64 as a foreign architecture (only arm64: armhf broke apt once)
+    case " ${missing[*]}" in *:arm64*) dpkg --print-foreign-architectures | grep -qx arm64 || $SUDO dpkg --add-architecture arm64 ;; esac
     $SUDO apt-get update -qq && $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null \
       || { echo "apt-get install failed"; exit 1; }
   fi
@@ -79,6 +82,7 @@ stage camera cargo test --release --features camera --lib camera_source
 stage gpio cargo test --release --features gpio --lib gpio
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
+stage cross bash tests/cross/run.sh
 
 echo
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi
