@@ -16,6 +16,7 @@
 //! passed in, so every test is deterministic.
 
 pub mod annotate;
+pub mod calib;
 pub mod camera;
 #[cfg(feature = "camera")]
 pub mod camera_source;
