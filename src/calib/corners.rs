@@ -48,7 +48,7 @@ impl std::str::FromStr for BoardSize {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CornerOptions {
     /// Half size of the search window, pixels (OpenCV's `winSize` = (11, 11) → 11). It is
-    /// reduced to the board's smallest corner spacing minus 2 when that is smaller.
+    /// reduced to 0.55 × the board's smallest corner spacing when that is smaller.
     pub subpix_win: usize,
     /// Most iterations.
     pub max_iter: usize,
@@ -231,10 +231,10 @@ pub fn find_chessboard(img: &GrayImage, board: BoardSize, opts: &CornerOptions) 
         }
         orient(&mut g);
         let mut pts: Vec<[f64; 2]> = g.into_iter().flatten().collect();
-        // 5. Sub-pixel refinement; the window is shrunk only when it would reach the next
-        //    corner (OpenCV keeps the caller's window whatever the board's size).
+        // 5. Sub-pixel refinement; the window is shrunk when it would reach well past half
+        //    way to the next corner (OpenCV keeps the caller's window whatever the board).
         let spacing = min_spacing(&pts, board);
-        let win = opts.subpix_win.min((spacing - 2.0).max(2.0) as usize).max(2);
+        let win = opts.subpix_win.min((0.55 * spacing) as usize).max(2);
         corner_subpix(img, &mut pts, win, opts.max_iter, opts.eps);
         return Some(pts);
     }

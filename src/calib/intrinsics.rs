@@ -97,11 +97,26 @@ pub fn rodrigues(r: [f64; 3]) -> Matrix3<f64> {
     Matrix3::identity() + kx * th.sin() + kx * kx * (1.0 - th.cos())
 }
 
-/// Rotation matrix → Rodrigues vector.
+/// Rotation matrix → Rodrigues vector (as OpenCV: first order near 0, the axis from R + I
+/// near π).
 pub fn rodrigues_inv(m: &Matrix3<f64>) -> [f64; 3] {
-    let rot = nalgebra::Rotation3::from_matrix(m);
-    let v = rot.scaled_axis();
-    [v[0], v[1], v[2]]
+    let v = [m[(2, 1)] - m[(1, 2)], m[(0, 2)] - m[(2, 0)], m[(1, 0)] - m[(0, 1)]];
+    let s = 0.5 * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let c = (0.5 * (m.trace() - 1.0)).clamp(-1.0, 1.0);
+    if s < 1e-5 {
+        if c > 0.0 {
+            return [v[0] / 2.0, v[1] / 2.0, v[2] / 2.0];
+        }
+        // θ ≈ π: the axis is a column of (R + I)/2.
+        let t = (m + Matrix3::identity()) * 0.5;
+        let k = (0..3).max_by(|&a, &b| t[(a, a)].total_cmp(&t[(b, b)])).unwrap_or(0);
+        let axis = t.column(k) / t[(k, k)].max(1e-300).sqrt();
+        let a = axis.normalize() * std::f64::consts::PI;
+        return [a[0], a[1], a[2]];
+    }
+    let th = s.atan2(c);
+    let k = th / (2.0 * s);
+    [v[0] * k, v[1] * k, v[2] * k]
 }
 
 /// Projects a point given in a board frame through `pose`, the lens and `k`; pixels.
