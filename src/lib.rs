@@ -30,5 +30,6 @@ pub mod ranging;
 pub mod sim;
 pub mod sink;
 pub mod source;
+pub mod stereo;
 pub mod telemetry;
 pub mod timing;
