@@ -16,6 +16,7 @@
 //! passed in, so every test is deterministic.
 
 pub mod annotate;
+pub mod calib;
 pub mod camera;
 pub mod capture;
 #[cfg(feature = "camera")]
@@ -33,5 +34,6 @@ pub mod record;
 pub mod sim;
 pub mod sink;
 pub mod source;
+pub mod stereo;
 pub mod telemetry;
 pub mod timing;

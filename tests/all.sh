@@ -19,6 +19,7 @@ DEB_PACKAGES=(
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
   socat                                        # a silent pty pair for rccar drive's bad-port test
   rustc-web cargo-web libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user  # cross stage (Pi)
+  opencv-doc                                   # OpenCV's stereo chessboard pairs (calib parity stage)
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   missing=()
@@ -83,6 +84,7 @@ stage gpio cargo test --release --features gpio --lib gpio
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
 stage cross bash tests/cross/run.sh
+stage calib-parity "$RCCAR_PYTHON" tests/parity/calib_parity.py
 
 echo
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi

@@ -27,6 +27,10 @@ use std::process::ExitCode;
 pub enum CalibrateCmd {
     /// Fit tilt and v0 (and a_y) of monocular ranging to measured pairs.
     Ranging(RangingArgs),
+    /// Intrinsics and lens distortion of one camera from checkerboard photos (JSON results).
+    Camera(super::calib_board::CameraArgs),
+    /// A stereo pair from checkerboard photo pairs: both cameras, R, T, rectification.
+    Stereo(super::calib_board::StereoArgs),
 }
 
 /// `rccar calibrate ranging` flags.
@@ -74,6 +78,8 @@ pub struct RangingArgs {
 pub fn run(c: CalibrateCmd) -> Result<ExitCode> {
     match c {
         CalibrateCmd::Ranging(a) => ranging(a),
+        CalibrateCmd::Camera(a) => super::calib_board::run_camera(a),
+        CalibrateCmd::Stereo(a) => super::calib_board::run_stereo(a),
     }
 }
 
