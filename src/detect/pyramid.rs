@@ -117,19 +117,14 @@ impl Pyramid {
         }
         self.key = None;
         self.plans.clear();
-        let frame = Rect::new(0, 0, width as i32, height as i32);
         for (i, d) in dets.iter().enumerate() {
             let scales = d.scales_for(width, height, &params[i])?;
-            let region = match regions[i] {
-                None => None,
-                Some(r) => {
-                    let c = r.intersect(&frame);
-                    if c.area() == 0 {
-                        continue;
-                    }
-                    Some(c)
-                }
-            };
+            // Not clipped to the frame: OpenCV's rounded boxes may reach a pixel past it, and a
+            // region covering the frame must keep them as no region does.
+            let region = regions[i];
+            if region.is_some_and(|r| r.width <= 0 || r.height <= 0) {
+                continue;
+            }
             for sc in scales {
                 let level = Level::new(sc, width, height);
                 let Some(win) = d.window_range(&level, region) else {
