@@ -153,11 +153,18 @@ impl DetectStage {
         }
     }
 
-    /// Runs every cascade on a colour frame (the pipeline's input): grey conversion into a
-    /// reused buffer, then [`DetectStage::run`] with the light reading enabled.
+    /// Runs every cascade on a colour frame (the pipeline's input): grey conversion of the rows
+    /// the pyramid reads ([`DetectStage::rows_needed`]) into a reused buffer, then
+    /// [`DetectStage::run`] with the light reading enabled.
     pub fn run_rgb(&mut self, rgb: &RgbImage) -> Result<Vec<DetectedObject>, DetectError> {
         let mut gray = std::mem::take(&mut self.gray);
-        gray_from_rgb(rgb, &mut gray);
+        if gray.dimensions() != rgb.dimensions() {
+            gray = GrayImage::new(rgb.width(), rgb.height());
+        }
+        let spans = self.rows_needed(rgb.width(), rgb.height());
+        for r in spans {
+            crate::lane::warp::rgb_to_gray_rows(rgb, &mut gray, r.start as u32..r.end as u32);
+        }
         let out = self.run(&gray, Some(rgb));
         self.gray = gray;
         out
