@@ -890,10 +890,10 @@ impl Default for DetectConfig {
             stop_sign_region: [0.45, 0.0, 1.0, 0.6],
             traffic_light_region: [0.45, 0.0, 1.0, 0.6],
             obstacle_region: [0.0, 0.08, 1.0, 1.0],
-            range_m: [0.2, 2.0],
-            stop_sign_box_m: [0.10, 0.16],
-            traffic_light_box_m: [0.055, 0.10],
-            obstacle_box_m: [0.10, 0.45],
+            range_m: [0.2, 1.6],
+            stop_sign_box_m: [0.11, 0.16],
+            traffic_light_box_m: [0.065, 0.10],
+            obstacle_box_m: [0.18, 0.45],
         }
     }
 }
