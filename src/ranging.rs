@@ -16,6 +16,28 @@
 //! `z = 0` this is Eq. 5 itself. (The alternative, finding the post's foot in the image, needs
 //! the post to be visible and segmented; the known mounting height needs one tape measure.)
 //!
+//! **Detector boxes** ([`BoxRanging::range_detector`]). A cascade's box is the object's face
+//! outline (plus the training margin `m`), widened to the cascade window's aspect, at a size
+//! and position quantised by the detector's scale steps. Two cues, both from the pinhole
+//! model with the tilt (camera frame: depth along the optical axis of a point `z` above the
+//! floor at forward distance `d` is `Z = d·cos α + (h − z)·sin α`):
+//!
+//! ```text
+//!     width:  w_px = f·W / Z(z_top)                      (a fronto-parallel edge of width W)
+//!     height: h_px = f·H·d / (Z(z_b)·Z(z_t))             (a vertical edge from z_b to z_t)
+//!     box:    h_box = m·max(h_px, w_px / aspect),  centre row = (v(z_b) + v(z_t)) / 2,
+//!             v(z) = v0 + a_y·tan(atan((h − z)/d) − α)   (Eq. 5 inverted)
+//! ```
+//!
+//! (the height formula is the difference of two Eq. 5 rows: `tan(a − α) = (k − d·t)/(d + k·t)`
+//! with `k = h − z`, `t = tan α`, and `d + k·t = Z / cos α`). The distance that reproduces the
+//! box's height and the one that reproduces its centre row (or, for an obstacle of unknown
+//! size, Eq. 5 on the outline's bottom row `v_c + h_box/(2m)` at the contact height) are fused
+//! by inverse variance, `d = Σ(d_i/σ_i²) / Σ(1/σ_i²)`, `σ_d² = 1 / Σ(1/σ_i²)`, each `σ_i`
+//! from the box noise through the cue's derivative. [`BoxRanging::range_refined`] does the
+//! same on a pixel-sharp colour outline found inside the box (src/ranging/refine.rs), and
+//! [`track`] follows each object across frames (Kalman filter, odometry as control input).
+//!
 //! Calibration ([`fit`]) finds `α` and `v0` (and optionally `a_y`) from measured pairs
 //! (box-bottom row, true distance) by nonlinear least squares (Gauss–Newton with a
 //! Levenberg–Marquardt damping), minimising the error in the predicted *row*, where the pixel
@@ -767,6 +789,60 @@ mod tests {
             fit(&[p, p, bad], nominal(), FitOptions::default()),
             Err(FitError::BadPair { index: 2, .. })
         ));
+    }
+
+    fn box_ranging() -> BoxRanging {
+        BoxRanging::from_config(&CameraConfig::default(), &crate::config::RangingConfig::default())
+    }
+
+    #[test]
+    fn the_height_formula_is_the_difference_of_two_eq5_rows() {
+        let b = box_ranging();
+        let f = b.camera.f_px;
+        for &d in &[0.3, 0.7, 1.5] {
+            let (zb, zt) = (0.10, 0.22);
+            let rows = b.tilt.row(d, zb) - b.tilt.row(d, zt);
+            let formula = f * (zt - zb) * d / (b.depth(d, zb) * b.depth(d, zt));
+            assert!((rows - formula).abs() < 1e-9, "{rows} vs {formula}");
+        }
+    }
+
+    #[test]
+    fn a_box_the_model_predicts_is_ranged_back_to_its_distance() {
+        let b = box_ranging();
+        for class in [ObjectClass::StopSign, ObjectClass::TrafficLight, ObjectClass::Obstacle] {
+            for &d in &[0.3, 0.8, 1.5] {
+                let aspect = if class == ObjectClass::TrafficLight { 0.4 } else { 1.25 };
+                let cb = b.classes[class as usize];
+                let (h, c) = b.predicted_box(class, d, aspect);
+                // An obstacle (size unknown): a box whose outline bottom is on Eq. 5's row.
+                let c = c.unwrap_or_else(|| b.tilt.row(d, cb.bottom_m) - h / (2.0 * cb.margin));
+                let u = b.camera.u0;
+                let bbox = [u - aspect * h / 2.0, c - h / 2.0, u + aspect * h / 2.0, c + h / 2.0];
+                let r = b.range_detector(class, bbox).unwrap();
+                assert!((r.distance_m - d).abs() < 1e-6 * d, "{class:?} at {d}: {r:?}");
+                assert!(r.sigma_m > 0.0 && r.sigma_m < 0.2 * d);
+                // Fusion never gives more weight than the better cue deserves.
+                let best = [r.by_size, r.by_row].into_iter().flatten().map(|c| c.1).fold(f64::INFINITY, f64::min);
+                assert!(r.sigma_m <= best + 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn an_exact_colour_outline_is_ranged_back_to_its_distance() {
+        let b = box_ranging();
+        let cam = b.camera;
+        for &d in &[0.3, 0.8, 1.5] {
+            // A sign's red area: 0.09 m square centred 0.17 m up, straight ahead.
+            let (_, t) = cam.project([d, 0.045, 0.215]).unwrap();
+            let (r, _) = cam.project([d, -0.045, 0.17]).unwrap();
+            let (_, bo) = cam.project([d, 0.0, 0.125]).unwrap();
+            // The widest row is the centre: use its width, the face's top and bottom rows.
+            let (l2, _) = cam.project([d, 0.045, 0.17]).unwrap();
+            let got = b.range_refined(ObjectClass::StopSign, [l2, t, r, bo]).unwrap();
+            assert!(((got.distance_m - d) / d).abs() < 1e-3, "at {d}: {got:?}");
+        }
     }
 
     #[test]

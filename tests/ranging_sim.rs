@@ -5,8 +5,13 @@
 //!
 //! Boxes: the objects' true image boxes (the simulator's renderer, a sign's face and a light's
 //! housing as a detector boxes them), with the bottom edge snapped to the pixel grid as a
-//! detector reports it (`y + h − 0.5`). The shipped cascades were not trained yet when this
-//! was written; with them, the detector's box-bottom error adds to this.
+//! detector reports it (`y + h − 0.5`).
+//!
+//! Issue 13's "must show": the same from the shipped cascades' own boxes over an approach,
+//! 0.3–1.5 m: single-box and tracked ranges (src/ranging.rs face model + colour refinement,
+//! src/ranging/track.rs), detection on every 1st, 2nd and 3rd frame; and the pipeline
+//! reporting tracked objects between detections. `detector_boxes_against_the_face_model`
+//! (ignored) prints the CSV the box margins in `[ranging]` were measured from.
 //!
 //! Reference: the true forward distance from the lens to the point the box bottom stands for
 //! (an obstacle's near face, a sign's face, a light's housing front), from the car's true pose.
@@ -295,10 +300,11 @@ fn approach(kind: &str, stage: &mut rccar::detect::DetectStage, from: f64, to: f
 /// Issue 13's target: ranging from the shipped cascades' boxes, 0.3–1.5 m, every class:
 /// median |error| ≤ 3%, max ≤ 6% — for the *tracked* distance (what the behaviours get), over
 /// an approach at 0.5 m/s with a detection on every frame and on every 2nd (the default
-/// `detect.every_n_frames`), odometry 5% short (dead reckoning is not exact). The single-box
-/// (per-frame) figures are printed beside them: they are worse, and not asserted beyond 10%.
+/// `detect.every_n_frames`; every 3rd is printed too), odometry 5% short (dead reckoning is
+/// not exact). The single-box (per-frame) figures are printed beside them: they are worse
+/// (the sign's worst single box is ~7%), and asserted at median ≤ 3%, max ≤ 10%.
 ///
-/// Runs in ~25 s in release (about 240 rendered and detected frames).
+/// Runs in ~15 s in release (about 260 rendered and detected frames).
 #[test]
 fn ranging_accuracy_with_the_detectors_boxes() {
     use rccar::ranging::track::{Measurement, Tracker, TrackerOptions};
@@ -409,7 +415,8 @@ fn ranging_accuracy_with_the_detectors_boxes() {
                 100.0 * x,
                 100.0 * within_2sigma
             );
-            if rel.len() * 10 < in_range.len() * 9 || m > 0.03 || x > 0.06 {
+            // Every 3rd frame is printed for comparison (the default is every 2nd), not asserted.
+            if every_n <= 2 && (rel.len() * 10 < in_range.len() * 9 || m > 0.03 || x > 0.06) {
                 failed.push(format!("{kind} tracked every {every_n}: median {m:.4}, max {x:.4}"));
             }
         }
