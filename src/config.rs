@@ -598,6 +598,7 @@ impl Config {
                 c.fail(key, format!("{b:?}"), "[min, max] metres, 0 < min <= max <= 5");
             }
         }
+        c.range("detect.every_n_frames", d.every_n_frames, 1, 30);
 
         let r = &self.ranging;
         c.range("ranging.v0_offset_px", r.v0_offset_px, -200.0, 200.0);
@@ -605,6 +606,23 @@ impl Config {
         c.range("ranging.stop_sign_bottom_m", r.stop_sign_bottom_m, 0.0, 3.0);
         c.range("ranging.traffic_light_bottom_m", r.traffic_light_bottom_m, 0.0, 3.0);
         c.range("ranging.obstacle_bottom_m", r.obstacle_bottom_m, 0.0, 3.0);
+        for (key, v) in [
+            ("ranging.stop_sign_size_m", r.stop_sign_size_m),
+            ("ranging.traffic_light_size_m", r.traffic_light_size_m),
+            ("ranging.obstacle_size_m", r.obstacle_size_m),
+        ] {
+            c.range(&format!("{key}[0]"), v[0], 0.0, 3.0);
+            c.range(&format!("{key}[1]"), v[1], 0.0, 3.0);
+        }
+        c.range("ranging.stop_sign_box_margin", r.stop_sign_box_margin, 0.5, 3.0);
+        c.range("ranging.traffic_light_box_margin", r.traffic_light_box_margin, 0.5, 3.0);
+        c.range("ranging.obstacle_box_margin", r.obstacle_box_margin, 0.5, 3.0);
+        c.range("ranging.box_centre_sigma_px", r.box_centre_sigma_px, 0.01, 100.0);
+        c.range("ranging.box_size_sigma", r.box_size_sigma, 0.001, 1.0);
+        c.range("ranging.track_accel_sigma", r.track_accel_sigma, 0.0, 100.0);
+        c.range("ranging.track_odometry_sigma", r.track_odometry_sigma, 0.0, 1.0);
+        c.range("ranging.track_max_missed", r.track_max_missed, 0, 100);
+        c.range("ranging.stop_sign_red_fraction", r.stop_sign_red_fraction, 0.1, 1.0);
         if r.stop_sign_bottom_m >= self.camera.height_m || r.traffic_light_bottom_m >= self.camera.height_m {
             c.fail(
                 "ranging.stop_sign_bottom_m",
@@ -1283,6 +1301,9 @@ pub struct DetectConfig {
     pub traffic_light_box_m: [f64; 2],
     /// Width of an obstacle box, [min, max] metres.
     pub obstacle_box_m: [f64; 2],
+    /// Run the cascades on every Nth frame only; the object tracker (src/ranging/track.rs)
+    /// predicts boxes and ranges from odometry on the frames between. 1 = every frame.
+    pub every_n_frames: u32,
 }
 
 impl Default for DetectConfig {
@@ -1302,6 +1323,7 @@ impl Default for DetectConfig {
             stop_sign_box_m: [0.11, 0.16],
             traffic_light_box_m: [0.065, 0.10],
             obstacle_box_m: [0.18, 0.45],
+            every_n_frames: 2,
         }
     }
 }
@@ -1321,6 +1343,33 @@ pub struct RangingConfig {
     pub traffic_light_bottom_m: f64,
     /// Height of an obstacle box's bottom edge, metres (0: it stands on the floor).
     pub obstacle_bottom_m: f64,
+    /// [width, height] of the face a stop-sign box frames, metres (0 = unknown: not used).
+    pub stop_sign_size_m: [f64; 2],
+    /// [width, height] of the face a traffic-light box frames (the housing), metres.
+    pub traffic_light_size_m: [f64; 2],
+    /// [width, height] of an obstacle's face, metres (0, 0: obstacles differ; contact row only).
+    pub obstacle_size_m: [f64; 2],
+    /// A stop-sign detector box's size over the face's outline (the training margin).
+    pub stop_sign_box_margin: f64,
+    /// A traffic-light detector box's size over the housing's outline.
+    pub traffic_light_box_margin: f64,
+    /// An obstacle detector box's size over the obstacle's outline.
+    pub obstacle_box_margin: f64,
+    /// σ of a detector box's centre row, pixels.
+    pub box_centre_sigma_px: f64,
+    /// σ of a detector box's size, relative.
+    pub box_size_sigma: f64,
+    /// Object tracker: σ of an object's own acceleration along the line of sight, m/s².
+    pub track_accel_sigma: f64,
+    /// Object tracker: σ of the odometry's distance per frame, relative to that distance.
+    pub track_odometry_sigma: f64,
+    /// Object tracker: a track not matched on this many detection frames in a row is dropped.
+    pub track_max_missed: u32,
+    /// Refine stop-sign and traffic-light boxes by colour (red area, dark housing) before
+    /// ranging them.
+    pub refine_by_colour: bool,
+    /// Share of a stop sign's face (across the flats) that is red inside its white rim.
+    pub stop_sign_red_fraction: f64,
 }
 
 impl Default for RangingConfig {
@@ -1331,6 +1380,19 @@ impl Default for RangingConfig {
             stop_sign_bottom_m: 0.12,
             traffic_light_bottom_m: 0.10,
             obstacle_bottom_m: 0.0,
+            stop_sign_size_m: [0.10, 0.10],
+            traffic_light_size_m: [0.0, 0.12],
+            obstacle_size_m: [0.0, 0.0],
+            stop_sign_box_margin: 1.085,
+            traffic_light_box_margin: 1.21,
+            obstacle_box_margin: 1.36,
+            box_centre_sigma_px: 1.0,
+            box_size_sigma: 0.06,
+            track_accel_sigma: 0.5,
+            track_odometry_sigma: 0.1,
+            track_max_missed: 3,
+            refine_by_colour: true,
+            stop_sign_red_fraction: 0.9,
         }
     }
 }
