@@ -113,6 +113,8 @@ pub struct Config {
     pub ranging: RangingConfig,
     /// The behaviour state machine: stop signs, lights, obstacles, lane lost.
     pub behaviour: BehaviourConfig,
+    /// `[dashboard]`: the live page of `sim|drive --dashboard`.
+    pub dashboard: DashboardConfig,
 }
 
 /// `[camera]`: the image the pipeline works on and the camera's pose on the car.
@@ -302,6 +304,34 @@ pub struct ReplayConfig {
 impl Default for ReplayConfig {
     fn default() -> Self {
         Self { annotate: true }
+    }
+}
+
+/// `[dashboard]`: the live page of `rccar sim|drive --dashboard` (issue 11).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DashboardConfig {
+    /// Address to listen on (`--listen` overrides). Anything but 127.0.0.1 / ::1 needs the token.
+    pub listen: String,
+    /// Access token for a dashboard on another address; empty = a random one printed at start.
+    pub token: String,
+    /// Disarm when the page that armed the car sends no heartbeat for this long, ms (0 = never).
+    pub heartbeat_ms: u64,
+    /// Frames per second sent to the viewers (the loop publishes at most this often).
+    pub stream_fps: f64,
+    /// Concurrent stream viewers; more get 503.
+    pub max_viewers: u32,
+}
+
+impl Default for DashboardConfig {
+    fn default() -> Self {
+        Self {
+            listen: "127.0.0.1:8080".into(),
+            token: String::new(),
+            heartbeat_ms: 1000,
+            stream_fps: 15.0,
+            max_viewers: 32,
+        }
     }
 }
 
@@ -548,6 +578,17 @@ impl Config {
         c.range("behaviour.pass_return_m", b.pass_return_m, 0.1, 50.0);
         c.range("behaviour.lost_throttle", b.lost_throttle, 0.0, 1.0);
         c.range("behaviour.lost_stop_s", b.lost_stop_s, 0.0, 60.0);
+
+        let d = &self.dashboard;
+        if d.listen.parse::<std::net::SocketAddr>().is_err() {
+            c.fail("dashboard.listen", format!("{:?}", d.listen), "IP:PORT, e.g. 127.0.0.1:8080");
+        }
+        if !d.token.is_empty() && (d.token.len() < 8 || !d.token.chars().all(|ch| ch.is_ascii_alphanumeric())) {
+            c.fail("dashboard.token", "(hidden)".into(), "empty, or 8+ letters and digits");
+        }
+        c.range("dashboard.heartbeat_ms", d.heartbeat_ms, 0, 60_000);
+        c.range("dashboard.stream_fps", d.stream_fps, 1.0, 60.0);
+        c.range("dashboard.max_viewers", d.max_viewers, 1, 256);
 
         if c.0.is_empty() {
             Ok(())

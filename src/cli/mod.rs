@@ -4,6 +4,7 @@
 pub mod calibrate;
 pub mod common;
 pub mod config;
+pub mod dashboard;
 pub mod detect;
 pub mod drive;
 pub mod link;
