@@ -85,12 +85,13 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
 
     let stop = super::signals::install();
     let world = World::new(&cfg, Arc::new(Scene::new(&track)))?.shared();
-    let mut camera = SimCamera::new(world.clone());
+    // With a dashboard the operator ends the run (a parked, disarmed car is not "stalled").
+    let mut camera = SimCamera::new(world.clone()).ending_with_world(!a.dash.dashboard);
     // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
     let fps = cfg.camera.fps;
     let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local.clone(), Some(world.clone()), &stop, Some(fps))?;
     let mut vehicle = dash.sink(SimVehicle::new(world.clone()));
-    let mut score = SimScore::new(world.clone());
+    let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
     let mut pipeline = Pipeline::new(&cfg)?;
     if a.truth_boxes {
         println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");

@@ -50,10 +50,20 @@ pub fn set_keys(text: &str, keys: &[(String, f64)], path: &str) -> Result<String
                 why: "expected section.key".into(),
             });
         };
-        let root = doc.as_table_mut();
-        if !root.contains_key(section) {
-            root.insert(section, Item::Table(Table::new()));
+        if !doc.as_table().contains_key(section) {
+            let mut t = Table::new();
+            // A file of comments only keeps them on top (toml_edit holds them as the
+            // document's trailing text, which would otherwise end up below the new table).
+            if doc.as_table().is_empty() {
+                let lead = doc.trailing().as_str().unwrap_or("").to_string();
+                if !lead.trim().is_empty() {
+                    t.decor_mut().set_prefix(lead);
+                    doc.set_trailing("");
+                }
+            }
+            doc.as_table_mut().insert(section, Item::Table(t));
         }
+        let root = doc.as_table_mut();
         let Some(tab) = root.get_mut(section).and_then(Item::as_table_like_mut) else {
             return Err(SaveError::Key {
                 path: path.into(),
@@ -105,6 +115,14 @@ mod tests {
         assert!(out.contains("[throttle]\nbase = 0.3\n"), "{out}");
         let back: toml::Table = out.parse().unwrap();
         assert_eq!(back["steering"]["kp"].as_float(), Some(0.9));
+    }
+
+    #[test]
+    fn a_comment_only_file_keeps_its_comment_on_top() {
+        let out = set_keys("# mine\n", &[("steering.kp".into(), 1.05)], "l.toml").unwrap();
+        assert_eq!(out, "# mine\n[steering]\nkp = 1.05\n");
+        let out = set_keys("", &[("steering.kp".into(), 1.05)], "l.toml").unwrap();
+        assert_eq!(out, "[steering]\nkp = 1.05\n");
     }
 
     #[test]

@@ -156,6 +156,7 @@ impl Pacer {
 pub struct Dash {
     obs: Option<DashObserver>,
     pacer: Option<Pacer>,
+    max_s: Option<f64>,
     /// Arming and e-stop shared by the page, the gate and the heartbeat watchdog.
     pub arm: Arc<ArmState>,
     sent: Arc<Sent>,
@@ -171,6 +172,7 @@ impl Dash {
         Dash {
             obs: None,
             pacer: None,
+            max_s: None,
             arm,
             sent: Sent::new(),
             #[cfg(feature = "dashboard")]
@@ -202,6 +204,7 @@ impl Dash {
             let listen = a.listen.clone().unwrap_or_else(|| cfg.dashboard.listen.clone());
             let arm = ArmState::new();
             let sent = Sent::new();
+            let world_given = world.is_some();
             let (slot, tx, obs) = rccar::dashboard::channel(cfg, world.clone(), Some(stop.clone()));
             let srv = server::Server::start(server::Options {
                 listen,
@@ -216,6 +219,7 @@ impl Dash {
             })?;
             Ok(Dash {
                 obs: Some(obs),
+                max_s: world_given.then_some(cfg.sim.max_seconds),
                 pacer: pace_fps.map(|f| Pacer {
                     period: Duration::from_secs_f64(1.0 / f.max(1.0)),
                     next: None,
@@ -265,10 +269,15 @@ impl Observer for Dash {
         f
     }
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
-        match &mut self.obs {
-            Some(o) => o.on_frame(ctx),
-            None => Ok(Flow::Continue),
-        }
+        let f = match &mut self.obs {
+            Some(o) => o.on_frame(ctx)?,
+            None => Flow::Continue,
+        };
+        // The simulator under a dashboard ends at `sim.max_seconds` (`--seconds`) only.
+        Ok(match self.max_s {
+            Some(m) if ctx.frame.time_s >= m => Flow::Stop,
+            _ => f,
+        })
     }
     fn on_skip(&mut self, e: &FrameError) {
         if let Some(o) = &mut self.obs {
