@@ -181,7 +181,8 @@ impl Dash {
     }
 
     /// Starts the server when `--dashboard` was given. `world`: the simulator's (pause, step,
-    /// place); `pace_fps`: pace the loop at this frame rate (the simulator). The car starts
+    /// place; the run then ends at `sim.max_seconds` only); `pace_fps`: pace the loop at this
+    /// frame rate (the simulator); `on_arm`: called when the page arms. The car starts
     /// disarmed: the page arms it.
     #[allow(unused_variables)]
     pub fn start(
@@ -191,6 +192,7 @@ impl Dash {
         world: Option<SharedWorld>,
         stop: &StopSignal,
         pace_fps: Option<f64>,
+        on_arm: Option<fn()>,
     ) -> Result<Dash> {
         if !a.dashboard {
             return Ok(Dash::off());
@@ -216,6 +218,7 @@ impl Dash {
                 sent: sent.clone(),
                 world,
                 stop: stop.clone(),
+                on_arm,
             })?;
             Ok(Dash {
                 obs: Some(obs),

@@ -62,6 +62,8 @@ pub struct Options {
     pub world: Option<SharedWorld>,
     /// The run's stop signal (the server's threads end with it).
     pub stop: StopSignal,
+    /// Called when the page arms (the car: ask the link to arm as the start button does).
+    pub on_arm: Option<fn()>,
 }
 
 /// The newest state for `GET /api/state`.
@@ -99,6 +101,7 @@ struct Shared {
     connections: AtomicUsize,
     frames_sent: AtomicU64,
     closed: AtomicBool,
+    on_arm: Option<fn()>,
 }
 
 /// The running server; its threads end when the run's stop signal is set or it is dropped.
@@ -173,6 +176,7 @@ impl Server {
             connections: AtomicUsize::new(0),
             frames_sent: AtomicU64::new(0),
             closed: AtomicBool::new(false),
+            on_arm: o.on_arm,
         });
         if need_token {
             println!(
@@ -595,6 +599,9 @@ fn handle(mut stream: TcpStream, sh: &Shared) {
             sh.last_heartbeat_ms.store(now_ms(sh), Ordering::SeqCst);
             if sh.arm.arm() {
                 sh.armed_by_page.store(true, Ordering::SeqCst);
+                if let Some(f) = sh.on_arm {
+                    f();
+                }
                 sh.tx.send(Control::Note(note("armed")));
                 json_reply(&mut stream, 200, &json!({"armed": true}));
             } else {
