@@ -23,6 +23,7 @@ pub mod capture;
 pub mod camera_source;
 pub mod config;
 pub mod control;
+pub mod dashboard;
 pub mod detect;
 pub mod drive;
 pub mod gpio;

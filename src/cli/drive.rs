@@ -76,6 +76,8 @@ pub struct DriveArgs {
     pub link_bit_errors: Option<f64>,
     #[command(flatten)]
     pub config: ConfigArgs,
+    #[command(flatten)]
+    pub dash: super::dashboard::DashArgs,
 }
 
 /// Runs `rccar drive`.
@@ -176,19 +178,26 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         sink: &mut *sink,
         presses: super::signals::button_presses(),
     };
+    // --dashboard: the page's Arm also arms the link (as the button does); its disarm,
+    // e-stop and lost heartbeat send neutral through the gate (docs/dashboard.md).
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local.clone(), None, &stop, None, Some(|| {
+        ARM_REQUEST.store(true, std::sync::atomic::Ordering::SeqCst)
+    }))?;
+    let mut arming = dash.sink(&mut arming);
     let end = {
         let mut none = rccar::drive::NoObserver;
         let score_obs: &mut dyn Observer = match score.as_mut() {
             Some(s) => s,
             None => &mut none,
         };
-        let mut obs: [&mut dyn Observer; 3] = [score_obs, &mut tel, &mut status];
+        let mut tel = dash.tag(&mut tel);
+        let mut obs: [&mut dyn Observer; 4] = [score_obs, &mut tel, &mut status, &mut dash];
         let mut timer = WallTimer::new();
         let mut driver = Driver::new(cfg.camera.fps);
         let r = driver.run(
             &mut *source,
             &mut pipeline,
-            &mut arming,
+            &mut *arming,
             &stop,
             clock.as_ref(),
             &mut timer,

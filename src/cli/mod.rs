@@ -5,6 +5,7 @@ pub mod calib_board;
 pub mod calibrate;
 pub mod common;
 pub mod config;
+pub mod dashboard;
 pub mod detect;
 pub mod drive;
 pub mod link;

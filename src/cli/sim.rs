@@ -55,6 +55,8 @@ pub struct SimArgs {
     pub truth_boxes: bool,
     #[command(flatten)]
     pub config: ConfigArgs,
+    #[command(flatten)]
+    pub dash: super::dashboard::DashArgs,
 }
 
 /// Runs `rccar sim`.
@@ -83,9 +85,13 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
 
     let stop = super::signals::install();
     let world = World::new(&cfg, Arc::new(Scene::new(&track)))?.shared();
-    let mut camera = SimCamera::new(world.clone());
-    let mut vehicle = SimVehicle::new(world.clone());
-    let mut score = SimScore::new(world.clone());
+    // With a dashboard the operator ends the run (a parked, disarmed car is not "stalled").
+    let mut camera = SimCamera::new(world.clone()).ending_with_world(!a.dash.dashboard);
+    // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
+    let fps = cfg.camera.fps;
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local.clone(), Some(world.clone()), &stop, Some(fps), None)?;
+    let mut vehicle = dash.sink(SimVehicle::new(world.clone()));
+    let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
     let mut pipeline = Pipeline::new(&cfg)?;
     if a.truth_boxes {
         println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
@@ -95,7 +101,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     }
     // Without recording nobody looks at the frames: render only the rows the pipeline reads
     // (the same decisions, about twice as fast) unless a detector needs the whole frame.
-    let need_all = a.record.is_some() || (pipeline.has_detector() && !a.truth_boxes);
+    let need_all = a.record.is_some() || dash.enabled() || (pipeline.has_detector() && !a.truth_boxes);
     camera.set_rows(if need_all { None } else { Some(roi_rows(&cfg)) });
     if let Some(dir) = &a.record {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
@@ -124,11 +130,12 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let started = std::time::Instant::now();
     let clock = super::timer::WallClock::new();
     let end = {
-        let mut obs: [&mut dyn Observer; 3] = [&mut score, &mut tel, &mut report];
+        let mut tel = dash.tag(&mut tel);
+        let mut obs: [&mut dyn Observer; 4] = [&mut score, &mut tel, &mut report, &mut dash];
         Driver::new(cfg.camera.fps).run(
             &mut camera,
             &mut pipeline,
-            &mut vehicle,
+            &mut *vehicle,
             &stop,
             &clock,
             timer,
