@@ -223,7 +223,7 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
             None => &mut none,
         };
         let mut tel = dash.tag(&mut tel);
-        let mut obs: [&mut dyn Observer; 4] = [score_obs, &mut tel, &mut status, &mut dash];
+        let mut obs: [&mut dyn Observer; 6] = [gpio_obs, score_obs, &mut tel, &mut status, &mut dash, rec_obs];
         let mut timer = WallTimer::new();
         let mut driver = Driver::new(cfg.camera.fps);
         let r = driver.run(
