@@ -27,6 +27,7 @@ use crate::detect::cascade::CascadeError;
 use crate::detect::detector::DetectParams;
 use crate::detect::light::{LightReading, LightState};
 use crate::detect::stage::{CascadeSpec, DetectStage};
+use crate::detect::Rect;
 use crate::lane::warp::WarpError;
 use crate::lane::{LaneDetector, LaneMeasurement};
 use crate::ranging::track::{Measurement, Tracker, TrackerOptions};
@@ -141,6 +142,47 @@ pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectSt
     Ok((Some(DetectStage::load(&specs)?), missing))
 }
 
+/// Where and at which sizes one class is searched (from `[detect]` and the camera).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DetectLimits {
+    /// The cascade's label (`stop_sign`, `traffic_light`, `obstacle`).
+    pub label: &'static str,
+    /// Boxes must lie inside this rectangle, frame pixels.
+    pub region: Rect,
+    /// Smallest window (width, height), pixels.
+    pub min_size: (u32, u32),
+    /// Largest window (width, height), pixels.
+    pub max_size: (u32, u32),
+}
+
+/// The `[detect]` regions and size limits of each class in frame pixels. An object `W` metres
+/// wide at `d` metres is about `f·W/d` pixels wide (pinhole, `f` from `camera.hfov_deg`), so a
+/// box of width `[W_min, W_max]` seen within `range_m = [near, far]` is at least
+/// `⌊f·W_min/far⌋` and at most `⌈f·W_max/near⌉` pixels wide; `min_size_px` still applies.
+/// Only widths are limited (the window's aspect is the cascade's).
+pub fn detect_limits(cfg: &Config) -> [DetectLimits; 3] {
+    let d = &cfg.detect;
+    let f = crate::camera::PinholeCamera::from_config(&cfg.camera).f_px;
+    let (w, h) = (cfg.camera.width as f64, cfg.camera.height as f64);
+    let lim = |label, r: [f64; 4], b: [f64; 2]| {
+        let (x0, y0) = ((r[0] * w).floor() as i32, (r[1] * h).floor() as i32);
+        let (x1, y1) = ((r[2] * w).ceil() as i32, (r[3] * h).ceil() as i32);
+        let min_w = ((f * b[0] / d.range_m[1]).floor() as u32).max(d.min_size_px);
+        let max_w = ((f * b[1] / d.range_m[0]).ceil().min(1e6) as u32).max(min_w).max(1);
+        DetectLimits {
+            label,
+            region: Rect::new(x0, y0, x1 - x0, y1 - y0),
+            min_size: (min_w, d.min_size_px),
+            max_size: (max_w, u32::MAX),
+        }
+    };
+    [
+        lim("stop_sign", d.stop_sign_region, d.stop_sign_box_m),
+        lim("traffic_light", d.traffic_light_region, d.traffic_light_box_m),
+        lim("obstacle", d.obstacle_region, d.obstacle_box_m),
+    ]
+}
+
 /// Lane detection, detection, ranging, behaviour and control, with buffers allocated once.
 #[derive(Debug, Clone)]
 pub struct Pipeline {
@@ -156,6 +198,9 @@ pub struct Pipeline {
     time_s: f64,
     last_throttle: f64,
     objects: Vec<RangedObject>,
+    detect_limits: [DetectLimits; 3],
+    /// Frame rows detection reads (set with the detector).
+    detect_rows: Vec<std::ops::Range<usize>>,
     tracker: Tracker<Option<LightColor>>,
     measurements: Vec<Measurement<Option<LightColor>>>,
     every_n: u64,
@@ -179,6 +224,8 @@ impl Pipeline {
             time_s: 0.0,
             last_throttle: 0.0,
             objects: Vec::with_capacity(16),
+            detect_limits: detect_limits(cfg),
+            detect_rows: Vec::new(),
             tracker: Tracker::new(tracker_options(cfg), BoxRanging::from_config(&cfg.camera, &cfg.ranging).camera),
             measurements: Vec::with_capacity(16),
             every_n: cfg.detect.every_n_frames.max(1) as u64,
@@ -186,9 +233,58 @@ impl Pipeline {
         })
     }
 
-    /// Installs (or removes) the detection stage.
+    /// Installs (or removes) the detection stage, with the `[detect]` regions and size
+    /// limits of each class ([`detect_limits`]).
     pub fn set_detector(&mut self, detect: Option<DetectStage>) {
         self.detect = detect;
+        self.detect_rows.clear();
+        if let Some(d) = &mut self.detect {
+            for l in &self.detect_limits {
+                d.set_limits(l.label, Some(l.region), l.min_size, l.max_size);
+            }
+            self.detect_rows = d.rows_needed(self.width, self.height);
+        }
+    }
+
+    /// Whether detection runs on the pipeline's step `frame_index` (counted from 0): every
+    /// `detect.every_n_frames`-th step while a detector is installed.
+    pub fn detects_on(&self, frame_index: u64) -> bool {
+        self.detect.is_some() && frame_index % self.every_n == 0
+    }
+
+    /// The rows the pipeline will read on its next step (see [`Pipeline::rows_needed`]).
+    pub fn rows_needed_next(&self) -> Vec<std::ops::Range<usize>> {
+        self.rows_needed(self.frame_index)
+    }
+
+    /// The frame rows the pipeline reads on frame `frame_index`, as sorted, disjoint half-open
+    /// ranges of row indices: the lane warp's source rows on every frame, and on frames where
+    /// detection runs ([`Pipeline::detects_on`]) the rows of the detectors' pyramid levels and
+    /// regions. A camera that renders (the simulator) may skip every other row: the output is
+    /// the same as for the whole frame.
+    pub fn rows_needed(&self, frame_index: u64) -> Vec<std::ops::Range<usize>> {
+        let lane = self.lane.warp_map().src_rows();
+        let mut spans = vec![lane.start as usize..lane.end as usize];
+        if self.detects_on(frame_index) {
+            spans.extend(self.detect_rows.iter().cloned());
+            // The light reading looks inside boxes, which lie inside the regions.
+            let h = self.height as i32;
+            for l in &self.detect_limits {
+                let (y0, y1) = (l.region.y.clamp(0, h), (l.region.y + l.region.height).clamp(0, h));
+                if l.label == "traffic_light" && y1 > y0 {
+                    spans.push(y0 as usize..y1 as usize);
+                }
+            }
+        }
+        spans.sort_by_key(|r| r.start);
+        let mut out: Vec<std::ops::Range<usize>> = Vec::with_capacity(spans.len());
+        for r in spans.into_iter().filter(|r| !r.is_empty()) {
+            match out.last_mut() {
+                Some(l) if r.start <= l.end => l.end = l.end.max(r.end),
+                _ => out.push(r),
+            }
+        }
+        out
     }
 
     /// Whether a detector is installed.
@@ -364,6 +460,12 @@ impl Pipeline {
     /// The controller state.
     pub fn controller(&self) -> &Controller {
         &self.control
+    }
+
+    /// The controller, to change gains between frames (a dashboard, a lab); see
+    /// [`crate::drive::Observer::before_frame`].
+    pub fn controller_mut(&mut self) -> &mut Controller {
+        &mut self.control
     }
 
     /// The behaviour machine (its state and last transition).
