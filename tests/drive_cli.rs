@@ -164,3 +164,57 @@ fn sigterm_stops_the_dry_run_with_143_and_complete_telemetry() {
     }
     assert!(out.join("summary.json").exists());
 }
+
+/// `drive --record DIR` then `replay DIR`: the same steering frame by frame (the frames went
+/// through JPEG at `record.jpeg_quality` 90; the tolerance is what that costs). The suite
+/// records 15 s; `RCCAR_RECORD_LAP=1` records a whole lap.
+#[test]
+fn a_recording_replays_with_the_same_steering() {
+    let dir = scratch("record");
+    let rec = dir.join("rec");
+    let lap = std::env::var("RCCAR_RECORD_LAP").is_ok_and(|v| v == "1");
+    let mut args = vec!["--camera", "sim", "--dry-run", "--set", "detect.enabled=false", "--record"];
+    let rec_s = rec.to_str().unwrap().to_string();
+    args.push(&rec_s);
+    if lap {
+        args.extend(["--laps", "1"]);
+    } else {
+        args.extend(["--seconds", "15"]);
+    }
+    let (code, stdout, err) = drive(&args, &dir.join("drive"));
+    assert_eq!(code, Some(0), "{stdout}\n{err}");
+    let out = dir.join("replay");
+    let o = Command::new(EXE)
+        .current_dir(root())
+        .args(["replay", &rec_s, "--no-annotate", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let read = |p: &Path| -> Vec<serde_json::Value> {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect()
+    };
+    let a = read(&dir.join("drive/telemetry.jsonl"));
+    let b = read(&out.join("telemetry.jsonl"));
+    assert_eq!(a.len(), b.len(), "every recorded frame replayed");
+    let mut worst: f64 = 0.0;
+    let mut sum = 0.0;
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(x["frame"], y["frame"]);
+        assert!((x["time_s"].as_f64().unwrap() - y["time_s"].as_f64().unwrap()).abs() < 1e-9, "same time steps");
+        let d = (x["steer"].as_f64().unwrap() - y["steer"].as_f64().unwrap()).abs();
+        worst = worst.max(d);
+        sum += d;
+    }
+    println!(
+        "record -> replay: {} frames, |steer difference| mean {:.5}, max {:.5} (tolerance 0.02)",
+        a.len(),
+        sum / a.len() as f64,
+        worst
+    );
+    assert!(worst <= 0.02, "steer differs by {worst}");
+}
