@@ -267,11 +267,22 @@ impl Pipeline {
         let mut spans = vec![lane.start as usize..lane.end as usize];
         if self.detects_on(frame_index) {
             spans.extend(self.detect_rows.iter().cloned());
-            // The light reading looks inside boxes, which lie inside the regions.
+            // The light reading looks inside boxes, which lie inside the regions; the colour
+            // refinement of ranging (src/ranging/refine.rs) inside sign and light boxes grown
+            // by `refine::GROW` of their height, so up to that share of the region beyond it.
             let h = self.height as i32;
             for l in &self.detect_limits {
-                let (y0, y1) = (l.region.y.clamp(0, h), (l.region.y + l.region.height).clamp(0, h));
-                if l.label == "traffic_light" && y1 > y0 {
+                let refined = self.ranging.refine && l.label != "obstacle";
+                let grow = if refined {
+                    (crate::ranging::refine::GROW * l.region.height as f64).ceil() as i32 + 1
+                } else {
+                    0
+                };
+                let (y0, y1) = (
+                    (l.region.y - grow).clamp(0, h),
+                    (l.region.y + l.region.height + grow).clamp(0, h),
+                );
+                if (l.label == "traffic_light" || refined) && y1 > y0 {
                     spans.push(y0 as usize..y1 as usize);
                 }
             }

@@ -815,7 +815,9 @@ mod tests {
                 let aspect = if class == ObjectClass::TrafficLight { 0.4 } else { 1.25 };
                 let cb = b.classes[class as usize];
                 let (h, c) = b.predicted_box(class, d, aspect);
-                // An obstacle (size unknown): a box whose outline bottom is on Eq. 5's row.
+                // An obstacle (size unknown, so no predicted height): any box whose outline
+                // bottom is on Eq. 5's row.
+                let h = if h > 0.0 { h } else { 12.0 / d };
                 let c = c.unwrap_or_else(|| b.tilt.row(d, cb.bottom_m) - h / (2.0 * cb.margin));
                 let u = b.camera.u0;
                 let bbox = [u - aspect * h / 2.0, c - h / 2.0, u + aspect * h / 2.0, c + h / 2.0];
