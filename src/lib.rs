@@ -22,6 +22,7 @@ pub mod camera_source;
 pub mod config;
 pub mod control;
 pub mod detect;
+pub mod imageio;
 pub mod lane;
 pub mod link;
 pub mod pipeline;

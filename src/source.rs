@@ -132,11 +132,11 @@ impl ReplayDir {
         if meta.len() == 0 {
             return Err("empty file (0 bytes)".into());
         }
-        let img = image::ImageReader::open(path)
-            .and_then(|r| r.with_guessed_format())
-            .map_err(|e| e.to_string())?
-            .decode()
-            .map_err(|e| format!("not a readable image: {e}"))?
+        let img = crate::imageio::open(path)
+            .map_err(|e| match e {
+                crate::imageio::ImageIoError::Read { source, .. } => source.to_string(),
+                crate::imageio::ImageIoError::Decode { msg, .. } => format!("not a readable image: {msg}"),
+            })?
             .to_rgb8();
         let (w, h) = img.dimensions();
         if w < self.min_size.0 || h < self.min_size.1 {

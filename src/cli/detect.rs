@@ -83,7 +83,7 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
         std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     }
     for path in &args.images {
-        let img = image::open(path).with_context(|| format!("reading {}", path.display()))?;
+        let img = rccar::imageio::open(path).with_context(|| format!("reading {}", path.display()))?;
         let rgb = img.to_rgb8();
         let gray = match &img {
             image::DynamicImage::ImageLuma8(g) => g.clone(),

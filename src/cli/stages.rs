@@ -34,7 +34,7 @@ pub fn run(a: StagesArgs) -> Result<ExitCode> {
     let m = det.warp_map().homography().inverse().map(|h| h.0).unwrap_or_default();
     let mut failed = 0;
     for path in &a.images {
-        let img = match image::open(path) {
+        let img = match rccar::imageio::open(path) {
             Ok(i) => i.to_rgb8(),
             Err(e) => {
                 eprintln!("skipped {}: {e}", path.display());
