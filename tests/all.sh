@@ -17,6 +17,7 @@ DEB_PACKAGES=(
   simavr libsimavr-dev libsimavrparts1 libelf-dev  # hardware-in-the-loop harness
   libclang-dev                                 # the `camera` feature (nokhwa's V4L2 bindings)
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
+  opencv-doc                                   # OpenCV's sample JPEGs for the jpeg parity stage
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   missing=()
@@ -74,6 +75,8 @@ stage link-hil cargo test --release --features serial --test link_hil
 stage camera cargo test --release --features camera --lib camera_source
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
+# Last: builds rccar with --features jpeg-turbo (libjpeg-turbo's C code via mozjpeg; needs gcc).
+stage jpeg-parity "$RCCAR_PYTHON" tests/parity/jpeg_parity.py
 
 echo
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi
