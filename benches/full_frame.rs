@@ -262,7 +262,9 @@ fn main() {
                 om / cm,
                 on / cn
             );
-            let cv_cpu: Vec<f64> = cv["cpu"].as_array().map_or(vec![], |a| a.iter().filter_map(|x| x.as_f64()).collect());
+            let cv_cpu: Vec<f64> = cv["cpu"]
+                .as_array()
+                .map_or(vec![], |a| a.iter().filter_map(|x| x.as_f64()).collect());
             if !parallel && !ours_cpu.is_empty() && !cv_cpu.is_empty() {
                 let (ocm, ocn) = median_min(&mut ours_cpu);
                 let (ccm, ccn) = median_min(&mut cv_cpu.clone());

@@ -17,7 +17,10 @@ fn main() {
         let p = std::path::Path::new(f);
         match rccar::imageio::open(p) {
             Ok(img) => {
-                let stem = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+                let stem = p
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default();
                 let dst = std::path::Path::new(out).join(format!("{stem}.png"));
                 if let Err(e) = img.save(&dst) {
                     eprintln!("{}: {e}", dst.display());

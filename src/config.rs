@@ -520,11 +520,19 @@ impl Config {
             ("detect.obstacle_region", d.obstacle_region),
         ] {
             if !(r.iter().all(|v| (0.0..=1.0).contains(v)) && r[0] < r[2] && r[1] < r[3]) {
-                c.fail(key, format!("{r:?}"), "[left, top, right, bottom] in 0..=1 with left < right, top < bottom");
+                c.fail(
+                    key,
+                    format!("{r:?}"),
+                    "[left, top, right, bottom] in 0..=1 with left < right, top < bottom",
+                );
             }
         }
         if !(d.range_m[0] >= 0.05 && d.range_m[0] < d.range_m[1] && d.range_m[1] <= 20.0) {
-            c.fail("detect.range_m", format!("{:?}", d.range_m), "[near, far] metres, 0.05 <= near < far <= 20");
+            c.fail(
+                "detect.range_m",
+                format!("{:?}", d.range_m),
+                "[near, far] metres, 0.05 <= near < far <= 20",
+            );
         }
         for (key, b) in [
             ("detect.stop_sign_box_m", d.stop_sign_box_m),

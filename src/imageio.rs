@@ -128,7 +128,12 @@ mod tests {
         assert!(is_jpeg(&bytes));
         let back = decode(&bytes, "mem.jpg").unwrap().to_rgb8();
         assert_eq!(back.dimensions(), (40, 24));
-        let diff = back.pixels().zip(img.pixels()).map(|(a, b)| (a[0] as i32 - b[0] as i32).abs()).max().unwrap();
+        let diff = back
+            .pixels()
+            .zip(img.pixels())
+            .map(|(a, b)| (a[0] as i32 - b[0] as i32).abs())
+            .max()
+            .unwrap();
         assert!(diff < 20, "lossy but close: {diff}");
         // A truncated JPEG may decode (libjpeg fills the rest grey, as cv2.imread does) or fail,
         // but does not panic; garbage is an error naming the file.

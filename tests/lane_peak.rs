@@ -57,13 +57,25 @@ fn peak_mode_default_is_the_better_one() {
     let cfg = Config::default();
     let cam = PinholeCamera::from_config(&cfg.camera);
     let h = *LaneDetector::from_config(&cfg).unwrap().warp_map().homography();
-    let photos: Vec<RgbImage> = ["baboon.jpg", "fruits.jpg", "building.jpg", "home.jpg", "lena.jpg", "board.jpg"]
-        .iter()
-        .filter_map(|n| image::open(format!("{DOC}{n}")).ok())
-        .map(|im| {
-            image::imageops::resize(&im.to_rgb8(), cfg.camera.width, cfg.camera.height, image::imageops::FilterType::Triangle)
-        })
-        .collect();
+    let photos: Vec<RgbImage> = [
+        "baboon.jpg",
+        "fruits.jpg",
+        "building.jpg",
+        "home.jpg",
+        "lena.jpg",
+        "board.jpg",
+    ]
+    .iter()
+    .filter_map(|n| image::open(format!("{DOC}{n}")).ok())
+    .map(|im| {
+        image::imageops::resize(
+            &im.to_rgb8(),
+            cfg.camera.width,
+            cfg.camera.height,
+            image::imageops::FilterType::Triangle,
+        )
+    })
+    .collect();
     // (set, mode) -> errors
     let mut errs: std::collections::BTreeMap<(&str, &str), Vec<f64>> = Default::default();
     let mut seen: std::collections::BTreeMap<(&str, &str), (usize, usize)> = Default::default();
@@ -113,7 +125,9 @@ fn peak_mode_default_is_the_better_one() {
                 e.1 += 1;
                 if m.status == LaneStatus::Both {
                     e.0 += 1;
-                    errs.entry((set, mode)).or_default().push((m.lane_center.unwrap() - truth).abs());
+                    errs.entry((set, mode))
+                        .or_default()
+                        .push((m.lane_center.unwrap() - truth).abs());
                 }
             }
         }
@@ -133,7 +147,10 @@ fn peak_mode_default_is_the_better_one() {
         PeakMode::Argmax => "argmax",
     };
     let (dm, dx, _) = stats(errs[&("clean", default)].clone());
-    assert!(dm <= 1.0 && dx <= 3.0, "default {default} on clean frames: median {dm:.2}, max {dx:.2}");
+    assert!(
+        dm <= 1.0 && dx <= 3.0,
+        "default {default} on clean frames: median {dm:.2}, max {dx:.2}"
+    );
     assert!(
         med[&("bright strip", "argmax")] < med[&("bright strip", "centroid")],
         "argmax should not be dragged by the bright strip"
