@@ -2,7 +2,13 @@
 //! behaviour and control per 320×240 frame, side by side with the same work in OpenCV in the
 //! same run.
 //!
-//! `cargo bench --bench full_frame [-- --reps N]`
+//! `cargo bench --bench full_frame [-- --reps N] [--parallel]`
+//!
+//! `--parallel` spreads our pyramid levels over rayon's threads (`RAYON_NUM_THREADS=2` for two);
+//! OpenCV stays on one thread, so that ratio is against the same one-thread reference.
+//! Besides wall time, both sides report this thread's CPU time per frame (ours from
+//! `/proc/thread-self/schedstat`, OpenCV's from `time.thread_time`), which other jobs on a busy
+//! machine do not inflate; the one-thread ratio is quoted on both.
 //!
 //! 1. Frames: 24 simulator frames of config/tracks/scenarios.toml, taken on the approaches to
 //!    the stop sign, the traffic light and the obstacle (so the cascades have something to find),
@@ -42,8 +48,9 @@ frames = [cv2.cvtColor(cv2.imread(p, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB) for p
 ccs = [cv2.CascadeClassifier(p) for p in a["cascades"]]
 ms = a["min_size"]
 flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-lane_t, total_t = [], []
+lane_t, total_t, cpu_t = [], [], []
 def frame(rgb):
+    c0 = time.thread_time()
     t0 = time.perf_counter()
     bird = cv2.cvtColor(cv2.warpPerspective(rgb, M, (W, H), flags=flags), cv2.COLOR_RGB2GRAY)
     edges = cv2.Canny(cv2.GaussianBlur(bird, (5, 5), 0), a["canny_low"], a["canny_high"], L2gradient=False)
@@ -55,19 +62,42 @@ def frame(rgb):
     for cc in ccs:
         cc.detectMultiScale(gray, a["scale_factor"], a["min_neighbors"], minSize=(ms, ms))
     t2 = time.perf_counter()
-    return t1 - t0, t2 - t0
+    return t1 - t0, t2 - t0, time.thread_time() - c0
 for rgb in frames:
     frame(rgb)
 for _ in range(a["reps"]):
     for rgb in frames:
-        l, t = frame(rgb)
-        lane_t.append(l); total_t.append(t)
-print(json.dumps({"opencv": cv2.__version__, "lane": lane_t, "total": total_t}))
+        l, t, c = frame(rgb)
+        lane_t.append(l); total_t.append(t); cpu_t.append(c)
+print(json.dumps({"opencv": cv2.__version__, "lane": lane_t, "total": total_t, "cpu": cpu_t}))
 "#;
+
+/// This thread's CPU time, seconds (Linux `/proc/thread-self/schedstat`; `None` elsewhere).
+fn cpu_s() -> Option<f64> {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()?
+        .split_whitespace()
+        .next()?
+        .parse::<u64>()
+        .ok()
+        .map(|ns| ns as f64 * 1e-9)
+}
 
 fn median_min(v: &mut [f64]) -> (f64, f64) {
     v.sort_by(f64::total_cmp);
     (v[v.len() / 2], v[0])
+}
+
+/// rayon's thread count (1 without the `parallel` feature).
+fn rayon_threads() -> usize {
+    #[cfg(feature = "parallel")]
+    {
+        rayon::current_num_threads()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        1
+    }
 }
 
 fn main() {
@@ -78,6 +108,7 @@ fn main() {
         .and_then(|i| args.get(i + 1))
         .and_then(|v| v.parse().ok())
         .unwrap_or(5);
+    let parallel = args.iter().any(|a| a == "--parallel");
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut cfg = Config::default();
     cfg.sim.noise_sigma = 2.0;
@@ -118,6 +149,10 @@ fn main() {
     cfg.detect.obstacle = cascades[2].display().to_string();
     let (det, missing) = rccar::pipeline::load_detector(&cfg.detect, &root.join("config")).expect("cascades load");
     assert!(missing.is_empty(), "missing cascades {missing:?}");
+    let mut det = det;
+    if let Some(d) = &mut det {
+        d.set_parallel(parallel);
+    }
     let mut pipe = Pipeline::new(&cfg).unwrap();
     pipe.set_detector(det);
     // 3. Ours.
@@ -126,12 +161,17 @@ fn main() {
         pipe.step(f, dt, &mut NoTimer);
     }
     let mut ours = vec![];
+    let mut ours_cpu = vec![];
     let mut found = 0usize;
     for _ in 0..reps {
         for f in &frames {
+            let c0 = cpu_s();
             let t0 = Instant::now();
             std::hint::black_box(pipe.step(f, dt, &mut NoTimer));
             ours.push(t0.elapsed().as_secs_f64());
+            if let (Some(a), Some(b)) = (c0, cpu_s()) {
+                ours_cpu.push(b - a);
+            }
             found += pipe.objects().len();
         }
     }
@@ -167,11 +207,16 @@ fn main() {
         .and_then(|o| serde_json::from_slice(&o.stdout).ok());
     // 4. Report.
     println!(
-        "full frame: {} frames of {}x{}, {} reps, one thread; cascades: {} ({})",
+        "full frame: {} frames of {}x{}, {} reps, {}; cascades: {} ({})",
         frames.len(),
         cfg.camera.width,
         cfg.camera.height,
         reps,
+        if parallel {
+            format!("ours on {} threads (OpenCV on one)", rayon_threads())
+        } else {
+            "one thread".to_string()
+        },
         if stock {
             "STOCK OpenCV (shipped ones missing)"
         } else {
@@ -217,6 +262,25 @@ fn main() {
                 om / cm,
                 on / cn
             );
+            let cv_cpu: Vec<f64> = cv["cpu"]
+                .as_array()
+                .map_or(vec![], |a| a.iter().filter_map(|x| x.as_f64()).collect());
+            if !parallel && !ours_cpu.is_empty() && !cv_cpu.is_empty() {
+                let (ocm, ocn) = median_min(&mut ours_cpu);
+                let (ccm, ccn) = median_min(&mut cv_cpu.clone());
+                println!(
+                    "  CPU time per frame: ours median {:.3} ms min {:.3} ms; opencv median {:.3} ms min {:.3} ms",
+                    ocm * 1e3,
+                    ocn * 1e3,
+                    ccm * 1e3,
+                    ccn * 1e3
+                );
+                println!(
+                    "ratio ours/OpenCV (full frame, CPU time): median {:.2}, min {:.2}",
+                    ocm / ccm,
+                    ocn / ccn
+                );
+            }
             println!(
                 "ratio ours/OpenCV (lane only):  median {:.2}, min {:.2}",
                 lm / clm,

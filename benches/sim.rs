@@ -71,6 +71,34 @@ fn main() {
     let pipe = time(300, || {
         std::hint::black_box(pipeline.step(&img, 1.0 / 30.0, &mut NoTimer));
     });
+    // Detection on (issue 13): the pipeline with the shipped cascades (regions and size
+    // limits from [detect]), and the render of only the rows it reads (`rows_needed`).
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let (det, _) = rccar::pipeline::load_detector(&cfg.detect, root).expect("cascades");
+    let mut pipeline_det = Pipeline::new(&cfg).expect("pipeline");
+    pipeline_det.set_detector(det);
+    let has_det = pipeline_det.has_detector();
+    let pipe_det = time(300, || {
+        std::hint::black_box(pipeline_det.step(&img, 1.0 / 30.0, &mut NoTimer));
+    });
+    let spans = pipeline_det.rows_needed(0);
+    let lane_spans = {
+        let r = pipeline_det.lane().warp_map().src_rows();
+        vec![r.start as usize..r.end as usize]
+    };
+    let mut img2 = img.clone();
+    let render_needed = time(300, || {
+        for r in &spans {
+            renderer.render_rows(&pose, 2.0, frame, &mut img2, r.clone());
+        }
+        frame += 1;
+    });
+    let render_lane = time(300, || {
+        for r in &lane_spans {
+            renderer.render_rows(&pose, 2.0, frame, &mut img2, r.clone());
+        }
+        frame += 1;
+    });
     let step = time(600, || {
         std::hint::black_box(sim.step(&mut NoTimer));
     });
@@ -81,16 +109,34 @@ fn main() {
     let budget = 1e6 / (30.0 * 20.0);
     println!("simulator, 320x240, one core; budget for 20x real time at 30 fps: {budget:.0} us/step");
     println!("{:<28} {:>10} {:>10} {:>12}", "", "median us", "min us", "mean CPU us");
+    let rows: usize = spans.iter().map(|r| r.len()).sum();
     for (name, (med, min, cpu)) in [
         ("render one frame", render),
         ("render, no object in view", render_bare),
+        ("render rows_needed (detect)", render_needed),
+        ("render lane ROI rows only", render_lane),
         ("pipeline on a frame", pipe),
+        ("pipeline + 3 cascades", pipe_det),
         ("closed-loop step", step),
         ("step, only the ROI's rows", step_roi),
     ] {
         let cpu = cpu.map_or("-".to_string(), |c| format!("{c:.0}"));
         println!("{name:<28} {med:>10.0} {min:>10.0} {cpu:>12}");
     }
+    // With detection: render what the pipeline reads + pipeline with cascades + the rest of a
+    // step (truth, vehicle: a full step minus its render and lane-only pipeline).
+    let cpu_or = |t: (f64, f64, Option<f64>)| t.2.unwrap_or(t.0);
+    let rest = (cpu_or(step) - cpu_or(render) - cpu_or(pipe)).max(0.0);
+    let with_det = cpu_or(render_needed) + cpu_or(pipe_det) + rest;
+    println!(
+        "detection {}: rows_needed = {spans:?} ({rows} of {} rows); step estimate {with_det:.0} us = render {:.0} + pipeline {:.0} + rest {rest:.0}: {:.1}x real time at 30 fps (target 10x: {})",
+        if has_det { "on" } else { "OFF (cascades missing)" },
+        cfg.camera.height,
+        cpu_or(render_needed),
+        cpu_or(pipe_det),
+        1e6 / (30.0 * with_det),
+        if 1e6 / (30.0 * with_det) >= 10.0 { "met" } else { "NOT met" }
+    );
     // CPU time is what one core spends; wall time also counts waiting for a busy machine.
     for (name, st) in [("full frames", step), ("ROI rows only", step_roi)] {
         let per_step = st.2.unwrap_or(st.0);

@@ -29,13 +29,20 @@ fn main() {
     let mut sim = Simulation::new(&cfg, &track).unwrap();
     let len = track.length;
     // per class: (min x0, min y0, max x1, max y1) of matched boxes, ratios, count; truth extent
-    let mut stats: std::collections::BTreeMap<String, (Vec<[f64; 4]>, Vec<(f64, f64)>, Vec<[f64; 4]>)> = Default::default();
+    let mut stats: std::collections::BTreeMap<String, (Vec<[f64; 4]>, Vec<(f64, f64)>, Vec<[f64; 4]>)> =
+        Default::default();
     let mut s = 0.0;
     while s < len {
         sim.place_at(s);
         let step = sim.step(&mut NoTimer);
         s += 0.05;
-        let objs: Vec<_> = step.truth.objects.iter().filter(|o| o.distance_m >= 0.2 && o.distance_m <= 2.0 && !o.clipped).cloned().collect();
+        let objs: Vec<_> = step
+            .truth
+            .objects
+            .iter()
+            .filter(|o| o.distance_m >= 0.2 && o.distance_m <= 2.0 && !o.clipped)
+            .cloned()
+            .collect();
         if objs.is_empty() {
             continue;
         }
@@ -43,7 +50,12 @@ fn main() {
         for o in &objs {
             let label = format!("{:?}", o.kind);
             let t = o.bbox;
-            let tr = Rect::new(t[0].round() as i32, t[1].round() as i32, (t[2] - t[0]).round() as i32, (t[3] - t[1]).round() as i32);
+            let tr = Rect::new(
+                t[0].round() as i32,
+                t[1].round() as i32,
+                (t[2] - t[0]).round() as i32,
+                (t[3] - t[1]).round() as i32,
+            );
             let e = stats.entry(label.clone()).or_default();
             e.2.push([t[0] / w, t[1] / h, t[2] / w, t[3] / h]);
             let want = match o.kind {
@@ -54,7 +66,12 @@ fn main() {
             for b in found.iter().filter(|b| b.label == want) {
                 if b.rect.iou(&tr) >= 0.3 {
                     let r = b.rect;
-                    e.0.push([r.x as f64 / w, r.y as f64 / h, (r.x + r.width) as f64 / w, (r.y + r.height) as f64 / h]);
+                    e.0.push([
+                        r.x as f64 / w,
+                        r.y as f64 / h,
+                        (r.x + r.width) as f64 / w,
+                        (r.y + r.height) as f64 / h,
+                    ]);
                     // box width × distance / f: the object width the box stands for, metres
                     e.1.push((o.distance_m, r.width as f64 * o.distance_m / f_px));
                 }
@@ -63,7 +80,9 @@ fn main() {
     }
     for (k, (boxes, ratios, truth)) in &stats {
         let ext = |v: &[[f64; 4]]| {
-            v.iter().fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |a, b| [a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])])
+            v.iter().fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |a, b| {
+                [a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])]
+            })
         };
         let wm: Vec<f64> = ratios.iter().map(|r| r.1).collect();
         let (mn, mx) = wm.iter().fold((f64::MAX, f64::MIN), |a, &b| (a.0.min(b), a.1.max(b)));

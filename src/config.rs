@@ -240,6 +240,18 @@ pub enum ThresholdMode {
     Otsu,
 }
 
+/// How a line's column is read from its histogram peak (`lane.peak`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PeakMode {
+    /// Centroid of the run of columns around the highest that reach half its height
+    /// (sub-pixel; a wide bright blob next to the line drags it).
+    #[default]
+    Centroid,
+    /// The highest column (the paper's argmax; the middle of a flat top), whole pixels.
+    Argmax,
+}
+
 /// `[lane]`: extracting the lane lines from the bird's-eye image.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -258,6 +270,8 @@ pub struct LaneConfig {
     pub band: f64,
     /// A line is found only where its histogram peak reaches this fraction of the band height.
     pub min_peak: f64,
+    /// `centroid` or `argmax`: how a line's column is read from its peak.
+    pub peak: PeakMode,
     /// Lane width between the two line centres in the bird's-eye image, pixels; used to
     /// estimate a lost line from the other.
     pub lane_width_px: f64,
@@ -279,6 +293,7 @@ impl Default for LaneConfig {
             blur: true,
             band: 0.4,
             min_peak: 0.3,
+            peak: PeakMode::Centroid,
             lane_width_px: 191.4,
             width_tolerance: 0.35,
             center_offset_px: 0.0,
@@ -613,11 +628,19 @@ impl Config {
             ("detect.obstacle_region", d.obstacle_region),
         ] {
             if !(r.iter().all(|v| (0.0..=1.0).contains(v)) && r[0] < r[2] && r[1] < r[3]) {
-                c.fail(key, format!("{r:?}"), "[left, top, right, bottom] in 0..=1 with left < right, top < bottom");
+                c.fail(
+                    key,
+                    format!("{r:?}"),
+                    "[left, top, right, bottom] in 0..=1 with left < right, top < bottom",
+                );
             }
         }
         if !(d.range_m[0] >= 0.05 && d.range_m[0] < d.range_m[1] && d.range_m[1] <= 20.0) {
-            c.fail("detect.range_m", format!("{:?}", d.range_m), "[near, far] metres, 0.05 <= near < far <= 20");
+            c.fail(
+                "detect.range_m",
+                format!("{:?}", d.range_m),
+                "[near, far] metres, 0.05 <= near < far <= 20",
+            );
         }
         for (key, b) in [
             ("detect.stop_sign_box_m", d.stop_sign_box_m),

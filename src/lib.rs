@@ -27,6 +27,7 @@ pub mod dashboard;
 pub mod detect;
 pub mod drive;
 pub mod gpio;
+pub mod imageio;
 pub mod lane;
 pub mod link;
 pub mod pipeline;

@@ -338,6 +338,14 @@ pub fn decode_image(bytes: &[u8]) -> Result<image::DynamicImage, String> {
             MAX_IMAGE_PIXELS / 1_000_000
         ));
     }
+    // JPEG as cv2.imread decodes it (libjpeg-turbo's IDCT and upsampling) with the
+    // `jpeg-turbo` feature; see src/imageio.rs.
+    if crate::imageio::is_jpeg(bytes) {
+        return crate::imageio::decode(bytes, "").map_err(|e| match e {
+            crate::imageio::ImageIoError::Decode { msg, .. } => format!("not a readable image: {msg}"),
+            e => e.to_string(),
+        });
+    }
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(MAX_IMAGE_SIDE);
     limits.max_image_height = Some(MAX_IMAGE_SIDE);

@@ -85,6 +85,8 @@ stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
 stage cross bash tests/cross/run.sh
 stage calib-parity "$RCCAR_PYTHON" tests/parity/calib_parity.py
+# Last: builds rccar with --features jpeg-turbo (libjpeg-turbo's C code via mozjpeg; needs gcc).
+stage jpeg-parity "$RCCAR_PYTHON" tests/parity/jpeg_parity.py
 
 echo
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi

@@ -31,14 +31,22 @@ fn cascades() -> Vec<(String, Cascade, DetectParams)> {
     let mut out = vec![];
     for (name, path, params) in [
         ("stop_sign", format!("{ROOT}/config/cascades/stop_sign.xml"), p(3, 0, 0)),
-        ("traffic_light", format!("{ROOT}/config/cascades/traffic_light.xml"), p(2, 22, 0)),
+        (
+            "traffic_light",
+            format!("{ROOT}/config/cascades/traffic_light.xml"),
+            p(2, 22, 0),
+        ),
         ("obstacle", format!("{ROOT}/config/cascades/obstacle.xml"), p(3, 0, 90)),
         (
             "face",
             "/usr/share/opencv4/haarcascades/haarcascade_frontalface_default.xml".into(),
             p(3, 30, 0),
         ),
-        ("eye", "/usr/share/opencv4/haarcascades/haarcascade_eye.xml".into(), p(1, 0, 0)),
+        (
+            "eye",
+            "/usr/share/opencv4/haarcascades/haarcascade_eye.xml".into(),
+            p(1, 0, 0),
+        ),
         (
             "body",
             "/usr/share/opencv4/haarcascades/haarcascade_fullbody.xml".into(),
@@ -178,7 +186,11 @@ fn a_region_keeps_exactly_the_hits_inside_it() {
                 let got: Vec<Rect> = found.iter().filter(|o| &o.label == label).map(|o| o.rect).collect();
                 // Raw hits come out clipped to the frame (as OpenCV's clipObjects does).
                 let frame = Rect::new(0, 0, w, h);
-                let want_clipped: Vec<Rect> = want.iter().map(|b| b.intersect(&frame)).filter(|b| b.area() > 0).collect();
+                let want_clipped: Vec<Rect> = want
+                    .iter()
+                    .map(|b| b.intersect(&frame))
+                    .filter(|b| b.area() > 0)
+                    .collect();
                 assert_eq!(got, want_clipped, "{label} on {name} in {r:?}");
                 let groups: Vec<_> = group_rectangles(&want, p.min_neighbors as i32, 0.2)
                     .into_iter()

@@ -354,7 +354,15 @@ impl Detector {
         params: &DetectParams,
     ) -> Result<(), DetectError> {
         let mut own = std::mem::take(&mut self.own);
-        let out = own.run(img, width, height, std::slice::from_mut(self), &[*params], &[None], params.parallel);
+        let out = own.run(
+            img,
+            width,
+            height,
+            std::slice::from_mut(self),
+            &[*params],
+            &[None],
+            params.parallel,
+        );
         self.own = own;
         out
     }
@@ -412,7 +420,6 @@ fn scales(cw: i32, ch: i32, iw: i32, ih: i32, p: &DetectParams) -> Vec<f32> {
     out
 }
 
-
 /// One pyramid level: the input resized by `1/scale` (shared by every cascade that uses it).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Level {
@@ -450,7 +457,12 @@ pub(crate) struct WinRange {
 
 impl Detector {
     /// Step 1 for this cascade on a `width` × `height` image, after the input checks.
-    pub(crate) fn scales_for(&self, width: usize, height: usize, params: &DetectParams) -> Result<Vec<f32>, DetectError> {
+    pub(crate) fn scales_for(
+        &self,
+        width: usize,
+        height: usize,
+        params: &DetectParams,
+    ) -> Result<Vec<f32>, DetectError> {
         if !(params.scale_factor.is_finite() && params.scale_factor > 1.0) {
             return Err(DetectError::BadScaleFactor(params.scale_factor));
         }
@@ -536,7 +548,8 @@ impl Detector {
                     let d = &data[p..];
                     let vs = rect_sum(d[n[0] as usize], d[n[1] as usize], d[n[2] as usize], d[n[3] as usize]);
                     let q = &sq[p..];
-                    let vq = (q[n[0] as usize] + q[n[3] as usize]).wrapping_sub(q[n[1] as usize] + q[n[2] as usize]) as u32;
+                    let vq =
+                        (q[n[0] as usize] + q[n[3] as usize]).wrapping_sub(q[n[1] as usize] + q[n[2] as usize]) as u32;
                     let nf = area * vq as f64 - vs as f64 * vs as f64;
                     if nf > 0.0 {
                         let inv = (1.0 / nf.sqrt()) as f32;
@@ -600,7 +613,11 @@ impl Detector {
 #[inline]
 fn eval_stumps(c: &Cascade, k: &Compiled, d: &[i32], inv: f32, first_only: bool) -> i32 {
     let mut first = 0;
-    let n = if first_only { c.stages.len().min(1) } else { c.stages.len() };
+    let n = if first_only {
+        c.stages.len().min(1)
+    } else {
+        c.stages.len()
+    };
     for (si, st) in c.stages[..n].iter().enumerate() {
         let mut sum = 0.0f64;
         for stump in &k.stumps[first..first + st.tree_count] {
@@ -617,7 +634,11 @@ fn eval_stumps(c: &Cascade, k: &Compiled, d: &[i32], inv: f32, first_only: bool)
 
 /// Steps 5–6 for a cascade of trees.
 fn eval_trees(c: &Cascade, k: &Compiled, d: &[i32], inv: f32, first_only: bool) -> i32 {
-    let n = if first_only { c.stages.len().min(1) } else { c.stages.len() };
+    let n = if first_only {
+        c.stages.len().min(1)
+    } else {
+        c.stages.len()
+    };
     for (si, st) in c.stages[..n].iter().enumerate() {
         let mut sum = 0.0f64;
         for t in &c.trees[st.first_tree..st.first_tree + st.tree_count] {
@@ -642,7 +663,11 @@ fn eval_trees(c: &Cascade, k: &Compiled, d: &[i32], inv: f32, first_only: bool) 
 /// Steps 5–6 for an LBP cascade (category stumps or trees).
 fn eval_lbp(c: &Cascade, k: &Compiled, d: &[i32], first_only: bool) -> i32 {
     let ss = c.subset_size;
-    let n = if first_only { c.stages.len().min(1) } else { c.stages.len() };
+    let n = if first_only {
+        c.stages.len().min(1)
+    } else {
+        c.stages.len()
+    };
     for (si, st) in c.stages[..n].iter().enumerate() {
         let mut sum = 0.0f64;
         for t in &c.trees[st.first_tree..st.first_tree + st.tree_count] {

@@ -229,7 +229,9 @@ mod tests {
                         continue;
                     }
                     let s = |t: &Integrals, ox: usize, oy: usize| {
-                        t.sum_at(ox + x + rw, oy + y + rh) - t.sum_at(ox + x, oy + y + rh) - t.sum_at(ox + x + rw, oy + y)
+                        t.sum_at(ox + x + rw, oy + y + rh)
+                            - t.sum_at(ox + x, oy + y + rh)
+                            - t.sum_at(ox + x + rw, oy + y)
                             + t.sum_at(ox + x, oy + y)
                     };
                     assert_eq!(s(&crop, 0, 0), s(&full, cx, cy));

@@ -103,7 +103,10 @@ impl Pyramid {
         params: &[DetectParams],
         regions: &[Option<Rect>],
     ) -> Result<(), DetectError> {
-        assert!(dets.len() == params.len() && dets.len() == regions.len(), "one parameter set and region per detector");
+        assert!(
+            dets.len() == params.len() && dets.len() == regions.len(),
+            "one parameter set and region per detector"
+        );
         check_size(width, height)?;
         let same = self.key.as_ref().is_some_and(|k| {
             k.width == width
@@ -334,8 +337,7 @@ impl Ctx<'_> {
                 p.row0..p.row1,
                 p.cols,
             );
-            s.ii
-                .compute_strided(&s.level, p.cols, p.cols, n, self.stride, self.rows, self.tilted);
+            s.ii.compute_strided(&s.level, p.cols, p.cols, n, self.stride, self.rows, self.tilted);
         }
     }
 }

@@ -222,7 +222,11 @@ mod tests {
                 let mut part = vec![0u8; rows.len() * cols];
                 r.resize_part(&src, sw, sh, &mut part, dw, dh, rows.clone(), cols);
                 for (k, y) in rows.clone().enumerate() {
-                    assert_eq!(&part[k * cols..(k + 1) * cols], &whole[y * dw..y * dw + cols], "{dw}x{dh} row {y}");
+                    assert_eq!(
+                        &part[k * cols..(k + 1) * cols],
+                        &whole[y * dw..y * dw + cols],
+                        "{dw}x{dh} row {y}"
+                    );
                 }
                 // The source rows it reads: changing any other row changes nothing.
                 let used = Resizer::source_rows(sh, dh, rows.clone());

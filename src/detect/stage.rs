@@ -175,8 +175,15 @@ impl DetectStage {
     pub fn run(&mut self, gray: &GrayImage, rgb: Option<&RgbImage>) -> Result<Vec<DetectedObject>, DetectError> {
         let (w, h) = (gray.width() as usize, gray.height() as usize);
         let parallel = self.params.iter().any(|p| p.parallel);
-        self.pyramid
-            .run(gray.as_raw(), w, h, &mut self.dets, &self.params, &self.regions, parallel)?;
+        self.pyramid.run(
+            gray.as_raw(),
+            w,
+            h,
+            &mut self.dets,
+            &self.params,
+            &self.regions,
+            parallel,
+        )?;
         let mut out = Vec::new();
         for ((spec, det), params) in self.specs.iter().zip(&self.dets).zip(&self.params) {
             for d in det.grouped(w, h, params.min_neighbors) {

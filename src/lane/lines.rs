@@ -16,6 +16,7 @@
 //!
 //! Units: bird's-eye pixels (columns), counts of pixels.
 
+pub use crate::config::PeakMode;
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
 
@@ -26,6 +27,8 @@ pub struct LineOptions {
     pub band: f64,
     /// Minimum peak height as a fraction of the band height (0..1).
     pub min_peak: f64,
+    /// How a peak's column is read (half-height centroid or argmax).
+    pub peak: PeakMode,
     /// Distance between the two line centres, pixels.
     pub lane_width_px: f64,
     /// A pair of lines whose distance differs from `lane_width_px` by more than this fraction
@@ -90,6 +93,40 @@ pub fn band_rows(height: u32, band: f64) -> u32 {
     ((height as f64 * band).round() as u32).clamp(1, height)
 }
 
+/// Step 2 with the configured [`PeakMode`]: [`peak`] (centroid) or [`peak_argmax`].
+pub fn peak_with(mode: PeakMode, hist: &[u16], range: std::ops::Range<usize>, min_count: u16) -> Option<f64> {
+    match mode {
+        PeakMode::Centroid => peak(hist, range, min_count),
+        PeakMode::Argmax => peak_argmax(hist, range, min_count),
+    }
+}
+
+/// Step 2, the paper's way: the column of the highest histogram value (the first maximum; when
+/// neighbouring columns share that value, the middle of their run, so a flat-topped line is
+/// located at its middle). Not moved by a wide bright blob beside the line unless the blob is
+/// higher. `None` when the maximum is below `min_count`.
+pub fn peak_argmax(hist: &[u16], range: std::ops::Range<usize>, min_count: u16) -> Option<f64> {
+    let (start, end) = (range.start, range.end.min(hist.len()));
+    if start >= end {
+        return None;
+    }
+    let mut imax = start;
+    for i in start..end {
+        if hist[i] > hist[imax] {
+            imax = i;
+        }
+    }
+    let max = hist[imax];
+    if max == 0 || max < min_count {
+        return None;
+    }
+    let mut r = imax;
+    while r + 1 < end && hist[r + 1] == max {
+        r += 1;
+    }
+    Some((imax + r) as f64 / 2.0)
+}
+
 /// Step 2: the peak of `hist[range]`: centroid of the half-height run around the first
 /// maximum. `None` when the maximum is below `min_count`.
 pub fn peak(hist: &[u16], range: std::ops::Range<usize>, min_count: u16) -> Option<f64> {
@@ -128,8 +165,8 @@ pub fn measure(hist: &[u16], band_rows: u32, opts: &LineOptions) -> LaneMeasurem
     let w = hist.len();
     let min_count = (opts.min_peak * band_rows as f64).ceil().max(1.0) as u16;
     let mid = w / 2;
-    let mut left = peak(hist, 0..mid, min_count);
-    let mut right = peak(hist, mid..w, min_count);
+    let mut left = peak_with(opts.peak, hist, 0..mid, min_count);
+    let mut right = peak_with(opts.peak, hist, mid..w, min_count);
     // Two peaks at an implausible distance: keep the stronger, estimate the other.
     if let (Some(l), Some(r)) = (left, right) {
         if ((r - l) - opts.lane_width_px).abs() > opts.width_tolerance * opts.lane_width_px {
@@ -176,6 +213,7 @@ mod tests {
     const OPTS: LineOptions = LineOptions {
         band: 0.4,
         min_peak: 0.3,
+        peak: PeakMode::Centroid,
         lane_width_px: 190.0,
         width_tolerance: 0.35,
         center_offset_px: 0.0,
@@ -275,6 +313,20 @@ mod tests {
             },
         );
         assert!(m.error_px.unwrap().abs() < 1e-9);
+    }
+
+    #[test]
+    fn argmax_is_not_dragged_by_a_wide_blob() {
+        // A 6 px line (height 40) with a 30 px blob of height 25 beside it: the half-height
+        // run takes the blob in, the argmax does not.
+        let mut h = vec![0u16; 160];
+        h[50..56].fill(40);
+        h[56..86].fill(25);
+        let c = peak(&h, 0..160, 1).unwrap();
+        let a = peak_argmax(&h, 0..160, 1).unwrap();
+        assert!((a - 52.5).abs() < 1e-9, "{a}");
+        assert!(c > 60.0, "{c}");
+        assert_eq!(peak_with(PeakMode::Argmax, &h, 0..160, 41), None);
     }
 
     proptest! {

@@ -48,6 +48,7 @@ impl LaneOptions {
             lines: LineOptions {
                 band: l.band,
                 min_peak: l.min_peak,
+                peak: l.peak,
                 lane_width_px: l.lane_width_px,
                 width_tolerance: l.width_tolerance,
                 center_offset_px: l.center_offset_px,

@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""JPEG decoded like OpenCV (issue 13): `rccar::imageio` against `cv2.imread`.
+
+Files: OpenCV's sample JPEGs (Debian opencv-doc, /usr/share/doc/opencv-doc/examples/data/*.jpg,
+never copied into the repository) and frames of rccar's own simulated track (`rccar synth`)
+written by cv2.imwrite at qualities 50, 75, 95 with 4:4:4, 4:2:2 and 4:2:0 chroma subsampling,
+plus a grey JPEG.
+
+Checks per file: (1) the decoded pixels are identical to cv2.imread(IMREAD_COLOR) (grey files:
+IMREAD_GRAYSCALE); (2) `rccar detect` on the JPEG gives the boxes cv2.CascadeClassifier gives on
+cv2's decoding (stock frontalface_default and the shipped stop-sign cascade, (1.1, 3)).
+The Rust side is built with `--features jpeg-turbo` (libjpeg-turbo's code via the mozjpeg
+crate); without the feature (RCCAR_JPEG_FEATURES="") it reports how far the pure-Rust decoder
+is from OpenCV. Prints "N passed, N failed" and exits non-zero on a failure.
+
+    RCCAR_PYTHON=... python3 tests/parity/jpeg_parity.py
+"""
+import glob
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+import cv2
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+FEATURES = os.environ.get("RCCAR_JPEG_FEATURES", "jpeg-turbo")
+DOC = "/usr/share/doc/opencv-doc/examples/data/"
+CASCADES = ["/usr/share/opencv4/haarcascades/haarcascade_frontalface_default.xml",
+            os.path.join(ROOT, "config", "cascades", "stop_sign.xml")]
+
+
+def cargo(*args):
+    feat = ["--features", FEATURES] if FEATURES else []
+    return subprocess.run(["cargo", *args[:1], "--release", "--quiet", *feat, *args[1:]], cwd=ROOT,
+                          capture_output=True, text=True)
+
+
+def main():
+    tmp = tempfile.mkdtemp(prefix="rccar_jpeg_")
+    files = sorted(glob.glob(DOC + "*.jpg"))
+    if not files:
+        print("opencv-doc sample JPEGs not installed (apt-get install opencv-doc)")
+    # The project's own frames, written as JPEG at several qualities and subsamplings.
+    b = cargo("build")
+    if b.returncode != 0:
+        print("FAIL build:", b.stderr[-2000:])
+        print("0 passed, 1 failed")
+        return 1
+    synth = os.path.join(tmp, "synth")
+    subprocess.run([os.path.join(ROOT, "target", "release", "rccar"), "synth", synth], cwd=ROOT,
+                   capture_output=True)
+    frames = sorted(glob.glob(os.path.join(synth, "*.png")))[::20][:3]
+    samp = {"444": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444, "422": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_422,
+            "420": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420}
+    for k, f in enumerate(frames):
+        im = cv2.imread(f, cv2.IMREAD_COLOR)
+        for q in (50, 75, 95):
+            for sname, sv in samp.items():
+                p = os.path.join(tmp, f"frame{k}_q{q}_{sname}.jpg")
+                cv2.imwrite(p, im, [cv2.IMWRITE_JPEG_QUALITY, q, cv2.IMWRITE_JPEG_SAMPLING_FACTOR, sv])
+                files.append(p)
+        g = os.path.join(tmp, f"frame{k}_grey.jpg")
+        cv2.imwrite(g, cv2.cvtColor(im, cv2.COLOR_BGR2GRAY), [cv2.IMWRITE_JPEG_QUALITY, 80])
+        files.append(g)
+    out = os.path.join(tmp, "decoded")
+    r = cargo("run", "--example", "decode", "--", out, *files)
+    print(r.stdout.strip().splitlines()[0] if r.stdout.strip() else "decode printed nothing", r.stderr.strip()[-500:])
+    passed = failed = 0
+    worst = []
+    for f in files:
+        stem = os.path.splitext(os.path.basename(f))[0]
+        ref = cv2.imread(f, cv2.IMREAD_UNCHANGED)
+        ours = cv2.imread(os.path.join(out, stem + ".png"), cv2.IMREAD_UNCHANGED)
+        if ours is None or ref is None or ours.shape != ref.shape:
+            print(f"FAIL {stem}: shapes {None if ref is None else ref.shape} vs {None if ours is None else ours.shape}")
+            failed += 1
+            continue
+        if ref.ndim == 3:
+            ref = cv2.imread(f, cv2.IMREAD_COLOR)
+        d = np.abs(ref.astype(int) - ours.astype(int))
+        n = int((d > 0).sum())
+        if n == 0:
+            passed += 1
+        else:
+            failed += 1
+            worst.append((stem, n, int(d.max())))
+    print(f"pixels: {passed}/{len(files)} files identical to cv2.imread"
+          + (f"; differing: " + ", ".join(f"{s} ({n} values, max {m})" for s, n, m in worst[:12]) if worst else ""))
+    # Boxes: rccar detect on the JPEGs against OpenCV on its own decoding.
+    box_pass = box_fail = 0
+    for casc in CASCADES:
+        if not os.path.isfile(casc):
+            continue
+        run = subprocess.run([os.path.join(ROOT, "target", "release", "rccar"), "detect", "--no-annotate",
+                              "--cascade", casc, *files], capture_output=True, text=True)
+        lines = [json.loads(l) for l in run.stdout.splitlines() if l.strip()]
+        cc = cv2.CascadeClassifier(casc)
+        for f, res in zip(files, lines):
+            im = cv2.imread(f, cv2.IMREAD_COLOR)
+            g = cv2.cvtColor(im, cv2.COLOR_BGR2GRAY)
+            ref = sorted(tuple(int(v) for v in b) for b in cc.detectMultiScale(g, 1.1, 3))
+            got = sorted((b["x"], b["y"], b["width"], b["height"]) for b in res["boxes"])
+            if ref == got:
+                box_pass += 1
+            else:
+                box_fail += 1
+                print(f"  boxes differ: {os.path.basename(casc)} on {os.path.basename(f)}: cv2 {ref} ours {got}")
+    print(f"boxes: {box_pass}/{box_pass + box_fail} image x cascade runs identical to cv2")
+    passed += box_pass
+    failed += box_fail
+    print(f"{passed} passed, {failed} failed")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
