@@ -15,6 +15,7 @@ pub mod render;
 pub mod rng;
 pub mod run;
 pub mod scenario_lab;
+pub mod stereo;
 pub mod scene;
 pub mod track;
 pub mod truth;

@@ -10,6 +10,10 @@
 //!    sliding sum; Σ T'·I needs one pass per candidate disparity (Σ T' = 0, so I' = I there).
 //! 2. The best disparity must score ≥ `min_score` (else the object is not in the other view:
 //!    "no range").
+//! 2b. Occlusion prior: an object hides what is behind it, so of the local maxima scoring
+//!    at least `near_peak_ratio` × the best, the one with the largest disparity (nearest) is
+//!    taken. A flat-coloured object over a textured floor otherwise locks onto the floor
+//!    behind it (its lines fill the box); 1.0 turns the prior off.
 //! 3. Sub-pixel: a parabola through the peak and its two neighbours,
 //!    δ = (R₋ − R₊) / (2(R₋ − 2R₀ + R₊)), |δ| ≤ 0.5.
 //!
@@ -30,6 +34,9 @@ pub struct MatchOptions {
     pub min_score: f64,
     /// The reference image is the left one (else the right one).
     pub reference_left: bool,
+    /// Of the local maxima scoring at least this fraction of the best, take the nearest
+    /// (largest disparity); 1.0 = always the best.
+    pub near_peak_ratio: f64,
 }
 
 impl Default for MatchOptions {
@@ -39,6 +46,7 @@ impl Default for MatchOptions {
             max_disparity: 120,
             min_score: 0.6,
             reference_left: true,
+            near_peak_ratio: 0.9,
         }
     }
 }
@@ -168,9 +176,20 @@ impl Matcher {
             }
             self.scores.push(score);
         }
-        let Some((i, score)) = best else {
+        let Some((mut i, mut score)) = best else {
             return Err(NoRange::NoSearchRoom);
         };
+        // 2b. The nearest of the near-best local maxima.
+        let floor = score * opts.near_peak_ratio.min(1.0);
+        for k in (i + 1)..self.scores.len() {
+            let v = self.scores[k];
+            let left = self.scores[k - 1];
+            let right = self.scores.get(k + 1).copied().unwrap_or(f64::NEG_INFINITY);
+            if v >= floor && v >= opts.min_score && v >= left && !(right > v) {
+                i = k;
+                score = v;
+            }
+        }
         // 2. Threshold.
         if score < opts.min_score {
             return Err(NoRange::BelowThreshold {
@@ -211,11 +230,23 @@ pub fn match_box(reference: &GrayImage, other: &GrayImage, bbox: [i64; 4], opts:
 mod tests {
     use super::*;
 
+    /// Aperiodic value noise (hashed lattice every 3 px, bilinear), shifted by `shift` px.
     fn textured(w: u32, h: u32, shift: f64) -> GrayImage {
+        let hash = |i: i64, j: i64| -> f64 {
+            let mut z = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+            z ^= z >> 29;
+            z = z.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z ^= z >> 32;
+            (z % 1000) as f64 / 1000.0
+        };
         GrayImage::from_fn(w, h, |x, y| {
-            let u = x as f64 + shift;
-            let v = 128.0 + 60.0 * (u * 0.31).sin() * (y as f64 * 0.23).cos() + 40.0 * (u * 0.097 + y as f64 * 0.05).sin();
-            image::Luma([v.round().clamp(0.0, 255.0) as u8])
+            let (u, v) = ((x as f64 + shift) / 3.0, y as f64 / 3.0);
+            let (i, j) = (u.floor(), v.floor());
+            let (a, b) = (u - i, v - j);
+            let (i, j) = (i as i64, j as i64);
+            let top = hash(i, j) * (1.0 - a) + hash(i + 1, j) * a;
+            let bot = hash(i, j + 1) * (1.0 - a) + hash(i + 1, j + 1) * a;
+            image::Luma([(40.0 + 170.0 * (top * (1.0 - b) + bot * b)).round() as u8])
         })
     }
 
