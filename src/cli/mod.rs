@@ -10,5 +10,6 @@ pub mod link;
 pub mod replay;
 pub mod sim;
 pub mod stages;
+pub mod stereo;
 pub mod synth;
 pub mod timer;
