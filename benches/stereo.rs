@@ -69,7 +69,11 @@ fn main() {
     let scene = Arc::new(Scene::new(&track));
     let mut rig = StereoRig::new(&cfg, scene, 0.06, RenderOptions::from_config(&cfg.sim));
     // The default track's stop sign (x 4.5, y −0.48) about 1 m ahead, on the right.
-    let pose = Pose { x: 3.26, y: -0.15, yaw: 0.0 };
+    let pose = Pose {
+        x: 3.26,
+        y: -0.15,
+        yaw: 0.0,
+    };
     let (l, r) = rig.render(&pose, 0.0, 0);
     let truth = rig.truth(&pose, true);
     let b = truth
@@ -78,7 +82,12 @@ fn main() {
         .expect("stop sign in view")
         .bbox
         .bbox;
-    let bx = [b[0].round() as i64, b[1].round() as i64, (b[2] - b[0]).round() as i64, (b[3] - b[1]).round() as i64];
+    let bx = [
+        b[0].round() as i64,
+        b[1].round() as i64,
+        (b[2] - b[0]).round() as i64,
+        (b[3] - b[1]).round() as i64,
+    ];
     let (mut gl, mut gr) = (image::GrayImage::new(0, 0), image::GrayImage::new(0, 0));
     gray_from_rgb(&l, &mut gl);
     gray_from_rgb(&r, &mut gr);

@@ -39,14 +39,33 @@ fn stereo_command_ranges_a_rendered_pair_with_and_without_calibration() {
     let cfg = Config::default();
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let track = Track::load(&root.join("config/tracks/default.toml")).unwrap();
-    let mut rig = StereoRig::new(&cfg, Arc::new(Scene::new(&track)), 0.06, RenderOptions::from_config(&cfg.sim));
-    let pose = Pose { x: 3.26, y: -0.15, yaw: 0.0 };
+    let mut rig = StereoRig::new(
+        &cfg,
+        Arc::new(Scene::new(&track)),
+        0.06,
+        RenderOptions::from_config(&cfg.sim),
+    );
+    let pose = Pose {
+        x: 3.26,
+        y: -0.15,
+        yaw: 0.0,
+    };
     let (l, r) = rig.render(&pose, 0.0, 0);
     l.save(d.join("l.png")).unwrap();
     r.save(d.join("r.png")).unwrap();
-    let t = rig.truth(&pose, true).into_iter().find(|t| t.bbox.kind == ObjectKind::StopSign).unwrap();
+    let t = rig
+        .truth(&pose, true)
+        .into_iter()
+        .find(|t| t.bbox.kind == ObjectKind::StopSign)
+        .unwrap();
     let b = t.bbox.bbox;
-    let bx = format!("{},{},{},{}", b[0].round(), b[1].round(), (b[2] - b[0]).round(), (b[3] - b[1]).round());
+    let bx = format!(
+        "{},{},{},{}",
+        b[0].round(),
+        b[1].round(),
+        (b[2] - b[0]).round(),
+        (b[3] - b[1]).round()
+    );
     let forward = |out: &str| -> f64 {
         let v: serde_json::Value = serde_json::from_str(out.lines().next().unwrap()).unwrap();
         v["forward_m"]["bfd"].as_f64().unwrap_or_else(|| panic!("{out}"))
@@ -58,23 +77,50 @@ fn stereo_command_ranges_a_rendered_pair_with_and_without_calibration() {
     let out_ideal = out.clone();
     // 2. Through a calibration made from rendered boards.
     let cam = PinholeCamera::from_config(&cfg.camera);
-    let board = Board { size: BoardSize { cols: 9, rows: 6 }, square_m: 0.025 };
-    let mut args: Vec<String> = ["calibrate", "stereo", "--out", "st.json", "--left"].iter().map(|s| s.to_string()).collect();
+    let board = Board {
+        size: BoardSize { cols: 9, rows: 6 },
+        square_m: 0.025,
+    };
+    let mut args: Vec<String> = ["calibrate", "stereo", "--out", "st.json", "--left"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
     let mut rights = vec![];
     for (i, p) in board.calibration_poses(&cam, 0.45, 10).iter().enumerate() {
         let mut pr = *p;
         pr.t[0] -= 0.06;
-        board.render(&cam, p, 2.0, 10 + i as u64).save(d.join(format!("bl{i}.png"))).unwrap();
-        board.render(&cam, &pr, 2.0, 50 + i as u64).save(d.join(format!("br{i}.png"))).unwrap();
+        board
+            .render(&cam, p, 2.0, 10 + i as u64)
+            .save(d.join(format!("bl{i}.png")))
+            .unwrap();
+        board
+            .render(&cam, &pr, 2.0, 50 + i as u64)
+            .save(d.join(format!("br{i}.png")))
+            .unwrap();
         args.push(format!("bl{i}.png"));
         rights.push(format!("br{i}.png"));
     }
     args.push("--right".into());
     args.extend(rights);
     let a: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
-    let out = Command::new(env!("CARGO_BIN_EXE_rccar")).args(&a).current_dir(d).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rccar"))
+        .args(&a)
+        .current_dir(d)
+        .output()
+        .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let (code, out, err) = rccar(&["stereo", "l.png", "r.png", "--box", &bx, "--set", "stereo.calibration=\"st.json\""], d);
+    let (code, out, err) = rccar(
+        &[
+            "stereo",
+            "l.png",
+            "r.png",
+            "--box",
+            &bx,
+            "--set",
+            "stereo.calibration=\"st.json\"",
+        ],
+        d,
+    );
     assert_eq!(code, 0, "{err}");
     let f_cal = forward(&out);
     println!("ideal: {out_ideal}calibrated: {out}");
@@ -97,9 +143,23 @@ fn stereo_command_ranges_a_rendered_pair_with_and_without_calibration() {
     let big = |img: &image::RgbImage| image::imageops::resize(img, 640, 480, image::imageops::FilterType::Triangle);
     big(&l).save(d.join("L.png")).unwrap();
     big(&r).save(d.join("R.png")).unwrap();
-    let (code, _, err) = rccar(&["stereo", "L.png", "R.png", "--box", "10,10,20,20", "--set", "stereo.calibration=\"st.json\""], d);
+    let (code, _, err) = rccar(
+        &[
+            "stereo",
+            "L.png",
+            "R.png",
+            "--box",
+            "10,10,20,20",
+            "--set",
+            "stereo.calibration=\"st.json\"",
+        ],
+        d,
+    );
     assert_ne!(code, 0);
-    assert!(err.contains("st.json: calibrated for 320x240 images, but the frames are 640x480"), "{err}");
+    assert!(
+        err.contains("st.json: calibrated for 320x240 images, but the frames are 640x480"),
+        "{err}"
+    );
     let (code, _, err) = rccar(&["stereo", "l.png", "r.png", "--box", "1,2,3"], d);
     assert_ne!(code, 0);
     assert!(err.contains("--box 1,2,3: needs exactly four integers"), "{err}");

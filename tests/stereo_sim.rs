@@ -111,7 +111,11 @@ fn setup(kind: &str, class: ObjectClass) -> Option<Setup> {
     .unwrap();
     let t = track(kind);
     let ob = t.enabled_objects().next().unwrap().clone();
-    let near = if ob.kind == ObjectKind::Obstacle { ob.size[0] / 2.0 } else { 0.0 };
+    let near = if ob.kind == ObjectKind::Obstacle {
+        ob.size[0] / 2.0
+    } else {
+        0.0
+    };
     Some(Setup {
         cfg: Config::default(),
         stage,
@@ -156,7 +160,9 @@ fn measure(s: &mut Setup, base: f64, d: f64, matcher: &mut Matcher) -> Option<Ro
         (rect.x + rect.width) as f64 - 0.5,
         (rect.y + rect.height) as f64 - 0.5,
     ];
-    let mono = BoxRanging::from_config(&cfg.camera, &cfg.ranging).range(s.class, bbox).map(|r| r.0);
+    let mono = BoxRanging::from_config(&cfg.camera, &cfg.ranging)
+        .range(s.class, bbox)
+        .map(|r| r.0);
     let (mut gl, mut gr) = (image::GrayImage::new(0, 0), image::GrayImage::new(0, 0));
     gray_from_rgb(&l, &mut gl);
     gray_from_rgb(&r, &mut gr);
@@ -167,13 +173,28 @@ fn measure(s: &mut Setup, base: f64, d: f64, matcher: &mut Matcher) -> Option<Ro
         near_peak_ratio: cfg.stereo.near_peak_ratio,
         ..MatchOptions::default()
     };
-    let est = match matcher.match_box(&gl, &gr, [rect.x as i64, rect.y as i64, rect.width as i64, rect.height as i64], &opts) {
+    let est = match matcher.match_box(
+        &gl,
+        &gr,
+        [rect.x as i64, rect.y as i64, rect.width as i64, rect.height as i64],
+        &opts,
+    ) {
         Ok(m) => {
             if let Ok(dir) = std::env::var("RCCAR_STEREO_DUMP") {
                 l.save(format!("{dir}/l_{base}_{d}.png")).unwrap();
                 r.save(format!("{dir}/r_{base}_{d}.png")).unwrap();
-                println!("dump base {base} d {d}: rect {rect:?} disparity {:.2} score {:.3} truth box {:?}", m.disparity, m.score, tb);
-                println!("scores {:?}", matcher.scores().iter().map(|v| (v * 100.0).round() / 100.0).collect::<Vec<_>>());
+                println!(
+                    "dump base {base} d {d}: rect {rect:?} disparity {:.2} score {:.3} truth box {:?}",
+                    m.disparity, m.score, tb
+                );
+                println!(
+                    "scores {:?}",
+                    matcher
+                        .scores()
+                        .iter()
+                        .map(|v| (v * 100.0).round() / 100.0)
+                        .collect::<Vec<_>>()
+                );
             }
             let v = rect.y as f64 + (rect.height as f64 - 1.0) / 2.0;
             let sr = geo.range(&m, v, true).unwrap();
@@ -225,9 +246,17 @@ fn stereo_ranging_on_detector_boxes_in_the_simulator() {
     ] {
         let Some(mut s) = setup(kind, class) else { continue };
         for base in [0.06, 0.12] {
-            let rows: Vec<Row> = ds.iter().filter_map(|&d| measure(&mut s, base, d, &mut matcher)).collect();
+            let rows: Vec<Row> = ds
+                .iter()
+                .filter_map(|&d| measure(&mut s, base, d, &mut matcher))
+                .collect();
             let pct = |x: (f64, f64, usize)| format!("{:.1} / {:.1} %", 100.0 * x.0, 100.0 * x.1);
-            let (a, b, c, m) = (stats(&rows, 0, 9.0), stats(&rows, 1, 9.0), stats(&rows, 2, 9.0), stats(&rows, 3, 9.0));
+            let (a, b, c, m) = (
+                stats(&rows, 0, 9.0),
+                stats(&rows, 1, 9.0),
+                stats(&rows, 2, 9.0),
+                stats(&rows, 3, 9.0),
+            );
             let near_c = stats(&rows, 2, 1.5);
             let near_b = stats(&rows, 1, 1.5);
             let stereo_n = c.2;
@@ -249,15 +278,26 @@ fn stereo_ranging_on_detector_boxes_in_the_simulator() {
             }
             let n_near = ds.iter().filter(|&&d| d <= 1.5 + 1e-9).count();
             if (near_c.2 as f64) < 0.75 * n_near as f64 {
-                failures.push(format!("{kind} base {base}: stereo range at {}/{n_near} distances ≤ 1.5 m", near_c.2));
+                failures.push(format!(
+                    "{kind} base {base}: stereo range at {}/{n_near} distances ≤ 1.5 m",
+                    near_c.2
+                ));
             }
             for (name, st) in [("(b)", near_b), ("(c)", near_c)] {
                 if kind == "obstacle" && base < 0.1 {
-                    println!("  known shortfall: {kind} base {base} {name}: median {:.2} %, max {:.2} %", 100.0 * st.0, 100.0 * st.1);
+                    println!(
+                        "  known shortfall: {kind} base {base} {name}: median {:.2} %, max {:.2} %",
+                        100.0 * st.0,
+                        100.0 * st.1
+                    );
                     continue;
                 }
                 if !(st.0 <= 0.02 && st.1 <= 0.05) {
-                    failures.push(format!("{kind} base {base} {name}: median {:.2} %, max {:.2} %", 100.0 * st.0, 100.0 * st.1));
+                    failures.push(format!(
+                        "{kind} base {base} {name}: median {:.2} %, max {:.2} %",
+                        100.0 * st.0,
+                        100.0 * st.1
+                    ));
                 }
             }
         }

@@ -47,7 +47,9 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
     let boxes: Vec<[i64; 4]> = a.boxes.iter().map(|s| parse_box(s)).collect::<Result<_>>()?;
     let load = |p: &PathBuf| -> Result<image::RgbImage> {
-        Ok(image::open(p).with_context(|| format!("{}: cannot read the image", p.display()))?.to_rgb8())
+        Ok(image::open(p)
+            .with_context(|| format!("{}: cannot read the image", p.display()))?
+            .to_rgb8())
     };
     let (l, r) = (load(&a.left)?, load(&a.right)?);
     if l.dimensions() != r.dimensions() {
@@ -94,7 +96,17 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
         stage
             .run(gref, None)?
             .into_iter()
-            .map(|d| (d.label, [d.rect.x as i64, d.rect.y as i64, d.rect.width as i64, d.rect.height as i64]))
+            .map(|d| {
+                (
+                    d.label,
+                    [
+                        d.rect.x as i64,
+                        d.rect.y as i64,
+                        d.rect.width as i64,
+                        d.rect.height as i64,
+                    ],
+                )
+            })
             .collect()
     } else {
         boxes.into_iter().map(|b| ("box".to_string(), b)).collect()
@@ -110,14 +122,19 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
     let mut m = Matcher::new();
     for (label, b) in labelled {
         let v = b[1] as f64 + (b[3] as f64 - 1.0) / 2.0;
-        let line = match m.match_box(gref, gother, b, &opts).map(|mm| (mm, geo.range(&mm, v, reference_left))) {
+        let line = match m
+            .match_box(gref, gother, b, &opts)
+            .map(|mm| (mm, geo.range(&mm, v, reference_left)))
+        {
             Ok((mm, Some(rg))) => serde_json::json!({
                 "label": label, "box": b, "disparity_px": mm.disparity, "ncc": mm.score,
                 "depth_m": {"eq16": rg.depth_eq16, "exact": rg.depth_exact, "bfd": rg.depth_bfd},
                 "forward_m": {"eq16": rg.forward_m[0], "exact": rg.forward_m[1], "bfd": rg.forward_m[2]},
                 "lateral_m": rg.lateral_m,
             }),
-            Ok((mm, None)) => serde_json::json!({"label": label, "box": b, "no_range": format!("disparity {:.3} px", mm.disparity)}),
+            Ok((mm, None)) => {
+                serde_json::json!({"label": label, "box": b, "no_range": format!("disparity {:.3} px", mm.disparity)})
+            }
             Err(e) => serde_json::json!({"label": label, "box": b, "no_range": e.to_string()}),
         };
         println!("{line}");

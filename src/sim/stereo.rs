@@ -60,7 +60,10 @@ impl StereoRig {
 
     /// Renders both views from the car at `pose` (time `t_s`, frame number `frame`).
     pub fn render(&mut self, pose: &Pose, t_s: f64, frame: u64) -> (RgbImage, RgbImage) {
-        (self.left.render_new(pose, t_s, frame), self.right.render_new(pose, t_s, frame))
+        (
+            self.left.render_new(pose, t_s, frame),
+            self.right.render_new(pose, t_s, frame),
+        )
     }
 
     /// Truth for every object in view of the reference camera (`left` or not).
@@ -71,8 +74,18 @@ impl StereoRig {
         r.object_boxes(pose)
             .into_iter()
             .filter_map(|b| {
-                let ob = r.scene().track.objects.iter().map(|o| &o.0).find(|o| o.index == b.index)?;
-                let near = if ob.kind == ObjectKind::Obstacle { ob.size[0] / 2.0 } else { 0.0 };
+                let ob = r
+                    .scene()
+                    .track
+                    .objects
+                    .iter()
+                    .map(|o| &o.0)
+                    .find(|o| o.index == b.index)?;
+                let near = if ob.kind == ObjectKind::Obstacle {
+                    ob.size[0] / 2.0
+                } else {
+                    0.0
+                };
                 let (dx, dy) = (ob.pos[0] - o[0], ob.pos[1] - o[1]);
                 Some(StereoTruth {
                     bbox: b,

@@ -148,7 +148,11 @@ impl Matcher {
         self.scores.clear();
         let mut best: Option<(usize, f64)> = None;
         for d in dmin..=dmax {
-            let x0 = if opts.reference_left { bx as i64 - d } else { bx as i64 + d };
+            let x0 = if opts.reference_left {
+                bx as i64 - d
+            } else {
+                bx as i64 + d
+            };
             if x0 < 0 || x0 as usize + bw > iw {
                 self.scores.push(f64::NAN);
                 continue;
@@ -170,7 +174,11 @@ impl Matcher {
                 }
                 cross += acc;
             }
-            let score = if var > 1e-9 { cross as f64 / (tnorm * var).sqrt() } else { 0.0 };
+            let score = if var > 1e-9 {
+                cross as f64 / (tnorm * var).sqrt()
+            } else {
+                0.0
+            };
             if best.is_none_or(|b| score > b.1) {
                 best = Some((self.scores.len(), score));
             }
@@ -211,7 +219,11 @@ impl Matcher {
             return Err(NoRange::NonPositiveDisparity(disparity));
         }
         let x_ref = bx as f64 + (bw as f64 - 1.0) / 2.0;
-        let x_other = if opts.reference_left { x_ref - disparity } else { x_ref + disparity };
+        let x_other = if opts.reference_left {
+            x_ref - disparity
+        } else {
+            x_ref + disparity
+        };
         Ok(StereoMatch {
             disparity,
             score,
@@ -222,7 +234,12 @@ impl Matcher {
 }
 
 /// [`Matcher::match_box`] with fresh buffers.
-pub fn match_box(reference: &GrayImage, other: &GrayImage, bbox: [i64; 4], opts: &MatchOptions) -> Result<StereoMatch, NoRange> {
+pub fn match_box(
+    reference: &GrayImage,
+    other: &GrayImage,
+    bbox: [i64; 4],
+    opts: &MatchOptions,
+) -> Result<StereoMatch, NoRange> {
     Matcher::new().match_box(reference, other, bbox, opts)
 }
 
@@ -259,7 +276,10 @@ mod tests {
         assert!((m.disparity - 17.4).abs() < 0.1, "{m:?}");
         assert!(m.score > 0.95);
         // The right image as reference finds the same disparity the other way.
-        let opts = MatchOptions { reference_left: false, ..MatchOptions::default() };
+        let opts = MatchOptions {
+            reference_left: false,
+            ..MatchOptions::default()
+        };
         let m = match_box(&r, &l, [150, 100, 40, 30], &opts).unwrap();
         assert!((m.disparity - 17.4).abs() < 0.1, "{m:?}");
     }
@@ -269,19 +289,38 @@ mod tests {
         let l = textured(320, 240, 0.0);
         let small = textured(160, 120, 0.0);
         let o = MatchOptions::default();
-        assert!(matches!(match_box(&l, &small, [10, 10, 20, 20], &o), Err(NoRange::SizeMismatch { .. })));
-        assert!(matches!(match_box(&l, &l, [310, 10, 20, 20], &o), Err(NoRange::BadBox(_))));
+        assert!(matches!(
+            match_box(&l, &small, [10, 10, 20, 20], &o),
+            Err(NoRange::SizeMismatch { .. })
+        ));
+        assert!(matches!(
+            match_box(&l, &l, [310, 10, 20, 20], &o),
+            Err(NoRange::BadBox(_))
+        ));
         let flat = GrayImage::from_pixel(320, 240, image::Luma([90]));
-        assert!(matches!(match_box(&flat, &l, [100, 100, 20, 20], &o), Err(NoRange::Flat)));
+        assert!(matches!(
+            match_box(&flat, &l, [100, 100, 20, 20], &o),
+            Err(NoRange::Flat)
+        ));
         // The same image: disparity 0 is the peak → no range.
-        assert!(matches!(match_box(&l, &l, [100, 100, 20, 20], &o), Err(NoRange::NonPositiveDisparity(_))));
+        assert!(matches!(
+            match_box(&l, &l, [100, 100, 20, 20], &o),
+            Err(NoRange::NonPositiveDisparity(_))
+        ));
         // An unrelated image: the best score is low.
         let noise = GrayImage::from_fn(320, 240, |x, y| image::Luma([((x * 7919 + y * 104729) % 251) as u8]));
         let e = match_box(&l, &noise, [100, 100, 30, 30], &o).unwrap_err();
         assert!(matches!(e, NoRange::BelowThreshold { .. }), "{e}");
         // No room: a box at the left edge with the left image as reference and min disparity 5.
-        let o2 = MatchOptions { min_disparity: 5, max_disparity: 10, ..o };
-        assert!(matches!(match_box(&l, &r(), [0, 10, 20, 20], &o2), Err(NoRange::NoSearchRoom)));
+        let o2 = MatchOptions {
+            min_disparity: 5,
+            max_disparity: 10,
+            ..o
+        };
+        assert!(matches!(
+            match_box(&l, &r(), [0, 10, 20, 20], &o2),
+            Err(NoRange::NoSearchRoom)
+        ));
         fn r() -> GrayImage {
             textured(320, 240, 3.0)
         }
