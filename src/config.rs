@@ -167,6 +167,8 @@ pub struct Config {
     pub record: RecordConfig,
     /// `[dashboard]`: the live page of `sim|drive --dashboard`.
     pub dashboard: DashboardConfig,
+    /// Stereo ranging with a second camera (src/stereo/, docs/stereo.md).
+    pub stereo: StereoConfig,
 }
 
 /// `[camera]`: the image the pipeline works on and the camera's pose on the car.
@@ -756,6 +758,15 @@ impl Config {
         c.range("dashboard.heartbeat_ms", d.heartbeat_ms, 0, 60_000);
         c.range("dashboard.stream_fps", d.stream_fps, 1.0, 60.0);
         c.range("dashboard.max_viewers", d.max_viewers, 1, 256);
+        let st = &self.stereo;
+        c.range("stereo.base_m", st.base_m, 0.01, 2.0);
+        if st.reference != "left" && st.reference != "right" {
+            c.fail("stereo.reference", format!("{:?}", st.reference), "\"left\" or \"right\"");
+        }
+        c.range("stereo.min_ncc", st.min_ncc, -1.0, 1.0);
+        c.range("stereo.max_disparity_px", st.max_disparity_px, 1, cam.width.max(1));
+        c.range("stereo.max_skew_ms", st.max_skew_ms, 0.0, 1000.0);
+        c.range("stereo.near_peak_ratio", st.near_peak_ratio, 0.5, 1.0);
 
         if c.0.is_empty() {
             Ok(())
@@ -1456,6 +1467,42 @@ impl Default for RangingConfig {
             track_max_missed: 3,
             refine_by_colour: true,
             stop_sign_red_fraction: 0.9,
+        }
+    }
+}
+
+/// `[stereo]`: a second camera for stereo ranging (src/stereo/, docs/stereo.md; Zaarane et
+/// al. 2020, Abdollahi 2011).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StereoConfig {
+    /// Distance between the two lenses, metres (used when `calibration` is empty).
+    pub base_m: f64,
+    /// Which camera detection runs on: `left` or `right`.
+    pub reference: String,
+    /// Results file of `rccar calibrate stereo` (JSON); empty = an ideal pair of `[camera]`.
+    pub calibration: String,
+    /// Lowest normalised cross-correlation that counts as a match (-1..1).
+    pub min_ncc: f64,
+    /// Largest disparity searched, pixels.
+    pub max_disparity_px: u32,
+    /// Of the correlation peaks scoring at least this fraction of the best, the nearest is
+    /// taken (an object hides what is behind it); 1 = always the best.
+    pub near_peak_ratio: f64,
+    /// Largest time between the two cameras' frames paired as one stereo frame, milliseconds.
+    pub max_skew_ms: f64,
+}
+
+impl Default for StereoConfig {
+    fn default() -> Self {
+        Self {
+            base_m: 0.06,
+            reference: "left".into(),
+            calibration: String::new(),
+            min_ncc: 0.6,
+            max_disparity_px: 120,
+            near_peak_ratio: 0.9,
+            max_skew_ms: 20.0,
         }
     }
 }

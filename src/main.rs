@@ -35,9 +35,12 @@ enum Cmd {
     Drive(cli::drive::DriveArgs),
     /// Drive the simulated car round a track with the pipeline in the loop; report and plot.
     Sim(cli::sim::SimArgs),
-    /// Calibrate the car: `calibrate ranging PAIRS.csv` fits the camera tilt for ranging.
+    /// Calibrate the car: `calibrate ranging PAIRS.csv` fits the camera tilt for ranging;
+    /// `calibrate camera|stereo` calibrates cameras from checkerboard photos.
     #[command(subcommand)]
     Calibrate(cli::calibrate::CalibrateCmd),
+    /// Range objects in a stereo pair: NCC along the rows, Eq. 16 / exact angles / b·f/d.
+    Stereo(cli::stereo::StereoRangeArgs),
 }
 
 fn main() -> ExitCode {
@@ -52,6 +55,7 @@ fn main() -> ExitCode {
         Cmd::Sim(a) => cli::sim::run(a),
         Cmd::Drive(a) => cli::drive::run(a),
         Cmd::Calibrate(c) => cli::calibrate::run(c),
+        Cmd::Stereo(a) => cli::stereo::run(a),
     };
     match result {
         Ok(code) => code,

@@ -45,7 +45,12 @@ fn recovers_the_simulated_cameras_intrinsics() {
     );
     assert!((k.fx - cam.f_px).abs() / cam.f_px < 0.005, "fx {}", k.fx);
     assert!((k.fy - cam.f_px).abs() / cam.f_px < 0.005, "fy {}", k.fy);
-    assert!((k.cx - cam.u0).abs() < 1.5 && (k.cy - cam.v0).abs() < 1.5, "c ({}, {})", k.cx, k.cy);
+    assert!(
+        (k.cx - cam.u0).abs() < 1.5 && (k.cy - cam.v0).abs() < 1.5,
+        "c ({}, {})",
+        k.cx,
+        k.cy
+    );
     assert!(fit.dist.0[0].abs() < 0.05, "k1 {}", fit.dist.0[0]);
     assert!(fit.rms < 0.2, "RMS {}", fit.rms);
 }
@@ -61,7 +66,11 @@ fn recovers_the_simulated_stereo_base() {
         let mut pr = *p;
         pr.t[0] -= base;
         let l = find_chessboard(&b.render(&cam, p, 2.0, 2 * i as u64), b.size, &CornerOptions::default());
-        let r = find_chessboard(&b.render(&cam, &pr, 2.0, 2 * i as u64 + 1), b.size, &CornerOptions::default());
+        let r = find_chessboard(
+            &b.render(&cam, &pr, 2.0, 2 * i as u64 + 1),
+            b.size,
+            &CornerOptions::default(),
+        );
         if let (Some(l), Some(r)) = (l, r) {
             lv.push(l);
             rv.push(r);
@@ -96,7 +105,11 @@ fn no_board_and_a_single_image_are_clear_errors() {
 }
 
 fn rccar(args: &[&str], dir: &std::path::Path) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_rccar")).args(args).current_dir(dir).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rccar"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap();
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stdout).into(),
@@ -118,7 +131,9 @@ fn calibrate_commands_on_rendered_boards_and_bad_input() {
         b.render(&cam, p, 2.0, i as u64).save(d.join(&n)).unwrap();
         names.push(n);
     }
-    image::GrayImage::from_pixel(320, 240, image::Luma([90])).save(d.join("blank.png")).unwrap();
+    image::GrayImage::from_pixel(320, 240, image::Luma([90]))
+        .save(d.join("blank.png"))
+        .unwrap();
     names.push("blank.png".into());
     let mut args: Vec<&str> = vec!["calibrate", "camera", "--out", "cam.json"];
     args.extend(names.iter().map(|s| s.as_str()));
@@ -126,7 +141,9 @@ fn calibrate_commands_on_rendered_boards_and_bad_input() {
     assert_eq!(code, 0, "{out}\n{err}");
     assert!(err.contains("blank.png: board 9x6 not found"), "{err}");
     let file = CalibrationFile::load(&d.join("cam.json")).unwrap();
-    let CalibrationFile::Camera { camera, .. } = file else { panic!("not a camera file") };
+    let CalibrationFile::Camera { camera, .. } = file else {
+        panic!("not a camera file")
+    };
     assert_eq!(camera.board_not_found, vec!["blank.png".to_string()]);
     assert_eq!(camera.per_image_rms_px.len(), 8);
     assert!((camera.intrinsics.fx - cam.f_px).abs() / cam.f_px < 0.005);
@@ -134,27 +151,48 @@ fn calibrate_commands_on_rendered_boards_and_bad_input() {
     // A single image.
     let (code, _, err) = rccar(&["calibrate", "camera", "--out", "x.json", "b0.png"], d);
     assert_ne!(code, 0);
-    assert!(err.contains("need at least 3 images with the board found, got 1"), "{err}");
+    assert!(
+        err.contains("need at least 3 images with the board found, got 1"),
+        "{err}"
+    );
     assert!(!d.join("x.json").exists());
 
     // A pair of different sizes.
-    image::GrayImage::from_pixel(640, 480, image::Luma([90])).save(d.join("big.png")).unwrap();
+    image::GrayImage::from_pixel(640, 480, image::Luma([90]))
+        .save(d.join("big.png"))
+        .unwrap();
     let (code, _, err) = rccar(&["calibrate", "stereo", "--left", "b0.png", "--right", "big.png"], d);
     assert_ne!(code, 0);
-    assert!(err.contains("left images are 320x240 but right images are 640x480"), "{err}");
+    assert!(
+        err.contains("left images are 320x240 but right images are 640x480"),
+        "{err}"
+    );
     // Unequal counts.
-    let (code, _, err) = rccar(&["calibrate", "stereo", "--left", "b0.png", "b1.png", "--right", "b0.png"], d);
+    let (code, _, err) = rccar(
+        &["calibrate", "stereo", "--left", "b0.png", "b1.png", "--right", "b0.png"],
+        d,
+    );
     assert_ne!(code, 0);
     assert!(err.contains("2 left images but 1 right images"), "{err}");
 
     // A stereo file read for frames of another size; a camera file where a stereo one is needed.
-    let mut pose_args: Vec<String> = vec!["calibrate".into(), "stereo".into(), "--out".into(), "st.json".into(), "--left".into()];
+    let mut pose_args: Vec<String> = vec![
+        "calibrate".into(),
+        "stereo".into(),
+        "--out".into(),
+        "st.json".into(),
+        "--left".into(),
+    ];
     let mut rights = vec![];
     for (i, p) in b.calibration_poses(&cam, 0.45, 8).iter().enumerate() {
         let mut pr = *p;
         pr.t[0] -= 0.06;
-        b.render(&cam, p, 2.0, 100 + i as u64).save(d.join(format!("l{i}.png"))).unwrap();
-        b.render(&cam, &pr, 2.0, 200 + i as u64).save(d.join(format!("r{i}.png"))).unwrap();
+        b.render(&cam, p, 2.0, 100 + i as u64)
+            .save(d.join(format!("l{i}.png")))
+            .unwrap();
+        b.render(&cam, &pr, 2.0, 200 + i as u64)
+            .save(d.join(format!("r{i}.png")))
+            .unwrap();
         pose_args.push(format!("l{i}.png"));
         rights.push(format!("r{i}.png"));
     }
@@ -167,9 +205,16 @@ fn calibrate_commands_on_rendered_boards_and_bad_input() {
     assert!((st.baseline_m - 0.06).abs() < 0.0006, "baseline {}", st.baseline_m);
     let e = CalibrationFile::load_stereo(&d.join("st.json"), 640, 480).unwrap_err();
     assert!(matches!(e, FileError::Size { .. }), "{e}");
-    assert!(e.to_string().contains("calibrated for 320x240 images, but the frames are 640x480"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("calibrated for 320x240 images, but the frames are 640x480"),
+        "{e}"
+    );
     let e = CalibrationFile::load_stereo(&d.join("cam.json"), 320, 240).unwrap_err();
-    assert!(e.to_string().contains("single-camera calibration, stereo needed"), "{e}");
+    assert!(
+        e.to_string().contains("single-camera calibration, stereo needed"),
+        "{e}"
+    );
     std::fs::write(d.join("junk.json"), "{\"kind\": \"stereo\"").unwrap();
     let e = CalibrationFile::load_stereo(&d.join("junk.json"), 320, 240).unwrap_err();
     assert!(e.to_string().contains("junk.json: not a calibration file"), "{e}");

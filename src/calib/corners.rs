@@ -35,7 +35,11 @@ impl std::str::FromStr for BoardSize {
         let (a, b) = s
             .split_once(['x', 'X'])
             .ok_or_else(|| format!("board size '{s}' is not COLSxROWS, e.g. 9x6"))?;
-        let p = |t: &str| t.trim().parse::<usize>().map_err(|_| format!("board size '{s}': '{t}' is not a number"));
+        let p = |t: &str| {
+            t.trim()
+                .parse::<usize>()
+                .map_err(|_| format!("board size '{s}': '{t}' is not a number"))
+        };
         let (cols, rows) = (p(a)?, p(b)?);
         if cols < 3 || rows < 3 || cols > 64 || rows > 64 {
             return Err(format!("board size '{s}': each side must be 3..64 inner corners"));
@@ -101,7 +105,9 @@ impl FImg {
 
     fn blur(&self, sigma: f64) -> FImg {
         let r = (3.0 * sigma).ceil() as isize;
-        let k: Vec<f32> = (-r..=r).map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp() as f32).collect();
+        let k: Vec<f32> = (-r..=r)
+            .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp() as f32)
+            .collect();
         let s: f32 = k.iter().sum();
         let k: Vec<f32> = k.iter().map(|v| v / s).collect();
         let mut tmp = vec![0f32; self.d.len()];
@@ -114,7 +120,11 @@ impl FImg {
                 tmp[y * self.w + x] = acc;
             }
         }
-        let t = FImg { w: self.w, h: self.h, d: tmp };
+        let t = FImg {
+            w: self.w,
+            h: self.h,
+            d: tmp,
+        };
         let mut out = vec![0f32; self.d.len()];
         for y in 0..self.h {
             for x in 0..self.w {
@@ -125,7 +135,11 @@ impl FImg {
                 out[y * self.w + x] = acc;
             }
         }
-        FImg { w: self.w, h: self.h, d: out }
+        FImg {
+            w: self.w,
+            h: self.h,
+            d: out,
+        }
     }
 }
 
@@ -157,7 +171,8 @@ pub fn find_chessboard(img: &GrayImage, board: BoardSize, opts: &CornerOptions) 
             let c = bl.at(xi, yi);
             let ixx = bl.at(xi + 1, yi) - 2.0 * c + bl.at(xi - 1, yi);
             let iyy = bl.at(xi, yi + 1) - 2.0 * c + bl.at(xi, yi - 1);
-            let ixy = (bl.at(xi + 1, yi + 1) - bl.at(xi + 1, yi - 1) - bl.at(xi - 1, yi + 1) + bl.at(xi - 1, yi - 1)) / 4.0;
+            let ixy =
+                (bl.at(xi + 1, yi + 1) - bl.at(xi + 1, yi - 1) - bl.at(xi - 1, yi + 1) + bl.at(xi - 1, yi - 1)) / 4.0;
             let v = ixy * ixy - ixx * iyy;
             s[y * w + x] = v;
             smax = smax.max(v);
@@ -225,7 +240,10 @@ pub fn find_chessboard(img: &GrayImage, board: BoardSize, opts: &CornerOptions) 
             continue;
         }
         // 4. Rows of `cols` corners, not mirrored, first row running right.
-        let mut g: Vec<Vec<[f64; 2]>> = grid.iter().map(|row| row.iter().map(|&i| cands[i].p).collect()).collect();
+        let mut g: Vec<Vec<[f64; 2]>> = grid
+            .iter()
+            .map(|row| row.iter().map(|&i| cands[i].p).collect())
+            .collect();
         if g[0].len() != board.cols {
             g = transpose(&g);
         }
@@ -475,7 +493,10 @@ fn alternates(c: &[Cand], bl: &FImg, g: &[Vec<usize>]) -> bool {
     let mut vals = vec![];
     for r in 0..g.len() - 1 {
         for k in 0..g[0].len() - 1 {
-            vals.push(((r + k) % 2, cell_value(bl, p(r, k), p(r, k + 1), p(r + 1, k), p(r + 1, k + 1))));
+            vals.push((
+                (r + k) % 2,
+                cell_value(bl, p(r, k), p(r, k + 1), p(r + 1, k), p(r + 1, k + 1)),
+            ));
         }
     }
     let mean = |par: usize| {
@@ -525,7 +546,15 @@ fn extend_bottom(c: &[Cand], bl: &FImg, g: &mut Vec<Vec<usize>>, used: &mut [boo
     }
     // The new cells must be the opposite colour of the ones above them.
     let p = |i: usize| c[i].p;
-    let above = |k: usize| cell_value(bl, p(g[n - 2][k]), p(g[n - 2][k + 1]), p(g[n - 1][k]), p(g[n - 1][k + 1]));
+    let above = |k: usize| {
+        cell_value(
+            bl,
+            p(g[n - 2][k]),
+            p(g[n - 2][k + 1]),
+            p(g[n - 1][k]),
+            p(g[n - 1][k + 1]),
+        )
+    };
     let below = |k: usize| cell_value(bl, p(g[n - 1][k]), p(g[n - 1][k + 1]), p(row[k]), p(row[k + 1]));
     let ok = (0..cols - 1).all(|k| {
         let (a, b) = (above(k), below(k));
@@ -642,7 +671,10 @@ mod tests {
             for c in 0..9 {
                 let p = pts[r * 9 + c];
                 let want = [100.3 + 20.0 * c as f64, 80.7 + 20.0 * r as f64];
-                assert!((p[0] - want[0]).abs() < 0.05 && (p[1] - want[1]).abs() < 0.05, "{r},{c}: {p:?} vs {want:?}");
+                assert!(
+                    (p[0] - want[0]).abs() < 0.05 && (p[1] - want[1]).abs() < 0.05,
+                    "{r},{c}: {p:?} vs {want:?}"
+                );
             }
         }
     }

@@ -122,8 +122,14 @@ impl CalibrationFile {
     /// Reads a results file.
     pub fn load(path: &Path) -> Result<CalibrationFile, FileError> {
         let p = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| FileError::Io { path: p.clone(), source })?;
-        serde_json::from_str(&text).map_err(|e| FileError::Parse { path: p, msg: e.to_string() })
+        let text = std::fs::read_to_string(path).map_err(|source| FileError::Io {
+            path: p.clone(),
+            source,
+        })?;
+        serde_json::from_str(&text).map_err(|e| FileError::Parse {
+            path: p,
+            msg: e.to_string(),
+        })
     }
 
     /// Reads a stereo results file whose images are `width`×`height`.
@@ -133,11 +139,21 @@ impl CalibrationFile {
             CalibrationFile::Stereo { stereo, .. } => {
                 let [cw, ch] = stereo.left.image_size;
                 if (cw, ch) != (width, height) {
-                    return Err(FileError::Size { path: p, cw, ch, w: width, h: height });
+                    return Err(FileError::Size {
+                        path: p,
+                        cw,
+                        ch,
+                        w: width,
+                        h: height,
+                    });
                 }
                 Ok(stereo)
             }
-            CalibrationFile::Camera { .. } => Err(FileError::Kind { path: p, got: "single-camera", want: "stereo" }),
+            CalibrationFile::Camera { .. } => Err(FileError::Kind {
+                path: p,
+                got: "single-camera",
+                want: "stereo",
+            }),
         }
     }
 

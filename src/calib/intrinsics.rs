@@ -162,11 +162,7 @@ pub fn homography(obj: &[[f64; 2]], img: &[[f64; 2]]) -> Option<Matrix3<f64>> {
     // The null vector of A: the eigenvector of AᵀA with the smallest eigenvalue.
     let ata = a.tr_mul(&a);
     let eig = ata.symmetric_eigen();
-    let (imin, _) = eig
-        .eigenvalues
-        .iter()
-        .enumerate()
-        .min_by(|a, b| a.1.total_cmp(b.1))?;
+    let (imin, _) = eig.eigenvalues.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
     let h = eig.eigenvectors.column(imin);
     let hn = Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]);
     let hm = ti.try_inverse()? * hn * to;
@@ -207,7 +203,14 @@ pub fn pose_from_homography(h: &Matrix3<f64>, k: &Intrinsics) -> Option<Pose> {
 
 /// Refines one view's pose with the intrinsics fixed (a planar `solvePnP`).
 pub fn refine_pose(k: &Intrinsics, d: &Distortion, obj: &[[f64; 3]], img: &[[f64; 2]], start: Pose) -> Pose {
-    let mut p = [start.rvec[0], start.rvec[1], start.rvec[2], start.t[0], start.t[1], start.t[2]];
+    let mut p = [
+        start.rvec[0],
+        start.rvec[1],
+        start.rvec[2],
+        start.t[0],
+        start.t[1],
+        start.t[2],
+    ];
     let m = 2 * obj.len();
     let f = |p: &[f64], out: &mut [f64]| {
         let r = rodrigues([p[0], p[1], p[2]]);
@@ -218,7 +221,16 @@ pub fn refine_pose(k: &Intrinsics, d: &Distortion, obj: &[[f64; 3]], img: &[[f64
             out[2 * i + 1] = v - im[1];
         }
     };
-    minimize(&mut p, m, &f, &|_| 0..m, LmOptions { max_iter: 100, tol: 1e-14 });
+    minimize(
+        &mut p,
+        m,
+        &f,
+        &|_| 0..m,
+        LmOptions {
+            max_iter: 100,
+            tol: 1e-14,
+        },
+    );
     Pose {
         rvec: [p[0], p[1], p[2]],
         t: [p[3], p[4], p[5]],
@@ -249,7 +261,10 @@ pub fn calibrate_camera(
     height: u32,
 ) -> Result<CameraFit, CalibError> {
     if views.len() < 3 {
-        return Err(CalibError::TooFewViews { need: 3, got: views.len() });
+        return Err(CalibError::TooFewViews {
+            need: 3,
+            got: views.len(),
+        });
     }
     let obj2: Vec<[f64; 2]> = obj.iter().map(|p| [p[0], p[1]]).collect();
     // 1. Homographies.
@@ -295,7 +310,8 @@ pub fn calibrate_camera(
         .zip(views)
         .enumerate()
         .map(|(i, (h, v))| {
-            let p = pose_from_homography(h, &k0).ok_or_else(|| CalibError::Degenerate(format!("no pose for view {i}")))?;
+            let p =
+                pose_from_homography(h, &k0).ok_or_else(|| CalibError::Degenerate(format!("no pose for view {i}")))?;
             Ok(refine_pose(&k0, &d0, obj, v, p))
         })
         .collect::<Result<_, CalibError>>()?;
@@ -309,7 +325,12 @@ pub fn calibrate_camera(
     }
     let m = 2 * np * nv;
     let f = |p: &[f64], out: &mut [f64]| {
-        let k = Intrinsics { fx: p[0], fy: p[1], cx: p[2], cy: p[3] };
+        let k = Intrinsics {
+            fx: p[0],
+            fy: p[1],
+            cx: p[2],
+            cy: p[3],
+        };
         let d = Distortion([p[4], p[5], p[6], p[7], p[8]]);
         for (vi, v) in views.iter().enumerate() {
             let q = &p[9 + 6 * vi..15 + 6 * vi];
@@ -330,13 +351,30 @@ pub fn calibrate_camera(
             2 * np * vi..2 * np * (vi + 1)
         }
     };
-    let res = minimize(&mut p, m, &f, &dep, LmOptions { max_iter: 300, tol: 1e-15 });
-    let k = Intrinsics { fx: p[0], fy: p[1], cx: p[2], cy: p[3] };
+    let res = minimize(
+        &mut p,
+        m,
+        &f,
+        &dep,
+        LmOptions {
+            max_iter: 300,
+            tol: 1e-15,
+        },
+    );
+    let k = Intrinsics {
+        fx: p[0],
+        fy: p[1],
+        cx: p[2],
+        cy: p[3],
+    };
     let dist = Distortion([p[4], p[5], p[6], p[7], p[8]]);
     let poses: Vec<Pose> = (0..nv)
         .map(|vi| {
             let q = &p[9 + 6 * vi..15 + 6 * vi];
-            Pose { rvec: [q[0], q[1], q[2]], t: [q[3], q[4], q[5]] }
+            Pose {
+                rvec: [q[0], q[1], q[2]],
+                t: [q[3], q[4], q[5]],
+            }
         })
         .collect();
     let mut r = vec![0.0; m];
@@ -372,18 +410,29 @@ mod tests {
     fn synth(k: &Intrinsics, d: &Distortion) -> (Vec<[f64; 3]>, Vec<Vec<[f64; 2]>>) {
         let obj = board_points(9, 6, 0.025);
         let mut views = vec![];
-        for (i, (rx, ry)) in [(0.3, 0.1), (-0.25, 0.3), (0.1, -0.35), (0.4, 0.4), (-0.3, -0.2), (0.05, 0.25)]
-            .iter()
-            .enumerate()
+        for (i, (rx, ry)) in [
+            (0.3, 0.1),
+            (-0.25, 0.3),
+            (0.1, -0.35),
+            (0.4, 0.4),
+            (-0.3, -0.2),
+            (0.05, 0.25),
+        ]
+        .iter()
+        .enumerate()
         {
             let pose = Pose {
                 rvec: [*rx, *ry, 0.1 * i as f64],
                 t: [-0.1 + 0.01 * i as f64, -0.06, 0.45 + 0.03 * i as f64],
             };
-            views.push(obj.iter().map(|&p| {
-                let (u, v) = project_point(k, d, &pose, p);
-                [u, v]
-            }).collect());
+            views.push(
+                obj.iter()
+                    .map(|&p| {
+                        let (u, v) = project_point(k, d, &pose, p);
+                        [u, v]
+                    })
+                    .collect(),
+            );
         }
         (obj, views)
     }
@@ -411,18 +460,32 @@ mod tests {
     /// Exact synthetic corners: the fit recovers the camera to 1e-6 and the RMS is ~0.
     #[test]
     fn recovers_a_synthetic_camera() {
-        let k = Intrinsics { fx: 530.0, fy: 532.0, cx: 330.0, cy: 245.0 };
+        let k = Intrinsics {
+            fx: 530.0,
+            fy: 532.0,
+            cx: 330.0,
+            cy: 245.0,
+        };
         let d = Distortion([-0.28, 0.09, 0.001, -0.0008, 0.0]);
         let (obj, views) = synth(&k, &d);
         let fit = calibrate_camera(&obj, &views, 640, 480).unwrap();
-        assert!((fit.k.fx - k.fx).abs() < 1e-4 && (fit.k.cy - k.cy).abs() < 1e-4, "{:?}", fit.k);
+        assert!(
+            (fit.k.fx - k.fx).abs() < 1e-4 && (fit.k.cy - k.cy).abs() < 1e-4,
+            "{:?}",
+            fit.k
+        );
         assert!((fit.dist.0[0] - d.0[0]).abs() < 1e-5, "{:?}", fit.dist);
         assert!(fit.rms < 1e-6, "rms {}", fit.rms);
     }
 
     #[test]
     fn too_few_views_is_an_error() {
-        let k = Intrinsics { fx: 530.0, fy: 532.0, cx: 330.0, cy: 245.0 };
+        let k = Intrinsics {
+            fx: 530.0,
+            fy: 532.0,
+            cx: 330.0,
+            cy: 245.0,
+        };
         let (obj, views) = synth(&k, &Distortion::default());
         let e = calibrate_camera(&obj, &views[..1], 640, 480).unwrap_err();
         assert!(e.to_string().contains("at least 3"), "{e}");

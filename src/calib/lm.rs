@@ -23,7 +23,10 @@ pub struct LmOptions {
 
 impl Default for LmOptions {
     fn default() -> Self {
-        Self { max_iter: 200, tol: 1e-12 }
+        Self {
+            max_iter: 200,
+            tol: 1e-12,
+        }
     }
 }
 

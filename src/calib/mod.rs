@@ -19,7 +19,7 @@ pub mod stereo;
 pub use corners::{corner_subpix, find_chessboard, BoardSize, CornerOptions};
 pub use file::{CalibrationFile, CameraCalibration, StereoCalibration};
 pub use intrinsics::{calibrate_camera, project_point, Distortion, Intrinsics, Pose};
-pub use stereo::{stereo_calibrate, stereo_rectify, RectifyMaps, Rectification};
+pub use stereo::{stereo_calibrate, stereo_rectify, Rectification, RectifyMaps};
 
 /// What can go wrong while calibrating.
 #[derive(Debug, thiserror::Error)]

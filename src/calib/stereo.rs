@@ -13,7 +13,9 @@
 //!    each image's undistorted corners centred); P2's x translation is f_new·T'_x, so a point
 //!    at depth Z has disparity d = −f_new·T'_x / Z (T'_x < 0 for a right camera on the right).
 
-use super::intrinsics::{homography, pose_from_homography, refine_pose, rodrigues, rodrigues_inv, Distortion, Intrinsics, Pose};
+use super::intrinsics::{
+    homography, pose_from_homography, refine_pose, rodrigues, rodrigues_inv, Distortion, Intrinsics, Pose,
+};
 use super::lm::{minimize, LmOptions};
 use super::CalibError;
 use image::GrayImage;
@@ -39,7 +41,13 @@ fn project(k: &Intrinsics, d: &Distortion, r: &Matrix3<f64>, t: &Vector3<f64>, p
     (k.fx * xd + k.cx, k.fy * yd + k.cy)
 }
 
-fn start_pose(k: &Intrinsics, d: &Distortion, obj: &[[f64; 3]], img: &[[f64; 2]], view: usize) -> Result<Pose, CalibError> {
+fn start_pose(
+    k: &Intrinsics,
+    d: &Distortion,
+    obj: &[[f64; 3]],
+    img: &[[f64; 2]],
+    view: usize,
+) -> Result<Pose, CalibError> {
     let obj2: Vec<[f64; 2]> = obj.iter().map(|p| [p[0], p[1]]).collect();
     // Undistort the image points first, so the homography is that of a pinhole.
     let und: Vec<[f64; 2]> = img
@@ -76,7 +84,10 @@ pub fn stereo_calibrate(
     dr: &Distortion,
 ) -> Result<StereoFit, CalibError> {
     if left.len() != right.len() {
-        return Err(CalibError::PairCount { left: left.len(), right: right.len() });
+        return Err(CalibError::PairCount {
+            left: left.len(),
+            right: right.len(),
+        });
     }
     if left.is_empty() {
         return Err(CalibError::TooFewViews { need: 1, got: 0 });
@@ -135,7 +146,16 @@ pub fn stereo_calibrate(
             4 * np * vi..4 * np * (vi + 1)
         }
     };
-    let res = minimize(&mut p, m, &f, &dep, LmOptions { max_iter: 300, tol: 1e-15 });
+    let res = minimize(
+        &mut p,
+        m,
+        &f,
+        &dep,
+        LmOptions {
+            max_iter: 300,
+            tol: 1e-15,
+        },
+    );
     let mut r = vec![0.0; m];
     f(&p, &mut r);
     let per_view_rms = (0..nv)
@@ -175,7 +195,9 @@ fn to_rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
 
 /// Matrix from rows.
 pub fn from_rows(m: &[[f64; 3]; 3]) -> Matrix3<f64> {
-    Matrix3::new(m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2])
+    Matrix3::new(
+        m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2],
+    )
 }
 
 /// Bouguet's rectification (step 3) for images of `width`×`height`.
@@ -207,7 +229,11 @@ pub fn stereo_rectify(
     let r1 = wr * rr.transpose();
     let r2 = wr * rr;
     let t2 = r2 * t;
-    let f = if idx == 0 { 0.5 * (kl.fy + kr.fy) } else { 0.5 * (kl.fx + kr.fx) };
+    let f = if idx == 0 {
+        0.5 * (kl.fy + kr.fy)
+    } else {
+        0.5 * (kl.fx + kr.fx)
+    };
     let (nx, ny) = (width as f64, height as f64);
     let mut cc = [[0.0; 2]; 2];
     for (k, (kk, dd, rk)) in [(kl, dl, &r1), (kr, dr, &r2)].into_iter().enumerate() {
@@ -246,7 +272,15 @@ pub struct RectifyMaps {
 
 impl RectifyMaps {
     /// Maps for one camera: rectified pixel → ray (f, c) → Rᵀ → distortion → K.
-    pub fn new(k: &Intrinsics, d: &Distortion, r: &[[f64; 3]; 3], f: f64, c: [f64; 2], width: u32, height: u32) -> Self {
+    pub fn new(
+        k: &Intrinsics,
+        d: &Distortion,
+        r: &[[f64; 3]; 3],
+        f: f64,
+        c: [f64; 2],
+        width: u32,
+        height: u32,
+    ) -> Self {
         let rt = from_rows(r).transpose();
         let n = (width * height) as usize;
         let (mut map_x, mut map_y) = (Vec::with_capacity(n), Vec::with_capacity(n));
@@ -258,7 +292,12 @@ impl RectifyMaps {
                 map_y.push((k.fy * yd + k.cy) as f32);
             }
         }
-        RectifyMaps { width, height, map_x, map_y }
+        RectifyMaps {
+            width,
+            height,
+            map_x,
+            map_y,
+        }
     }
 
     /// Bilinear remap of a grey image (outside pixels become 0, as OpenCV's constant border).
@@ -296,8 +335,18 @@ mod tests {
     /// rectification puts corresponding points on the same row.
     #[test]
     fn recovers_a_synthetic_rig_and_rectifies_rows() {
-        let kl = Intrinsics { fx: 530.0, fy: 531.0, cx: 322.0, cy: 241.0 };
-        let kr = Intrinsics { fx: 528.0, fy: 529.0, cx: 318.0, cy: 239.0 };
+        let kl = Intrinsics {
+            fx: 530.0,
+            fy: 531.0,
+            cx: 322.0,
+            cy: 241.0,
+        };
+        let kr = Intrinsics {
+            fx: 528.0,
+            fy: 529.0,
+            cx: 318.0,
+            cy: 239.0,
+        };
         let dl = Distortion([-0.2, 0.05, 0.0, 0.0, 0.0]);
         let dr = Distortion([-0.21, 0.06, 0.0, 0.0, 0.0]);
         let r = rodrigues([0.01, -0.02, 0.005]);
@@ -305,13 +354,33 @@ mod tests {
         let obj = board_points(9, 6, 0.025);
         let (mut left, mut right) = (vec![], vec![]);
         for i in 0..5 {
-            let a = Pose { rvec: [0.2 - 0.1 * i as f64, 0.3 * (i as f64 - 2.0) / 2.0, 0.05], t: [-0.1, -0.06, 0.5 + 0.05 * i as f64] };
+            let a = Pose {
+                rvec: [0.2 - 0.1 * i as f64, 0.3 * (i as f64 - 2.0) / 2.0, 0.05],
+                t: [-0.1, -0.06, 0.5 + 0.05 * i as f64],
+            };
             let ra = rodrigues(a.rvec);
             let rb = r * ra;
             let tb = r * Vector3::from(a.t) + t;
-            let b = Pose { rvec: rodrigues_inv(&rb), t: [tb[0], tb[1], tb[2]] };
-            left.push(obj.iter().map(|&p| { let (u, v) = project_point(&kl, &dl, &a, p); [u, v] }).collect::<Vec<_>>());
-            right.push(obj.iter().map(|&p| { let (u, v) = project_point(&kr, &dr, &b, p); [u, v] }).collect::<Vec<_>>());
+            let b = Pose {
+                rvec: rodrigues_inv(&rb),
+                t: [tb[0], tb[1], tb[2]],
+            };
+            left.push(
+                obj.iter()
+                    .map(|&p| {
+                        let (u, v) = project_point(&kl, &dl, &a, p);
+                        [u, v]
+                    })
+                    .collect::<Vec<_>>(),
+            );
+            right.push(
+                obj.iter()
+                    .map(|&p| {
+                        let (u, v) = project_point(&kr, &dr, &b, p);
+                        [u, v]
+                    })
+                    .collect::<Vec<_>>(),
+            );
         }
         let fit = stereo_calibrate(&obj, &left, &right, &kl, &dl, &kr, &dr).unwrap();
         assert!((fit.t - t).norm() < 1e-7, "{:?}", fit.t);

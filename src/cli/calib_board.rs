@@ -99,7 +99,8 @@ fn find_all(paths: &[PathBuf], b: &BoardArgs) -> Result<(Vec<Option<Vec<[f64; 2]
         for (p, c) in paths.iter().zip(&out) {
             all.insert(name(p), c.clone());
         }
-        std::fs::write(path, serde_json::to_string(&all)?).with_context(|| format!("{}: cannot write", path.display()))?;
+        std::fs::write(path, serde_json::to_string(&all)?)
+            .with_context(|| format!("{}: cannot write", path.display()))?;
     }
     Ok((out, size.unwrap_or((0, 0))))
 }
@@ -141,14 +142,24 @@ pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
                 names.push(name(p));
             }
             None => {
-                eprintln!("{}: board {}x{} not found", p.display(), a.board.board.cols, a.board.board.rows);
+                eprintln!(
+                    "{}: board {}x{} not found",
+                    p.display(),
+                    a.board.board.cols,
+                    a.board.board.rows
+                );
                 not_found.push(name(p));
             }
         }
     }
     let obj = board_points(a.board.board.cols, a.board.board.rows, a.board.square);
-    let fit = calibrate_camera(&obj, &views, size.0, size.1)
-        .with_context(|| format!("calibrating from {} images ({} without a board)", a.images.len(), not_found.len()))?;
+    let fit = calibrate_camera(&obj, &views, size.0, size.1).with_context(|| {
+        format!(
+            "calibrating from {} images ({} without a board)",
+            a.images.len(),
+            not_found.len()
+        )
+    })?;
     let cam = camera_result(&fit, &names, size, not_found);
     for (n, e) in &cam.per_image_rms_px {
         println!("{n}: reprojection RMS {e:.4} px");

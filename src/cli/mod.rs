@@ -13,5 +13,6 @@ pub mod replay;
 pub mod signals;
 pub mod sim;
 pub mod stages;
+pub mod stereo;
 pub mod synth;
 pub mod timer;

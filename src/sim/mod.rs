@@ -16,6 +16,7 @@ pub mod rng;
 pub mod run;
 pub mod world;
 pub mod scenario_lab;
+pub mod stereo;
 pub mod scene;
 pub mod track;
 pub mod truth;

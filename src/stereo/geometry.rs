@@ -104,7 +104,8 @@ impl StereoGeometry {
         let phi = p1 * ap + beta; // Eq. 13
         let theta = p2 * ap + beta; // Eq. 14
         let alpha = std::f64::consts::PI - (phi + theta); // Eq. 15
-        (alpha > 1e-12).then(|| self.base_m * theta.sin() * phi.sin() / alpha.sin()) // Eq. 16
+        (alpha > 1e-12).then(|| self.base_m * theta.sin() * phi.sin() / alpha.sin())
+        // Eq. 16
     }
 
     /// (b) The same triangle with exact angles; metres.
@@ -136,7 +137,11 @@ impl StereoGeometry {
 
     /// All three distances of a match whose box centre row is `v` (reference image).
     pub fn range(&self, m: &StereoMatch, v: f64, reference_left: bool) -> Option<StereoRange> {
-        let (xl, xr) = if reference_left { (m.x_ref, m.x_other) } else { (m.x_other, m.x_ref) };
+        let (xl, xr) = if reference_left {
+            (m.x_ref, m.x_other)
+        } else {
+            (m.x_other, m.x_ref)
+        };
         let depth_bfd = self.depth_bfd(m.disparity)?;
         let a = self.depth_eq16(xl, xr);
         let b = self.depth_exact(xl, xr);
@@ -174,7 +179,11 @@ mod tests {
             assert!((b - z).abs() < 1e-9 && (c - z).abs() < 1e-9, "{b} {c} {z}");
             let a = g.depth_eq16(xl, xr).unwrap();
             let predicted = g.eq16_bias((xl + xr) / 2.0);
-            assert!((a / z - predicted).abs() < 0.01, "x {x} z {z}: (a)/true {} predicted {predicted}", a / z);
+            assert!(
+                (a / z - predicted).abs() < 0.01,
+                "x {x} z {z}: (a)/true {} predicted {predicted}",
+                a / z
+            );
         }
         // On the axis the bias is 2 tan(ω/2)/ω: +11 % for 62.2°.
         let centre = g.eq16_bias(g.cx);

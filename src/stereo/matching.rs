@@ -10,6 +10,10 @@
 //!    sliding sum; Σ T'·I needs one pass per candidate disparity (Σ T' = 0, so I' = I there).
 //! 2. The best disparity must score ≥ `min_score` (else the object is not in the other view:
 //!    "no range").
+//! 2b. Occlusion prior: an object hides what is behind it, so of the local maxima scoring
+//!    at least `near_peak_ratio` × the best, the one with the largest disparity (nearest) is
+//!    taken. A flat-coloured object over a textured floor otherwise locks onto the floor
+//!    behind it (its lines fill the box); 1.0 turns the prior off.
 //! 3. Sub-pixel: a parabola through the peak and its two neighbours,
 //!    δ = (R₋ − R₊) / (2(R₋ − 2R₀ + R₊)), |δ| ≤ 0.5.
 //!
@@ -30,6 +34,9 @@ pub struct MatchOptions {
     pub min_score: f64,
     /// The reference image is the left one (else the right one).
     pub reference_left: bool,
+    /// Of the local maxima scoring at least this fraction of the best, take the nearest
+    /// (largest disparity); 1.0 = always the best.
+    pub near_peak_ratio: f64,
 }
 
 impl Default for MatchOptions {
@@ -39,6 +46,7 @@ impl Default for MatchOptions {
             max_disparity: 120,
             min_score: 0.6,
             reference_left: true,
+            near_peak_ratio: 0.9,
         }
     }
 }
@@ -140,7 +148,11 @@ impl Matcher {
         self.scores.clear();
         let mut best: Option<(usize, f64)> = None;
         for d in dmin..=dmax {
-            let x0 = if opts.reference_left { bx as i64 - d } else { bx as i64 + d };
+            let x0 = if opts.reference_left {
+                bx as i64 - d
+            } else {
+                bx as i64 + d
+            };
             if x0 < 0 || x0 as usize + bw > iw {
                 self.scores.push(f64::NAN);
                 continue;
@@ -162,15 +174,30 @@ impl Matcher {
                 }
                 cross += acc;
             }
-            let score = if var > 1e-9 { cross as f64 / (tnorm * var).sqrt() } else { 0.0 };
+            let score = if var > 1e-9 {
+                cross as f64 / (tnorm * var).sqrt()
+            } else {
+                0.0
+            };
             if best.is_none_or(|b| score > b.1) {
                 best = Some((self.scores.len(), score));
             }
             self.scores.push(score);
         }
-        let Some((i, score)) = best else {
+        let Some((mut i, mut score)) = best else {
             return Err(NoRange::NoSearchRoom);
         };
+        // 2b. The nearest of the near-best local maxima.
+        let floor = score * opts.near_peak_ratio.min(1.0);
+        for k in (i + 1)..self.scores.len() {
+            let v = self.scores[k];
+            let left = self.scores[k - 1];
+            let right = self.scores.get(k + 1).copied().unwrap_or(f64::NEG_INFINITY);
+            if v >= floor && v >= opts.min_score && v >= left && !(right > v) {
+                i = k;
+                score = v;
+            }
+        }
         // 2. Threshold.
         if score < opts.min_score {
             return Err(NoRange::BelowThreshold {
@@ -192,7 +219,11 @@ impl Matcher {
             return Err(NoRange::NonPositiveDisparity(disparity));
         }
         let x_ref = bx as f64 + (bw as f64 - 1.0) / 2.0;
-        let x_other = if opts.reference_left { x_ref - disparity } else { x_ref + disparity };
+        let x_other = if opts.reference_left {
+            x_ref - disparity
+        } else {
+            x_ref + disparity
+        };
         Ok(StereoMatch {
             disparity,
             score,
@@ -203,7 +234,12 @@ impl Matcher {
 }
 
 /// [`Matcher::match_box`] with fresh buffers.
-pub fn match_box(reference: &GrayImage, other: &GrayImage, bbox: [i64; 4], opts: &MatchOptions) -> Result<StereoMatch, NoRange> {
+pub fn match_box(
+    reference: &GrayImage,
+    other: &GrayImage,
+    bbox: [i64; 4],
+    opts: &MatchOptions,
+) -> Result<StereoMatch, NoRange> {
     Matcher::new().match_box(reference, other, bbox, opts)
 }
 
@@ -211,11 +247,23 @@ pub fn match_box(reference: &GrayImage, other: &GrayImage, bbox: [i64; 4], opts:
 mod tests {
     use super::*;
 
+    /// Aperiodic value noise (hashed lattice every 3 px, bilinear), shifted by `shift` px.
     fn textured(w: u32, h: u32, shift: f64) -> GrayImage {
+        let hash = |i: i64, j: i64| -> f64 {
+            let mut z = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+            z ^= z >> 29;
+            z = z.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z ^= z >> 32;
+            (z % 1000) as f64 / 1000.0
+        };
         GrayImage::from_fn(w, h, |x, y| {
-            let u = x as f64 + shift;
-            let v = 128.0 + 60.0 * (u * 0.31).sin() * (y as f64 * 0.23).cos() + 40.0 * (u * 0.097 + y as f64 * 0.05).sin();
-            image::Luma([v.round().clamp(0.0, 255.0) as u8])
+            let (u, v) = ((x as f64 + shift) / 3.0, y as f64 / 3.0);
+            let (i, j) = (u.floor(), v.floor());
+            let (a, b) = (u - i, v - j);
+            let (i, j) = (i as i64, j as i64);
+            let top = hash(i, j) * (1.0 - a) + hash(i + 1, j) * a;
+            let bot = hash(i, j + 1) * (1.0 - a) + hash(i + 1, j + 1) * a;
+            image::Luma([(40.0 + 170.0 * (top * (1.0 - b) + bot * b)).round() as u8])
         })
     }
 
@@ -228,7 +276,10 @@ mod tests {
         assert!((m.disparity - 17.4).abs() < 0.1, "{m:?}");
         assert!(m.score > 0.95);
         // The right image as reference finds the same disparity the other way.
-        let opts = MatchOptions { reference_left: false, ..MatchOptions::default() };
+        let opts = MatchOptions {
+            reference_left: false,
+            ..MatchOptions::default()
+        };
         let m = match_box(&r, &l, [150, 100, 40, 30], &opts).unwrap();
         assert!((m.disparity - 17.4).abs() < 0.1, "{m:?}");
     }
@@ -238,19 +289,38 @@ mod tests {
         let l = textured(320, 240, 0.0);
         let small = textured(160, 120, 0.0);
         let o = MatchOptions::default();
-        assert!(matches!(match_box(&l, &small, [10, 10, 20, 20], &o), Err(NoRange::SizeMismatch { .. })));
-        assert!(matches!(match_box(&l, &l, [310, 10, 20, 20], &o), Err(NoRange::BadBox(_))));
+        assert!(matches!(
+            match_box(&l, &small, [10, 10, 20, 20], &o),
+            Err(NoRange::SizeMismatch { .. })
+        ));
+        assert!(matches!(
+            match_box(&l, &l, [310, 10, 20, 20], &o),
+            Err(NoRange::BadBox(_))
+        ));
         let flat = GrayImage::from_pixel(320, 240, image::Luma([90]));
-        assert!(matches!(match_box(&flat, &l, [100, 100, 20, 20], &o), Err(NoRange::Flat)));
+        assert!(matches!(
+            match_box(&flat, &l, [100, 100, 20, 20], &o),
+            Err(NoRange::Flat)
+        ));
         // The same image: disparity 0 is the peak → no range.
-        assert!(matches!(match_box(&l, &l, [100, 100, 20, 20], &o), Err(NoRange::NonPositiveDisparity(_))));
+        assert!(matches!(
+            match_box(&l, &l, [100, 100, 20, 20], &o),
+            Err(NoRange::NonPositiveDisparity(_))
+        ));
         // An unrelated image: the best score is low.
         let noise = GrayImage::from_fn(320, 240, |x, y| image::Luma([((x * 7919 + y * 104729) % 251) as u8]));
         let e = match_box(&l, &noise, [100, 100, 30, 30], &o).unwrap_err();
         assert!(matches!(e, NoRange::BelowThreshold { .. }), "{e}");
         // No room: a box at the left edge with the left image as reference and min disparity 5.
-        let o2 = MatchOptions { min_disparity: 5, max_disparity: 10, ..o };
-        assert!(matches!(match_box(&l, &r(), [0, 10, 20, 20], &o2), Err(NoRange::NoSearchRoom)));
+        let o2 = MatchOptions {
+            min_disparity: 5,
+            max_disparity: 10,
+            ..o
+        };
+        assert!(matches!(
+            match_box(&l, &r(), [0, 10, 20, 20], &o2),
+            Err(NoRange::NoSearchRoom)
+        ));
         fn r() -> GrayImage {
             textured(320, 240, 3.0)
         }

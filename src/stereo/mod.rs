@@ -14,9 +14,11 @@
 
 pub mod geometry;
 pub mod matching;
+pub mod source;
 
 pub use geometry::{StereoGeometry, StereoRange};
 pub use matching::{match_box, MatchOptions, StereoMatch};
+pub use source::{StereoFrame, StereoSource};
 
 /// Why a box got no stereo range (never a wrong number).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -1,0 +1,164 @@
+//! Stereo matching speed (issue 12, "must show" 5): one detector-sized box found in the other
+//! image of a 320×240 pair and ranged (NCC along the rows + sub-pixel peak + the three
+//! distances), side by side with OpenCV's `cv2.matchTemplate(strip, box, TM_CCOEFF_NORMED)` +
+//! `cv2.minMaxLoc` on the same search strip, in one run.
+//!
+//! `cargo bench --bench stereo [-- --runs N]`
+//!
+//! 1. The simulator's stereo rig (base 0.06 m) renders a stop sign 1 m ahead; its true box in
+//!    the left image is the template; the strip is the right image's rows of the box over the
+//!    disparity range 0..max_disparity_px (config default 120).
+//! 2. A Python helper (`$RCCAR_PYTHON`, else `python3`, with cv2 4.x) loads the same grey
+//!    images and times its call with `cv2.setNumThreads(1)`; rounds alternate (20 OpenCV
+//!    calls, 20 of ours) so both see the same machine load.
+//! 3. Median and minimum in ms of each, their ratio, and both peaks (they must agree).
+
+use rccar::config::Config;
+use rccar::detect::gray_from_rgb;
+use rccar::sim::render::RenderOptions;
+use rccar::sim::scene::Scene;
+use rccar::sim::stereo::StereoRig;
+use rccar::sim::track::Track;
+use rccar::sim::vehicle::Pose;
+use rccar::stereo::matching::Matcher;
+use rccar::stereo::{MatchOptions, StereoGeometry};
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Command, Stdio};
+use std::sync::Arc;
+use std::time::Instant;
+
+const PY: &str = r#"
+import cv2, json, sys, time
+cv2.setNumThreads(1)
+l = cv2.imread(sys.argv[1], 0); r = cv2.imread(sys.argv[2], 0)
+x, y, w, h, dmax = map(int, sys.argv[3:8])
+t = l[y:y+h, x:x+w]
+x0 = max(0, x - dmax)
+strip = r[y:y+h, x0:x+w]
+res = cv2.matchTemplate(strip, t, cv2.TM_CCOEFF_NORMED)
+_, best, _, loc = cv2.minMaxLoc(res)
+print(json.dumps({"disparity": x - (x0 + loc[0]), "score": best}), flush=True)
+for line in sys.stdin:
+    n = int(line)
+    ts = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        res = cv2.matchTemplate(r[y:y+h, x0:x+w], t, cv2.TM_CCOEFF_NORMED)
+        cv2.minMaxLoc(res)
+        ts.append((time.perf_counter() - t0) * 1e3)
+    print(json.dumps(ts), flush=True)
+"#;
+
+fn stats(v: &mut [f64]) -> (f64, f64) {
+    v.sort_by(|a, b| a.total_cmp(b));
+    (v[v.len() / 2], v[0])
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let runs: usize = args
+        .iter()
+        .position(|a| a == "--runs")
+        .and_then(|i| args.get(i + 1))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(400);
+    // 1. The pair and the box.
+    let cfg = Config::default();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let track = Track::load(&root.join("config/tracks/default.toml")).expect("default track");
+    let scene = Arc::new(Scene::new(&track));
+    let mut rig = StereoRig::new(&cfg, scene, 0.06, RenderOptions::from_config(&cfg.sim));
+    // The default track's stop sign (x 4.5, y −0.48) about 1 m ahead, on the right.
+    let pose = Pose {
+        x: 3.26,
+        y: -0.15,
+        yaw: 0.0,
+    };
+    let (l, r) = rig.render(&pose, 0.0, 0);
+    let truth = rig.truth(&pose, true);
+    let b = truth
+        .iter()
+        .find(|t| t.bbox.kind == rccar::sim::track::ObjectKind::StopSign)
+        .expect("stop sign in view")
+        .bbox
+        .bbox;
+    let bx = [
+        b[0].round() as i64,
+        b[1].round() as i64,
+        (b[2] - b[0]).round() as i64,
+        (b[3] - b[1]).round() as i64,
+    ];
+    let (mut gl, mut gr) = (image::GrayImage::new(0, 0), image::GrayImage::new(0, 0));
+    gray_from_rgb(&l, &mut gl);
+    gray_from_rgb(&r, &mut gr);
+    let dir = std::env::temp_dir().join("rccar_stereo_bench");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let (pl, pr) = (dir.join("left.png"), dir.join("right.png"));
+    gl.save(&pl).expect("write left");
+    gr.save(&pr).expect("write right");
+    let dmax = cfg.stereo.max_disparity_px;
+    let opts = MatchOptions {
+        max_disparity: dmax,
+        min_score: cfg.stereo.min_ncc,
+        near_peak_ratio: 1.0,
+        ..MatchOptions::default()
+    };
+    let geo = StereoGeometry::ideal(&rig.left.mount().camera, 0.06);
+    let mut m = Matcher::new();
+    let first = m.match_box(&gl, &gr, bx, &opts).expect("match");
+    // 2. The helper.
+    let python = std::env::var("RCCAR_PYTHON").unwrap_or_else(|_| "python3".into());
+    let mut helper = Command::new(&python)
+        .args(["-c", PY, pl.to_str().unwrap(), pr.to_str().unwrap()])
+        .args(bx.iter().map(|v| v.to_string()))
+        .arg(dmax.to_string())
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("running the OpenCV helper");
+    let mut to_cv = helper.stdin.take().unwrap();
+    let mut from_cv = BufReader::new(helper.stdout.take().unwrap());
+    let mut line = String::new();
+    from_cv.read_line(&mut line).expect("helper output");
+    let cv: serde_json::Value = serde_json::from_str(&line).expect("helper JSON (is cv2 4.x installed?)");
+    let (mut ours, mut theirs) = (vec![], vec![]);
+    let round = 20;
+    let mut sink = 0.0;
+    while ours.len() < runs {
+        writeln!(to_cv, "{round}").unwrap();
+        line.clear();
+        from_cv.read_line(&mut line).unwrap();
+        let t: Vec<f64> = serde_json::from_str(&line).unwrap();
+        theirs.extend(t);
+        for _ in 0..round {
+            let t0 = Instant::now();
+            let mm = m.match_box(&gl, &gr, bx, &opts).expect("match");
+            let v = bx[1] as f64 + (bx[3] as f64 - 1.0) / 2.0;
+            let rg = geo.range(&mm, v, true).expect("range");
+            ours.push(t0.elapsed().as_secs_f64() * 1e3);
+            sink += rg.depth_bfd;
+        }
+    }
+    drop(to_cv);
+    let _ = helper.wait();
+    let (om, omin) = stats(&mut ours);
+    let (cm, cmin) = stats(&mut theirs);
+    println!(
+        "box {}x{} px, search 0..{dmax} px in a 320x240 pair, {} runs each, alternating rounds; ms",
+        bx[2],
+        bx[3],
+        ours.len()
+    );
+    println!("  rccar match + sub-pixel + 3 ranges: median {om:.4}, min {omin:.4}");
+    println!("  cv2.matchTemplate + minMaxLoc:      median {cm:.4}, min {cmin:.4}");
+    println!("  ratio of minima (ours / OpenCV): {:.2}", omin / cmin);
+    println!(
+        "  peak: ours {:.2} px (integer {}), score {:.4}; OpenCV {} px, score {:.4}",
+        first.disparity,
+        first.disparity.round(),
+        first.score,
+        cv["disparity"],
+        cv["score"].as_f64().unwrap_or(f64::NAN)
+    );
+    assert!(sink > 0.0);
+}
