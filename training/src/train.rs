@@ -420,7 +420,6 @@ pub fn train_with_holdout(
         budget >> 20,
         opts.mem_mb
     ));
-    let required_fa = p.max_false_alarm.powi(p.num_stages as i32);
     let mut last_check: Option<HoldoutCheck> = None;
     let mut ran_out = false;
     let reason;
@@ -474,14 +473,6 @@ pub fn train_with_holdout(
         );
         let (scanned, accepted) = (mined.evaluated, mined.accepted);
         let t_mine = t0.elapsed().as_secs_f64();
-        if si > 0 && mined.acceptance() <= required_fa && !mined.windows.is_empty() {
-            reason = format!(
-                "done after {si} stages: the cascade accepts {:.2e} of the background windows, \
-                 below max_false_alarm^num_stages = {required_fa:.2e}",
-                mined.acceptance()
-            );
-            break;
-        }
         let negs = mined.windows;
         if negs.is_empty() {
             if si == 0 {
