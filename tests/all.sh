@@ -17,6 +17,7 @@ DEB_PACKAGES=(
   simavr libsimavr-dev libsimavrparts1 libelf-dev  # hardware-in-the-loop harness
   libclang-dev                                 # the `camera` feature (nokhwa's V4L2 bindings)
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
+  opencv-doc                                   # sample photos: the trainer's photo-like workflow test
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   missing=()
