@@ -69,20 +69,41 @@ impl FeatureMatrix {
         F: Fn(usize, usize) -> f32 + Sync,
     {
         let step = (n / subsample.max(1)).max(1);
-        // Written in place, one row per feature: the budget holds the bins once.
+        // Written in place, one row per feature: the budget holds the bins once. Values are
+        // computed in blocks of FEATURE_BLOCK features × SAMPLE_BLOCK samples so the samples'
+        // integral tables stay in cache while every feature of the block reads them (feature
+        // by feature over all samples missed the cache on every read: 5-10× slower).
+        const FEATURE_BLOCK: usize = 64;
+        const SAMPLE_BLOCK: usize = 48;
+        let nn = n.max(1);
         let mut bins = vec![0u8; features.len() * n];
-        let edges: Vec<Vec<f32>> = bins
-            .par_chunks_mut(n.max(1))
-            .zip(features.par_iter())
-            .map(|(row, &f)| {
-                let vals: Vec<f32> = (0..n).map(|i| value(f, i)).collect();
-                let edges = edges_of(vals.iter().step_by(step).copied().collect());
-                for (b, v) in row.iter_mut().zip(&vals) {
-                    *b = edges.partition_point(|e| *e <= *v) as u8;
+        let blocks: Vec<Vec<Vec<f32>>> = bins
+            .par_chunks_mut(nn * FEATURE_BLOCK)
+            .zip(features.par_chunks(FEATURE_BLOCK))
+            .map(|(rows, fs)| {
+                let mut vals = vec![0f32; fs.len() * n];
+                for s0 in (0..n).step_by(SAMPLE_BLOCK) {
+                    let s1 = (s0 + SAMPLE_BLOCK).min(n);
+                    for (k, &f) in fs.iter().enumerate() {
+                        for (i, v) in vals[k * n + s0..k * n + s1].iter_mut().enumerate() {
+                            *v = value(f, s0 + i);
+                        }
+                    }
                 }
-                edges
+                rows.chunks_mut(nn)
+                    .enumerate()
+                    .map(|(k, row)| {
+                        let v = &vals[k * n..(k + 1) * n];
+                        let edges = edges_of(v.iter().step_by(step).copied().collect());
+                        for (b, x) in row.iter_mut().zip(v) {
+                            *b = edges.partition_point(|e| *e <= *x) as u8;
+                        }
+                        edges
+                    })
+                    .collect()
             })
             .collect();
+        let edges: Vec<Vec<f32>> = blocks.into_iter().flatten().collect();
         FeatureMatrix {
             n,
             features,

@@ -60,7 +60,7 @@ struct DistortArgs {
     seed: u64,
     /// Window WxH the samples are made for: the pasted object is at least this big. Written
     /// into info.dat; `train` then uses it for -W/-H. Default: from the templates' boxes
-    /// (with --templates-from-info), else 24x24.
+    /// (with --templates-from-info), else 20x20.
     #[arg(long)]
     window: Option<String>,
     /// Output folder (PNG crops + info.dat).
@@ -179,7 +179,7 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
     }
     let window = match &a.window {
         Some(w) => parse_wh(w)?,
-        None => rccar_train::plan::choose_window(&info_lines).map_or((24, 24), |c| {
+        None => rccar_train::plan::choose_window(&info_lines).map_or((20, 20), |c| {
             eprintln!("{}", c.why);
             c.size
         }),
@@ -287,7 +287,7 @@ struct PhotosetArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Smallest and largest sign face, pixels (MINxMAX).
-    #[arg(long, default_value = "24x96")]
+    #[arg(long, default_value = "16x64")]
     sign_px: String,
     /// Track file whose scene paints the sign.
     #[arg(long, default_value = "config/tracks/default.toml")]
@@ -341,9 +341,10 @@ struct EvalArgs {
     /// Cascade XML.
     #[arg(long)]
     cascade: PathBuf,
-    /// Labelled frames (info.dat).
-    #[arg(long)]
-    info: PathBuf,
+    /// Labelled frames: info.dat files (boxes) and bg.txt files (frames without the object,
+    /// where every detection is a false positive); several may follow.
+    #[arg(long, required = true, num_args = 1..)]
+    info: Vec<PathBuf>,
     /// Output folder for report.json and curve.png (default: next to the cascade).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -369,19 +370,10 @@ const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 
 fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
     let cascade = rccar::detect::Cascade::from_file(&a.cascade)?;
-    let (lines, skipped) = samples::read_info(&a.info)?;
-    for s in &skipped {
-        eprintln!("{s}");
-    }
-    let mut frames = Vec::new();
-    for l in lines {
-        match samples::load_gray(&l.path) {
-            Ok(img) => frames.push((l.path.display().to_string(), img, l.boxes)),
-            Err(e) => eprintln!("{}:{}: skipped: {e}", a.info.display(), l.line),
-        }
-    }
+    let frames = load_frames(&a.info)?;
+    let info_name = a.info.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" + ");
     if frames.is_empty() {
-        bail!("{}: no readable frames", a.info.display());
+        bail!("{info_name}: no readable frames");
     }
     let mns: Vec<u32> = (0..=10).collect();
     let rep = evaluate::evaluate(
@@ -405,7 +397,7 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
         let title = a
             .title
             .clone()
-            .unwrap_or_else(|| format!("{} on {}", a.cascade.display(), a.info.display()));
+            .unwrap_or_else(|| format!("{} on {}", a.cascade.display(), info_name));
         let img = evaluate::curve_png(&rep, &title).map_err(anyhow::Error::msg)?;
         let png = out.join("curve.png");
         img.save(&png).with_context(|| png.display().to_string())?;

@@ -8,8 +8,8 @@
 //! Per frame (320 × 240, seeded):
 //! 1. background: a photo, a random crop of 40–100% of the largest 4:3 region, resized to the
 //!    frame (exact bilinear), mirrored half of the time;
-//! 2. with a sign (frames "with"): face size 24–96 px (log-uniform: 1.5–0.4 m with the car's
-//!    265 px focal length and a 10 cm sign), seen up to 40° off-axis (width × cos), rotated
+//! 2. with a sign (frames "with"): face size 16–64 px by default (log-uniform: 1.65–0.41 m
+//!    with the car's 265 px focal length and a 10 cm sign), seen up to 40° off-axis (width × cos), rotated
 //!    ±8°, corners jittered ±6% (perspective), its own lighting (contrast 0.7–1.2, ±30 grey),
 //!    a grey post below; the label is the axis-aligned box around the face's corners, as a
 //!    person would draw it;
@@ -138,7 +138,7 @@ impl Default for PhotoSetOptions {
             with_sign: 48,
             without: 350,
             seed: 1,
-            sign_px: (24.0, 96.0),
+            sign_px: (16.0, 64.0),
         }
     }
 }

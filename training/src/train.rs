@@ -143,6 +143,11 @@ pub struct Holdout {
     pub target_fp_per_frame: f64,
 }
 
+/// The held-out check runs once the cascade is estimated to accept at most this fraction of
+/// windows (acceptance before the stage × the stage's false-alarm rate): about 200 raw hits
+/// per 320 × 240 frame.
+pub const HOLDOUT_FROM: f64 = 2e-3;
+
 /// Held-out figures after a stage.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HoldoutCheck {
@@ -415,7 +420,6 @@ pub fn train_with_holdout(
         budget >> 20,
         opts.mem_mb
     ));
-    let required_fa = p.max_false_alarm.powi(p.num_stages as i32);
     let mut last_check: Option<HoldoutCheck> = None;
     let mut ran_out = false;
     let reason;
@@ -428,8 +432,9 @@ pub fn train_with_holdout(
         let t0 = Instant::now();
         let cascade: Option<Cascade> = if si == 0 { None } else { Some(model.to_cascade()?) };
         // 2c. The held-out check of the cascade so far (its early stop).
+        let est = file.log.last().map_or(1.0, |l| l.acceptance_ratio * l.false_alarm);
         if let (Some(hd), Some(c)) = (holdout, cascade.as_ref()) {
-            if last_check.is_none() {
+            if last_check.is_none() && est <= HOLDOUT_FROM {
                 let chk = check_holdout(c, hd)?;
                 last_check = Some(chk);
             }
@@ -468,14 +473,6 @@ pub fn train_with_holdout(
         );
         let (scanned, accepted) = (mined.evaluated, mined.accepted);
         let t_mine = t0.elapsed().as_secs_f64();
-        if si > 0 && mined.acceptance() <= required_fa && !mined.windows.is_empty() {
-            reason = format!(
-                "done after {si} stages: the cascade accepts {:.2e} of the background windows, \
-                 below max_false_alarm^num_stages = {required_fa:.2e}",
-                mined.acceptance()
-            );
-            break;
-        }
         let negs = mined.windows;
         if negs.is_empty() {
             if si == 0 {
@@ -601,8 +598,10 @@ pub fn train_with_holdout(
             holdout_fp_per_frame: None,
         };
         let mut log = log;
-        // 8. The held-out check of the new cascade.
-        if let Some(hd) = holdout {
+        // 8. The held-out check of the new cascade, once it rejects most windows (before, the
+        // raw hits are too many to group quickly and the check could not stop anything).
+        let acc_now = if scanned > 0 { accepted as f64 / scanned as f64 } else { 1.0 };
+        if let Some(hd) = holdout.filter(|_| acc_now * fa <= HOLDOUT_FROM) {
             let c = model.to_cascade()?;
             let chk = check_holdout(&c, hd)?;
             log.holdout_recall = chk.recall;

@@ -55,6 +55,7 @@ fn opts(stages: u32) -> TrainOptions {
         mem_mb: 64,
         seed: 3,
         scale_factor: 1.2,
+        mirror_negatives: false,
     }
 }
 
@@ -214,7 +215,26 @@ fn bad_input_is_named_skipped_or_refused() {
         e.to_string().contains("stages.json") && e.to_string().contains("20x16"),
         "{e}"
     );
-    // 7. A corrupt stages.json is refused, not a panic.
+    // 7. Backgrounds that cannot supply the negatives: training stops with what to add.
+    // Noise against noise: each stage can only halve the false alarms, and one 40×30 image
+    // holds about 650 windows of 16×16 (scale step 1.2).
+    let mut rng = rccar::sim::rng::SplitMix64::new(11);
+    let few = Background {
+        name: "few".into(),
+        img: image::GrayImage::from_fn(40, 30, |_, _| image::Luma([(rng.next_u64() % 256) as u8])),
+        avoid: vec![],
+    };
+    let pos_real: Vec<Vec<u8>> = (0..200).map(|_| (0..256).map(|_| (rng.next_u64() % 256) as u8).collect()).collect();
+    let mut o = opts(6);
+    o.num_neg = 2000;
+    let out = train::train(&o, &pos_real, &[few], &d.join("m6"), false, &mut NoProgress).expect("trains");
+    assert!(out.negatives_ran_out, "{}", out.reason);
+    assert!(
+        out.reason.contains("negatives ran out") && out.reason.contains("add background images"),
+        "{}",
+        out.reason
+    );
+    // 8. A corrupt stages.json is refused, not a panic.
     std::fs::write(m5.join("stages.json"), "{ truncated").expect("write");
     let e = train::train(&opts(2), &pos20, &[bg], &m5, true, &mut NoProgress).unwrap_err();
     assert!(e.to_string().contains("not a stages.json"), "{e}");

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# The photo-like generalisation check of docs/training.md ("Does it generalise?"): the real-photo
+# workflow (boxes -> distort -> train with the documented defaults -> evaluate) on frames made
+# from the system's photographs (opencv-doc samples, scikit-image data) with the simulator's
+# stop sign pasted in; the test frames come from the other half of the photos and other seeds.
+# Also trains a baseline with the trainer of another build (BASELINE=path/to/rccar-train, e.g.
+# main before issue 16) on the same positives and window, its defaults otherwise.
+# Usage: bash training/photo_check.sh [WORKDIR]   (default out/photo_check; ~30-60 min on 2 cores)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo build --release -p rccar-train
+B=$PWD/target/release/rccar-train
+W=${1:-out/photo_check}
+THREADS=${THREADS:-2}
+rm -rf "$W"; mkdir -p "$W"; cd "$W"
+# 1. Frames: 42 with a sign + 300 without to train on (like the issue's set), a validation set
+#    for the early stop from the same photos, and the test set: other photos, other seeds.
+$B photoset --half 0 --seed 1 --with-sign 42 --without 300 --out train
+$B photoset --half 0 --seed 2 --with-sign 30 --without 150 --out val
+$B photoset --half 1 --seed 3 --with-sign 48 --without 350 --out test
+# 2. Boxes (the CSV a student would type) -> info.dat + previews.
+$B boxes --csv train/boxes.csv --out train/pos.dat --preview train/preview
+$B boxes --csv val/boxes.csv --out val/pos.dat
+# 3. 1500 distorted positives from the 42 crops, over the training backgrounds.
+$B distort --templates-from-info train/pos.dat --bg train/bg.txt --count 1500 --out dist
+# 4. Train with the documented defaults (window and counts from the data, held-out stop).
+T0=$(date +%s)
+/usr/bin/time -v $B train --pos dist/info.dat train/pos.dat --bg train/bg.txt \
+  --holdout val/pos.dat val/bg.txt --out model --threads "$THREADS" > train.out 2> train.err
+echo "train: $(( $(date +%s) - T0 )) s"; cat train.out
+# 5. The held-out check on the test frames.
+$B evaluate --cascade model/cascade.xml --info test/info.dat test/bg.txt --out eval | tee eval.txt
+if [ -n "${BASELINE:-}" ]; then
+  WIN=$(sed -n 's/^# rccar-train distort window //p' dist/info.dat)
+  T0=$(date +%s)
+  /usr/bin/time -v "$BASELINE" train --pos dist/info.dat --pos train/pos.dat --bg train/bg.txt \
+    -W "${WIN%x*}" -H "${WIN#*x}" --out base --threads "$THREADS" > base.out 2> base.err || true
+  echo "baseline train: $(( $(date +%s) - T0 )) s"
+  $B evaluate --cascade base/cascade.xml --info test/info.dat test/bg.txt --out base_eval | tee base_eval.txt
+fi
