@@ -1,13 +1,18 @@
-//! Frames from the car's camera (V4L2 through nokhwa), behind the `camera` cargo feature.
+//! The car's camera (V4L2 through nokhwa), behind the `camera` cargo feature.
 //!
-//! A [`CameraSource`] is a [`FrameSource`] like a replay folder or the simulator: the pipeline
-//! does not know which it is given. Frames are converted to RGB and resized to the configured
-//! camera size; a frame that fails to arrive or decode is reported for that frame only.
-//! Time stamps come from the frame counter and the configured fps (the library reads no clock).
+//! [`V4l2Grabber`] opens `/dev/videoN` at the configured size and frame rate, asking for MJPEG
+//! first (what USB webcams deliver at 30 fps) and YUYV otherwise, and decodes each frame to
+//! RGB. [`open`] runs it on a capture thread ([`crate::capture::CaptureSource`]): the newest
+//! frame only, a stall or unplug detected within the stall time, the device reopened until it
+//! comes back, a wrong frame size a clear error.
 
-use crate::source::{Frame, FrameError, FrameSource};
+use crate::capture::{CaptureSource, Grabber};
+use crate::drive::Clock;
+use image::RgbImage;
 use nokhwa::pixel_format::RgbFormat;
-use nokhwa::utils::{CameraIndex, RequestedFormat, RequestedFormatType};
+use nokhwa::utils::{CameraFormat, CameraIndex, FrameFormat, RequestedFormat, RequestedFormatType, Resolution};
+use std::sync::Arc;
+use std::time::Duration;
 
 /// Why the camera could not be opened.
 #[derive(Debug, thiserror::Error)]
@@ -19,69 +24,86 @@ pub struct CameraError {
     pub reason: String,
 }
 
-/// A V4L2 camera delivering frames at the configured size.
-pub struct CameraSource {
-    cam: nokhwa::Camera,
-    index: u64,
+/// A V4L2 camera delivering `width × height` frames at `fps`.
+pub struct V4l2Grabber {
+    index: u32,
+    fps: u32,
+    width: u32,
+    height: u32,
+    cam: Option<nokhwa::Camera>,
+}
+
+impl V4l2Grabber {
+    /// Camera `index` (0 = /dev/video0); nothing is opened yet.
+    pub fn new(index: u32, fps: f64, width: u32, height: u32) -> Self {
+        Self {
+            index,
+            fps: fps.round().clamp(1.0, 240.0) as u32,
+            width,
+            height,
+            cam: None,
+        }
+    }
+
+    fn try_open(&self, format: FrameFormat) -> Result<nokhwa::Camera, nokhwa::NokhwaError> {
+        let want = CameraFormat::new(Resolution::new(self.width, self.height), format, self.fps);
+        let req = RequestedFormat::new::<RgbFormat>(RequestedFormatType::Closest(want));
+        let mut cam = nokhwa::Camera::new(CameraIndex::Index(self.index), req)?;
+        cam.open_stream()?;
+        Ok(cam)
+    }
+}
+
+impl Grabber for V4l2Grabber {
+    fn open(&mut self) -> Result<(), String> {
+        if self.cam.is_some() {
+            return Ok(());
+        }
+        let cam = self
+            .try_open(FrameFormat::MJPEG)
+            .or_else(|_| self.try_open(FrameFormat::YUYV))
+            .map_err(|e| e.to_string())?;
+        self.cam = Some(cam);
+        Ok(())
+    }
+
+    fn grab(&mut self) -> Result<RgbImage, String> {
+        let cam = self.cam.as_mut().ok_or("not open")?;
+        cam.frame()
+            .and_then(|b| b.decode_image::<RgbFormat>())
+            .map_err(|e| e.to_string())
+    }
+
+    fn close(&mut self) {
+        if let Some(mut c) = self.cam.take() {
+            let _ = c.stop_stream();
+        }
+    }
+
+    fn label(&self) -> String {
+        format!("/dev/video{}", self.index)
+    }
+}
+
+/// Opens camera `index` once to check it exists (a missing camera is an error before the car
+/// does anything), then captures on a thread.
+pub fn open(
+    index: u32,
     fps: f64,
     width: u32,
     height: u32,
-}
-
-impl CameraSource {
-    /// Opens camera `index` (0 = /dev/video0) and starts streaming at the highest frame rate it
-    /// offers; frames are resized to `width × height`.
-    pub fn open(index: u32, fps: f64, width: u32, height: u32) -> Result<Self, CameraError> {
-        let err = |e: nokhwa::NokhwaError| CameraError {
-            index,
-            reason: e.to_string(),
-        };
-        let req = RequestedFormat::new::<RgbFormat>(RequestedFormatType::AbsoluteHighestFrameRate);
-        let mut cam = nokhwa::Camera::new(CameraIndex::Index(index), req).map_err(err)?;
-        cam.open_stream().map_err(err)?;
-        Ok(Self {
-            cam,
-            index: 0,
-            fps,
-            width,
-            height,
-        })
-    }
-}
-
-impl FrameSource for CameraSource {
-    fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
-        let index = self.index;
-        self.index += 1;
-        let name = format!("camera_{index:06}");
-        let decoded = self.cam.frame().and_then(|b| b.decode_image::<RgbFormat>());
-        Some(match decoded {
-            Ok(img) => {
-                let img = if img.dimensions() == (self.width, self.height) {
-                    img
-                } else {
-                    image::imageops::resize(&img, self.width, self.height, image::imageops::FilterType::Triangle)
-                };
-                Ok(Frame {
-                    index,
-                    time_s: index as f64 / self.fps,
-                    name,
-                    image: img,
-                })
-            }
-            Err(e) => Err(FrameError {
-                index,
-                name,
-                reason: e.to_string(),
-            }),
-        })
-    }
-}
-
-impl Drop for CameraSource {
-    fn drop(&mut self) {
-        let _ = self.cam.stop_stream();
-    }
+    clock: Arc<dyn Clock + Send + Sync>,
+    stall_after: Duration,
+) -> Result<CaptureSource, CameraError> {
+    let mut g = V4l2Grabber::new(index, fps, width, height);
+    g.open().map_err(|reason| CameraError { index, reason })?;
+    Ok(CaptureSource::start(
+        Box::new(g),
+        (width, height),
+        clock,
+        stall_after,
+        Duration::from_millis(250),
+    ))
 }
 
 #[cfg(test)]
@@ -94,7 +116,13 @@ mod tests {
         if std::path::Path::new("/dev/video250").exists() {
             return;
         }
-        let e = CameraSource::open(250, 30.0, 320, 240)
+        struct Zero;
+        impl Clock for Zero {
+            fn now_s(&self) -> f64 {
+                0.0
+            }
+        }
+        let e = open(250, 30.0, 320, 240, Arc::new(Zero), Duration::from_millis(500))
             .err()
             .expect("no camera 250 here");
         assert!(e.to_string().starts_with("camera 250:"), "{e}");

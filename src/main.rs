@@ -30,6 +30,9 @@ enum Cmd {
     Link(cli::link::LinkArgs),
     /// Run OpenCV Haar/LBP cascades on images; print boxes as JSON, write annotated images.
     Detect(cli::detect::DetectArgs),
+    /// The car's main loop: camera (or the simulator, or a folder) → pipeline → serial link,
+    /// on the wall clock (needs the `serial` feature for a port, `camera` for V4L2).
+    Drive(cli::drive::DriveArgs),
     /// Drive the simulated car round a track with the pipeline in the loop; report and plot.
     Sim(cli::sim::SimArgs),
     /// Calibrate the car: `calibrate ranging PAIRS.csv` fits the camera tilt for ranging.
@@ -47,6 +50,7 @@ fn main() -> ExitCode {
         Cmd::Link(a) => cli::link::run(a),
         Cmd::Detect(a) => cli::detect::run(a),
         Cmd::Sim(a) => cli::sim::run(a),
+        Cmd::Drive(a) => cli::drive::run(a),
         Cmd::Calibrate(c) => cli::calibrate::run(c),
     };
     match result {

@@ -23,6 +23,17 @@ pub trait CommandSink {
     }
 }
 
+/// A borrowed sink is a sink (so the loop can wrap `&mut dyn CommandSink` in
+/// [`NeutralOnDrop`]).
+impl<S: CommandSink + ?Sized> CommandSink for &mut S {
+    fn send(&mut self, cmd: Command, now_s: f64) -> Result<(), SinkError> {
+        (**self).send(cmd, now_s)
+    }
+    fn stop(&mut self) -> Result<(), SinkError> {
+        (**self).stop()
+    }
+}
+
 /// A sink that forgets everything (replay without a car).
 #[derive(Debug, Default)]
 pub struct NullSink;
@@ -74,6 +85,9 @@ impl<S: CommandSink> NeutralOnDrop<S> {
 impl<S: CommandSink> CommandSink for NeutralOnDrop<S> {
     fn send(&mut self, cmd: Command, now_s: f64) -> Result<(), SinkError> {
         self.get_mut().send(cmd, now_s)
+    }
+    fn stop(&mut self) -> Result<(), SinkError> {
+        self.get_mut().stop()
     }
 }
 

@@ -44,9 +44,10 @@ pub struct FrameRecord {
     pub throttle: f64,
     /// Microseconds per stage.
     pub stage_us: StageTimes,
-    /// Ground truth (simulator only): true offset, heading error, line columns, objects.
+    /// Ground truth (simulator only): true offset, heading error, line columns, objects. Kept
+    /// as JSON: telemetry does not know the simulator's types (`sim::truth::FrameTruth`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub truth: Option<crate::sim::truth::FrameTruth>,
+    pub truth: Option<serde_json::Value>,
     /// Behaviour state after this frame.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub behaviour: Option<Mode>,
@@ -65,6 +66,19 @@ pub struct FrameRecord {
     /// Detection + ranging + behaviour time, microseconds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub detect_us: Option<u32>,
+    /// Capture → command sent, milliseconds, on the run's clock (0 without one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latency_ms: Option<f64>,
+    /// Time since the previous frame's command, milliseconds (the loop period).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub period_ms: Option<f64>,
+    /// Frames the source produced that the loop never saw, so far (it takes the newest).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dropped: Option<u64>,
+    /// Events of the run at this frame: an operator's change (`kp=0.9 from dashboard`), a
+    /// stall, the emergency brake. Explains a run afterwards.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub events: Vec<String>,
 }
 
 impl FrameRecord {
@@ -100,6 +114,10 @@ impl FrameRecord {
             speed_est_mps: None,
             odometry_m: None,
             detect_us: None,
+            latency_ms: None,
+            period_ms: None,
+            dropped: None,
+            events: Vec::new(),
         }
     }
 
@@ -118,5 +136,54 @@ impl FrameRecord {
     /// The record as one JSON line (no newline).
     pub fn to_json_line(&self) -> String {
         serde_json::to_string(self).expect("records always serialise")
+    }
+}
+
+/// Writes one record per processed frame as a JSON line, flushed after every line, so that an
+/// interrupted or killed run keeps every frame it processed (each line complete).
+pub struct JsonlWriter<W: std::io::Write> {
+    out: W,
+    /// What to call the output in errors (the file's path).
+    label: String,
+    lines: u64,
+}
+
+impl<W: std::io::Write> JsonlWriter<W> {
+    /// Writes to `out`; errors name `label`.
+    pub fn new(out: W, label: impl Into<String>) -> Self {
+        Self {
+            out,
+            label: label.into(),
+            lines: 0,
+        }
+    }
+
+    /// Writes one record and flushes it.
+    pub fn write(&mut self, rec: &FrameRecord) -> std::io::Result<()> {
+        let mut line = rec.to_json_line();
+        line.push('\n');
+        self.out.write_all(line.as_bytes())?;
+        self.out.flush()?;
+        self.lines += 1;
+        Ok(())
+    }
+
+    /// Lines written so far.
+    pub fn lines(&self) -> u64 {
+        self.lines
+    }
+
+    /// Flushes and returns the writer.
+    pub fn finish(mut self) -> std::io::Result<W> {
+        self.out.flush()?;
+        Ok(self.out)
+    }
+}
+
+impl<W: std::io::Write> crate::drive::Observer for JsonlWriter<W> {
+    fn on_frame(&mut self, ctx: &crate::drive::FrameContext<'_>) -> Result<crate::drive::Flow, crate::drive::LoopError> {
+        self.write(ctx.record)
+            .map_err(|e| crate::drive::LoopError::Observer(format!("{}: cannot write: {e}", self.label)))?;
+        Ok(crate::drive::Flow::Continue)
     }
 }

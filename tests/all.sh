@@ -17,7 +17,9 @@ DEB_PACKAGES=(
   simavr libsimavr-dev libsimavrparts1 libelf-dev  # hardware-in-the-loop harness
   libclang-dev                                 # the `camera` feature (nokhwa's V4L2 bindings)
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
+  socat                                        # a silent pty pair for rccar drive's bad-port test
   rustc-web cargo-web libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user  # cross stage (Pi)
+  opencv-doc                                   # OpenCV's stereo chessboard pairs (calib parity stage)
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   missing=()
@@ -74,10 +76,15 @@ stage protocol-c make -C firmware test
 stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
 stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
 stage link-hil cargo test --release --features serial --test link_hil
+# the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr
+# (one test at a time: each needs a core for the emulator on the wall clock; ~5 min)
+stage drive-fil cargo test --release --features serial --test drive_fil --test drive_cli -- --test-threads 1
 stage camera cargo test --release --features camera --lib camera_source
+stage gpio cargo test --release --features gpio --lib gpio
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
 stage cross bash tests/cross/run.sh
+stage calib-parity "$RCCAR_PYTHON" tests/parity/calib_parity.py
 
 echo
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi

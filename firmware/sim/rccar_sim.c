@@ -11,10 +11,10 @@
  *   HANG <t_us>                          stdin "hang": the CPU is sent into avr-libc's final
  *                                        `cli; rjmp .` loop, i.e. a hung firmware, for the watchdog
  *
- * Usage: rccar_sim FIRMWARE.elf [--link PATH] [--sniff]. --link makes PATH a symlink to the pty
+ * Usage: rccar_sim FIRMWARE.elf [--link PATH] [--sniff] [--no-stdin]. --link makes PATH a symlink to the pty
  * (each test its own path; simavr's fixed /tmp/simavr-uart0 collides between parallel runs).
  * stdin: "reset" resets the AVR; "quit" or end of file exits, so the harness dies with the
- * test that started it. The simulation is paced to wall-clock time (never more than 2 ms ahead)
+ * test that started it; with --no-stdin stdin is not read (run it in the background: SIGTERM ends it). The simulation is paced to wall-clock time (never more than 2 ms ahead)
  * so the host sees real-time behaviour. SIGTERM exits with _exit: uart_pty_stop can hang. */
 #define _GNU_SOURCE
 #include <fcntl.h>
@@ -42,6 +42,7 @@ static volatile int reset_requested, hang_requested;
 static uint32_t hang_pc; /* byte address of avr-libc's `_exit: cli; __stop_program: rjmp .-2` */
 static rc_parser sniffer;
 static int sniff;
+static int no_stdin; /* --no-stdin: run detached (e.g. in the background for `rccar drive --camera sim`) */
 
 static double t_us(void) { return (double)avr->cycle * 1e6 / (double)avr->frequency; }
 
@@ -124,13 +125,15 @@ int main(int argc, char **argv) {
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--link") == 0 && i + 1 < argc)
             link = argv[++i];
+        else if (strcmp(argv[i], "--no-stdin") == 0)
+            no_stdin = 1;
         else if (strcmp(argv[i], "--sniff") == 0)
             sniff = 1;
         else
             elf = argv[i];
     }
     if (!elf) {
-        fprintf(stderr, "usage: %s FIRMWARE.elf [--link PATH] [--sniff]\n", argv[0]);
+        fprintf(stderr, "usage: %s FIRMWARE.elf [--link PATH] [--sniff] [--no-stdin]\n", argv[0]);
         return 2;
     }
     setvbuf(stdout, NULL, _IOLBF, 0);
@@ -187,7 +190,7 @@ int main(int argc, char **argv) {
     if (sniff) avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT), uart_in, NULL);
 
     pthread_t th;
-    pthread_create(&th, NULL, stdin_thread, NULL);
+    if (!no_stdin) pthread_create(&th, NULL, stdin_thread, NULL);
 
     /* 4. run, paced to wall-clock time */
     double start = wall_us();

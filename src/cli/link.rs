@@ -2,7 +2,8 @@
 //! versions, then one of: live telemetry (default), a servo sweep (`--sweep`), trim editing
 //! (`--trim-us`, `--save` to store it in EEPROM), round-trip latency (`--latency N`).
 //! Every exit path disarms: the `Link` sends DISARM + neutral when dropped, and Ctrl-C only
-//! raises a flag that ends the loops so that drop runs.
+//! raises a flag that ends the loops so that drop runs; a second Ctrl-C/SIGTERM disarms from
+//! the signal thread and exits.
 
 use clap::Args;
 use std::process::ExitCode;
@@ -40,21 +41,19 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
     use anyhow::Context;
     use rccar::link::protocol::status;
     use rccar::link::transport::{Link, LinkOptions};
-    use std::sync::atomic::{AtomicBool, Ordering};
     use std::time::{Duration, Instant};
 
-    static STOP: AtomicBool = AtomicBool::new(false);
-    extern "C" fn on_sigint(_: libc::c_int) {
-        STOP.store(true, Ordering::SeqCst);
-    }
-    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
-    unsafe {
-        libc::signal(libc::SIGINT, on_sigint as *const () as libc::sighandler_t);
-        libc::signal(libc::SIGTERM, on_sigint as *const () as libc::sighandler_t);
-    }
-    let stopped = || STOP.load(Ordering::SeqCst);
+    // Ctrl-C / SIGTERM end the loops (the Link disarms when dropped); a second one disarms
+    // from the signal thread and exits at once, even if this thread is stuck.
+    let stop = super::signals::install();
+    let stopped = || stop.is_set();
 
-    let link = Link::open(&args.port, LinkOptions::default());
+    let link = std::sync::Arc::new(Link::open(&args.port, LinkOptions::default()));
+    let l = link.clone();
+    super::signals::on_emergency(move || {
+        l.drive(0, 0);
+        let _ = l.disarm();
+    });
     let hello = link
         .wait_connected(Duration::from_secs(3))
         .with_context(|| format!("no firmware answering on {}", args.port))?;
@@ -135,7 +134,9 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
             std::thread::sleep(Duration::from_millis(200));
         }
     }
-    // dropping `link` disarms and sends a neutral DRIVE
+    // disarm and a neutral DRIVE now (dropping the last `Link` does the same)
+    link.drive(0, 0);
+    let _ = link.disarm();
     drop(link);
     Ok(if stopped() {
         ExitCode::from(130)

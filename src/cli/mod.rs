@@ -1,12 +1,16 @@
 //! Subcommands of the `rccar` binary. Each file parses its flags with clap, wires library
 //! parts together and reports; the work itself is library code.
 
+pub mod calib_board;
 pub mod calibrate;
 pub mod common;
 pub mod config;
+pub mod dashboard;
 pub mod detect;
+pub mod drive;
 pub mod link;
 pub mod replay;
+pub mod signals;
 pub mod sim;
 pub mod stages;
 pub mod synth;

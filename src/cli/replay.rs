@@ -7,11 +7,12 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use rccar::annotate::annotate;
 use rccar::lane::LaneStatus;
+use rccar::drive::{Clock, Driver, Flow, FrameContext, LoopEnd, LoopError, NoClock, Observer, StopReason};
 use rccar::pipeline::Pipeline;
-use rccar::source::{FrameSource, ReplayDir};
-use rccar::telemetry::FrameRecord;
+use rccar::sink::NullSink;
+use rccar::source::{FrameError, FrameSource, ReplayDir};
+use rccar::telemetry::JsonlWriter;
 use rccar::timing::{NoTimer, StageTimer};
-use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -33,13 +34,48 @@ pub struct ReplayArgs {
     pub config: ConfigArgs,
 }
 
-/// Summary of a replay, also used by tests through the JSONL.
+/// Summary of a replay, also used by tests through the JSONL; it also writes the annotated
+/// frames.
 struct Summary {
     frames: u64,
     skipped: Vec<String>,
     status: [u64; 4],
     abs_err_sum: f64,
     total_us: Vec<u32>,
+    bar: ProgressBar,
+    annotate_dir: Option<PathBuf>,
+    warp_src: [[f64; 2]; 4],
+}
+
+impl Observer for Summary {
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        self.bar.inc(1);
+        let out = ctx.output;
+        self.frames += 1;
+        self.status[out.lane.status as usize] += 1;
+        self.abs_err_sum += out.lane.error_px.map_or(0.0, f64::abs);
+        self.total_us.push(out.stage_us.total_us);
+        if let Some(dir) = &self.annotate_dir {
+            let img = annotate(
+                &ctx.frame.image,
+                &self.warp_src,
+                ctx.pipeline.lane().warp_map().homography(),
+                ctx.pipeline.lane().images(),
+                &out.lane,
+                &out.command,
+            );
+            let p = dir.join(rccar::source::output_name(&ctx.frame.name));
+            img.save(&p)
+                .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
+        }
+        Ok(Flow::Continue)
+    }
+
+    fn on_skip(&mut self, e: &FrameError) {
+        self.bar.inc(1);
+        self.bar.println(format!("skipped {e}"));
+        self.skipped.push(e.to_string());
+    }
 }
 
 /// Runs the replay.
@@ -62,8 +98,9 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         std::fs::create_dir_all(&annotate_dir).with_context(|| format!("{}: cannot create", annotate_dir.display()))?;
     }
     let tel_path = a.out.join("telemetry.jsonl");
-    let mut tel = std::io::BufWriter::new(
+    let mut tel = JsonlWriter::new(
         std::fs::File::create(&tel_path).with_context(|| format!("{}: cannot create", tel_path.display()))?,
+        tel_path.display().to_string(),
     );
 
     let bar = ProgressBar::new(source.len_hint().unwrap_or(0) as u64);
@@ -77,58 +114,23 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         status: [0; 4],
         abs_err_sum: 0.0,
         total_us: vec![],
+        bar,
+        annotate_dir: annotate_frames.then(|| annotate_dir.clone()),
+        warp_src: cfg.warp.src,
     };
-    let mut last_time: Option<f64> = None;
+    let stop = super::signals::install();
     let mut wall = WallTimer::new();
     let mut none = NoTimer;
-    while let Some(item) = source.next_frame() {
-        bar.inc(1);
-        let frame = match item {
-            Ok(f) => f,
-            Err(e) => {
-                bar.println(format!("skipped {e}"));
-                s.skipped.push(e.to_string());
-                continue;
-            }
-        };
-        // dt counts skipped frames: time passed even if we could not see.
-        let dt = last_time.map_or(1.0 / cfg.camera.fps, |t| frame.time_s - t);
-        last_time = Some(frame.time_s);
-        let timer: &mut dyn StageTimer = if a.no_timing { &mut none } else { &mut wall };
-        let out = pipeline.step(&frame.image, dt, timer);
-        let rec = FrameRecord::new(
-            frame.index,
-            &frame.name,
-            frame.time_s,
-            &out.lane,
-            &out.command,
-            out.stage_us,
-        )
-        .with_pipeline(&out, &pipeline);
-        writeln!(tel, "{}", rec.to_json_line())?;
-        s.frames += 1;
-        s.status[out.lane.status as usize] += 1;
-        s.abs_err_sum += out.lane.error_px.map_or(0.0, f64::abs);
-        s.total_us.push(out.stage_us.total_us);
-        if annotate_frames {
-            let img = annotate(
-                &frame.image,
-                &cfg.warp.src,
-                pipeline.lane().warp_map().homography(),
-                pipeline.lane().images(),
-                &out.lane,
-                &out.command,
-            );
-            let stem = std::path::Path::new(&frame.name)
-                .file_stem()
-                .map(|s| s.to_string_lossy().to_string())
-                .unwrap_or_default();
-            let p = annotate_dir.join(format!("{stem}.png"));
-            img.save(&p).with_context(|| format!("{}: cannot write", p.display()))?;
-        }
-    }
-    bar.finish_and_clear();
-    tel.flush()?;
+    let timer: &mut dyn StageTimer = if a.no_timing { &mut none } else { &mut wall };
+    let wall_clock = super::timer::WallClock::new();
+    let clock: &dyn Clock = if a.no_timing { &NoClock } else { &wall_clock };
+    let end = {
+        let mut obs: [&mut dyn Observer; 2] = [&mut tel, &mut s];
+        // Replay moves nothing: its sink forgets the commands (they are in the telemetry).
+        Driver::new(cfg.camera.fps).run(&mut source, &mut pipeline, &mut NullSink, &stop, clock, timer, &mut obs)?
+    };
+    s.bar.finish_and_clear();
+    tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;
 
     let seen = s.status[LaneStatus::Both as usize]
         + s.status[LaneStatus::LeftOnly as usize]
@@ -164,6 +166,14 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     println!("  telemetry: {}", tel_path.display());
     if annotate_frames {
         println!("  annotated frames: {}/", annotate_dir.display());
+    }
+    if let LoopEnd::Stopped(why) = end {
+        println!(
+            "replay: interrupted ({}) after {} frames; telemetry holds every frame processed",
+            if why == StopReason::Terminate { "SIGTERM" } else { "Ctrl-C" },
+            s.frames
+        );
+        return Ok(ExitCode::from(why.exit_code()));
     }
     Ok(if s.frames == 0 {
         ExitCode::from(1)

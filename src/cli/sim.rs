@@ -7,12 +7,15 @@ use super::timer::WallTimer;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rccar::config::Config;
+use rccar::drive::{Driver, Flow, FrameContext, LoopEnd, LoopError, Observer, StopReason};
+use rccar::pipeline::Pipeline;
 use rccar::sim::plot;
-use rccar::sim::run::{Simulation, Summary};
+use rccar::sim::run::{roi_rows, Simulation, Summary};
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
+use rccar::sim::world::{lock, SharedWorld, SimCamera, SimScore, SimVehicle, World};
+use rccar::telemetry::JsonlWriter;
 use rccar::timing::{NoTimer, StageTimer};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -52,6 +55,8 @@ pub struct SimArgs {
     pub truth_boxes: bool,
     #[command(flatten)]
     pub config: ConfigArgs,
+    #[command(flatten)]
+    pub dash: super::dashboard::DashArgs,
 }
 
 /// Runs `rccar sim`.
@@ -78,22 +83,33 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         return run_sweep(&a, &cfg, &track, sweep, font);
     }
 
-    let mut sim = Simulation::new(&cfg, &track)?;
+    let stop = super::signals::install();
+    let world = World::new(&cfg, Arc::new(Scene::new(&track)))?.shared();
+    // With a dashboard the operator ends the run (a parked, disarmed car is not "stalled").
+    let mut camera = SimCamera::new(world.clone()).ending_with_world(!a.dash.dashboard);
+    // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
+    let fps = cfg.camera.fps;
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local.clone(), Some(world.clone()), &stop, Some(fps), None)?;
+    let mut vehicle = dash.sink(SimVehicle::new(world.clone()));
+    let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
+    let mut pipeline = Pipeline::new(&cfg)?;
     if a.truth_boxes {
         println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
-        sim.set_truth_boxes(true);
+        camera.set_truth_boxes(true);
     } else {
-        sim.set_detector(super::common::load_detector(&cfg)?);
+        pipeline.set_detector(super::common::load_detector(&cfg)?);
     }
     // Without recording nobody looks at the frames: render only the rows the pipeline reads
-    // (the same decisions, about twice as fast).
-    sim.set_full_frames(a.record.is_some());
+    // (the same decisions, about twice as fast) unless a detector needs the whole frame.
+    let need_all = a.record.is_some() || dash.enabled() || (pipeline.has_detector() && !a.truth_boxes);
+    camera.set_rows(if need_all { None } else { Some(roi_rows(&cfg)) });
     if let Some(dir) = &a.record {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     }
     let tel_path = a.out.join("telemetry.jsonl");
-    let mut tel = std::io::BufWriter::new(
+    let mut tel = JsonlWriter::new(
         std::fs::File::create(&tel_path).with_context(|| format!("{}: cannot create", tel_path.display()))?,
+        tel_path.display().to_string(),
     );
     println!(
         "sim: track {} ({:.2} m, tightest lane radius {:.2} m), {} lap(s), at most {} s",
@@ -106,30 +122,36 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut wall = WallTimer::new();
     let mut none = NoTimer;
     let timer: &mut dyn StageTimer = if a.no_timing { &mut none } else { &mut wall };
-    let mut series = plot::Series::default();
+    let mut report = Report {
+        world: world.clone(),
+        record: a.record.clone(),
+        series: plot::Series::default(),
+    };
     let started = std::time::Instant::now();
-    let summary = sim.run(timer, |sim, step| -> Result<()> {
-        let name = format!("frame_{:06}.png", step.frame);
-        if let Some(dir) = &a.record {
-            let p = dir.join(&name);
-            sim.image()
-                .save(&p)
-                .with_context(|| format!("{}: cannot write", p.display()))?;
+    let clock = super::timer::WallClock::new();
+    let end = {
+        let mut tel = dash.tag(&mut tel);
+        let mut obs: [&mut dyn Observer; 4] = [&mut score, &mut tel, &mut report, &mut dash];
+        Driver::new(cfg.camera.fps).run(
+            &mut camera,
+            &mut pipeline,
+            &mut *vehicle,
+            &stop,
+            &clock,
+            timer,
+            &mut obs,
+        )?
+    };
+    let interrupted = match end {
+        LoopEnd::Stopped(why) => {
+            lock(&world).interrupt();
+            Some(why)
         }
-        if let Some(tr) = &step.transition {
-            println!(
-                "  t={:7.2} s  {} -> {}: {}",
-                step.time_s,
-                tr.from.name(),
-                tr.to.name(),
-                tr.reason
-            );
-        }
-        writeln!(tel, "{}", step.record(&name).to_json_line())?;
-        series.push(step);
-        Ok(())
-    })?;
-    tel.flush()?;
+        _ => None,
+    };
+    tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;
+    let summary = lock(&world).summary();
+    let scene = lock(&world).scene().clone();
     let wall_s = started.elapsed().as_secs_f64();
     print_summary(&summary);
     println!(
@@ -146,9 +168,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     if let Some(font) = font {
         plot::register_font(font);
         let p1 = a.out.join("xte_steer.png");
-        save(&plot::time_plot(&series, summary.lane_width_m)?, &p1)?;
+        save(&plot::time_plot(&report.series, summary.lane_width_m)?, &p1)?;
         let p2 = a.out.join("path.png");
-        save(&plot::path_plot(&series, sim.scene())?, &p2)?;
+        save(&plot::path_plot(&report.series, &scene)?, &p2)?;
         println!("  plots:     {} {}", p1.display(), p2.display());
     } else {
         println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
@@ -161,8 +183,49 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             dir.display()
         );
     }
+    if let Some(why) = interrupted {
+        println!(
+            "sim: interrupted ({}) after {} frames; the summary and plots cover what ran",
+            if why == StopReason::Terminate { "SIGTERM" } else { "Ctrl-C" },
+            summary.frames
+        );
+        return Ok(ExitCode::from(why.exit_code()));
+    }
     let ok = summary.laps >= cfg.sim.laps && summary.lane_departures == 0;
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}
+
+/// What `rccar sim` shows and keeps while the loop runs: transitions on the terminal, the
+/// plots' series, the recorded frames.
+struct Report {
+    world: SharedWorld,
+    record: Option<PathBuf>,
+    series: plot::Series,
+}
+
+impl Observer for Report {
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        if let Some(dir) = &self.record {
+            let p = dir.join(&ctx.frame.name);
+            ctx.frame
+                .image
+                .save(&p)
+                .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
+        }
+        if let Some(tr) = &ctx.record.transition {
+            println!(
+                "  t={:7.2} s  {} -> {}: {}",
+                ctx.record.time_s,
+                tr.from.name(),
+                tr.to.name(),
+                tr.reason
+            );
+        }
+        if let Some(truth) = lock(&self.world).last_truth() {
+            self.series.push_parts(ctx.frame.time_s, truth, ctx.output.command.steer);
+        }
+        Ok(Flow::Continue)
+    }
 }
 
 const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
@@ -254,6 +317,7 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
         jobs,
         track.name
     );
+    let stop = super::signals::install();
     let next = std::sync::atomic::AtomicUsize::new(0);
     let results: Vec<std::sync::Mutex<Option<Result<Summary, String>>>> =
         (0..cfgs.len()).map(|_| std::sync::Mutex::new(None)).collect();
@@ -268,7 +332,8 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
                     .map_err(|e| e.to_string())
                     .map(|mut sim| {
                         sim.set_full_frames(false);
-                        sim.run(&mut NoTimer, |_, _| Ok::<(), ()>(()))
+                        // Ctrl-C ends every run of the sweep at its next frame
+                        sim.run(&mut NoTimer, |_, _| if stop.is_set() { Err(()) } else { Ok(()) })
                             .unwrap_or_else(|_| sim.summary())
                     });
                 if let Ok(mut slot) = results[i].lock() {
@@ -315,6 +380,10 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
         }
     }
     std::fs::write(&csv_path, csv).with_context(|| format!("{}: cannot write", csv_path.display()))?;
+    if let Some(why) = stop.reason() {
+        println!("sweep: interrupted; the rows above cover each run up to that moment");
+        return Ok(ExitCode::from(why.exit_code()));
+    }
     println!("  table: {}", csv_path.display());
     if let Some(font) = font {
         plot::register_font(font);

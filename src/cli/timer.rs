@@ -21,3 +21,19 @@ impl StageTimer for WallTimer {
         us
     }
 }
+
+/// The wall clock the binary hands to the loop (latency, loop period); seconds since creation.
+pub struct WallClock(Instant);
+
+impl WallClock {
+    /// Starts now.
+    pub fn new() -> Self {
+        Self(Instant::now())
+    }
+}
+
+impl rccar::drive::Clock for WallClock {
+    fn now_s(&self) -> f64 {
+        self.0.elapsed().as_secs_f64()
+    }
+}

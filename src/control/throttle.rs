@@ -39,6 +39,11 @@ impl Throttle {
         }
     }
 
+    /// The policy's settings (a dashboard changes `base`, `min` between frames).
+    pub fn config_mut(&mut self) -> &mut ThrottleConfig {
+        &mut self.cfg
+    }
+
     /// Seconds since the lane was last seen (0 while it is seen).
     pub fn lost_for_s(&self) -> f64 {
         self.lost_for_s

@@ -71,6 +71,10 @@ pub struct LinkOptions {
     pub max_drive_age: Duration,
     /// Optional fault injection (tests).
     pub wire_fault: Option<WireFault>,
+    /// After a reconnect or a firmware reset, arm again if the application had armed (`true`,
+    /// the bench tool's behaviour) or stay disarmed until the application arms again (`false`:
+    /// `rccar drive`, where a car that lost its link must not drive off on its own).
+    pub rearm_after_reconnect: bool,
 }
 
 impl Default for LinkOptions {
@@ -83,6 +87,7 @@ impl Default for LinkOptions {
             silence_timeout: Duration::from_millis(500),
             max_drive_age: Duration::from_millis(100),
             wire_fault: None,
+            rearm_after_reconnect: true,
         }
     }
 }
@@ -558,6 +563,11 @@ fn handshake(conn: &mut Conn, shared: &Shared, opt: &mut LinkOptions) -> Result<
                             let mut g = shared.lock();
                             g.hello = Some(a);
                             g.stats.handshakes += 1;
+                            if g.stats.handshakes > 1 && !opt.rearm_after_reconnect {
+                                // A new handshake after the first: the application re-arms.
+                                g.want_armed = false;
+                                g.drive = None;
+                            }
                             g.telemetry = None;
                             g.connected = a.status == status::OK;
                             g.want_armed && g.connected

@@ -8,11 +8,13 @@
 //! Units: metres, seconds, radians (degrees only in files). World frame x east, y north,
 //! z up; headings counter-clockwise from +x.
 
+pub mod board;
 pub mod glyphs;
 pub mod plot;
 pub mod render;
 pub mod rng;
 pub mod run;
+pub mod world;
 pub mod scenario_lab;
 pub mod scene;
 pub mod track;

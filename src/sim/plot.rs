@@ -40,10 +40,15 @@ pub struct Series {
 impl Series {
     /// Adds one step.
     pub fn push(&mut self, s: &StepOutput) {
-        self.t.push(s.time_s);
-        self.xte.push(s.truth.offset_m);
-        self.steer.push(s.out.command.steer);
-        self.path.push((s.truth.pose[0], s.truth.pose[1]));
+        self.push_parts(s.time_s, &s.truth, s.out.command.steer);
+    }
+
+    /// Adds one frame from its time, truth and steering command.
+    pub fn push_parts(&mut self, time_s: f64, truth: &super::truth::FrameTruth, steer: f64) {
+        self.t.push(time_s);
+        self.xte.push(truth.offset_m);
+        self.steer.push(steer);
+        self.path.push((truth.pose[0], truth.pose[1]));
     }
 }
 

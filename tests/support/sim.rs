@@ -57,6 +57,19 @@ pub struct Sim {
 impl Sim {
     /// Starts the harness with its pty linked at `tty`.
     pub fn start_at(tty: &str) -> Sim {
+        Self::start_logged(tty, None)
+    }
+
+    /// Like [`Sim::start_at`], also appending every report line to `log` (flushed per line),
+    /// the file `rccar drive --pwm-log` follows.
+    pub fn start_logged(tty: &str, log: Option<&Path>) -> Sim {
+        let mut log = log.map(|p| {
+            std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(p)
+                .expect("open the pulse log")
+        });
         let build = build_firmware();
         let mut child = Command::new(build.join("rccar_sim"))
             .arg(build.join("rccar_fw.elf"))
@@ -73,6 +86,10 @@ impl Sim {
         let ev = events.clone();
         std::thread::spawn(move || {
             for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if let Some(f) = log.as_mut() {
+                    let _ = writeln!(f, "{line}");
+                    let _ = f.flush();
+                }
                 let t: Vec<&str> = line.split_whitespace().collect();
                 let e = match t.as_slice() {
                     ["PTY", p] => {
@@ -165,6 +182,11 @@ impl Sim {
     pub fn hang(&mut self) {
         let _ = writeln!(self.stdin, "hang");
         let _ = self.stdin.flush();
+    }
+
+    /// The harness's process id (to kill it as a pulled plug would).
+    pub fn pid(&self) -> u32 {
+        self.child.id()
     }
 
     /// Simulated times (µs) at which the UART received host frames with this id.

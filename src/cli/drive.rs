@@ -1,0 +1,786 @@
+//! `rccar drive`: the car's main loop on the wall clock — a frame source, the pipeline, the
+//! serial link — through the one loop every run uses ([`rccar::drive::Driver`]).
+//!
+//! Frame sources: the V4L2 camera (`--camera v4l:0`, feature `camera`), a folder of frames
+//! played at the configured fps (`--camera DIR`, bench tests at the desk), or the simulator as
+//! a camera (`--camera sim`: the simulated car's view; the simulated car is moved by what the
+//! firmware outputs when `--pwm-log` names the firmware emulator's report, or by the commands
+//! themselves with `--dry-run`). Sink: the serial link (`--port`, feature `serial`) or nothing
+//! (`--dry-run`).
+//!
+//! Safety: the car is disarmed until the link handshake succeeded, a first frame arrived and
+//! `--arm` was given (or the button pressed); a reconnect disarms again; every way out — the
+//! end, Ctrl-C, SIGTERM, a panic, a lost camera — sends neutral before files are closed, and a
+//! second Ctrl-C/SIGTERM sends neutral from another thread and exits at once.
+
+use super::common::ConfigArgs;
+use super::timer::{WallClock, WallTimer};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use rccar::config::Config;
+use rccar::control::Command;
+use rccar::drive::{Clock, Driver, Flow, FrameContext, LoopEnd, LoopError, LoopStats, Observer, StopReason, StopSignal};
+use rccar::pipeline::Pipeline;
+use rccar::sim::scene::Scene;
+use rccar::sim::track::Track;
+use rccar::sim::world::{lock, SharedWorld, SimScore, World};
+use rccar::sink::{CommandSink, NullSink, SinkError};
+use rccar::source::{Frame, FrameError, FrameSource, ReplayDir};
+use rccar::telemetry::JsonlWriter;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// Flags of `rccar drive`.
+#[derive(Args, Debug)]
+pub struct DriveArgs {
+    /// Frame source: `v4l:INDEX` (the car's camera, /dev/videoINDEX; feature `camera`), `sim`
+    /// (the simulator's camera), or a folder of PNG/JPEG frames played at the configured fps.
+    #[arg(long, default_value = "v4l:0")]
+    pub camera: String,
+    /// Serial port of the Arduino (e.g. /dev/ttyACM0) or the firmware emulator's pty.
+    #[arg(long)]
+    pub port: Option<String>,
+    /// Run everything without a port: nothing is sent (with `--camera sim` the simulated car
+    /// follows the commands directly).
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Arm as soon as the link is up and the first frame arrived (otherwise the start button
+    /// arms).
+    #[arg(long)]
+    pub arm: bool,
+    /// Stop after this many seconds of wall-clock time (default: until stopped).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// With `--camera sim`: laps to drive before stopping (default: `sim.laps`; 0 = no limit).
+    #[arg(long)]
+    pub laps: Option<u32>,
+    /// With `--camera sim`: the firmware emulator's report (its stdout, `PULSE servo|esc WIDTH
+    /// T` lines); the simulated car then moves by those pulse widths, not by the commands.
+    #[arg(long, value_name = "FILE")]
+    pub pwm_log: Option<PathBuf>,
+    /// Output folder for telemetry.jsonl and summary.json.
+    #[arg(long, short, default_value = "out/drive")]
+    pub out: PathBuf,
+    /// Seconds between status lines.
+    #[arg(long, default_value_t = 2.0)]
+    pub status_every: f64,
+    /// Test hook: with `--camera sim`, the camera delivers nothing from T for D seconds
+    /// (`T:D`), as a stalled or unplugged camera would.
+    #[arg(long, value_name = "T:D", hide = true)]
+    pub sim_stall: Option<String>,
+    /// Test hook: flip each bit written to the link with this probability once armed (a noisy
+    /// cable), reproducibly seeded.
+    #[arg(long, value_name = "BER", hide = true)]
+    pub link_bit_errors: Option<f64>,
+    #[command(flatten)]
+    pub config: ConfigArgs,
+    #[command(flatten)]
+    pub dash: super::dashboard::DashArgs,
+}
+
+/// Runs `rccar drive`.
+pub fn run(a: DriveArgs) -> Result<ExitCode> {
+    let mut cfg = a.config.load()?;
+    if let Some(l) = a.laps {
+        cfg = cfg.with_override(&format!("sim.laps={l}"))?;
+    }
+    if let Some(s) = a.seconds {
+        if !(s.is_finite() && s > 0.0) {
+            bail!("--seconds {s}: must be a positive number of seconds");
+        }
+    }
+    if a.port.is_none() && !a.dry_run {
+        bail!("no --port: name the Arduino's serial port (e.g. --port /dev/ttyACM0), or --dry-run to run without one");
+    }
+    if a.port.is_some() && a.dry_run {
+        bail!("--port and --dry-run: choose one");
+    }
+    let stop = super::signals::install();
+    let clock = Arc::new(WallClock::new());
+    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
+    let tel_path = a.out.join("telemetry.jsonl");
+    let tel_file = std::fs::File::create(&tel_path).with_context(|| format!("{}: cannot create", tel_path.display()))?;
+    let mut tel = JsonlWriter::new(tel_file, tel_path.display().to_string());
+
+    let mut pipeline = Pipeline::new(&cfg)?;
+    pipeline.set_detector(super::common::load_detector(&cfg)?);
+
+    // ---- the frame source -----------------------------------------------------------------
+    let actuators = Arc::new(Mutex::new(Command::NEUTRAL));
+    let mut world: Option<SharedWorld> = None;
+    let mut pwm: Option<PwmWatcher> = None;
+    let mut source: Box<dyn FrameSource> = match a.camera.as_str() {
+        "sim" => {
+            let track_path = PathBuf::from(&cfg.sim.track);
+            let track = Track::load(&track_path)?;
+            let w = World::new(&cfg, Arc::new(Scene::new(&track)))?.shared();
+            world = Some(w.clone());
+            if let Some(log) = &a.pwm_log {
+                if a.dry_run {
+                    bail!("--pwm-log needs the firmware: give --port, not --dry-run");
+                }
+                pwm = Some(PwmWatcher::start(log, actuators.clone(), clock.clone())?);
+            } else if !a.dry_run {
+                bail!("--camera sim with --port: name the emulator's report with --pwm-log FILE so the firmware's pulses move the simulated car");
+            }
+            let stall = match &a.sim_stall {
+                Some(s) => Some(parse_stall(s)?),
+                None => None,
+            };
+            Box::new(PacedSimCamera::new(w, actuators.clone(), clock.clone(), &cfg, stall))
+        }
+        spec if spec.starts_with("v4l:") => open_camera(spec, &cfg, clock.clone())?,
+        dir => {
+            let p = PathBuf::from(dir);
+            if !p.is_dir() {
+                bail!("--camera {dir}: not `sim`, `v4l:INDEX` or a folder of frames");
+            }
+            let (w, h) = pipeline.frame_size();
+            Box::new(Paced {
+                inner: ReplayDir::open(&p, cfg.camera.fps, w, h, (1, 1))?,
+                clock: clock.clone(),
+                t0: None,
+            })
+        }
+    };
+
+    // ---- the sink -------------------------------------------------------------------------
+    let mut sink: Box<dyn ArmableSink> = match &a.port {
+        Some(port) => open_link(port, a.link_bit_errors.unwrap_or(0.0))?,
+        None if world.is_some() => Box::new(DirectSink(actuators.clone())),
+        None => Box::new(Disarmed(NullSink)),
+    };
+    println!(
+        "drive: camera {}, {}, {} fps configured; {}",
+        a.camera,
+        a.port.as_deref().map_or("dry run (no port)".to_string(), |p| format!("link {p}")),
+        cfg.camera.fps,
+        if a.arm { "arming after the first frame" } else { "disarmed (press the button or pass --arm)" }
+    );
+
+    // ---- observers --------------------------------------------------------------------------
+    let mut status = Status {
+        every_s: a.status_every.max(0.2),
+        last_print: 0.0,
+        clock: clock.clone(),
+        window: LoopStats::default(),
+        last: None,
+        deadline: a.seconds,
+        stop: stop.clone(),
+        arm_wanted: a.arm,
+        armed: false,
+        events: Vec::new(),
+    };
+    let mut score = world.clone().map(SimScore::new);
+    let mut arming = Arming {
+        sink: &mut *sink,
+        presses: super::signals::button_presses(),
+    };
+    // --dashboard: the page's Arm also arms the link (as the button does); its disarm,
+    // e-stop and lost heartbeat send neutral through the gate (docs/dashboard.md).
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local.clone(), None, &stop, None, Some(|| {
+        ARM_REQUEST.store(true, std::sync::atomic::Ordering::SeqCst)
+    }))?;
+    let mut arming = dash.sink(&mut arming);
+    let end = {
+        let mut none = rccar::drive::NoObserver;
+        let score_obs: &mut dyn Observer = match score.as_mut() {
+            Some(s) => s,
+            None => &mut none,
+        };
+        let mut tel = dash.tag(&mut tel);
+        let mut obs: [&mut dyn Observer; 4] = [score_obs, &mut tel, &mut status, &mut dash];
+        let mut timer = WallTimer::new();
+        let mut driver = Driver::new(cfg.camera.fps);
+        let r = driver.run(
+            &mut *source,
+            &mut pipeline,
+            &mut *arming,
+            &stop,
+            clock.as_ref(),
+            &mut timer,
+            &mut obs,
+        );
+        print_loop_stats(driver.stats());
+        r
+    };
+    // Neutral has gone out (the loop's guard); now the files.
+    drop(source);
+    let tel_lines = tel.lines();
+    tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;
+    println!("  telemetry: {} ({} frames)", tel_path.display(), tel_lines);
+    if let Some(p) = &pwm {
+        if let Some((med, max)) = p.latency_ms() {
+            println!("  capture -> pulse latency: median {med:.1} ms, max {max:.1} ms");
+        }
+    }
+    if let Some(w) = &world {
+        let sum = lock(w).summary();
+        println!(
+            "  sim: {} laps, RMS cross-track {:.4} m, max {:.4} m, departures {}, ended {:?}",
+            sum.laps, sum.xte_rms_m, sum.xte_max_m, sum.lane_departures, sum.end
+        );
+        let p = a.out.join("summary.json");
+        std::fs::write(&p, serde_json::to_string_pretty(&sum)?).with_context(|| format!("{}: cannot write", p.display()))?;
+    }
+    let end = end?;
+    Ok(match end {
+        LoopEnd::Stopped(why) => {
+            println!("drive: stopped ({why:?}); neutral sent");
+            ExitCode::from(why.exit_code())
+        }
+        _ => ExitCode::SUCCESS,
+    })
+}
+
+fn parse_stall(s: &str) -> Result<(f64, f64)> {
+    let (t, d) = s.split_once(':').context("--sim-stall T:D")?;
+    let t: f64 = t.parse().context("--sim-stall T")?;
+    let d: f64 = d.parse().context("--sim-stall D")?;
+    Ok((t, d))
+}
+
+fn print_loop_stats(s: &LoopStats) {
+    let lat = LoopStats::median_max(&s.latency_ms);
+    let per = LoopStats::median_max(&s.period_ms);
+    println!(
+        "drive: {} frames, {} dropped, {} skipped, {} stalls; latency capture->command {}; period {}",
+        s.frames,
+        s.dropped,
+        s.skipped,
+        s.stalls,
+        lat.map_or("-".into(), |(m, x)| format!("median {m:.1} ms, max {x:.1} ms")),
+        per.map_or("-".into(), |(m, x)| format!("median {m:.1} ms, max {x:.1} ms")),
+    );
+}
+
+// ---- sinks that know about arming -------------------------------------------------------------
+
+/// A sink that may be armed (the link) or needs no arming.
+trait ArmableSink: CommandSink {
+    /// Arms: from now on commands move the car. Errors name the port.
+    fn arm(&mut self) -> Result<(), SinkError>;
+    /// Whether commands currently move the car (false after a reconnect until re-armed).
+    fn armed(&self) -> bool;
+}
+
+/// The dry run without the simulator: nothing moves.
+struct Disarmed<S: CommandSink>(S);
+impl<S: CommandSink> CommandSink for Disarmed<S> {
+    fn send(&mut self, c: Command, t: f64) -> Result<(), SinkError> {
+        self.0.send(c, t)
+    }
+}
+impl<S: CommandSink> ArmableSink for Disarmed<S> {
+    fn arm(&mut self) -> Result<(), SinkError> {
+        Ok(())
+    }
+    fn armed(&self) -> bool {
+        true
+    }
+}
+
+/// The dry run in the simulator: the simulated car's actuators follow the commands directly.
+struct DirectSink(Arc<Mutex<Command>>);
+impl CommandSink for DirectSink {
+    fn send(&mut self, c: Command, _t: f64) -> Result<(), SinkError> {
+        *self.0.lock().unwrap_or_else(|e| e.into_inner()) = c;
+        Ok(())
+    }
+}
+impl ArmableSink for DirectSink {
+    fn arm(&mut self) -> Result<(), SinkError> {
+        Ok(())
+    }
+    fn armed(&self) -> bool {
+        true
+    }
+}
+
+/// Holds the car at neutral until armed; arms after the first frame when asked; the button
+/// (SIGUSR1 at the desk, the GPIO button on the car) arms, and disarms when pressed again.
+struct Arming<'a> {
+    sink: &'a mut dyn ArmableSink,
+    presses: u32,
+}
+impl CommandSink for Arming<'_> {
+    fn send(&mut self, c: Command, t: f64) -> Result<(), SinkError> {
+        let p = super::signals::button_presses();
+        if p != self.presses {
+            self.presses = p;
+            if self.sink.armed() {
+                println!("button: stop (disarmed; press again to drive)");
+                self.sink.stop()?;
+            } else {
+                ARM_REQUEST.store(true, std::sync::atomic::Ordering::SeqCst);
+            }
+        }
+        if ARM_REQUEST.swap(false, std::sync::atomic::Ordering::SeqCst) && !self.sink.armed() {
+            self.sink.arm()?;
+        }
+        if self.sink.armed() {
+            self.sink.send(c, t)
+        } else {
+            self.sink.send(Command::NEUTRAL, t)
+        }
+    }
+    fn stop(&mut self) -> Result<(), SinkError> {
+        self.sink.stop()
+    }
+}
+
+/// Raised by `--arm` after the first frame, by the start button, or by a dashboard.
+static ARM_REQUEST: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+#[cfg(not(feature = "serial"))]
+fn open_link(_port: &str, _ber: f64) -> Result<Box<dyn ArmableSink>> {
+    bail!("this rccar was built without the serial link: cargo build --release --features serial (or use --dry-run)")
+}
+
+#[cfg(feature = "serial")]
+fn open_link(port: &str, ber: f64) -> Result<Box<dyn ArmableSink>> {
+    use rccar::link::transport::{Link, LinkOptions};
+    use std::sync::atomic::{AtomicBool, Ordering};
+    if !std::path::Path::new(port).exists() {
+        bail!("{port}: no such serial port (is the Arduino plugged in? `ls /dev/ttyACM* /dev/ttyUSB*`)");
+    }
+    if !(0.0..0.5).contains(&ber) {
+        bail!("--link-bit-errors {ber}: must be in 0 ..< 0.5");
+    }
+    let inject = Arc::new(AtomicBool::new(false));
+    let inj = inject.clone();
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let wire_fault: Option<rccar::link::transport::WireFault> = (ber > 0.0).then(|| {
+        Box::new(move |bytes: &mut Vec<u8>| {
+            if !inj.load(Ordering::SeqCst) {
+                return;
+            }
+            for b in bytes.iter_mut() {
+                for bit in 0..8 {
+                    // xorshift64*: reproducible noise
+                    state ^= state >> 12;
+                    state ^= state << 25;
+                    state ^= state >> 27;
+                    let u = (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64;
+                    if u < ber {
+                        *b ^= 1 << bit;
+                    }
+                }
+            }
+        }) as rccar::link::transport::WireFault
+    });
+    let link = Arc::new(Link::open(
+        port,
+        LinkOptions {
+            rearm_after_reconnect: false,
+            wire_fault,
+            ..LinkOptions::default()
+        },
+    ));
+    let hello = link
+        .wait_connected(Duration::from_secs(3))
+        .with_context(|| format!("{port}: no rccar firmware answering (busy port, wrong device, or not flashed: make -C firmware flash)"))?;
+    println!(
+        "link {port}: protocol {}, firmware {}.{}.{}",
+        hello.protocol_version, hello.fw_major, hello.fw_minor, hello.fw_patch
+    );
+    // A second Ctrl-C while the main thread is stuck: neutral and disarm from the signal thread.
+    let l = link.clone();
+    super::signals::on_emergency(move || {
+        l.drive(0, 0);
+        let _ = l.disarm();
+    });
+    Ok(Box::new(LinkSink {
+        handshakes: link.stats().handshakes,
+        link,
+        armed: false,
+        inject,
+    }))
+}
+
+/// The serial link as the car's sink: disarmed until armed, and again after any reconnect.
+#[cfg(feature = "serial")]
+struct LinkSink {
+    link: Arc<rccar::link::transport::Link>,
+    armed: bool,
+    handshakes: u64,
+    /// The test hook's noise starts once armed.
+    inject: Arc<std::sync::atomic::AtomicBool>,
+}
+
+#[cfg(feature = "serial")]
+impl LinkSink {
+    fn check_reconnect(&mut self) {
+        let h = self.link.stats().handshakes;
+        if h != self.handshakes {
+            self.handshakes = h;
+            if self.armed {
+                eprintln!("link: reconnected; disarmed until armed again (button or --arm restart)");
+            }
+            self.armed = false;
+        }
+    }
+}
+
+#[cfg(feature = "serial")]
+impl CommandSink for LinkSink {
+    fn send(&mut self, c: Command, _t: f64) -> Result<(), SinkError> {
+        use rccar::link::protocol::to_permille;
+        self.check_reconnect();
+        if self.armed {
+            // Our own pause (a stalled camera) let the firmware's 250 ms failsafe trip: the car
+            // stood at neutral; this session armed it and still wants to drive, so arm again.
+            // (A reconnect, by contrast, disarms: see check_reconnect.)
+            if let Some((t, _)) = self.link.telemetry() {
+                if t.state == rccar::link::protocol::State::Failsafe && c != Command::NEUTRAL {
+                    eprintln!("link: firmware failsafe had tripped (no command for its timeout); arming again");
+                    self.link.arm().map_err(|e| SinkError(e.to_string()))?;
+                }
+            }
+            self.link.drive(to_permille(c.steer), to_permille(c.throttle));
+        }
+        Ok(())
+    }
+    fn stop(&mut self) -> Result<(), SinkError> {
+        self.inject.store(false, std::sync::atomic::Ordering::SeqCst);
+        self.link.drive(0, 0);
+        self.armed = false;
+        self.link.disarm().map_err(|e| SinkError(e.to_string()))
+    }
+}
+
+#[cfg(feature = "serial")]
+impl ArmableSink for LinkSink {
+    fn arm(&mut self) -> Result<(), SinkError> {
+        self.check_reconnect();
+        self.link.arm().map_err(|e| SinkError(e.to_string()))?;
+        self.handshakes = self.link.stats().handshakes;
+        self.armed = true;
+        self.inject.store(true, std::sync::atomic::Ordering::SeqCst);
+        println!("link: armed");
+        Ok(())
+    }
+    fn armed(&self) -> bool {
+        self.armed && self.link.is_connected()
+    }
+}
+
+// ---- frame sources on the wall clock -----------------------------------------------------------
+
+#[cfg(feature = "camera")]
+fn open_camera(spec: &str, cfg: &Config, clock: Arc<WallClock>) -> Result<Box<dyn FrameSource>> {
+    let index: u32 = spec[4..]
+        .parse()
+        .with_context(|| format!("--camera {spec}: expected v4l:INDEX, e.g. v4l:0"))?;
+    let src = rccar::camera_source::open(
+        index,
+        cfg.camera.fps,
+        cfg.camera.width,
+        cfg.camera.height,
+        clock,
+        Duration::from_millis(500),
+    )?;
+    Ok(Box::new(src))
+}
+
+#[cfg(not(feature = "camera"))]
+fn open_camera(spec: &str, _cfg: &Config, _clock: Arc<WallClock>) -> Result<Box<dyn FrameSource>> {
+    bail!("--camera {spec}: this rccar was built without the camera: cargo build --release --features camera (needs Debian libclang-dev)")
+}
+
+/// A folder of frames played at their own times on the wall clock.
+struct Paced<S: FrameSource> {
+    inner: S,
+    clock: Arc<WallClock>,
+    t0: Option<f64>,
+}
+
+impl<S: FrameSource> FrameSource for Paced<S> {
+    fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
+        let item = self.inner.next_frame()?;
+        if let Ok(f) = &item {
+            let t0 = *self.t0.get_or_insert_with(|| self.clock.now_s() - f.time_s);
+            let wait = t0 + f.time_s - self.clock.now_s();
+            if wait > 0.0 {
+                std::thread::sleep(Duration::from_secs_f64(wait));
+            }
+        }
+        Some(item.map(|mut f| {
+            f.captured_s = Some(self.clock.now_s());
+            f
+        }))
+    }
+}
+
+/// The simulator as the car's camera, on the wall clock: at each tick (1/fps) the world is
+/// advanced to now under what the actuators do (the firmware's pulse widths, or the commands
+/// in a dry run), then rendered. A late tick is never queued: the next frame is the one due
+/// now, and the ticks missed are counted as dropped.
+struct PacedSimCamera {
+    world: SharedWorld,
+    actuators: Arc<Mutex<Command>>,
+    clock: Arc<WallClock>,
+    image: image::RgbImage,
+    fps: f64,
+    t0: f64,
+    last_advance: f64,
+    carry: f64,
+    tick: u64,
+    stall: Option<(f64, f64)>,
+    stalled_reported: u64,
+    truth_rows: Option<std::ops::Range<usize>>,
+}
+
+impl PacedSimCamera {
+    fn new(
+        world: SharedWorld,
+        actuators: Arc<Mutex<Command>>,
+        clock: Arc<WallClock>,
+        cfg: &Config,
+        stall: Option<(f64, f64)>,
+    ) -> Self {
+        let now = clock.now_s();
+        let rows = (!cfg.detect.enabled).then(|| rccar::sim::run::roi_rows(cfg));
+        Self {
+            world,
+            actuators,
+            clock,
+            image: image::RgbImage::new(cfg.camera.width, cfg.camera.height),
+            fps: cfg.camera.fps,
+            t0: now,
+            last_advance: now,
+            carry: 0.0,
+            tick: 0,
+            stall,
+            stalled_reported: 0,
+            truth_rows: rows,
+        }
+    }
+
+    fn advance_to_now(&mut self) -> f64 {
+        let now = self.clock.now_s();
+        let cmd = *self.actuators.lock().unwrap_or_else(|e| e.into_inner());
+        lock(&self.world).advance(now - self.last_advance, cmd, &mut self.carry);
+        self.last_advance = now;
+        now
+    }
+}
+
+impl FrameSource for PacedSimCamera {
+    fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
+        if lock(&self.world).ended().is_some() {
+            return None;
+        }
+        // 1. Wait for the next tick (physics keeps running while we wait).
+        let due = self.t0 + (self.tick + 1) as f64 / self.fps;
+        loop {
+            let now = self.advance_to_now();
+            if now >= due {
+                break;
+            }
+            std::thread::sleep(Duration::from_secs_f64((due - now).min(0.002)));
+        }
+        // 2. A scripted camera stall: nothing for D seconds; tell the loop every 0.5 s.
+        let t = self.clock.now_s() - self.t0;
+        if let Some((at, dur)) = self.stall {
+            if t >= at && t < at + dur {
+                let until = (t + 0.5).min(at + dur);
+                while self.clock.now_s() - self.t0 < until {
+                    self.advance_to_now();
+                    std::thread::sleep(Duration::from_millis(2));
+                }
+                if self.clock.now_s() - self.t0 < at + dur {
+                    self.stalled_reported += 1;
+                    return Some(Err(FrameError::stalled(
+                        self.tick,
+                        "sim camera",
+                        "no frame for 500 ms (stalled or unplugged)",
+                    )));
+                }
+            }
+        }
+        // 3. Render the view at the car's pose now: the newest tick (ticks we were too late
+        //    for are dropped, never queued).
+        let now = self.advance_to_now();
+        self.tick = ((now - self.t0) * self.fps).floor() as u64;
+        let t = now - self.t0;
+        let mut w = lock(&self.world);
+        let truth = w.render(self.tick, t, &mut self.image, self.truth_rows.clone());
+        drop(w);
+        let mut f = Frame::new(self.tick, t, format!("frame_{:06}.png", self.tick), self.image.clone());
+        f.captured_s = Some(now);
+        f.truth = serde_json::to_value(&truth).ok();
+        Some(Ok(f))
+    }
+}
+
+// ---- the firmware's pulses -------------------------------------------------------------------
+
+/// Follows the firmware emulator's report (`PULSE servo|esc WIDTH_US T_US` lines) and turns
+/// the newest pulse widths into the simulated car's actuator command: servo 1000..2000 µs →
+/// steer −1..1, ESC 1000..2000 µs → throttle −1..1 (the firmware's default end points). Also
+/// measures capture → pulse latency against the frames' commands.
+struct PwmWatcher {
+    latencies: Arc<Mutex<Vec<f64>>>,
+    quit: Arc<std::sync::atomic::AtomicBool>,
+}
+
+/// Frames whose commanded servo width is waiting to show up as a pulse: (capture time, µs).
+static PENDING: Mutex<Vec<(f64, f64)>> = Mutex::new(Vec::new());
+
+impl PwmWatcher {
+    fn start(path: &PathBuf, actuators: Arc<Mutex<Command>>, clock: Arc<WallClock>) -> Result<Self> {
+        use std::io::{BufRead, Seek};
+        let mut f = std::fs::File::open(path).with_context(|| format!("{}: cannot read the emulator's report", path.display()))?;
+        // Start from the current end: old pulses are not this run's.
+        f.seek(std::io::SeekFrom::End(0)).with_context(|| format!("{}: cannot seek", path.display()))?;
+        let latencies = Arc::new(Mutex::new(Vec::new()));
+        let quit = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let (lat, q) = (latencies.clone(), quit.clone());
+        std::thread::Builder::new().name("rccar-pwm".into()).spawn(move || {
+            let mut r = std::io::BufReader::new(f);
+            let mut line = String::new();
+            while !q.load(std::sync::atomic::Ordering::SeqCst) {
+                line.clear();
+                match r.read_line(&mut line) {
+                    Ok(0) => {
+                        std::thread::sleep(Duration::from_millis(1));
+                        continue;
+                    }
+                    Ok(_) if !line.ends_with('\n') => {
+                        // a line being written: wait for its end
+                        let mut rest = String::new();
+                        while !rest.ends_with('\n') && !q.load(std::sync::atomic::Ordering::SeqCst) {
+                            std::thread::sleep(Duration::from_millis(1));
+                            let _ = r.read_line(&mut rest);
+                        }
+                        line.push_str(&rest);
+                    }
+                    Ok(_) => {}
+                    Err(_) => break,
+                }
+                let t: Vec<&str> = line.split_whitespace().collect();
+                if let ["PULSE", pin, w, _t] = t.as_slice() {
+                    let Ok(w) = w.parse::<f64>() else { continue };
+                    let v = ((w - 1500.0) / 500.0).clamp(-1.0, 1.0);
+                    let now = clock.now_s();
+                    let mut a = actuators.lock().unwrap_or_else(|e| e.into_inner());
+                    if *pin == "servo" {
+                        a.steer = v;
+                        let mut p = PENDING.lock().unwrap_or_else(|e| e.into_inner());
+                        if let Some(i) = p.iter().rposition(|&(_, us)| (us - w).abs() <= 1.0) {
+                            lat.lock().unwrap_or_else(|e| e.into_inner()).push((now - p[i].0) * 1e3);
+                            p.drain(..=i);
+                        }
+                    } else if *pin == "esc" {
+                        a.throttle = v;
+                    }
+                }
+            }
+        })?;
+        Ok(Self { latencies, quit })
+    }
+
+    fn latency_ms(&self) -> Option<(f64, f64)> {
+        LoopStats::median_max(&self.latencies.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+}
+
+impl Drop for PwmWatcher {
+    fn drop(&mut self) {
+        self.quit.store(true, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+// ---- status line and arming ------------------------------------------------------------------
+
+/// Prints one status line every few seconds, arms after the first frame when `--arm` was
+/// given, and ends the run at `--seconds`.
+struct Status {
+    every_s: f64,
+    last_print: f64,
+    clock: Arc<WallClock>,
+    window: LoopStats,
+    last: Option<(String, Option<f64>, f64, f64)>,
+    deadline: Option<f64>,
+    stop: StopSignal,
+    arm_wanted: bool,
+    armed: bool,
+    events: Vec<String>,
+}
+
+impl Observer for Status {
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        let r = ctx.record;
+        if self.arm_wanted && !self.armed {
+            ARM_REQUEST.store(true, std::sync::atomic::Ordering::SeqCst);
+            self.armed = true;
+        }
+        // Commanded servo width, for the capture -> pulse latency (firmware default end points).
+        if let Some(c) = ctx.frame.captured_s {
+            let us = f64::from(rccar::link::protocol::permille_to_us(
+                rccar::link::protocol::to_permille(r.steer),
+                1000,
+                1500,
+                2000,
+            ));
+            let mut p = PENDING.lock().unwrap_or_else(|e| e.into_inner());
+            p.push((c, us));
+            let n = p.len();
+            if n > 300 {
+                p.drain(..n - 300);
+            }
+        }
+        self.window.frames += 1;
+        if let Some(l) = r.latency_ms {
+            self.window.latency_ms.push(l);
+        }
+        if let Some(p) = r.period_ms {
+            self.window.period_ms.push(p);
+        }
+        self.window.dropped = r.dropped.unwrap_or(0);
+        self.last = Some((
+            r.behaviour.map_or("-".into(), |m| m.name().to_string()),
+            r.error,
+            r.steer,
+            r.throttle,
+        ));
+        let now = self.clock.now_s();
+        if now - self.last_print >= self.every_s {
+            let fps = self.window.frames as f64 / (now - self.last_print).max(1e-6);
+            let lat = LoopStats::median_max(&self.window.latency_ms);
+            let (b, e, s, t) = self.last.clone().unwrap_or_default();
+            println!(
+                "t={:6.1} s  {:5.1} fps  dropped {}  latency {}  {}  error {}  steer {:+.2}  throttle {:+.2}",
+                now,
+                fps,
+                self.window.dropped,
+                lat.map_or("-".into(), |(m, x)| format!("{m:.1}/{x:.1} ms")),
+                b,
+                e.map_or("-".into(), |e| format!("{e:+.3}")),
+                s,
+                t
+            );
+            self.window = LoopStats::default();
+            self.last_print = now;
+        }
+        if let Some(d) = self.deadline {
+            if now >= d {
+                self.stop.request(StopReason::Requested);
+            }
+        }
+        Ok(Flow::Continue)
+    }
+
+    fn on_stall(&mut self, e: &FrameError) {
+        let msg = format!("camera stalled: {e}; neutral sent, waiting for frames");
+        println!("t={:6.1} s  {msg}", self.clock.now_s());
+        self.events.push(msg);
+    }
+
+    fn on_skip(&mut self, e: &FrameError) {
+        println!("t={:6.1} s  skipped {e}", self.clock.now_s());
+    }
+}

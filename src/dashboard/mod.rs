@@ -1,0 +1,514 @@
+//! The live dashboard's loop side (issue 11): what the control loop hands to the web server
+//! and what it takes back. No sockets, no clock: the HTTP server lives in the binary
+//! (`src/cli/dashboard/`, feature `dashboard`).
+//!
+//! ```text
+//!   Driver ──on_frame──► DashObserver ──put──► Latest<Arc<Snapshot>>  ──► server threads
+//!          ◄─before_frame─  (drains)   ◄──try_send── bounded inbox  ◄──  (annotate, JPEG,
+//!                                                                        JSON, validation)
+//! ```
+//!
+//! The loop never waits for the web: publishing is one `put` into a newest-only slot at most
+//! `stream_fps` times per second of frame time (a copy of the frame and the lane images, a few
+//! hundred kB), and control messages arrive through a bounded channel that `before_frame`
+//! drains without blocking (except while the operator has paused the simulator). Every change
+//! becomes an event in the telemetry record of the first frame it acts on
+//! ([`FrameRecord::events`]), with the time the operator asked for it.
+//!
+//! Values are checked with the configuration's own ranges ([`validate_set`] goes through
+//! [`Config::with_override`]), so the page can never set what `config/car.toml` could not.
+
+pub mod local_toml;
+
+use crate::config::Config;
+use crate::control::behaviour::Transition;
+use crate::control::Command;
+use crate::drive::{Flow, FrameContext, Latest, LoopError, Observer, StopSignal};
+use crate::lane::warp::Homography;
+use crate::lane::{LaneImages, LaneMeasurement};
+use crate::pipeline::{Pipeline, RangedObject};
+use crate::sim::world::{lock, SharedWorld};
+use crate::telemetry::FrameRecord;
+use image::RgbImage;
+use serde::{Deserialize, Serialize};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TryRecvError, TrySendError};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// The keys the page may change while the car runs (the rest needs a restart).
+pub const SETTABLE: &[&str] = &[
+    "steering.kp",
+    "steering.ki",
+    "steering.kd",
+    "throttle.base",
+    "throttle.min",
+];
+
+/// Largest control message body the server reads, bytes.
+pub const MAX_BODY: usize = 4096;
+
+/// Messages queued for the loop at most; more are refused (HTTP 503), never queued.
+pub const INBOX_CAPACITY: usize = 64;
+
+/// A refused control message: the HTTP server answers 400 with this text.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ControlError {
+    /// The body is not the JSON the endpoint takes.
+    #[error("malformed request: {0}")]
+    Malformed(String),
+    /// A key the dashboard may not change.
+    #[error("unknown key `{0}` (settable: steering.kp, steering.ki, steering.kd, throttle.base, throttle.min)")]
+    UnknownKey(String),
+    /// NaN or infinite.
+    #[error("{key} = {value} is not a finite number")]
+    NotFinite {
+        /// The key.
+        key: String,
+        /// The value as given.
+        value: String,
+    },
+    /// Outside the configuration's range: the config's own message (key, value, range).
+    #[error("{0}")]
+    OutOfRange(String),
+}
+
+/// `POST /api/set` body: one key and its new value.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SetRequest {
+    /// Dotted config key, one of [`SETTABLE`].
+    pub key: String,
+    /// The new value.
+    pub value: f64,
+}
+
+/// `POST /api/sim/place` body: where along the track, metres.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaceRequest {
+    /// Arc length along the track's centre line, metres (0 ..= track length).
+    pub s: f64,
+}
+
+/// Parses a JSON body into `T`, refusing oversized bodies and unknown fields.
+pub fn parse_body<T: for<'de> Deserialize<'de>>(body: &[u8]) -> Result<T, ControlError> {
+    if body.len() > MAX_BODY {
+        return Err(ControlError::Malformed(format!(
+            "body of {} bytes (at most {MAX_BODY})",
+            body.len()
+        )));
+    }
+    serde_json::from_slice(body).map_err(|e| ControlError::Malformed(e.to_string()))
+}
+
+/// Checks `key = value` against the configuration's ranges; returns the configuration with
+/// the value set (the caller keeps it as the dashboard's view of the settings).
+pub fn validate_set(cfg: &Config, key: &str, value: f64) -> Result<Config, ControlError> {
+    if !SETTABLE.contains(&key) {
+        return Err(ControlError::UnknownKey(key.chars().take(64).collect()));
+    }
+    if !value.is_finite() {
+        return Err(ControlError::NotFinite {
+            key: key.into(),
+            value: value.to_string(),
+        });
+    }
+    cfg.with_override(&format!("{key}={value:?}"))
+        .map_err(|e| ControlError::OutOfRange(e.to_string().replace("config + override: ", "")))
+}
+
+/// The value of a settable key in `cfg`.
+pub fn get_value(cfg: &Config, key: &str) -> Option<f64> {
+    Some(match key {
+        "steering.kp" => cfg.steering.kp,
+        "steering.ki" => cfg.steering.ki,
+        "steering.kd" => cfg.steering.kd,
+        "throttle.base" => cfg.throttle.base,
+        "throttle.min" => cfg.throttle.min,
+        _ => return None,
+    })
+}
+
+/// Applies a settable key to the running pipeline (acts on the next frame).
+pub fn apply_value(p: &mut Pipeline, key: &str, value: f64) -> bool {
+    let c = p.controller_mut();
+    match key {
+        "steering.kp" => c.pid.gains.kp = value,
+        "steering.ki" => c.pid.gains.ki = value,
+        "steering.kd" => c.pid.gains.kd = value,
+        "throttle.base" => c.throttle.config_mut().base = value,
+        "throttle.min" => c.throttle.config_mut().min = value,
+        _ => return false,
+    }
+    true
+}
+
+/// A message from the page to the loop (already validated by the server).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Control {
+    /// Set a [`SETTABLE`] key. `note` says who asked and when (wall clock), for telemetry.
+    Set {
+        /// Dotted key.
+        key: String,
+        /// New value.
+        value: f64,
+        /// Who and when, e.g. `dashboard 127.0.0.1 at wall 12.345 s`.
+        note: String,
+    },
+    /// Simulator: stop taking frames until `Resume` or `Step`.
+    Pause,
+    /// Simulator: run again.
+    Resume,
+    /// Simulator, paused: process exactly one frame.
+    Step,
+    /// Simulator: the car back to the start, at rest.
+    Reset,
+    /// Simulator: the car to `s` metres along the track, at rest.
+    PlaceAt(f64),
+    /// Something that happened elsewhere (arm, disarm, e-stop), for the telemetry.
+    Note(String),
+}
+
+/// The server's end of the inbox: never blocks.
+#[derive(Debug, Clone)]
+pub struct ControlSender(SyncSender<Control>);
+
+impl ControlSender {
+    /// Queues `c` for the loop's next `before_frame`; `false` when the inbox is full (the loop
+    /// is paused or stuck) or the loop has ended.
+    pub fn send(&self, c: Control) -> bool {
+        !matches!(self.0.try_send(c), Err(TrySendError::Full(_) | TrySendError::Disconnected(_)))
+    }
+}
+
+/// One plot sample per frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PlotPoint {
+    /// Frame time, seconds.
+    pub t: f64,
+    /// Normalised lane error, −1..1 (`None`: lane lost).
+    pub error: Option<f64>,
+    /// Steering command, −1..1.
+    pub steer: f64,
+    /// Throttle command of the pipeline, −1..1 (before arming).
+    pub throttle: f64,
+    /// Dead-reckoned speed, m/s.
+    pub speed: Option<f64>,
+}
+
+/// What the loop publishes for the page, at most `stream_fps` times per second of frame time.
+#[derive(Debug, Clone)]
+pub struct Snapshot {
+    /// The frame's telemetry record (behaviour, transition, objects, timing).
+    pub record: FrameRecord,
+    /// The camera frame.
+    pub image: RgbImage,
+    /// The lane detector's intermediate images (bird's-eye view, binary, histogram).
+    pub lane_images: LaneImages,
+    /// The lane measurement.
+    pub lane: LaneMeasurement,
+    /// The pipeline's command.
+    pub command: Command,
+    /// Camera → bird's-eye homography (for annotation).
+    pub homography: Homography,
+    /// The ROI trapezoid in the camera image, pixels.
+    pub roi: [[f64; 2]; 4],
+    /// Plot samples since the previous snapshot (every frame).
+    pub points: Vec<PlotPoint>,
+    /// The settable values in force, in [`SETTABLE`] order.
+    pub values: Vec<(String, f64)>,
+    /// The last behaviour transition, with the frame time it happened at.
+    pub last_transition: Option<(f64, Transition)>,
+    /// Ranged objects of the frame.
+    pub objects: Vec<RangedObject>,
+    /// The simulator is paused.
+    pub paused: bool,
+    /// Snapshots replaced before the server took them (slow server threads).
+    pub dropped: u64,
+}
+
+/// The loop's side of the dashboard: publishes snapshots, applies control messages between
+/// frames, and hands its events to the telemetry (see [`DashObserver::tag`]).
+pub struct DashObserver {
+    rx: Receiver<Control>,
+    out: Arc<Latest<Arc<Snapshot>>>,
+    world: Option<SharedWorld>,
+    stop: Option<StopSignal>,
+    pending: Arc<Mutex<Vec<String>>>,
+    every_s: f64,
+    last_pub: Option<f64>,
+    points: Vec<PlotPoint>,
+    roi: [[f64; 2]; 4],
+    last_transition: Option<(f64, Transition)>,
+    paused: bool,
+    /// A `Step` was taken: pause again after this frame.
+    stepping: bool,
+}
+
+/// The slot the loop publishes into, the inbox sender for the server, and the observer.
+pub fn channel(cfg: &Config, world: Option<SharedWorld>, stop: Option<StopSignal>) -> (Arc<Latest<Arc<Snapshot>>>, ControlSender, DashObserver) {
+    let (tx, rx) = std::sync::mpsc::sync_channel(INBOX_CAPACITY);
+    let out = Arc::new(Latest::new());
+    let obs = DashObserver {
+        rx,
+        out: out.clone(),
+        world,
+        stop,
+        pending: Arc::new(Mutex::new(Vec::new())),
+        every_s: 1.0 / cfg.dashboard.stream_fps.clamp(1.0, 60.0),
+        last_pub: None,
+        points: Vec::new(),
+        roi: cfg.warp.src,
+        last_transition: None,
+        paused: false,
+        stepping: false,
+    };
+    (out, ControlSender(tx), obs)
+}
+
+impl DashObserver {
+    /// Wraps the telemetry writer so that this observer's events land in the records it
+    /// writes (the record of the first frame a change acts on).
+    pub fn tag<'a>(&self, telemetry: &'a mut dyn Observer) -> WithEvents<'a> {
+        WithEvents {
+            inner: telemetry,
+            pending: self.pending.clone(),
+        }
+    }
+
+    /// Whether the simulator is paused.
+    pub fn paused(&self) -> bool {
+        self.paused
+    }
+
+    fn event(&self, s: String) {
+        self.pending.lock().unwrap_or_else(|e| e.into_inner()).push(s);
+    }
+
+    /// Applies one message; returns whether the loop should go on to the next frame now
+    /// (only meaningful while paused).
+    fn apply(&mut self, c: Control, p: &mut Pipeline) -> bool {
+        match c {
+            Control::Set { key, value, note } => {
+                let was = get_value_pipeline(p, &key);
+                if apply_value(p, &key, value) {
+                    self.event(format!(
+                        "{key}={value} (was {}) from {note}",
+                        was.map_or("?".into(), |w| w.to_string())
+                    ));
+                }
+                false
+            }
+            Control::Pause => {
+                self.paused = true;
+                self.event("paused from dashboard".into());
+                false
+            }
+            Control::Resume => {
+                let was = self.paused;
+                self.paused = false;
+                self.stepping = false;
+                if was {
+                    self.event("resumed from dashboard".into());
+                }
+                true
+            }
+            Control::Step => {
+                self.stepping = true;
+                true
+            }
+            Control::Reset | Control::PlaceAt(_) => {
+                let s = if let Control::PlaceAt(s) = c { s } else { 0.0 };
+                if let Some(w) = &self.world {
+                    lock(w).place_at(s);
+                    p.controller_mut().pid.reset();
+                    self.event(format!("car placed at s={s:.2} m from dashboard"));
+                }
+                false
+            }
+            Control::Note(n) => {
+                self.event(n);
+                false
+            }
+        }
+    }
+}
+
+fn get_value_pipeline(p: &mut Pipeline, key: &str) -> Option<f64> {
+    let c = p.controller_mut();
+    Some(match key {
+        "steering.kp" => c.pid.gains.kp,
+        "steering.ki" => c.pid.gains.ki,
+        "steering.kd" => c.pid.gains.kd,
+        "throttle.base" => c.throttle.config_mut().base,
+        "throttle.min" => c.throttle.config_mut().min,
+        _ => return None,
+    })
+}
+
+impl Observer for DashObserver {
+    fn before_frame(&mut self, p: &mut Pipeline) -> Flow {
+        if self.stepping {
+            // The stepped frame has been processed: pause again.
+            self.stepping = false;
+            self.paused = true;
+        }
+        loop {
+            match self.rx.try_recv() {
+                Ok(c) => {
+                    self.apply(c, p);
+                }
+                Err(TryRecvError::Empty) | Err(TryRecvError::Disconnected) => break,
+            }
+        }
+        // Paused (simulator only): wait for the operator, a stop request ends the wait.
+        while self.paused {
+            if self.stop.as_ref().is_some_and(|s| s.reason().is_some()) {
+                break;
+            }
+            match self.rx.recv_timeout(Duration::from_millis(50)) {
+                Ok(c) => {
+                    if self.apply(c, p) {
+                        break;
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => {
+                    self.paused = false;
+                }
+            }
+        }
+        Flow::Continue
+    }
+
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        let r = ctx.record;
+        self.points.push(PlotPoint {
+            t: r.time_s,
+            error: r.error,
+            steer: r.steer,
+            throttle: r.throttle,
+            speed: r.speed_est_mps,
+        });
+        if let Some(tr) = &r.transition {
+            if self.last_transition.as_ref().map(|(_, t)| t) != Some(tr) {
+                self.last_transition = Some((r.time_s, tr.clone()));
+            }
+        }
+        let due = self
+            .last_pub
+            .map_or(true, |t| r.time_s - t >= self.every_s - 1e-6 || r.time_s < t)
+            || self.paused
+            || self.stepping;
+        if !due {
+            return Ok(Flow::Continue);
+        }
+        self.last_pub = Some(r.time_s);
+        let p = ctx.pipeline;
+        let c = p.controller();
+        let values = vec![
+            ("steering.kp".to_string(), c.pid.gains.kp),
+            ("steering.ki".to_string(), c.pid.gains.ki),
+            ("steering.kd".to_string(), c.pid.gains.kd),
+            ("throttle.base".to_string(), throttle_cfg(p).0),
+            ("throttle.min".to_string(), throttle_cfg(p).1),
+        ];
+        let snap = Snapshot {
+            record: r.clone(),
+            image: ctx.frame.image.clone(),
+            lane_images: p.lane().images().clone(),
+            lane: ctx.output.lane.clone(),
+            command: ctx.output.command,
+            homography: *p.lane().warp_map().homography(),
+            roi: self.roi,
+            points: std::mem::take(&mut self.points),
+            values,
+            last_transition: self.last_transition.clone(),
+            objects: p.objects().to_vec(),
+            paused: self.paused || self.stepping,
+            dropped: self.out.dropped(),
+        };
+        self.out.put(Arc::new(snap));
+        Ok(Flow::Continue)
+    }
+}
+
+fn throttle_cfg(p: &Pipeline) -> (f64, f64) {
+    // `Throttle` exposes its settings mutably only; read them through a clone.
+    let mut t = p.controller().throttle.clone();
+    let c = t.config_mut();
+    (c.base, c.min)
+}
+
+/// The telemetry writer with the dashboard's events added to the record of the frame they
+/// first act on.
+pub struct WithEvents<'a> {
+    inner: &'a mut dyn Observer,
+    pending: Arc<Mutex<Vec<String>>>,
+}
+
+impl<'a> WithEvents<'a> {
+    /// `telemetry` unchanged (no dashboard).
+    pub fn plain(telemetry: &'a mut dyn Observer) -> Self {
+        Self {
+            inner: telemetry,
+            pending: Arc::new(Mutex::new(Vec::new())),
+        }
+    }
+}
+
+impl Observer for WithEvents<'_> {
+    fn before_frame(&mut self, p: &mut Pipeline) -> Flow {
+        self.inner.before_frame(p)
+    }
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        let events = std::mem::take(&mut *self.pending.lock().unwrap_or_else(|e| e.into_inner()));
+        if events.is_empty() {
+            return self.inner.on_frame(ctx);
+        }
+        let mut rec = ctx.record.clone();
+        rec.events.extend(events);
+        self.inner.on_frame(&FrameContext {
+            frame: ctx.frame,
+            output: ctx.output,
+            record: &rec,
+            pipeline: ctx.pipeline,
+        })
+    }
+    fn on_skip(&mut self, e: &crate::source::FrameError) {
+        self.inner.on_skip(e)
+    }
+    fn on_stall(&mut self, e: &crate::source::FrameError) {
+        self.inner.on_stall(e)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_are_checked_with_the_config_ranges() {
+        let cfg = Config::default();
+        let ok = validate_set(&cfg, "steering.kp", 0.8).unwrap();
+        assert_eq!(ok.steering.kp, 0.8);
+        let e = validate_set(&cfg, "steering.kp", 25.0).unwrap_err().to_string();
+        assert!(e.contains("steering.kp") && e.contains("0 ..= 20"), "{e}");
+        let e = validate_set(&cfg, "throttle.min", 0.9).unwrap_err().to_string();
+        assert!(e.contains("throttle.min"), "{e}");
+        assert!(matches!(validate_set(&cfg, "steering.kp", f64::NAN), Err(ControlError::NotFinite { .. })));
+        assert!(matches!(validate_set(&cfg, "steering.kp", f64::INFINITY), Err(ControlError::NotFinite { .. })));
+        assert!(matches!(validate_set(&cfg, "camera.fps", 10.0), Err(ControlError::UnknownKey(_))));
+    }
+
+    #[test]
+    fn bodies_refuse_unknown_fields_nan_and_size() {
+        assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp","value":0.5}"#).is_ok());
+        assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp","value":0.5,"x":1}"#).is_err());
+        assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp","value":NaN}"#).is_err());
+        assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp","value":1e999}"#).is_err());
+        assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp""#).is_err());
+        let big = vec![b' '; MAX_BODY + 1];
+        assert!(parse_body::<SetRequest>(&big).is_err());
+    }
+}

@@ -1,0 +1,525 @@
+//! The one loop: the car, replay and the simulator all run [`Driver`].
+//!
+//! ```text
+//!   &mut dyn FrameSource  ──frame──►  Pipeline  ──Command──►  &mut dyn CommandSink
+//!   (camera | folder | simulator camera)          (serial link | simulator vehicle | nothing)
+//!                     │                                   │
+//!                     └──────► one FrameRecord ◄──────────┘  ──►  &mut dyn Observer
+//!                                                                 (telemetry file, scoring,
+//!                                                                  recording, dashboard)
+//! ```
+//!
+//! One turn of the loop (the donkeycar vehicle loop, with one part of each kind):
+//! 1. stop requested (Ctrl-C, SIGTERM, a fault, the button)? → end;
+//! 2. the observer may change the pipeline between frames (gains from a dashboard);
+//! 3. `source.next_frame()`: a frame; an unusable frame is skipped and counted; a *stalled*
+//!    source (no frame for the stall time) gets neutral sent at once and the loop waits on;
+//! 4. `dt` = this frame's time − the previous frame's (the loop owns dt: frames the source
+//!    dropped or could not read still count as time passed);
+//! 5. `Pipeline::step` → command → `sink.send`;
+//! 6. the one telemetry record of the frame, with the capture→command latency and the loop
+//!    period measured on the [`Clock`] the caller passes in (the library reads no clock);
+//! 7. the observer sees the frame, the record and the pipeline; it may end the run.
+//!
+//! The sink is wrapped in [`NeutralOnDrop`] for the whole run: every way out of [`Driver::run`]
+//! — the end of the source, a stop request, an error, a panic unwinding — sends neutral before
+//! the caller gets control back, so files are flushed *after* the motor is safe.
+
+pub mod gate;
+pub mod slot;
+pub mod stop;
+
+pub use gate::{ArmState, Gate};
+pub use slot::Latest;
+pub use stop::{StopReason, StopSignal};
+
+use crate::control::Command;
+use crate::pipeline::{FrameOutput, Pipeline};
+use crate::sink::{CommandSink, NeutralOnDrop, SinkError};
+use crate::source::{Frame, FrameError, FrameSource};
+use crate::telemetry::FrameRecord;
+use crate::timing::StageTimer;
+use serde::Serialize;
+
+/// A clock the caller hands in (the library reads none). Only used for *reporting* latency and
+/// loop period; decisions use the frames' own timestamps, so replay and the simulator stay
+/// deterministic.
+pub trait Clock {
+    /// Seconds since some fixed start.
+    fn now_s(&self) -> f64;
+    /// `false` for a clock that measures nothing ([`NoClock`]): latency and period are then
+    /// left out of the telemetry, so it stays reproducible.
+    fn is_real(&self) -> bool {
+        true
+    }
+}
+
+/// A clock that always reads 0: latency and period are then reported as 0 (tests, golden
+/// files).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct NoClock;
+
+impl Clock for NoClock {
+    fn now_s(&self) -> f64 {
+        0.0
+    }
+    fn is_real(&self) -> bool {
+        false
+    }
+}
+
+/// What the observer wants after a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Flow {
+    /// Go on.
+    Continue,
+    /// End the run (the simulator: laps done; a test: enough frames).
+    Stop,
+}
+
+/// Why the loop failed (the sink or an observer reported an error).
+#[derive(Debug, thiserror::Error)]
+pub enum LoopError {
+    /// The command sink failed.
+    #[error("command sink: {0}")]
+    Sink(#[from] SinkError),
+    /// An observer (telemetry writer, recorder…) failed; the message names the file.
+    #[error("{0}")]
+    Observer(String),
+}
+
+/// Everything about one processed frame, handed to the observer.
+pub struct FrameContext<'a> {
+    /// The frame as the source delivered it.
+    pub frame: &'a Frame,
+    /// What the pipeline made of it.
+    pub output: &'a FrameOutput,
+    /// The telemetry record (already complete).
+    pub record: &'a FrameRecord,
+    /// The pipeline after the frame (lane images for annotation, behaviour, objects).
+    pub pipeline: &'a Pipeline,
+}
+
+/// Watches the loop: writes telemetry, scores a simulation, records frames, feeds a
+/// dashboard. Every method has a do-nothing default.
+pub trait Observer {
+    /// Before each frame is read: the one place where the pipeline may be changed during a run
+    /// (a dashboard's new gains act on the next frame).
+    fn before_frame(&mut self, _pipeline: &mut Pipeline) -> Flow {
+        Flow::Continue
+    }
+    /// A processed frame.
+    fn on_frame(&mut self, _ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        Ok(Flow::Continue)
+    }
+    /// A frame that could not be used (skipped and counted).
+    fn on_skip(&mut self, _err: &FrameError) {}
+    /// The source stalled (no frame within its stall time); neutral was just sent.
+    fn on_stall(&mut self, _err: &FrameError) {}
+}
+
+/// An observer that does nothing.
+#[derive(Debug, Default)]
+pub struct NoObserver;
+impl Observer for NoObserver {}
+
+/// Several observers, called in order (the first `Stop` wins, all still see the frame).
+impl<const N: usize> Observer for [&mut dyn Observer; N] {
+    fn before_frame(&mut self, pipeline: &mut Pipeline) -> Flow {
+        let mut f = Flow::Continue;
+        for o in self.iter_mut() {
+            if o.before_frame(pipeline) == Flow::Stop {
+                f = Flow::Stop;
+            }
+        }
+        f
+    }
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        let mut f = Flow::Continue;
+        for o in self.iter_mut() {
+            if o.on_frame(ctx)? == Flow::Stop {
+                f = Flow::Stop;
+            }
+        }
+        Ok(f)
+    }
+    fn on_skip(&mut self, err: &FrameError) {
+        for o in self.iter_mut() {
+            o.on_skip(err);
+        }
+    }
+    fn on_stall(&mut self, err: &FrameError) {
+        for o in self.iter_mut() {
+            o.on_stall(err);
+        }
+    }
+}
+
+/// Why a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LoopEnd {
+    /// The source has no more frames (the end of a folder, the simulator's end).
+    SourceEnded,
+    /// A stop was requested from outside (signal, button, fault).
+    Stopped(StopReason),
+    /// An observer ended the run (laps done, frame limit).
+    ObserverStopped,
+}
+
+/// Loop statistics (also printed as the periodic status line).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct LoopStats {
+    /// Frames processed.
+    pub frames: u64,
+    /// Frames the source could not deliver (named by `on_skip`).
+    pub skipped: u64,
+    /// Frames the source produced but the loop never saw (it always takes the newest).
+    pub dropped: u64,
+    /// Times the source stalled (neutral sent each time).
+    pub stalls: u64,
+    /// Capture → command latency per frame, milliseconds (as measured by the clock).
+    pub latency_ms: Vec<f64>,
+    /// Time between successive frames' commands, milliseconds.
+    pub period_ms: Vec<f64>,
+}
+
+impl LoopStats {
+    /// (median, max) of a series, `None` when empty.
+    pub fn median_max(v: &[f64]) -> Option<(f64, f64)> {
+        if v.is_empty() {
+            return None;
+        }
+        let mut s = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        Some((s[s.len() / 2], s[s.len() - 1]))
+    }
+}
+
+/// What one call of [`Driver::step`] did.
+#[derive(Debug)]
+pub enum Step {
+    /// A frame was processed; here is its output and record.
+    Frame(Box<(FrameOutput, FrameRecord)>),
+    /// A frame could not be used (skipped).
+    Skipped,
+    /// The source stalled; neutral was sent.
+    Stalled,
+    /// The run is over.
+    End(LoopEnd),
+}
+
+/// The loop's state between frames: the previous frame's time (for dt), counters, and the
+/// period measurement. The car, replay, the simulator and the firmware-in-the-loop test all go
+/// through [`Driver::step`].
+#[derive(Debug)]
+pub struct Driver {
+    fps: f64,
+    last_time_s: Option<f64>,
+    next_index: u64,
+    last_cmd_clock: Option<f64>,
+    stats: LoopStats,
+    ended: Option<LoopEnd>,
+    resync: bool,
+}
+
+impl Driver {
+    /// A driver for a source nominally running at `fps` (used for the first frame's dt).
+    pub fn new(fps: f64) -> Self {
+        Self {
+            fps: if fps.is_finite() && fps > 0.0 { fps } else { 30.0 },
+            last_time_s: None,
+            next_index: 0,
+            last_cmd_clock: None,
+            stats: LoopStats::default(),
+            ended: None,
+            resync: false,
+        }
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> &LoopStats {
+        &self.stats
+    }
+
+    /// Why the run ended, once it has.
+    pub fn ended(&self) -> Option<LoopEnd> {
+        self.ended
+    }
+
+    /// One turn of the loop (see the module notes). `sink` should already be wrapped in
+    /// [`NeutralOnDrop`] by the caller that owns the run ([`Driver::run`] does it).
+    #[allow(clippy::too_many_arguments)]
+    pub fn step(
+        &mut self,
+        source: &mut dyn FrameSource,
+        pipeline: &mut Pipeline,
+        sink: &mut dyn CommandSink,
+        stop: &StopSignal,
+        clock: &dyn Clock,
+        timer: &mut dyn StageTimer,
+        observer: &mut dyn Observer,
+    ) -> Result<Step, LoopError> {
+        if let Some(e) = self.ended {
+            return Ok(Step::End(e));
+        }
+        // 1. A stop request ends the run before anything else moves.
+        if let Some(r) = stop.reason() {
+            return Ok(self.end(LoopEnd::Stopped(r)));
+        }
+        // 2. Between frames: the only time the pipeline may be changed.
+        if observer.before_frame(pipeline) == Flow::Stop {
+            return Ok(self.end(LoopEnd::ObserverStopped));
+        }
+        // 3. The next frame.
+        let frame = match source.next_frame() {
+            None => return Ok(self.end(LoopEnd::SourceEnded)),
+            Some(Err(e)) if e.stalled => {
+                // A camera that stalls or is unplugged: the car must not drive blind.
+                sink.send(Command::NEUTRAL, self.last_time_s.unwrap_or(0.0))?;
+                self.stats.stalls += 1;
+                self.last_cmd_clock = None;
+                // frames missing after a stall were never made: not dropped
+                self.resync = true;
+                observer.on_stall(&e);
+                return Ok(Step::Stalled);
+            }
+            Some(Err(e)) => {
+                self.stats.skipped += 1;
+                self.next_index = self.next_index.max(e.index + 1);
+                observer.on_skip(&e);
+                return Ok(Step::Skipped);
+            }
+            Some(Ok(f)) => f,
+        };
+        let captured = frame.captured_s.unwrap_or_else(|| clock.now_s());
+        if frame.index > self.next_index && !self.resync {
+            self.stats.dropped += frame.index - self.next_index;
+        }
+        self.resync = false;
+        self.next_index = frame.index + 1;
+        // 4. dt from the frames' own times: skipped and dropped frames still count as time.
+        let dt = self.last_time_s.map_or(1.0 / self.fps, |t| frame.time_s - t);
+        self.last_time_s = Some(frame.time_s);
+        // 5. Pipeline → command → sink.
+        let out = pipeline.step_with(&frame.image, dt, timer, frame.given.as_deref());
+        sink.send(out.command, frame.time_s)?;
+        let sent = clock.now_s();
+        // 6. The one telemetry record.
+        let latency_ms = (sent - captured) * 1e3;
+        let period_ms = self.last_cmd_clock.map(|t| (sent - t) * 1e3);
+        self.last_cmd_clock = Some(sent);
+        self.stats.frames += 1;
+        self.stats.latency_ms.push(latency_ms);
+        if let Some(p) = period_ms {
+            self.stats.period_ms.push(p);
+        }
+        let mut record = FrameRecord::new(
+            frame.index,
+            &frame.name,
+            frame.time_s,
+            &out.lane,
+            &out.command,
+            out.stage_us,
+        )
+        .with_pipeline(&out, pipeline);
+        record.truth = frame.truth.clone();
+        if clock.is_real() {
+            record.latency_ms = Some(latency_ms);
+            record.period_ms = period_ms;
+        }
+        if self.stats.dropped > 0 {
+            record.dropped = Some(self.stats.dropped);
+        }
+        // 7. Observers.
+        let flow = observer.on_frame(&FrameContext {
+            frame: &frame,
+            output: &out,
+            record: &record,
+            pipeline,
+        })?;
+        if flow == Flow::Stop {
+            self.ended = Some(LoopEnd::ObserverStopped);
+        }
+        Ok(Step::Frame(Box::new((out, record))))
+    }
+
+    fn end(&mut self, why: LoopEnd) -> Step {
+        self.ended = Some(why);
+        Step::End(why)
+    }
+
+    /// Runs until the source ends, a stop is requested or an observer ends the run. The sink
+    /// gets neutral on every way out (see the module notes).
+    #[allow(clippy::too_many_arguments)]
+    pub fn run(
+        &mut self,
+        source: &mut dyn FrameSource,
+        pipeline: &mut Pipeline,
+        sink: &mut dyn CommandSink,
+        stop: &StopSignal,
+        clock: &dyn Clock,
+        timer: &mut dyn StageTimer,
+        observer: &mut dyn Observer,
+    ) -> Result<LoopEnd, LoopError> {
+        let mut guard = NeutralOnDrop::new(sink);
+        loop {
+            match self.step(source, pipeline, &mut guard, stop, clock, timer, observer)? {
+                Step::End(why) => {
+                    // Neutral now (and exactly once), before the caller flushes files.
+                    guard.into_inner();
+                    return Ok(why);
+                }
+                _ => {
+                    if let Some(why) = self.ended {
+                        guard.into_inner();
+                        return Ok(why);
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+    use crate::sink::RecordingSink;
+    use crate::timing::NoTimer;
+    use image::RgbImage;
+
+    /// Frames from a list; `None` entries are unusable frames, `Stall` a stalled camera.
+    struct Scripted {
+        items: Vec<Option<Result<u64, bool>>>,
+        i: usize,
+        size: (u32, u32),
+    }
+    impl FrameSource for Scripted {
+        fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
+            let it = self.items.get(self.i)?.clone();
+            self.i += 1;
+            Some(match it {
+                Some(Ok(index)) => Ok(Frame::new(
+                    index,
+                    index as f64 / 30.0,
+                    format!("f{index}"),
+                    RgbImage::new(self.size.0, self.size.1),
+                )),
+                Some(Err(stalled)) => Err(FrameError {
+                    index: self.i as u64,
+                    name: "cam".into(),
+                    reason: "x".into(),
+                    stalled,
+                }),
+                None => return None,
+            })
+        }
+    }
+
+    fn pipeline() -> Pipeline {
+        let mut cfg = Config::default();
+        cfg.detect.enabled = false;
+        Pipeline::new(&cfg).unwrap()
+    }
+
+    #[test]
+    fn counts_drops_skips_stalls_and_ends_with_neutral() {
+        let mut p = pipeline();
+        let (w, h) = p.frame_size();
+        let mut src = Scripted {
+            items: vec![
+                Some(Ok(0)),
+                Some(Ok(1)),
+                Some(Ok(4)), // 2, 3 dropped by the source
+                Some(Err(false)),
+                Some(Err(true)),
+                Some(Ok(7)),
+            ],
+            i: 0,
+            size: (w, h),
+        };
+        let mut sink = RecordingSink::default();
+        let stop = StopSignal::new();
+        let mut d = Driver::new(30.0);
+        let end = d
+            .run(&mut src, &mut p, &mut sink, &stop, &NoClock, &mut NoTimer, &mut NoObserver)
+            .unwrap();
+        assert_eq!(end, LoopEnd::SourceEnded);
+        let s = d.stats();
+        assert_eq!((s.frames, s.skipped, s.stalls), (4, 1, 1));
+        // 2, 3 dropped; the skipped frame names index 4; after the stall the gap to 7 is not
+        // counted (a stalled camera made no frames)
+        assert_eq!(s.dropped, 2);
+        // 4 frame commands + the stall's neutral + the final neutral
+        assert_eq!(sink.log.len(), 6);
+        assert_eq!(sink.log[4].1, Command::NEUTRAL, "stall sends neutral");
+        assert_eq!(sink.log.last().unwrap().1, Command::NEUTRAL);
+    }
+
+    #[test]
+    fn a_stop_request_ends_before_the_next_frame_and_sends_neutral() {
+        let mut p = pipeline();
+        let (w, h) = p.frame_size();
+        let mut src = Scripted {
+            items: (0..100).map(|i| Some(Ok(i))).collect(),
+            i: 0,
+            size: (w, h),
+        };
+        struct StopAt(u64, StopSignal);
+        impl Observer for StopAt {
+            fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+                if ctx.frame.index == self.0 {
+                    self.1.request(StopReason::Interrupt);
+                }
+                Ok(Flow::Continue)
+            }
+        }
+        let stop = StopSignal::new();
+        let mut obs = StopAt(9, stop.clone());
+        let mut sink = RecordingSink::default();
+        let end = Driver::new(30.0)
+            .run(&mut src, &mut p, &mut sink, &stop, &NoClock, &mut NoTimer, &mut obs)
+            .unwrap();
+        assert_eq!(end, LoopEnd::Stopped(StopReason::Interrupt));
+        assert_eq!(sink.log.len(), 11, "10 frames + neutral");
+        assert_eq!(sink.log[10].1, Command::NEUTRAL);
+    }
+
+    #[test]
+    fn an_observer_error_still_sends_neutral() {
+        let mut p = pipeline();
+        let (w, h) = p.frame_size();
+        let mut src = Scripted {
+            items: (0..10).map(|i| Some(Ok(i))).collect(),
+            i: 0,
+            size: (w, h),
+        };
+        struct Fails;
+        impl Observer for Fails {
+            fn on_frame(&mut self, _: &FrameContext<'_>) -> Result<Flow, LoopError> {
+                Err(LoopError::Observer("telemetry.jsonl: disk full".into()))
+            }
+        }
+        let log = std::rc::Rc::new(std::cell::RefCell::new(Vec::new()));
+        struct Shared(std::rc::Rc<std::cell::RefCell<Vec<Command>>>);
+        impl CommandSink for Shared {
+            fn send(&mut self, c: Command, _: f64) -> Result<(), SinkError> {
+                self.0.borrow_mut().push(c);
+                Ok(())
+            }
+        }
+        let mut sink = Shared(log.clone());
+        let r = Driver::new(30.0).run(
+            &mut src,
+            &mut p,
+            &mut sink,
+            &StopSignal::new(),
+            &NoClock,
+            &mut NoTimer,
+            &mut Fails,
+        );
+        assert!(r.is_err());
+        assert_eq!(log.borrow().last(), Some(&Command::NEUTRAL));
+    }
+}

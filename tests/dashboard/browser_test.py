@@ -1,0 +1,351 @@
+#!/usr/bin/env python3
+"""The dashboard in a real headless browser (issue 11, must-show 1).
+
+Starts `rccar sim --dashboard` on a copy of config/ (the repo's files stay untouched), drives
+Debian's chromium through chromedriver with plain WebDriver HTTP calls (urllib, no extra
+package), and checks what a student would see and do:
+
+1. frames arrive in the page's <img> (MJPEG): counted by the server per viewer, and two
+   captures of the <img> differ;
+2. the Kp slider moved with the keyboard (arrow right) changes kp on the next frame: the
+   telemetry record of that frame carries the event `steering.kp=…`;
+3. EMERGENCY STOP clicked while armed: the throttle the simulated car gets is 0 within
+   100 ms of the click (wall and simulated time reported), and the space bar does the same;
+4. pause / step / resume act on the loop (one step = exactly one frame);
+5. "save" writes exactly that key into the temp local.toml and keeps its comment.
+
+Screenshots go to the output folder (not committed); `--screenshot PATH` also writes one
+there (docs/img/dashboard.png). Prints "N passed, N failed"; exit 1 on any failure.
+
+Usage: python3 tests/dashboard/browser_test.py [--rccar target/release/rccar] [--keep]
+Build first: cargo build --release --features dashboard
+"""
+
+import argparse
+import base64
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+import urllib.error
+import urllib.request
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CHROME_FLAGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--window-size=1400,1000",
+]
+
+passed = 0
+failed = 0
+
+
+def check(name, ok, detail=""):
+    global passed, failed
+    if ok:
+        passed += 1
+        print(f"ok    {name}  {detail}")
+    else:
+        failed += 1
+        print(f"FAIL  {name}  {detail}")
+
+
+def free_port():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    p = s.getsockname()[1]
+    s.close()
+    return p
+
+
+def http(method, url, body=None, headers=None, timeout=10):
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(url, data=data, method=method, headers=headers or {})
+    if data is not None:
+        req.add_header("Content-Type", "application/json")
+    try:
+        with urllib.request.urlopen(req, timeout=timeout) as r:
+            return r.status, json.loads(r.read() or b"null")
+    except urllib.error.HTTPError as e:
+        return e.code, json.loads(e.read() or b"null")
+
+
+class WebDriver:
+    """The few W3C WebDriver commands the test needs."""
+
+    def __init__(self, port, user_dir):
+        self.base = f"http://127.0.0.1:{port}"
+        caps = {"capabilities": {"alwaysMatch": {
+            "browserName": "chrome",
+            "goog:chromeOptions": {"binary": "/usr/bin/chromium",
+                                   "args": CHROME_FLAGS + [f"--user-data-dir={user_dir}"]}}}}
+        st, v = http("POST", self.base + "/session", caps, timeout=60)
+        if st != 200:
+            raise RuntimeError(f"chromedriver: cannot start a session: {st} {v}")
+        self.sid = v["value"]["sessionId"]
+
+    def cmd(self, method, path, body=None):
+        st, v = http(method, f"{self.base}/session/{self.sid}{path}", body, timeout=30)
+        if st != 200:
+            raise RuntimeError(f"webdriver {path}: {st} {v}")
+        return v["value"]
+
+    def go(self, url):
+        self.cmd("POST", "/url", {"url": url})
+
+    def js(self, script, *args):
+        return self.cmd("POST", "/execute/sync", {"script": script, "args": list(args)})
+
+    def find(self, css):
+        v = self.cmd("POST", "/element", {"using": "css selector", "value": css})
+        return next(iter(v.values()))
+
+    def click(self, el):
+        self.cmd("POST", f"/element/{el}/click", {})
+
+    def keys(self, el, text):
+        self.cmd("POST", f"/element/{el}/value", {"text": text})
+
+    def press(self, key):
+        self.cmd("POST", "/actions", {"actions": [{"type": "key", "id": "kbd", "actions": [
+            {"type": "keyDown", "value": key}, {"type": "keyUp", "value": key}]}]})
+
+    def screenshot(self, path):
+        png = base64.b64decode(self.cmd("GET", "/screenshot"))
+        with open(path, "wb") as f:
+            f.write(png)
+
+    def quit(self):
+        try:
+            http("DELETE", f"{self.base}/session/{self.sid}", timeout=10)
+        except Exception:
+            pass
+
+
+def wait(pred, timeout, step=0.02):
+    end = time.time() + timeout
+    while time.time() < end:
+        v = pred()
+        if v:
+            return v
+        time.sleep(step)
+    return None
+
+
+def telemetry(path):
+    out = []
+    with open(path) as f:
+        for line in f:
+            if line.strip():
+                out.append(json.loads(line))
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--rccar", default=os.path.join(ROOT, "target/release/rccar"))
+    ap.add_argument("--screenshot", help="also save the page here (docs/img/dashboard.png)")
+    ap.add_argument("--keep", action="store_true", help="keep the temp folder")
+    a = ap.parse_args()
+    tmp = tempfile.mkdtemp(prefix="rccar-dash-")
+    cfgdir = os.path.join(tmp, "config")
+    shutil.copy2(os.path.join(ROOT, "config/car.toml"), os.path.join(tmp, "car.toml"))
+    os.makedirs(cfgdir)
+    local = os.path.join(cfgdir, "local.toml")
+    with open(local, "w") as f:
+        f.write("# my overrides (the dashboard must keep this line)\n")
+    out = os.path.join(tmp, "out")
+    port, dport = free_port(), free_port()
+    procs = []
+    wd = None
+    try:
+        sim = subprocess.Popen(
+            [a.rccar, "sim", "--dashboard", "--listen", f"127.0.0.1:{port}", "--truth-boxes",
+             "--config", os.path.join(tmp, "car.toml"), "--local", local,
+             "--seconds", "900", "--laps", "1000", "-o", out],
+            cwd=ROOT, stdout=open(os.path.join(tmp, "sim.log"), "w"), stderr=subprocess.STDOUT)
+        procs.append(sim)
+        base = f"http://127.0.0.1:{port}"
+        up = wait(lambda: _state(base), 30, 0.2)
+        check("sim --dashboard serves /api/state", bool(up), f"port {port}")
+        if not up:
+            return
+        drv = subprocess.Popen(["/usr/bin/chromedriver", f"--port={dport}"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        procs.append(drv)
+        wait(lambda: _ok(f"http://127.0.0.1:{dport}/status"), 20, 0.2)
+        wd = WebDriver(dport, os.path.join(tmp, "chrome-profile"))
+        wd.go(base + "/")
+        shown = wait(lambda: wd.js("return document.getElementById('s-steering.kp') !== null"), 20, 0.1)
+        check("page loads and builds the sliders", bool(shown))
+
+        # 1. Frames arrive in the <img> (the only viewer).
+        s0 = _state(base)
+        time.sleep(3.0)
+        s1 = _state(base)
+        n = s1["stream_frames"] - s0["stream_frames"]
+        fps = n / 3.0
+        check("frames arrive in the browser", n >= 15 and s1["viewers"] == 1,
+              f"{n} frames in 3 s = {fps:.1f} fps to 1 viewer (target 15; loop period {s1.get('period_ms') or 0:.1f} ms)")
+        grab = ("const i=document.getElementById('view');const c=document.createElement('canvas');"
+                "c.width=i.naturalWidth;c.height=i.naturalHeight;c.getContext('2d').drawImage(i,0,0);"
+                "return [i.naturalWidth,i.naturalHeight,c.toDataURL('image/png').length,c.toDataURL('image/png')];")
+        g1 = wd.js(grab)
+        time.sleep(0.5)
+        g2 = wd.js(grab)
+        check("the <img> shows camera + bird's-eye and changes", g1[0] > g1[1] > 0 and g1[3] != g2[3],
+              f"{g1[0]}x{g1[1]} px")
+        wd.screenshot(os.path.join(tmp, "dashboard_1_running.png"))
+
+        # 2. Kp slider: one arrow-right press on the focused slider.
+        kp0 = _state(base)["values"]["steering.kp"]
+        before = _state(base)["frame"]
+        # Focus the slider, then a real key press (WebDriver actions): the browser moves the
+        # slider one step and fires its change event, as for a student's keyboard.
+        wd.js("document.getElementById('s-steering.kp').focus()")
+        wd.press("\ue014")  # ArrowRight
+        t_req = time.time()
+        applied = wait(lambda: _state(base)["values"]["steering.kp"] != kp0 or None, 5)
+        kp1 = _state(base)["values"]["steering.kp"]
+        check("Kp slider changes the running gain", bool(applied), f"kp {kp0} -> {kp1}")
+        ev = wait(lambda: _find_event(os.path.join(out, "telemetry.jsonl"), f"steering.kp={_fmt(kp1)}"), 5)
+        if ev:
+            rec = ev
+            check("telemetry records kp on the next frame", rec["frame"] > before,
+                  f"frame {rec['frame']} (page saw frame {before} before the key press): {rec['events']}")
+        else:
+            check("telemetry records kp on the next frame", False, f"no event steering.kp={_fmt(kp1)}")
+
+        # 3. Arm, then EMERGENCY STOP by click and by the space bar.
+        for how in ("click", "space bar"):
+            wd.click(wd.find("#release"))
+            wd.click(wd.find("#arm"))
+            moving = wait(lambda: (lambda s: s["armed"] and (s["sent"]["throttle"] or 0) > 0.05)(_state(base)), 10)
+            check(f"armed: the car gets throttle ({how})", bool(moving),
+                  f"throttle sent {_state(base)['sent']['throttle']}")
+            time.sleep(0.5)
+            frame_before = _state(base)["frame"]
+            # The moment the browser dispatches the click / key press, on the epoch clock.
+            wd.js("window.__t=null;const h=e=>{if(window.__t===null)window.__t=performance.timeOrigin+e.timeStamp;};"
+                  "document.getElementById('estop').addEventListener('click',h,true);"
+                  "document.addEventListener('keydown',h,true);")
+            if how == "click":
+                btn = wd.find("#estop")
+                t_call = time.time()
+                wd.click(btn)
+            else:
+                wd.js("document.activeElement.blur()")
+                t_call = time.time()
+                wd.press(" ")
+            t_click = wd.js("return window.__t") / 1e3
+            t_done = time.time()
+            st = wait(lambda: (lambda s: s if s["estop_timing"]["neutral_wall_s"] is not None else None)(_state(base)), 5)
+            if not st:
+                check(f"e-stop ({how}) -> throttle 0", False, "no neutral command seen")
+                continue
+            et = st["estop_timing"]
+            # The server's wall clock -> epoch, to compare with the moment of the click.
+            epoch_neutral = st["epoch_ms"] / 1e3 - (st["wall_s"] - et["neutral_wall_s"])
+            click_to_zero = (epoch_neutral - t_click) * 1e3
+            server_ms = (et["neutral_wall_s"] - et["pressed_wall_s"]) * 1e3
+            sim_ms = (et["neutral_sim_s"] - et["pressed_sim_s"]) * 1e3
+            check(f"e-stop ({how}) -> throttle 0 within 100 ms", st["estop"] and click_to_zero < 100.0,
+                  f"click->throttle 0: {click_to_zero:.1f} ms wall (event in the page {(t_click - t_call) * 1e3:.1f} ms after the WebDriver call began, which took {(t_done - t_call) * 1e3:.1f} ms); "
+                  f"request->throttle 0: {server_ms:.1f} ms wall, {sim_ms:.1f} ms simulated")
+            rec = wait(lambda: _find_event(os.path.join(out, "telemetry.jsonl"), "EMERGENCY STOP", frame_before), 3)
+            check(f"telemetry records the e-stop ({how})", rec is not None,
+                  f"frame {rec['frame']}" if rec else "")
+            time.sleep(0.3)
+            check(f"the car stays stopped ({how})", _state(base)["sent"]["throttle"] == 0.0)
+        wd.screenshot(os.path.join(tmp, "dashboard_2_estop.png"))
+
+        # 4. Pause, step, resume.
+        wd.click(wd.find("#pause"))
+        wait(lambda: _state(base).get("paused"), 5)
+        time.sleep(0.3)
+        f0 = _state(base)["frame"]
+        time.sleep(0.5)
+        f1 = _state(base)["frame"]
+        wd.click(wd.find("#step"))
+        wait(lambda: _state(base)["frame"] != f1, 5)
+        time.sleep(0.3)
+        f2 = _state(base)["frame"]
+        check("pause holds the loop, step runs one frame", f0 == f1 and f2 == f1 + 1, f"frames {f0}, {f1}, after step {f2}")
+        wd.click(wd.find("#resume"))
+        resumed = wait(lambda: _state(base)["frame"] > f2 + 5, 5)
+        check("resume runs the loop again", bool(resumed))
+
+        # 5. Save: exactly the changed key lands in local.toml, the comment stays.
+        wd.click(wd.find("#save"))
+        saved = wait(lambda: "steering" in open(local).read(), 5)
+        text = open(local).read()
+        data = tomllib.loads(text)
+        check("save writes exactly the changed key", bool(saved) and data == {"steering": {"kp": kp1}}, repr(text))
+        check("save keeps the file's comment", text.startswith("# my overrides"))
+        wd.screenshot(os.path.join(tmp, "dashboard_3_saved.png"))
+        if a.screenshot:
+            wd.click(wd.find("#release"))
+            wd.click(wd.find("#arm"))
+            time.sleep(3)
+            wd.screenshot(a.screenshot)
+        print(f"screenshots in {tmp}")
+        check("the sim is still running", sim.poll() is None)
+    finally:
+        if wd:
+            wd.quit()
+        for p in reversed(procs):
+            p.terminate()
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        if not a.keep and failed == 0:
+            shutil.rmtree(tmp, ignore_errors=True)
+        else:
+            print(f"kept {tmp}")
+    print(f"{passed} passed, {failed} failed")
+
+
+def _fmt(v):
+    # Rust's `{}` for f64 prints the shortest round-trip form, like Python's repr.
+    return repr(float(v)).removesuffix(".0") if float(v).is_integer() else repr(float(v))
+
+
+def _ok(url):
+    try:
+        with urllib.request.urlopen(url, timeout=2):
+            return True
+    except Exception:
+        return False
+
+
+def _state(base):
+    try:
+        st, v = http("GET", base + "/api/state?since=1e300", timeout=5)
+        return v if st == 200 and v.get("frame") is not None else None
+    except Exception:
+        return None
+
+
+def _find_event(path, text, min_frame=-1):
+    try:
+        for rec in telemetry(path):
+            if rec["frame"] < min_frame:
+                continue
+            for e in rec.get("events", []):
+                if text in e:
+                    return rec
+    except (OSError, ValueError):
+        pass
+    return None
+
+
+if __name__ == "__main__":
+    main()
+    sys.exit(1 if failed else 0)

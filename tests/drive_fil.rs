@@ -1,0 +1,382 @@
+//! The firmware in the loop, closed: `rccar drive --camera sim --port <pty>` on the wall clock.
+//! The simulator renders the car's view, `drive` runs the pipeline and sends DRIVE frames over
+//! the pty, the real firmware (.elf in simavr) produces servo/ESC pulse widths, and those widths
+//! (`--pwm-log`, the harness's report) move the simulated car. Faults are injected into this
+//! same setup: kill -9, Ctrl-C, a stalled camera, a vanished pty, bit errors on the wire.
+//!
+//! Run: `cargo test --release --features serial --test drive_fil -- --nocapture --test-threads 1`
+//! (each test needs one core for the emulator and one for `rccar drive`; in parallel they
+//! would fall behind the wall clock). `RCCAR_FIL_LAPS=3` drives 3 laps in the closed-loop test;
+//! `RCCAR_FIL_DETECT=1` turns detection on.
+#![cfg(feature = "serial")]
+
+#[path = "support/sim.rs"]
+mod sim;
+
+use rccar::config::Config;
+use rccar::control::Command;
+use rccar::sim::vehicle::{Pose, Vehicle};
+use serde_json::Value;
+use sim::{Event, Sim};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command as Proc, Stdio};
+use std::time::{Duration, Instant};
+
+const EXE: &str = env!("CARGO_BIN_EXE_rccar");
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A scratch folder per test.
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("rccar-fil-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The emulator (its report teed into `dir/pwm.log`) and the path `drive` should follow.
+fn start_sim(dir: &Path, name: &str) -> (Sim, PathBuf) {
+    let log = dir.join("pwm.log");
+    std::fs::write(&log, "").unwrap();
+    let sim = Sim::start_logged(&Sim::fresh_path(name), Some(&log));
+    (sim, log)
+}
+
+/// Starts `rccar drive --camera sim` against the emulator; lane keeping only unless `extra`
+/// says otherwise.
+fn drive(sim: &Sim, log: &Path, out: &Path, extra: &[&str]) -> Child {
+    let mut c = Proc::new(EXE);
+    c.current_dir(root())
+        .args(["drive", "--camera", "sim", "--port", &sim.tty, "--pwm-log"])
+        .arg(log)
+        .arg("--out")
+        .arg(out)
+        .args(["--arm", "--status-every", "5"])
+        .args(extra)
+        .stdin(Stdio::null())
+        .stdout(std::fs::File::create(out.with_extension("stdout")).unwrap())
+        .stderr(std::fs::File::create(out.with_extension("stderr")).unwrap());
+    std::fs::create_dir_all(out).unwrap();
+    c.spawn().expect("start rccar drive")
+}
+
+/// Waits for `drive` (its output went to `out.stdout` / `out.stderr`).
+fn wait(child: &mut Child, out: &Path, limit: Duration) -> (Option<i32>, String, String) {
+    let end = Instant::now() + limit;
+    let read = |ext: &str| std::fs::read_to_string(out.with_extension(ext)).unwrap_or_default();
+    loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            return (st.code(), read("stdout"), read("stderr"));
+        }
+        if Instant::now() > end {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!(
+                "rccar drive did not end in {limit:?}\nstdout:\n{}\nstderr:\n{}",
+                read("stdout"),
+                read("stderr")
+            );
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn telemetry(out: &Path) -> Vec<Value> {
+    std::fs::read_to_string(out.join("telemetry.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect()
+}
+
+fn summary(out: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary.json")).unwrap()
+}
+
+/// Waits until `drive` has processed `n` frames (telemetry lines).
+fn wait_frames(out: &Path, n: usize, limit: Duration) {
+    let end = Instant::now() + limit;
+    while Instant::now() < end {
+        if telemetry(out).len() >= n {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    panic!("drive did not reach {n} frames in {limit:?}");
+}
+
+/// ESC pulses (width µs, simulated µs).
+fn esc(sim: &Sim) -> Vec<(f64, f64)> {
+    sim.pulses(false)
+}
+
+/// `rccar sim` on the same track, same settings: the pure simulation to compare with.
+fn pure_sim(laps: u32, detect: bool, out: &Path) -> Value {
+    let st = Proc::new(EXE)
+        .current_dir(root())
+        .args(["sim", "--laps", &laps.to_string(), "--no-timing", "--out"])
+        .arg(out)
+        .args(["--set", &format!("detect.enabled={detect}")])
+        .output()
+        .unwrap();
+    assert!(st.status.success() || st.status.code() == Some(1), "{}", String::from_utf8_lossy(&st.stderr));
+    summary(out)
+}
+
+fn detect_on() -> bool {
+    std::env::var("RCCAR_FIL_DETECT").is_ok_and(|v| v == "1")
+}
+
+#[test]
+fn firmware_in_the_loop_drives_a_lap_like_the_pure_simulation() {
+    let laps: u32 = std::env::var("RCCAR_FIL_LAPS").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
+    let detect = detect_on();
+    let dir = scratch("closed");
+    let (sim, log) = start_sim(&dir, "closed");
+    let out = dir.join("drive");
+    let mut child = drive(
+        &sim,
+        &log,
+        &out,
+        &[
+            "--laps",
+            &laps.to_string(),
+            "--set",
+            &format!("detect.enabled={detect}"),
+        ],
+    );
+    let (code, stdout, stderr) = wait(&mut child, &out, Duration::from_secs(150 * laps as u64 + 120));
+    println!("{stdout}");
+    assert_eq!(code, Some(0), "stderr: {stderr}");
+    let fil = summary(&out);
+    let pure = pure_sim(laps, detect, &dir.join("sim"));
+    let f = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    println!(
+        "FIL  : laps {} rms {:.4} m max {:.4} m departures {} lap times {}",
+        fil["laps"], f(&fil, "xte_rms_m"), f(&fil, "xte_max_m"), fil["lane_departures"], fil["lap_times_s"]
+    );
+    println!(
+        "sim  : laps {} rms {:.4} m max {:.4} m departures {} lap times {}",
+        pure["laps"], f(&pure, "xte_rms_m"), f(&pure, "xte_max_m"), pure["lane_departures"], pure["lap_times_s"]
+    );
+    let ratio = f(&fil, "xte_rms_m") / f(&pure, "xte_rms_m");
+    println!("FIL RMS / sim RMS = {ratio:.3} (bound 1.25)");
+    assert_eq!(fil["laps"].as_u64(), Some(laps as u64));
+    assert_eq!(fil["lane_departures"].as_u64(), Some(0));
+    assert!(ratio <= 1.25, "FIL RMS {ratio:.3}x the pure simulation's");
+    // Latency: capture -> pulse, from drive's own report.
+    let line = stdout
+        .lines()
+        .find(|l| l.contains("capture -> pulse latency"))
+        .expect("latency line");
+    println!("{line}");
+    // The pulses moved the car: the ESC went well above neutral.
+    assert!(esc(&sim).iter().any(|&(w, _)| w > 1550.0));
+}
+
+#[test]
+fn kill_9_mid_lap_the_firmware_failsafe_holds_the_car() {
+    let dir = scratch("kill9");
+    let (sim, log) = start_sim(&dir, "kill9");
+    let out = dir.join("drive");
+    let mut child = drive(&sim, &log, &out, &["--laps", "1", "--set", "detect.enabled=false"]);
+    wait_frames(&out, 150, Duration::from_secs(60));
+    // driving: the ESC is above neutral
+    assert!(sim.last_width(false).is_some_and(|w| w > 1550.0), "not driving: {:?}", sim.last_width(false));
+    let pid = child.id();
+    let _ = Proc::new("kill").args(["-9", &pid.to_string()]).status();
+    let _ = child.wait();
+    std::thread::sleep(Duration::from_millis(800));
+    // last DRIVE at the UART (simulated µs) -> ESC neutral pulse
+    let drives = sim.rx_times(rccar::link::protocol::id::DRIVE);
+    let last_drive = *drives.last().expect("drives");
+    let neutral = esc(&sim)
+        .into_iter()
+        .find(|&(w, t)| t > last_drive && (w - 1500.0).abs() <= 1.0)
+        .expect("ESC back to neutral");
+    let held_ms = (neutral.1 - last_drive) / 1e3;
+    println!("kill -9: last DRIVE at {last_drive:.0} µs, ESC neutral at {:.0} µs: {held_ms:.1} ms (bound 270 ms)", neutral.1);
+    assert!(held_ms <= 270.0, "failsafe took {held_ms} ms");
+    // The simulated car stops: continue its physics from the last frame drive recorded, under
+    // the pulses the firmware produced after it (the world died with the process; the model and
+    // the pulses did not).
+    let tel = telemetry(&out);
+    let last = tel.last().unwrap();
+    let truth = &last["truth"];
+    let cfg = Config::load(&root().join("config/car.toml"), &[], &[]).unwrap();
+    let p = truth["pose"].as_array().unwrap();
+    let mut v = Vehicle::new(
+        &cfg.vehicle,
+        Pose {
+            x: p[0].as_f64().unwrap(),
+            y: p[1].as_f64().unwrap(),
+            yaw: p[2].as_f64().unwrap(),
+        },
+        1.0 / (cfg.camera.fps * cfg.sim.substeps as f64),
+    )
+    .with_speed(truth["speed_mps"].as_f64().unwrap());
+    let v0 = v.speed;
+    // ESC widths after the last DRIVE: neutral from `neutral.1` on; before it the last width.
+    let before = esc(&sim).into_iter().filter(|&(_, t)| t <= last_drive).last().map_or(1500.0, |p| p.0);
+    let rate = cfg.camera.fps * cfg.sim.substeps as f64;
+    let steps_before = ((neutral.1 - last_drive) / 1e6 * rate).round() as usize;
+    for i in 0..(steps_before + (2.0 * rate) as usize) {
+        let w = if i < steps_before { before } else { 1500.0 };
+        v.step(Command {
+            steer: 0.0,
+            throttle: (w - 1500.0) / 500.0,
+        });
+    }
+    println!("kill -9: simulated car {v0:.3} m/s at the kill, {:.4} m/s 2 s after the failsafe", v.speed);
+    assert!(v.speed.abs() < 0.01, "car still moving at {} m/s", v.speed);
+}
+
+#[test]
+fn ctrl_c_sends_neutral_before_exit() {
+    let dir = scratch("ctrlc");
+    let (sim, log) = start_sim(&dir, "ctrlc");
+    let out = dir.join("drive");
+    let mut child = drive(&sim, &log, &out, &["--set", "detect.enabled=false"]);
+    wait_frames(&out, 120, Duration::from_secs(60));
+    assert!(sim.last_width(false).is_some_and(|w| w > 1550.0));
+    let n_before = esc(&sim).len();
+    let t0 = Instant::now();
+    let _ = Proc::new("kill").args(["-INT", &child.id().to_string()]).status();
+    // wall time until the ESC neutral pulse shows up in the emulator's report
+    let mut neutral_wall = None;
+    while t0.elapsed() < Duration::from_secs(5) {
+        if esc(&sim)[n_before..].iter().any(|&(w, _)| (w - 1500.0).abs() <= 1.0) {
+            neutral_wall = Some(t0.elapsed());
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let (code, stdout, _) = wait(&mut child, &out, Duration::from_secs(10));
+    let exit_wall = t0.elapsed();
+    let neutral_wall = neutral_wall.expect("ESC neutral after Ctrl-C");
+    println!(
+        "Ctrl-C: ESC neutral after {:.0} ms, process exited after {:.0} ms, code {code:?}",
+        neutral_wall.as_secs_f64() * 1e3,
+        exit_wall.as_secs_f64() * 1e3
+    );
+    assert_eq!(code, Some(130));
+    assert!(stdout.contains("neutral sent"), "{stdout}");
+    // neutral came from drive (disarm), long before the 250 ms failsafe could have done it
+    let disarms = sim.rx_times(rccar::link::protocol::id::DISARM);
+    assert!(!disarms.is_empty(), "no DISARM frame reached the firmware");
+    assert!(neutral_wall <= exit_wall + Duration::from_millis(50));
+}
+
+#[test]
+fn a_stalled_camera_sends_neutral_within_half_a_second_and_driving_resumes() {
+    let dir = scratch("stall");
+    let (sim, log) = start_sim(&dir, "stall");
+    let out = dir.join("drive");
+    let mut child = drive(
+        &sim,
+        &log,
+        &out,
+        &["--seconds", "9", "--sim-stall", "4:1", "--set", "detect.enabled=false"],
+    );
+    let (code, stdout, stderr) = wait(&mut child, &out, Duration::from_secs(60));
+    assert_eq!(code, Some(0), "{stderr}");
+    let stall_line = stdout.lines().find(|l| l.contains("camera stalled")).expect("stall reported");
+    println!("{stall_line}");
+    let tel = telemetry(&out);
+    // the last frame before the stall and the first after it (frame time, s)
+    let times: Vec<f64> = tel.iter().map(|r| r["time_s"].as_f64().unwrap()).collect();
+    let (gap_at, gap) = times
+        .windows(2)
+        .map(|w| (w[0], w[1] - w[0]))
+        .fold((0.0, 0.0), |m, x| if x.1 > m.1 { x } else { m });
+    println!("camera gap: {gap:.3} s from t={gap_at:.2} s");
+    assert!(gap >= 0.9, "no stall seen in the frames: largest gap {gap}");
+    // ESC: neutral within 0.5 s of the last frame before the stall (simulated time of the
+    // emulator runs with the wall clock; compare with the first pulse after the stall began)
+    let pulses = esc(&sim);
+    let driving_before = pulses.iter().any(|&(w, _)| w > 1550.0);
+    assert!(driving_before);
+    let neutral_idx = pulses
+        .iter()
+        .position(|&(w, t)| (w - 1500.0).abs() <= 1.0 && t > 1e6)
+        .expect("ESC neutral during the stall");
+    let last_drive_before = pulses[..neutral_idx].last().map_or(0.0, |p| p.1);
+    let resumed = pulses[neutral_idx..].iter().any(|&(w, _)| w > 1550.0);
+    println!(
+        "stall: ESC neutral at {:.3} s (previous change {:.3} s), driving resumed: {resumed}",
+        pulses[neutral_idx].1 / 1e6,
+        last_drive_before / 1e6
+    );
+    assert!(resumed, "driving did not resume after the stall");
+    // Neutral within 0.5 s of the last frame's command (both in the emulator's time): the last
+    // DRIVE at the UART more than 50 ms before the neutral pulse is the last frame's.
+    let t_neutral = pulses[neutral_idx].1;
+    let last_frame_drive = sim
+        .rx_times(rccar::link::protocol::id::DRIVE)
+        .into_iter()
+        .filter(|&t| t < t_neutral - 50e3)
+        .fold(f64::NAN, f64::max);
+    let after_ms = (t_neutral - last_frame_drive) / 1e3;
+    println!("stall: ESC neutral {after_ms:.0} ms after the last frame's DRIVE (bound 500 ms + one 20 ms PWM period)");
+    assert!(after_ms <= 520.0, "neutral {after_ms} ms after the last frame");
+    let lat = tel.iter().filter_map(|r| r["latency_ms"].as_f64()).fold(0.0, f64::max);
+    assert!(lat < 500.0, "a frame's latency {lat} ms");
+}
+
+#[test]
+fn a_vanished_pty_reconnects_and_nothing_moves_until_armed_again() {
+    let dir = scratch("vanish");
+    let log = dir.join("pwm.log");
+    std::fs::write(&log, "").unwrap();
+    let path = Sim::fresh_path("vanish-drive");
+    let sim = Sim::start_logged(&path, Some(&log));
+    let out = dir.join("drive");
+    let mut child = drive(&sim, &log, &out, &["--seconds", "40", "--set", "detect.enabled=false"]);
+    wait_frames(&out, 90, Duration::from_secs(60));
+    assert!(sim.last_width(false).is_some_and(|w| w > 1550.0), "driving before the unplug");
+    drop(sim); // unplugged: the emulator and its pty are gone
+    std::thread::sleep(Duration::from_millis(1500));
+    let sim = Sim::start_logged(&path, Some(&log)); // plugged in again: a fresh firmware boot
+    // reconnected (telemetry flows) but nothing moves: no DRIVE applied, ESC at neutral
+    std::thread::sleep(Duration::from_secs(3));
+    let moved = esc(&sim).iter().any(|&(w, _)| (w - 1500.0).abs() > 1.0);
+    let drives = sim.rx_times(rccar::link::protocol::id::DRIVE).len();
+    println!("after reconnect, before re-arming: ESC moved {moved}, DRIVE frames received {drives}");
+    assert!(!moved, "the car moved after a reconnect without being armed again");
+    // the button (SIGUSR1 at the desk) arms again: driving resumes
+    let _ = Proc::new("kill").args(["-USR1", &child.id().to_string()]).status();
+    let ok = sim.wait_until(Duration::from_secs(8), || (), |s| s.last_width(false).is_some_and(|w| w > 1550.0));
+    println!("after the button: driving again {ok}");
+    assert!(ok, "not driving after re-arming");
+    let _ = Proc::new("kill").args(["-INT", &child.id().to_string()]).status();
+    let (code, _, _) = wait(&mut child, &out, Duration::from_secs(10));
+    assert_eq!(code, Some(130));
+}
+
+#[test]
+fn bit_errors_at_1e_3_for_a_lap_cause_no_departure() {
+    let dir = scratch("ber");
+    let (sim, log) = start_sim(&dir, "ber");
+    let out = dir.join("drive");
+    let mut child = drive(
+        &sim,
+        &log,
+        &out,
+        &["--laps", "1", "--link-bit-errors", "1e-3", "--set", "detect.enabled=false"],
+    );
+    let (code, stdout, stderr) = wait(&mut child, &out, Duration::from_secs(300));
+    assert_eq!(code, Some(0), "{stdout}\n{stderr}");
+    let s = summary(&out);
+    println!(
+        "1e-3 bit errors: laps {} departures {} rms {:.4} m",
+        s["laps"],
+        s["lane_departures"],
+        s["xte_rms_m"].as_f64().unwrap()
+    );
+    let crc_hit = sim.events().iter().filter(|e| matches!(e, Event::Rx { .. })).count();
+    assert!(crc_hit > 100);
+    assert_eq!(s["laps"].as_u64(), Some(1));
+    assert_eq!(s["lane_departures"].as_u64(), Some(0));
+}
