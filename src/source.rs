@@ -129,6 +129,8 @@ pub struct ReplayDir {
     width: u32,
     height: u32,
     min_size: (u32, u32),
+    /// A recording's frame times (frame index → seconds), see [`ReplayDir::with_recorded_times`].
+    times: Option<std::collections::BTreeMap<u64, f64>>,
 }
 
 fn is_frame_file(p: &Path) -> bool {
@@ -204,7 +206,17 @@ impl ReplayDir {
             width,
             height,
             min_size,
+            times: None,
         })
+    }
+
+    /// Uses a recording's own frame numbers and times (`crate::record::recorded_times`) for the
+    /// frames named `frame_NNNNNNNNN.jpg`, so a replay sees the time steps the car saw (the car
+    /// drops late frames; they are not always 1/fps apart). Other names keep 1/fps.
+    pub fn with_recorded_times(mut self, times: std::collections::BTreeMap<u64, f64>) -> Self {
+        self.ignored.retain(|n| n != crate::record::TELEMETRY_FILE);
+        self.times = Some(times);
+        self
     }
 
     /// Files in the folder that are not frames (named in the summary, never silently dropped).
@@ -223,8 +235,16 @@ impl FrameSource for ReplayDir {
         let index = self.next as u64;
         self.next += 1;
         let name = path.file_name().map(escape_name).unwrap_or_default();
+        let (index, time_s) = self
+            .times
+            .as_ref()
+            .and_then(|t| {
+                let i = crate::record::frame_index(&name)?;
+                Some((i, *t.get(&i)?))
+            })
+            .unwrap_or((index, index as f64 / self.fps));
         Some(match self.load(&path) {
-            Ok(image) => Ok(Frame::new(index, index as f64 / self.fps, name, image)),
+            Ok(image) => Ok(Frame::new(index, time_s, name, image)),
             Err(reason) => Err(FrameError::bad(index, name, reason)),
         })
     }

@@ -62,6 +62,16 @@ impl ConfigArgs {
         }
     }
 
+    /// Where a change saved by this command goes (a dashboard's "save"): `--local` if named,
+    /// else `local.toml` beside the configuration (created when missing).
+    pub fn local_target(&self) -> Result<PathBuf> {
+        if let Some(p) = &self.local {
+            return Ok(p.clone());
+        }
+        let base = self.base_file()?;
+        Ok(base.parent().unwrap_or(Path::new("")).join("local.toml"))
+    }
+
     /// Loads, merges and validates the configuration: the values, the base file's folder and
     /// every file read. Path keys in the result are absolute.
     pub fn load_full(&self) -> Result<LoadedConfig> {

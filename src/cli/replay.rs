@@ -91,6 +91,15 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         ((max_x.ceil() as u32).min(w), (max_y.ceil() as u32).min(h))
     };
     let mut source = ReplayDir::open(&a.dir, cfg.camera.fps, w, h, min_size)?;
+    // A recording of `rccar drive --record`: replay with the time steps the car saw.
+    if a.dir.join(rccar::record::TELEMETRY_FILE).is_file() {
+        if let Ok(t) = rccar::record::recorded_times(&a.dir) {
+            if !t.times.is_empty() {
+                println!("replay: a recording; frame times from its telemetry ({} frames)", t.times.len());
+                source = source.with_recorded_times(t.times);
+            }
+        }
+    }
     let annotate_dir = a.out.join("annotated");
     let annotate_frames = cfg.replay.annotate && !a.no_annotate;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;

@@ -89,7 +89,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut camera = SimCamera::new(world.clone()).ending_with_world(!a.dash.dashboard);
     // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
     let fps = cfg.camera.fps;
-    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local.clone(), Some(world.clone()), &stop, Some(fps), None)?;
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, Some(world.clone()), &stop, Some(fps), None)?;
     let mut vehicle = dash.sink(SimVehicle::new(world.clone()));
     let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
     let mut pipeline = Pipeline::new(&cfg)?;

@@ -108,6 +108,9 @@ pub trait Observer {
     fn before_frame(&mut self, _pipeline: &mut Pipeline) -> Flow {
         Flow::Continue
     }
+    /// Adds what this observer knows to the frame's record before anyone sees it (a sensor
+    /// reading, an operator's change): the record stays the one record of the frame.
+    fn decorate(&mut self, _record: &mut FrameRecord) {}
     /// A processed frame.
     fn on_frame(&mut self, _ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
         Ok(Flow::Continue)
@@ -133,6 +136,11 @@ impl<const N: usize> Observer for [&mut dyn Observer; N] {
             }
         }
         f
+    }
+    fn decorate(&mut self, record: &mut FrameRecord) {
+        for o in self.iter_mut() {
+            o.decorate(record);
+        }
     }
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
         let mut f = Flow::Continue;
@@ -331,6 +339,7 @@ impl Driver {
         if self.stats.dropped > 0 {
             record.dropped = Some(self.stats.dropped);
         }
+        observer.decorate(&mut record);
         // 7. Observers.
         let flow = observer.on_frame(&FrameContext {
             frame: &frame,
