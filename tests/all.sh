@@ -17,6 +17,7 @@ DEB_PACKAGES=(
   simavr libsimavr-dev libsimavrparts1 libelf-dev  # hardware-in-the-loop harness
   libclang-dev                                 # the `camera` feature (nokhwa's V4L2 bindings)
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
+  chromium chromium-driver                     # the dashboard's headless-browser stage
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   missing=()
@@ -74,6 +75,9 @@ stage link-hil cargo test --release --features serial --test link_hil
 stage camera cargo test --release --features camera --lib camera_source
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
+stage dashboard-security cargo test --release --features dashboard --test dashboard_security
+# builds target/release/rccar with the dashboard (the browser test runs that binary)
+stage dashboard-browser bash -c 'cargo build --release --features dashboard && "$RCCAR_PYTHON" tests/dashboard/browser_test.py'
 
 echo
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi

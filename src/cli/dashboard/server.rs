@@ -208,12 +208,24 @@ impl Server {
     }
 }
 
+/// The web's threads yield to the control loop: nice 10 for this thread (Linux; elsewhere a
+/// no-op). A busy page or a flood of requests then takes CPU only when the loop does not.
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: plain system calls on the calling thread's own id; no memory is passed.
+    unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, 10);
+    }
+}
+
 fn now_ms(sh: &Shared) -> u64 {
     (sh.sent.now() * 1e3) as u64
 }
 
 /// Disarms when the page that armed the car stops sending heartbeats.
 fn watchdog(sh: Arc<Shared>, stop: StopSignal) {
+    // The watchdog disarms the car: it keeps normal priority.
     while !sh.closed.load(Ordering::SeqCst) && !stop.is_set() {
         std::thread::sleep(Duration::from_millis(20));
         if sh.heartbeat_ms == 0 || !sh.armed_by_page.load(Ordering::SeqCst) || !sh.arm.is_armed() {
@@ -236,6 +248,7 @@ fn watchdog(sh: Arc<Shared>, stop: StopSignal) {
 
 /// Takes the loop's snapshots, keeps the plot history, renders and encodes the stream image.
 fn hub(slot: Arc<Latest<Arc<Snapshot>>>, sh: Arc<Shared>) {
+    lower_priority();
     while !sh.closed.load(Ordering::SeqCst) {
         let Some(snap) = slot.wait_take(Duration::from_millis(200)) else {
             if slot.is_closed() {
@@ -513,8 +526,12 @@ fn handle(mut stream: TcpStream, sh: &Shared) {
             return;
         }
     };
-    let who = r.peer.map_or("?".to_string(), |p| p.ip().to_string());
     let path = r.path.as_str();
+    // Everything but the e-stop yields to the control loop from here on.
+    if path != "/api/estop" {
+        lower_priority();
+    }
+    let who = r.peer.map_or("?".to_string(), |p| p.ip().to_string());
     // Only exact routes exist: `..`, `%2e`, `//` and the like are simply not found.
     let get = r.method == "GET";
     let post = r.method == "POST";
