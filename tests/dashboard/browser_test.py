@@ -175,6 +175,7 @@ def main():
         up = wait(lambda: _state(base), 30, 0.2)
         check("sim --dashboard serves /api/state", bool(up), f"port {port}")
         if not up:
+            print(open(os.path.join(tmp, "sim.log")).read()[-2000:])
             return
         drv = subprocess.Popen(["/usr/bin/chromedriver", f"--port={dport}"],
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -280,6 +281,20 @@ def main():
         wd.click(wd.find("#resume"))
         resumed = wait(lambda: _state(base)["frame"] > f2 + 5, 5)
         check("resume runs the loop again", bool(resumed))
+
+        # Move the car to s = 10 m with the page's slider and button, then reset it.
+        tel = os.path.join(out, "telemetry.jsonl")
+        for label, action, want in (("place at 10 m", "place", 10.0), ("reset", "reset", 0.0)):
+            f_before = _state(base)["frame"]
+            if action == "place":
+                wd.js("const p=document.getElementById('place');p.value='10';p.dispatchEvent(new Event('input'));")
+                wd.click(wd.find("#placego"))
+            else:
+                wd.click(wd.find("#reset"))
+            rec = wait(lambda: _find_event(tel, f"car placed at s={want:.2f} m", f_before), 5)
+            s_m = rec["truth"]["s_m"] if rec and rec.get("truth") else None
+            check(f"{label}: the car is there on the next frame", s_m is not None and abs(s_m - want) < 0.2,
+                  f"frame {rec['frame'] if rec else '-'}: true s = {s_m} m")
 
         # 5. Save: exactly the changed key lands in local.toml, the comment stays.
         wd.click(wd.find("#save"))

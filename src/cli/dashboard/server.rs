@@ -23,7 +23,7 @@ use super::Sent;
 use anyhow::{Context, Result};
 use image::{Rgb, RgbImage};
 use rccar::config::Config;
-use rccar::dashboard::{self, Control, ControlSender, PlaceRequest, PlotPoint, SetRequest, Snapshot};
+use rccar::dashboard::{self, Control, ControlSender, Live, PlaceRequest, PlotPoint, SetRequest, Snapshot};
 use rccar::drive::{ArmState, Latest, StopSignal};
 use rccar::sim::world::{lock, SharedWorld};
 use serde_json::{json, Value};
@@ -52,6 +52,8 @@ pub struct Options {
     pub local: PathBuf,
     /// The loop's snapshots.
     pub slot: Arc<Latest<Arc<Snapshot>>>,
+    /// The loop's per-frame counters.
+    pub live: Arc<Live>,
     /// The loop's inbox.
     pub tx: ControlSender,
     /// Arming and e-stop.
@@ -102,6 +104,7 @@ struct Shared {
     frames_sent: AtomicU64,
     closed: AtomicBool,
     on_arm: Option<fn()>,
+    live: Arc<Live>,
 }
 
 /// The running server; its threads end when the run's stop signal is set or it is dropped.
@@ -177,6 +180,7 @@ impl Server {
             frames_sent: AtomicU64::new(0),
             closed: AtomicBool::new(false),
             on_arm: o.on_arm,
+            live: o.live,
         });
         if need_token {
             println!(
@@ -766,8 +770,10 @@ fn state_json(sh: &Shared, since: f64, authorized: bool) -> Value {
     });
     if let Some(sn) = snap {
         let r = &sn.record;
-        o["frame"] = json!(r.frame);
-        o["t"] = json!(r.time_s);
+        // Exact between snapshots: the loop's own counters.
+        o["frame"] = json!(sh.live.frame.load(Ordering::SeqCst));
+        o["t"] = json!(sh.live.time_s());
+        o["snapshot_frame"] = json!(r.frame);
         o["error"] = json!(r.error);
         o["steer"] = json!(r.steer);
         o["throttle"] = json!(r.throttle);
@@ -776,7 +782,7 @@ fn state_json(sh: &Shared, since: f64, authorized: bool) -> Value {
         o["behaviour"] = json!(r.behaviour);
         o["latency_ms"] = json!(r.latency_ms);
         o["period_ms"] = json!(r.period_ms);
-        o["paused"] = json!(sn.paused);
+        o["paused"] = json!(sh.live.paused.load(Ordering::SeqCst));
         o["dropped_snapshots"] = json!(sn.dropped);
         o["objects"] = json!(sn.objects);
         o["transition"] = match &sn.last_transition {
