@@ -105,7 +105,7 @@ fn main() {
     // 2. Cascades.
     let shipped: Vec<PathBuf> = [&cfg.detect.stop_sign, &cfg.detect.traffic_light, &cfg.detect.obstacle]
         .iter()
-        .map(|p| root.join(p))
+        .map(|p| root.join("config").join(p))
         .collect();
     let cascades: Vec<PathBuf> = if shipped.iter().all(|p| p.is_file()) {
         shipped
@@ -116,7 +116,7 @@ fn main() {
     cfg.detect.stop_sign = cascades[0].display().to_string();
     cfg.detect.traffic_light = cascades[1].display().to_string();
     cfg.detect.obstacle = cascades[2].display().to_string();
-    let (det, missing) = rccar::pipeline::load_detector(&cfg.detect, root).expect("cascades load");
+    let (det, missing) = rccar::pipeline::load_detector(&cfg.detect, &root.join("config")).expect("cascades load");
     assert!(missing.is_empty(), "missing cascades {missing:?}");
     let mut pipe = Pipeline::new(&cfg).unwrap();
     pipe.set_detector(det);

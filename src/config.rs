@@ -19,13 +19,28 @@ use std::path::{Path, PathBuf};
 /// Everything that can go wrong while loading a configuration.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
+    /// The file could not be read. The OS error is part of the message (and not repeated as
+    /// a source, so `{:#}` prints it once).
+    #[error("{path}: cannot read: {error}")]
     Io {
         /// File that failed.
         path: PathBuf,
         /// Underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
+    },
+    /// The configuration file does not exist; the message says how to point at one.
+    #[error("{path}: cannot read: {error}; {HOW_TO_POINT}")]
+    Missing {
+        /// The file that was looked for.
+        path: PathBuf,
+        /// Underlying error (in the message, not repeated as a source).
+        error: std::io::Error,
+    },
+    /// No `config/car.toml` in the starting folder or any folder above it.
+    #[error("no config/car.toml in {start} or any folder above it; {HOW_TO_POINT}")]
+    NotFound {
+        /// Where the search started (the working directory).
+        start: PathBuf,
     },
     /// TOML syntax error (the message carries the line and column).
     #[error("{path}: {message}")]
@@ -56,6 +71,16 @@ pub enum ConfigError {
     /// A `key=value` override that cannot be parsed.
     #[error("bad override `{0}`: expected key=value, e.g. steering.kp=0.8")]
     BadOverride(String),
+    /// A number that is not finite (inf, NaN, or too large for a 64-bit float, e.g. 1e309).
+    #[error("{origin}: `{key}` = `{typed}` is not a finite number (inf and NaN are not allowed)")]
+    NotFinite {
+        /// Where the value came from (`command line` or a file).
+        origin: String,
+        /// Dotted key.
+        key: String,
+        /// What was typed.
+        typed: String,
+    },
     /// One or more values outside their allowed range.
     #[error("{}", .errors.iter().map(|e| format!("{origin}: {e}")).collect::<Vec<_>>().join("\n"))]
     Invalid {
@@ -64,6 +89,29 @@ pub enum ConfigError {
         /// Every bad value.
         errors: Vec<InvalidValue>,
     },
+}
+
+/// How to name a configuration when none is found (part of the error messages).
+pub const HOW_TO_POINT: &str =
+    "run rccar inside the project folder, or name a file with --config FILE or RCCAR_CONFIG=FILE";
+
+/// The keys whose values are file paths. A relative path written in a file is resolved
+/// against that file's folder; one given on the command line (`--set`) against the working
+/// directory; a default (a key set nowhere) against the base configuration's folder.
+/// Add a new path key here and it is resolved like the others.
+pub const PATH_KEYS: &[&str] = &[
+    "sim.track",
+    "detect.stop_sign",
+    "detect.traffic_light",
+    "detect.obstacle",
+];
+
+/// Bounds on sizes that files and flags control, checked before anything is allocated.
+pub mod limits {
+    /// Largest image a frame source, `stages` or `detect` decodes, pixels (width × height).
+    pub const MAX_IMAGE_PIXELS: u64 = 40_000_000;
+    /// Largest image side, pixels.
+    pub const MAX_IMAGE_SIDE: u32 = 16_384;
 }
 
 /// One value outside its allowed range or inconsistent with another.
@@ -113,6 +161,10 @@ pub struct Config {
     pub ranging: RangingConfig,
     /// The behaviour state machine: stop signs, lights, obstacles, lane lost.
     pub behaviour: BehaviourConfig,
+    /// The Raspberry Pi's GPIO: start/stop button, status LED, HC-SR04 ultrasonic brake.
+    pub gpio: GpioConfig,
+    /// Recording on the car (`--record DIR`): JPEG quality, disk budget, segments.
+    pub record: RecordConfig,
     /// `[dashboard]`: the live page of `sim|drive --dashboard`.
     pub dashboard: DashboardConfig,
 }
@@ -376,9 +428,10 @@ impl Default for VehicleConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SimConfig {
-    /// Track file, relative to the working directory.
+    /// Track file; a relative path is relative to the folder of the config file that names it
+    /// (the default, `tracks/default.toml`, to the base config's folder).
     pub track: String,
-    /// Laps to drive before the run ends.
+    /// Laps to drive before the run ends; 0 = no lap target, drive until `max_seconds`.
     pub laps: u32,
     /// The run ends after this much simulated time even if the laps are not done, seconds.
     pub max_seconds: f64,
@@ -401,7 +454,7 @@ pub struct SimConfig {
 impl Default for SimConfig {
     fn default() -> Self {
         Self {
-            track: "config/tracks/default.toml".into(),
+            track: "tracks/default.toml".into(),
             laps: 3,
             max_seconds: 600.0,
             substeps: 4,
@@ -421,10 +474,16 @@ struct Checker(Vec<InvalidValue>);
 impl Checker {
     fn range<T: PartialOrd + fmt::Display + Copy>(&mut self, key: &str, v: T, lo: T, hi: T) {
         if !(v >= lo && v <= hi) {
+            let value = v.to_string();
+            let not_finite = matches!(value.as_str(), "inf" | "-inf" | "NaN");
             self.0.push(InvalidValue {
                 key: key.into(),
-                value: v.to_string(),
-                allowed: format!("{lo} ..= {hi}"),
+                allowed: if not_finite {
+                    format!("{lo} ..= {hi}; inf and NaN are not allowed")
+                } else {
+                    format!("{lo} ..= {hi}")
+                },
+                value,
             });
         }
     }
@@ -467,6 +526,25 @@ impl Config {
         c.range("warp.out_height", w.out_height, 16, 4096);
         if let Err(e) = crate::lane::warp::Homography::from_quad_to_rect(&w.src, w.out_width, w.out_height) {
             c.fail("warp.src", format!("{:?}", w.src), &e.to_string());
+        } else {
+            // The bird's-eye image puts src[0..2] (the far edge) at its top: a quad whose far
+            // edge is below its near edge warps the floor upside down (and mirrored when left
+            // and right are swapped); the histogram band then reads the wrong end of the lane.
+            let [tl, tr, br, bl] = w.src;
+            if !(tl[1] < bl[1] && tr[1] < br[1]) {
+                c.fail(
+                    "warp.src",
+                    format!("{:?}", w.src),
+                    "top corners [0], [1] (far edge) above the bottom corners [3], [2] (near edge); this ROI looks at the floor upside down (make one with `rccar config roi`)",
+                );
+            }
+            if !(tl[0] < tr[0] && bl[0] < br[0]) {
+                c.fail(
+                    "warp.src",
+                    format!("{:?}", w.src),
+                    "left corners [0], [3] left of the right corners [1], [2]; this ROI is mirrored (make one with `rccar config roi`)",
+                );
+            }
         }
 
         let l = &self.lane;
@@ -529,6 +607,28 @@ impl Config {
         c.range("detect.scale_factor", d.scale_factor, 1.01, 2.0);
         c.range("detect.min_neighbors", d.min_neighbors, 0, 100);
         c.range("detect.min_size_px", d.min_size_px, 0, 4096);
+        for (key, r) in [
+            ("detect.stop_sign_region", d.stop_sign_region),
+            ("detect.traffic_light_region", d.traffic_light_region),
+            ("detect.obstacle_region", d.obstacle_region),
+        ] {
+            if !(r.iter().all(|v| (0.0..=1.0).contains(v)) && r[0] < r[2] && r[1] < r[3]) {
+                c.fail(key, format!("{r:?}"), "[left, top, right, bottom] in 0..=1 with left < right, top < bottom");
+            }
+        }
+        if !(d.range_m[0] >= 0.05 && d.range_m[0] < d.range_m[1] && d.range_m[1] <= 20.0) {
+            c.fail("detect.range_m", format!("{:?}", d.range_m), "[near, far] metres, 0.05 <= near < far <= 20");
+        }
+        for (key, b) in [
+            ("detect.stop_sign_box_m", d.stop_sign_box_m),
+            ("detect.traffic_light_box_m", d.traffic_light_box_m),
+            ("detect.obstacle_box_m", d.obstacle_box_m),
+        ] {
+            if !(b[0] > 0.0 && b[0] <= b[1] && b[1] <= 5.0) {
+                c.fail(key, format!("{b:?}"), "[min, max] metres, 0 < min <= max <= 5");
+            }
+        }
+        c.range("detect.every_n_frames", d.every_n_frames, 1, 30);
 
         let r = &self.ranging;
         c.range("ranging.v0_offset_px", r.v0_offset_px, -200.0, 200.0);
@@ -536,6 +636,23 @@ impl Config {
         c.range("ranging.stop_sign_bottom_m", r.stop_sign_bottom_m, 0.0, 3.0);
         c.range("ranging.traffic_light_bottom_m", r.traffic_light_bottom_m, 0.0, 3.0);
         c.range("ranging.obstacle_bottom_m", r.obstacle_bottom_m, 0.0, 3.0);
+        for (key, v) in [
+            ("ranging.stop_sign_size_m", r.stop_sign_size_m),
+            ("ranging.traffic_light_size_m", r.traffic_light_size_m),
+            ("ranging.obstacle_size_m", r.obstacle_size_m),
+        ] {
+            c.range(&format!("{key}[0]"), v[0], 0.0, 3.0);
+            c.range(&format!("{key}[1]"), v[1], 0.0, 3.0);
+        }
+        c.range("ranging.stop_sign_box_margin", r.stop_sign_box_margin, 0.5, 3.0);
+        c.range("ranging.traffic_light_box_margin", r.traffic_light_box_margin, 0.5, 3.0);
+        c.range("ranging.obstacle_box_margin", r.obstacle_box_margin, 0.5, 3.0);
+        c.range("ranging.box_centre_sigma_px", r.box_centre_sigma_px, 0.01, 100.0);
+        c.range("ranging.box_size_sigma", r.box_size_sigma, 0.001, 1.0);
+        c.range("ranging.track_accel_sigma", r.track_accel_sigma, 0.0, 100.0);
+        c.range("ranging.track_odometry_sigma", r.track_odometry_sigma, 0.0, 1.0);
+        c.range("ranging.track_max_missed", r.track_max_missed, 0, 100);
+        c.range("ranging.stop_sign_red_fraction", r.stop_sign_red_fraction, 0.1, 1.0);
         if r.stop_sign_bottom_m >= self.camera.height_m || r.traffic_light_bottom_m >= self.camera.height_m {
             c.fail(
                 "ranging.stop_sign_bottom_m",
@@ -579,6 +696,33 @@ impl Config {
         c.range("behaviour.lost_throttle", b.lost_throttle, 0.0, 1.0);
         c.range("behaviour.lost_stop_s", b.lost_stop_s, 0.0, 60.0);
 
+        let g = &self.gpio;
+        // BCM GPIO 2..27 are on the 40-pin header; 0 and 1 are reserved for HAT EEPROMs.
+        let mut pins = vec![("gpio.button_pin", g.button_pin), ("gpio.led_pin", g.led_pin)];
+        if g.ultrasonic {
+            pins.push(("gpio.trig_pin", g.trig_pin));
+            pins.push(("gpio.echo_pin", g.echo_pin));
+        }
+        for (i, &(key, pin)) in pins.iter().enumerate() {
+            c.range(key, pin, 2, 27);
+            if let Some(&(first, _)) = pins[..i].iter().find(|(_, p)| *p == pin) {
+                c.fail(key, pin.to_string(), &format!("a pin not already used by {first}"));
+            }
+        }
+        c.range("gpio.debounce_ms", g.debounce_ms, 1.0, 500.0);
+        if g.long_press_ms != 0.0 {
+            c.range("gpio.long_press_ms", g.long_press_ms, 200.0, 10000.0);
+        }
+        c.range("gpio.brake_m", g.brake_m, 0.03, 3.9);
+        c.range("gpio.release_m", g.release_m, g.brake_m.clamp(0.03, 3.9), 4.0);
+        c.range("gpio.sensor_temp_c", g.sensor_temp_c, -20.0, 60.0);
+        c.range("gpio.median_n", g.median_n, 1, 15);
+        c.range("gpio.period_ms", g.period_ms, 60.0, 1000.0);
+
+        let r = &self.record;
+        c.range("record.jpeg_quality", r.jpeg_quality, 1, 100);
+        c.range("record.max_mb", r.max_mb, 1.0, 1_000_000.0);
+        c.range("record.segment_frames", r.segment_frames, 1, 100_000);
         let d = &self.dashboard;
         if d.listen.parse::<std::net::SocketAddr>().is_err() {
             c.fail("dashboard.listen", format!("{:?}", d.listen), "IP:PORT, e.g. 127.0.0.1:8080");
@@ -601,37 +745,34 @@ impl Config {
     }
 
     /// Loads `base`, then each override file, then `key=value` overrides; checks everything.
+    /// Relative path keys ([`PATH_KEYS`]) come back absolute, as [`LoadedConfig::load`].
     pub fn load(base: &Path, override_files: &[PathBuf], overrides: &[String]) -> Result<Config, ConfigError> {
-        let mut layers = vec![Layer::from_file(base)?];
-        for f in override_files {
-            layers.push(Layer::from_file(f)?);
-        }
-        for o in overrides {
-            layers.push(Layer::from_assignment(o)?);
-        }
-        Self::from_layers(&layers)
+        LoadedConfig::load(base, override_files, overrides).map(|l| l.cfg)
     }
 
-    /// Parses one TOML text (e.g. a test's inline config) on top of the defaults.
+    /// Parses one TOML text (e.g. a test's inline config) on top of the defaults. Paths are
+    /// kept as written.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Config, ConfigError> {
         let table = text.parse::<toml::Table>().map_err(|e| ConfigError::Syntax {
             path: origin.into(),
-            message: e.to_string(),
+            message: e.to_string().trim_end().to_string(),
         })?;
-        Self::from_layers(&[Layer {
+        let layer = Layer {
             origin: origin.to_string(),
             table,
-        }])
+        };
+        layer.check_numbers()?;
+        Self::from_layers(&[layer])
     }
 
     /// This config with one dotted numeric or boolean key set, e.g. `steering.kp=0.8`;
-    /// used by gain sweeps. Validated like a file.
+    /// used by gain sweeps. Validated like a file. A path value is kept as typed.
     pub fn with_override(&self, assignment: &str) -> Result<Config, ConfigError> {
         let base = Layer {
             origin: "config".into(),
             table: to_table(self),
         };
-        Self::from_layers(&[base, Layer::from_assignment(assignment)?])
+        Self::from_layers(&[base, Layer::from_assignment(assignment, None)?])
     }
 
     fn from_layers(layers: &[Layer]) -> Result<Config, ConfigError> {
@@ -643,11 +784,18 @@ impl Config {
         }
         let origin = layers.iter().map(|l| l.origin.as_str()).collect::<Vec<_>>().join(" + ");
         // serde_path_to_error remembers which key was being read when a type is wrong.
-        let cfg: Config =
-            serde_path_to_error::deserialize(toml::Value::Table(merged)).map_err(|e| ConfigError::Type {
+        let cfg: Config = serde_path_to_error::deserialize(toml::Value::Table(merged.clone())).map_err(|e| {
+            let key = e.path().to_string();
+            let typed = lookup(&merged, &key).map(show_value).unwrap_or_default();
+            ConfigError::Type {
                 origin: origin.clone(),
-                message: format!("`{}`: {}", e.path(), e.inner().message().trim()),
-            })?;
+                message: if typed.is_empty() {
+                    format!("`{key}`: {}", e.inner().message().trim())
+                } else {
+                    format!("`{key}` = {typed}: {}", e.inner().message().trim())
+                },
+            }
+        })?;
         cfg.validate().map_err(|e| match e {
             ConfigError::Invalid { errors, .. } => ConfigError::Invalid { origin, errors },
             other => other,
@@ -655,9 +803,167 @@ impl Config {
         Ok(cfg)
     }
 
+    /// Makes every relative path key ([`PATH_KEYS`]) absolute against `dir` (e.g. the folder of
+    /// the file the defaults stand for). Empty values are left alone.
+    pub fn resolve_paths(&mut self, dir: &Path) {
+        for p in [
+            &mut self.sim.track,
+            &mut self.detect.stop_sign,
+            &mut self.detect.traffic_light,
+            &mut self.detect.obstacle,
+        ] {
+            if !p.is_empty() && Path::new(p.as_str()).is_relative() {
+                *p = absolute(&dir.join(p.as_str())).display().to_string();
+            }
+        }
+    }
+
     /// The resolved configuration as TOML text.
     pub fn to_toml(&self) -> String {
         toml::to_string(self).unwrap_or_else(|e| format!("# cannot print config: {e}"))
+    }
+}
+
+/// A configuration as loaded for a command: the values (path keys absolute), the folder of
+/// the base file and every file that was read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedConfig {
+    /// The merged, validated configuration; every [`PATH_KEYS`] value is an absolute path.
+    pub cfg: Config,
+    /// The folder of the base configuration file, absolute.
+    pub dir: PathBuf,
+    /// Every file read, base first, then the override files in order.
+    pub files: Vec<PathBuf>,
+    /// How many values the files set (0: every value is a default).
+    pub values_in_files: usize,
+}
+
+impl LoadedConfig {
+    /// Loads `base`, then each override file (each must exist), then `key=value` overrides,
+    /// and checks everything. Relative paths in a file resolve against that file's folder,
+    /// those in `overrides` against the working directory, defaults against `base`'s folder.
+    pub fn load(base: &Path, override_files: &[PathBuf], overrides: &[String]) -> Result<LoadedConfig, ConfigError> {
+        let base_layer = Layer::from_file(base).map_err(|e| match e {
+            ConfigError::Io { path, error } if error.kind() == std::io::ErrorKind::NotFound => {
+                ConfigError::Missing { path, error }
+            }
+            other => other,
+        })?;
+        let mut layers = vec![base_layer];
+        for f in override_files {
+            layers.push(Layer::from_file(f)?);
+        }
+        let values_in_files = layers.iter().map(|l| count_values(&l.table)).sum();
+        let cwd = absolute(Path::new("."));
+        for o in overrides {
+            layers.push(Layer::from_assignment(o, Some(&cwd))?);
+        }
+        let mut cfg = Config::from_layers(&layers)?;
+        let dir = absolute(
+            base.parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(Path::new(".")),
+        );
+        cfg.resolve_paths(&dir);
+        let mut files = vec![base.to_path_buf()];
+        files.extend(override_files.iter().cloned());
+        Ok(LoadedConfig {
+            cfg,
+            dir,
+            files,
+            values_in_files,
+        })
+    }
+}
+
+impl LoadedConfig {
+    /// Checks what the configuration would be if the override file `path` held `text`
+    /// (before writing it): `base`, then `override_files` without `path`, then `text` as
+    /// `path`. Nothing is written.
+    pub fn check_with_text(
+        base: &Path,
+        override_files: &[PathBuf],
+        path: &Path,
+        text: &str,
+    ) -> Result<Config, ConfigError> {
+        let mut layers = vec![Layer::from_file(base)?];
+        for f in override_files.iter().filter(|f| !same_file(f, path)) {
+            layers.push(Layer::from_file(f)?);
+        }
+        layers.push(Layer::from_text(path, text)?);
+        Config::from_layers(&layers)
+    }
+}
+
+/// The same path, compared after making both absolute (the files need not exist).
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => absolute(a) == absolute(b),
+    }
+}
+
+/// Finds the configuration: `env` (the value of `RCCAR_CONFIG`, relative to `start`) when
+/// given and non-empty, else `config/car.toml` in `start` or the nearest folder above it.
+pub fn find_config(start: &Path, env: Option<&std::ffi::OsStr>) -> Result<PathBuf, ConfigError> {
+    if let Some(e) = env.filter(|e| !e.is_empty()) {
+        // Loading it reports a missing file, with the OS error and how to point elsewhere.
+        return Ok(start.join(e));
+    }
+    let start = absolute(start);
+    for dir in start.ancestors() {
+        let p = dir.join("config").join("car.toml");
+        if p.is_file() {
+            return Ok(p);
+        }
+    }
+    Err(ConfigError::NotFound { start })
+}
+
+/// `p` made absolute against the working directory (no symlinks resolved; unchanged if the
+/// working directory cannot be read).
+fn absolute(p: &Path) -> PathBuf {
+    std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
+}
+
+fn count_values(t: &toml::Table) -> usize {
+    t.values()
+        .map(|v| match v {
+            toml::Value::Table(s) => count_values(s),
+            _ => 1,
+        })
+        .sum()
+}
+
+/// The value at a serde path such as `steering.kp` or `warp.src[1][0]`.
+fn lookup<'a>(t: &'a toml::Table, path: &str) -> Option<&'a toml::Value> {
+    let mut cur: Option<&toml::Value> = None;
+    for part in path.split('.') {
+        let (name, idx) = match part.find('[') {
+            Some(i) => (&part[..i], &part[i..]),
+            None => (part, ""),
+        };
+        cur = match cur {
+            None => t.get(name),
+            Some(toml::Value::Table(s)) => s.get(name),
+            _ => None,
+        };
+        for i in idx.split(['[', ']']).filter(|s| !s.is_empty()) {
+            cur = match (cur, i.parse::<usize>()) {
+                (Some(toml::Value::Array(a)), Ok(i)) => a.get(i),
+                _ => None,
+            };
+        }
+    }
+    cur
+}
+
+fn show_value(v: &toml::Value) -> String {
+    let s = v.to_string();
+    if s.chars().count() > 60 {
+        format!("{}…", s.chars().take(60).collect::<String>())
+    } else {
+        s
     }
 }
 
@@ -669,21 +975,35 @@ struct Layer {
 
 impl Layer {
     fn from_file(path: &Path) -> Result<Layer, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Io {
             path: path.into(),
-            source,
+            error,
         })?;
-        let table = text.parse::<toml::Table>().map_err(|e| ConfigError::Syntax {
+        Self::from_text(path, &text)
+    }
+
+    /// The text of a file at `path` (relative paths in it resolve against its folder).
+    fn from_text(path: &Path, text: &str) -> Result<Layer, ConfigError> {
+        let mut table = text.parse::<toml::Table>().map_err(|e| ConfigError::Syntax {
             path: path.into(),
             message: e.to_string().trim_end().to_string(),
         })?;
-        Ok(Layer {
+        let dir = absolute(
+            path.parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(Path::new(".")),
+        );
+        resolve_table_paths(&mut table, &dir);
+        let layer = Layer {
             origin: path.display().to_string(),
             table,
-        })
+        };
+        layer.check_numbers()?;
+        Ok(layer)
     }
 
-    fn from_assignment(text: &str) -> Result<Layer, ConfigError> {
+    /// `key=value`; a relative path value resolves against `cwd` when given.
+    fn from_assignment(text: &str, cwd: Option<&Path>) -> Result<Layer, ConfigError> {
         let (key, value) = text
             .split_once('=')
             .ok_or_else(|| ConfigError::BadOverride(text.into()))?;
@@ -691,13 +1011,27 @@ impl Layer {
         if key.is_empty() || key.split('.').any(str::is_empty) {
             return Err(ConfigError::BadOverride(text.into()));
         }
+        let typed = value.trim();
         // Parse the value as TOML so numbers, booleans, arrays and quoted strings all work;
-        // an unquoted word is taken as a string (`lane.threshold_mode=otsu`).
-        let value = format!("v = {}", value.trim())
+        // an unquoted word is taken as a string (`lane.threshold_mode=otsu`), unless it reads
+        // as a number that is not finite (`1e309`, `NaN`, `inf`): that is refused here.
+        let parsed = format!("v = {typed}")
             .parse::<toml::Table>()
             .ok()
-            .and_then(|mut t| t.remove("v"))
-            .unwrap_or_else(|| toml::Value::String(value.trim().to_string()));
+            .and_then(|mut t| t.remove("v"));
+        let not_finite = match &parsed {
+            Some(toml::Value::Float(f)) => !f.is_finite(),
+            Some(_) => false,
+            None => typed.parse::<f64>().is_ok_and(|f| !f.is_finite()),
+        };
+        if not_finite {
+            return Err(ConfigError::NotFinite {
+                origin: "command line".into(),
+                key: key.into(),
+                typed: typed.into(),
+            });
+        }
+        let value = parsed.unwrap_or_else(|| toml::Value::String(typed.to_string()));
         let mut table = toml::Table::new();
         let parts: Vec<&str> = key.split('.').collect();
         let mut cur = &mut table;
@@ -706,13 +1040,66 @@ impl Layer {
                 .entry(p.to_string())
                 .or_insert_with(|| toml::Value::Table(toml::Table::new()))
                 .as_table_mut()
-                .expect("just inserted a table");
+                .ok_or_else(|| ConfigError::BadOverride(text.into()))?;
         }
         cur.insert(parts[parts.len() - 1].to_string(), value);
+        if let Some(cwd) = cwd {
+            resolve_table_paths(&mut table, cwd);
+        }
         Ok(Layer {
             origin: "command line".into(),
             table,
         })
+    }
+
+    /// Refuses inf and NaN anywhere (TOML allows `inf` and `nan` literals).
+    fn check_numbers(&self) -> Result<(), ConfigError> {
+        fn walk(v: &toml::Value, key: &str, origin: &str) -> Result<(), ConfigError> {
+            match v {
+                toml::Value::Float(f) if !f.is_finite() => Err(ConfigError::NotFinite {
+                    origin: origin.into(),
+                    key: key.into(),
+                    typed: f.to_string(),
+                }),
+                toml::Value::Table(t) => {
+                    for (k, v) in t {
+                        let full = if key.is_empty() {
+                            k.clone()
+                        } else {
+                            format!("{key}.{k}")
+                        };
+                        walk(v, &full, origin)?;
+                    }
+                    Ok(())
+                }
+                toml::Value::Array(a) => {
+                    for (i, v) in a.iter().enumerate() {
+                        walk(v, &format!("{key}[{i}]"), origin)?;
+                    }
+                    Ok(())
+                }
+                _ => Ok(()),
+            }
+        }
+        walk(&toml::Value::Table(self.table.clone()), "", &self.origin)
+    }
+}
+
+/// Makes the relative string values of [`PATH_KEYS`] in one layer absolute against `dir`.
+fn resolve_table_paths(table: &mut toml::Table, dir: &Path) {
+    for key in PATH_KEYS {
+        let Some((section, name)) = key.split_once('.') else {
+            continue;
+        };
+        if let Some(toml::Value::String(s)) = table
+            .get_mut(section)
+            .and_then(toml::Value::as_table_mut)
+            .and_then(|t| t.get_mut(name))
+        {
+            if !s.is_empty() && Path::new(s.as_str()).is_relative() {
+                *s = absolute(&dir.join(s.as_str())).display().to_string();
+            }
+        }
     }
 }
 
@@ -802,11 +1189,9 @@ mod tests {
     fn shipped_car_toml_equals_defaults() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/car.toml");
         let cfg = Config::load(&path, &[], &[]).unwrap();
-        assert_eq!(
-            cfg,
-            Config::default(),
-            "config/car.toml and Config::default() drifted apart"
-        );
+        let mut def = Config::default();
+        def.resolve_paths(&Path::new(env!("CARGO_MANIFEST_DIR")).join("config"));
+        assert_eq!(cfg, def, "config/car.toml and Config::default() drifted apart");
     }
 
     #[test]
@@ -849,6 +1234,66 @@ mod tests {
     }
 
     #[test]
+    fn gpio_pin_used_twice_names_both_keys() {
+        let e = Config::from_toml_str("[gpio]\nbutton_pin = 17\nled_pin = 5\nechO_pin = 1\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("gpio.echO_pin") && e.contains("did you mean `echo_pin`"),
+            "{e}"
+        );
+        let e = Config::from_toml_str("[gpio]\nbutton_pin = 23\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "t.toml: gpio.trig_pin = 23 is out of range (allowed: a pin not already used by gpio.button_pin)"
+        );
+        let e = Config::from_toml_str("[gpio]\nled_pin = 24\ntrig_pin = 24\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("gpio.trig_pin = 24") && e.contains("used by gpio.led_pin"),
+            "{e}"
+        );
+        assert!(e.contains("gpio.echo_pin = 24") && e.lines().count() == 2, "{e}");
+        // Without an ultrasonic sensor its pins are free for other uses.
+        Config::from_toml_str("[gpio]\nultrasonic = false\nled_pin = 23\n", "t.toml").unwrap();
+        let e = Config::from_toml_str("[gpio]\nbutton_pin = 40\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "t.toml: gpio.button_pin = 40 is out of range (allowed: 2 ..= 27)");
+    }
+
+    #[test]
+    fn gpio_and_record_ranges() {
+        let bad = [
+            ("gpio.debounce_ms=0", "gpio.debounce_ms"),
+            ("gpio.long_press_ms=50", "gpio.long_press_ms"),
+            ("gpio.release_m=0.2", "gpio.release_m"), // below brake_m
+            ("gpio.brake_m=5", "gpio.brake_m"),
+            ("gpio.sensor_temp_c=90", "gpio.sensor_temp_c"),
+            ("gpio.median_n=0", "gpio.median_n"),
+            ("gpio.period_ms=10", "gpio.period_ms"),
+            ("record.jpeg_quality=0", "record.jpeg_quality"),
+            ("record.jpeg_quality=101", "record.jpeg_quality"),
+            ("record.max_mb=0", "record.max_mb"),
+            ("record.segment_frames=0", "record.segment_frames"),
+        ];
+        for (set, key) in bad {
+            let e = Config::default().with_override(set).unwrap_err().to_string();
+            assert!(e.contains(key), "{set}: {e}");
+        }
+        let g = Config::default().gpio.options();
+        assert_eq!((g.button_pin, g.led_pin, g.trig_pin, g.echo_pin), (17, 27, 23, 24));
+        assert!((g.button.debounce_s - 0.03).abs() < 1e-12 && g.button.long_press_s.is_none());
+        assert!((g.sonar.brake_m - 0.35).abs() < 1e-12 && (g.sonar_period_s - 0.06).abs() < 1e-12);
+        let r = Config::default().record.options();
+        assert_eq!((r.jpeg_quality, r.segment_frames), (90, 300));
+        assert_eq!(r.max_bytes, 2_000_000_000);
+    }
+
+    #[test]
     fn overrides_layer_in_order() {
         let cfg = Config::default().with_override("steering.kp=2.5").unwrap();
         assert_eq!(cfg.steering.kp, 2.5);
@@ -866,7 +1311,8 @@ mod tests {
 pub struct DetectConfig {
     /// Run detection at all.
     pub enabled: bool,
-    /// Stop-sign cascade (OpenCV XML), relative to the working directory.
+    /// Stop-sign cascade (OpenCV XML); a relative path is relative to the folder of the config
+    /// file that names it.
     pub stop_sign: String,
     /// Traffic-light cascade; the light's state is read inside its boxes.
     pub traffic_light: String,
@@ -878,18 +1324,46 @@ pub struct DetectConfig {
     pub min_neighbors: u32,
     /// Smallest window, pixels (both sides; 0 = the cascade's own size).
     pub min_size_px: u32,
+    /// Where stop signs are searched: [left, top, right, bottom], fractions of the frame
+    /// (0..1); a box must lie inside.
+    pub stop_sign_region: [f64; 4],
+    /// Where traffic lights are searched (as `stop_sign_region`).
+    pub traffic_light_region: [f64; 4],
+    /// Where obstacles are searched (as `stop_sign_region`).
+    pub obstacle_region: [f64; 4],
+    /// Distances at which objects must be found, [near, far] metres along the floor; with the
+    /// box widths below they bound each cascade's window size.
+    pub range_m: [f64; 2],
+    /// Width of what the stop-sign cascade's box frames, [min, max] metres (its box, not the
+    /// sign: trained boxes include a margin).
+    pub stop_sign_box_m: [f64; 2],
+    /// Width of a traffic-light box, [min, max] metres.
+    pub traffic_light_box_m: [f64; 2],
+    /// Width of an obstacle box, [min, max] metres.
+    pub obstacle_box_m: [f64; 2],
+    /// Run the cascades on every Nth frame only; the object tracker (src/ranging/track.rs)
+    /// predicts boxes and ranges from odometry on the frames between. 1 = every frame.
+    pub every_n_frames: u32,
 }
 
 impl Default for DetectConfig {
     fn default() -> Self {
         Self {
             enabled: true,
-            stop_sign: "config/cascades/stop_sign.xml".into(),
-            traffic_light: "config/cascades/traffic_light.xml".into(),
-            obstacle: "config/cascades/obstacle.xml".into(),
+            stop_sign: "cascades/stop_sign.xml".into(),
+            traffic_light: "cascades/traffic_light.xml".into(),
+            obstacle: "cascades/obstacle.xml".into(),
             scale_factor: 1.1,
             min_neighbors: 3,
             min_size_px: 0,
+            stop_sign_region: [0.45, 0.0, 1.0, 0.6],
+            traffic_light_region: [0.45, 0.0, 1.0, 0.6],
+            obstacle_region: [0.0, 0.08, 1.0, 1.0],
+            range_m: [0.2, 1.6],
+            stop_sign_box_m: [0.11, 0.16],
+            traffic_light_box_m: [0.065, 0.10],
+            obstacle_box_m: [0.18, 0.45],
+            every_n_frames: 2,
         }
     }
 }
@@ -909,6 +1383,33 @@ pub struct RangingConfig {
     pub traffic_light_bottom_m: f64,
     /// Height of an obstacle box's bottom edge, metres (0: it stands on the floor).
     pub obstacle_bottom_m: f64,
+    /// [width, height] of the face a stop-sign box frames, metres (0 = unknown: not used).
+    pub stop_sign_size_m: [f64; 2],
+    /// [width, height] of the face a traffic-light box frames (the housing), metres.
+    pub traffic_light_size_m: [f64; 2],
+    /// [width, height] of an obstacle's face, metres (0, 0: obstacles differ; contact row only).
+    pub obstacle_size_m: [f64; 2],
+    /// A stop-sign detector box's size over the face's outline (the training margin).
+    pub stop_sign_box_margin: f64,
+    /// A traffic-light detector box's size over the housing's outline.
+    pub traffic_light_box_margin: f64,
+    /// An obstacle detector box's size over the obstacle's outline.
+    pub obstacle_box_margin: f64,
+    /// σ of a detector box's centre row, pixels.
+    pub box_centre_sigma_px: f64,
+    /// σ of a detector box's size, relative.
+    pub box_size_sigma: f64,
+    /// Object tracker: σ of an object's own acceleration along the line of sight, m/s².
+    pub track_accel_sigma: f64,
+    /// Object tracker: σ of the odometry's distance per frame, relative to that distance.
+    pub track_odometry_sigma: f64,
+    /// Object tracker: a track not matched on this many detection frames in a row is dropped.
+    pub track_max_missed: u32,
+    /// Refine stop-sign and traffic-light boxes by colour (red area, dark housing) before
+    /// ranging them.
+    pub refine_by_colour: bool,
+    /// Share of a stop sign's face (across the flats) that is red inside its white rim.
+    pub stop_sign_red_fraction: f64,
 }
 
 impl Default for RangingConfig {
@@ -919,6 +1420,19 @@ impl Default for RangingConfig {
             stop_sign_bottom_m: 0.12,
             traffic_light_bottom_m: 0.10,
             obstacle_bottom_m: 0.0,
+            stop_sign_size_m: [0.10, 0.10],
+            traffic_light_size_m: [0.0, 0.12],
+            obstacle_size_m: [0.0, 0.0],
+            stop_sign_box_margin: 1.085,
+            traffic_light_box_margin: 1.21,
+            obstacle_box_margin: 1.36,
+            box_centre_sigma_px: 1.0,
+            box_size_sigma: 0.06,
+            track_accel_sigma: 0.5,
+            track_odometry_sigma: 0.1,
+            track_max_missed: 3,
+            refine_by_colour: true,
+            stop_sign_red_fraction: 0.9,
         }
     }
 }
@@ -1002,6 +1516,119 @@ impl Default for BehaviourConfig {
             pass_return_m: 3.5,
             lost_throttle: 0.2,
             lost_stop_s: 1.0,
+        }
+    }
+}
+
+/// `[gpio]`: the Raspberry Pi's GPIO (feature `gpio`, src/gpio/): a start/stop push button, a
+/// status LED and an HC-SR04 ultrasonic sensor as an emergency brake. Pins are BCM numbers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GpioConfig {
+    /// Use the GPIO at all (false on a desk computer).
+    pub enabled: bool,
+    /// Push button to ground, BCM pin (internal pull-up).
+    pub button_pin: u8,
+    /// Status LED with its resistor, BCM pin.
+    pub led_pin: u8,
+    /// An HC-SR04 is wired (false: no ultrasonic brake; its pins are not used).
+    pub ultrasonic: bool,
+    /// HC-SR04 TRIG, BCM pin.
+    pub trig_pin: u8,
+    /// HC-SR04 ECHO through a 5 V -> 3.3 V divider, BCM pin.
+    pub echo_pin: u8,
+    /// A button level must hold this long to count, milliseconds.
+    pub debounce_ms: f64,
+    /// Holding the button this long is a long press, milliseconds (0 = off).
+    pub long_press_ms: f64,
+    /// Brake when the ultrasonic distance is nearer than this, metres.
+    pub brake_m: f64,
+    /// Release the brake beyond this distance, metres (> brake_m).
+    pub release_m: f64,
+    /// Air temperature at the sensor, degrees Celsius (speed of sound).
+    pub sensor_temp_c: f64,
+    /// Ultrasonic readings in the median filter.
+    pub median_n: u32,
+    /// Time between two ultrasonic measurements, milliseconds.
+    pub period_ms: f64,
+}
+
+impl Default for GpioConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            button_pin: 17,
+            led_pin: 27,
+            ultrasonic: true,
+            trig_pin: 23,
+            echo_pin: 24,
+            debounce_ms: 30.0,
+            long_press_ms: 0.0,
+            brake_m: 0.35,
+            release_m: 0.50,
+            sensor_temp_c: 20.0,
+            median_n: 3,
+            period_ms: 60.0,
+        }
+    }
+}
+
+impl GpioConfig {
+    /// The GPIO layer's options (ms -> s; the sensor's fixed limits from its datasheet).
+    pub fn options(&self) -> crate::gpio::GpioOptions {
+        use crate::gpio::{ButtonOptions, EchoTimeouts, GpioOptions, UltrasonicOptions};
+        GpioOptions {
+            button_pin: self.button_pin,
+            led_pin: self.led_pin,
+            ultrasonic: self.ultrasonic,
+            trig_pin: self.trig_pin,
+            echo_pin: self.echo_pin,
+            button: ButtonOptions {
+                debounce_s: self.debounce_ms / 1000.0,
+                long_press_s: (self.long_press_ms > 0.0).then_some(self.long_press_ms / 1000.0),
+            },
+            sonar: UltrasonicOptions {
+                temp_c: self.sensor_temp_c,
+                median_n: self.median_n as usize,
+                brake_m: self.brake_m,
+                release_m: self.release_m,
+                ..UltrasonicOptions::default()
+            },
+            sonar_period_s: self.period_ms / 1000.0,
+            timeouts: EchoTimeouts::default(),
+        }
+    }
+}
+
+/// `[record]`: recording frames and telemetry on the car (src/record.rs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RecordConfig {
+    /// JPEG quality of recorded frames, 1..=100.
+    pub jpeg_quality: u8,
+    /// Disk budget of one recording, megabytes (10^6 bytes); the oldest frames go first.
+    pub max_mb: f64,
+    /// Frames per segment folder (the unit that is deleted when over budget).
+    pub segment_frames: u32,
+}
+
+impl Default for RecordConfig {
+    fn default() -> Self {
+        Self {
+            jpeg_quality: 90,
+            max_mb: 2000.0,
+            segment_frames: 300,
+        }
+    }
+}
+
+impl RecordConfig {
+    /// The recorder's options.
+    pub fn options(&self) -> crate::record::RecordOptions {
+        crate::record::RecordOptions {
+            jpeg_quality: self.jpeg_quality,
+            max_bytes: (self.max_mb * 1e6).round() as u64,
+            segment_frames: self.segment_frames,
         }
     }
 }

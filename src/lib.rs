@@ -16,6 +16,7 @@
 //! passed in, so every test is deterministic.
 
 pub mod annotate;
+pub mod calib;
 pub mod camera;
 pub mod capture;
 #[cfg(feature = "camera")]
@@ -25,12 +26,15 @@ pub mod control;
 pub mod dashboard;
 pub mod detect;
 pub mod drive;
+pub mod gpio;
 pub mod lane;
 pub mod link;
 pub mod pipeline;
 pub mod ranging;
+pub mod record;
 pub mod sim;
 pub mod sink;
 pub mod source;
+pub mod stereo;
 pub mod telemetry;
 pub mod timing;

@@ -6,9 +6,14 @@
 //! 1. lane: bird's-eye warp, edges, histogram → `LaneMeasurement` (src/lane);
 //! 2. detect: the `[detect]` cascades on the frame (src/detect), or boxes handed in
 //!    ([`Pipeline::step_with`], the simulator's ground-truth switch), light state per light box;
-//! 3. ranging: each box's forward distance and side from its bottom row (src/ranging.rs,
-//!    Eq. 5 at the class's contact height);
-//! 4. dead reckoning: speed and distance from the previous command through `[vehicle]`;
+//! 3. dead reckoning: speed and distance from the previous command through `[vehicle]`;
+//! 4. ranging and tracking: each detector box's distance from its size and row, fused, with a
+//!    σ (`BoxRanging::range_detector`, src/ranging.rs; a true box: Eq. 5 on its bottom row);
+//!    then per-object tracks (src/ranging/track.rs: association, a constant-velocity Kalman
+//!    filter in distance with the dead reckoning's distance as its control input). The
+//!    detector runs on every `detect.every_n_frames`-th frame; in between the tracks predict
+//!    boxes and ranges. The objects reported are the tracks matched this frame, and between
+//!    detections the tracks matched at the last one (seen at least twice);
 //! 5. behaviour: the state machine (src/control/behaviour.rs) on these observations;
 //! 6. control: lane PID + throttle policy, overridden or capped by the behaviour's decision.
 //!
@@ -22,8 +27,10 @@ use crate::detect::cascade::CascadeError;
 use crate::detect::detector::DetectParams;
 use crate::detect::light::{LightReading, LightState};
 use crate::detect::stage::{CascadeSpec, DetectStage};
+use crate::detect::Rect;
 use crate::lane::warp::WarpError;
 use crate::lane::{LaneDetector, LaneMeasurement};
+use crate::ranging::track::{Measurement, Tracker, TrackerOptions};
 use crate::ranging::{BoxRanging, ObjectClass};
 use crate::timing::{StageTimer, StageTimes};
 use image::RgbImage;
@@ -83,6 +90,18 @@ pub struct RangedObject {
     /// A traffic light's colour.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub light: Option<LightColor>,
+    /// σ of `distance_m`, metres (the track's filter; absent for an object without a range).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distance_sigma_m: Option<f64>,
+    /// This frame's single-box distance before tracking, metres (absent between detections).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_m: Option<f64>,
+    /// The object's track (the same number across frames).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub track_id: Option<u32>,
+    /// `true` on frames without detection: box and range predicted by the track.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub predicted: bool,
 }
 
 /// Loads the `[detect]` cascades that exist (paths relative to `base`). Returns the stage
@@ -123,6 +142,47 @@ pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectSt
     Ok((Some(DetectStage::load(&specs)?), missing))
 }
 
+/// Where and at which sizes one class is searched (from `[detect]` and the camera).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DetectLimits {
+    /// The cascade's label (`stop_sign`, `traffic_light`, `obstacle`).
+    pub label: &'static str,
+    /// Boxes must lie inside this rectangle, frame pixels.
+    pub region: Rect,
+    /// Smallest window (width, height), pixels.
+    pub min_size: (u32, u32),
+    /// Largest window (width, height), pixels.
+    pub max_size: (u32, u32),
+}
+
+/// The `[detect]` regions and size limits of each class in frame pixels. An object `W` metres
+/// wide at `d` metres is about `f·W/d` pixels wide (pinhole, `f` from `camera.hfov_deg`), so a
+/// box of width `[W_min, W_max]` seen within `range_m = [near, far]` is at least
+/// `⌊f·W_min/far⌋` and at most `⌈f·W_max/near⌉` pixels wide; `min_size_px` still applies.
+/// Only widths are limited (the window's aspect is the cascade's).
+pub fn detect_limits(cfg: &Config) -> [DetectLimits; 3] {
+    let d = &cfg.detect;
+    let f = crate::camera::PinholeCamera::from_config(&cfg.camera).f_px;
+    let (w, h) = (cfg.camera.width as f64, cfg.camera.height as f64);
+    let lim = |label, r: [f64; 4], b: [f64; 2]| {
+        let (x0, y0) = ((r[0] * w).floor() as i32, (r[1] * h).floor() as i32);
+        let (x1, y1) = ((r[2] * w).ceil() as i32, (r[3] * h).ceil() as i32);
+        let min_w = ((f * b[0] / d.range_m[1]).floor() as u32).max(d.min_size_px);
+        let max_w = ((f * b[1] / d.range_m[0]).ceil().min(1e6) as u32).max(min_w).max(1);
+        DetectLimits {
+            label,
+            region: Rect::new(x0, y0, x1 - x0, y1 - y0),
+            min_size: (min_w, d.min_size_px),
+            max_size: (max_w, u32::MAX),
+        }
+    };
+    [
+        lim("stop_sign", d.stop_sign_region, d.stop_sign_box_m),
+        lim("traffic_light", d.traffic_light_region, d.traffic_light_box_m),
+        lim("obstacle", d.obstacle_region, d.obstacle_box_m),
+    ]
+}
+
 /// Lane detection, detection, ranging, behaviour and control, with buffers allocated once.
 #[derive(Debug, Clone)]
 pub struct Pipeline {
@@ -138,6 +198,13 @@ pub struct Pipeline {
     time_s: f64,
     last_throttle: f64,
     objects: Vec<RangedObject>,
+    detect_limits: [DetectLimits; 3],
+    /// Frame rows detection reads (set with the detector).
+    detect_rows: Vec<std::ops::Range<usize>>,
+    tracker: Tracker<Option<LightColor>>,
+    measurements: Vec<Measurement<Option<LightColor>>>,
+    every_n: u64,
+    frame_index: u64,
 }
 
 impl Pipeline {
@@ -157,12 +224,67 @@ impl Pipeline {
             time_s: 0.0,
             last_throttle: 0.0,
             objects: Vec::with_capacity(16),
+            detect_limits: detect_limits(cfg),
+            detect_rows: Vec::new(),
+            tracker: Tracker::new(tracker_options(cfg), BoxRanging::from_config(&cfg.camera, &cfg.ranging).camera),
+            measurements: Vec::with_capacity(16),
+            every_n: cfg.detect.every_n_frames.max(1) as u64,
+            frame_index: 0,
         })
     }
 
-    /// Installs (or removes) the detection stage.
+    /// Installs (or removes) the detection stage, with the `[detect]` regions and size
+    /// limits of each class ([`detect_limits`]).
     pub fn set_detector(&mut self, detect: Option<DetectStage>) {
         self.detect = detect;
+        self.detect_rows.clear();
+        if let Some(d) = &mut self.detect {
+            for l in &self.detect_limits {
+                d.set_limits(l.label, Some(l.region), l.min_size, l.max_size);
+            }
+            self.detect_rows = d.rows_needed(self.width, self.height);
+        }
+    }
+
+    /// Whether detection runs on the pipeline's step `frame_index` (counted from 0): every
+    /// `detect.every_n_frames`-th step while a detector is installed.
+    pub fn detects_on(&self, frame_index: u64) -> bool {
+        self.detect.is_some() && frame_index % self.every_n == 0
+    }
+
+    /// The rows the pipeline will read on its next step (see [`Pipeline::rows_needed`]).
+    pub fn rows_needed_next(&self) -> Vec<std::ops::Range<usize>> {
+        self.rows_needed(self.frame_index)
+    }
+
+    /// The frame rows the pipeline reads on frame `frame_index`, as sorted, disjoint half-open
+    /// ranges of row indices: the lane warp's source rows on every frame, and on frames where
+    /// detection runs ([`Pipeline::detects_on`]) the rows of the detectors' pyramid levels and
+    /// regions. A camera that renders (the simulator) may skip every other row: the output is
+    /// the same as for the whole frame.
+    pub fn rows_needed(&self, frame_index: u64) -> Vec<std::ops::Range<usize>> {
+        let lane = self.lane.warp_map().src_rows();
+        let mut spans = vec![lane.start as usize..lane.end as usize];
+        if self.detects_on(frame_index) {
+            spans.extend(self.detect_rows.iter().cloned());
+            // The light reading looks inside boxes, which lie inside the regions.
+            let h = self.height as i32;
+            for l in &self.detect_limits {
+                let (y0, y1) = (l.region.y.clamp(0, h), (l.region.y + l.region.height).clamp(0, h));
+                if l.label == "traffic_light" && y1 > y0 {
+                    spans.push(y0 as usize..y1 as usize);
+                }
+            }
+        }
+        spans.sort_by_key(|r| r.start);
+        let mut out: Vec<std::ops::Range<usize>> = Vec::with_capacity(spans.len());
+        for r in spans.into_iter().filter(|r| !r.is_empty()) {
+            match out.last_mut() {
+                Some(l) if r.start <= l.end => l.end = l.end.max(r.end),
+                _ => out.push(r),
+            }
+        }
+        out
     }
 
     /// Whether a detector is installed.
@@ -202,15 +324,19 @@ impl Pipeline {
         timer.lap_us();
         // 1. Lane.
         let lane = self.lane.measure(frame, timer, &mut stage_us);
-        // 2.–3. Detections and their ranges.
+        // 2. Detections (on every n-th frame; given boxes on every frame), ranged.
+        let detect_now = given.is_some() || self.frame_index % self.every_n == 0;
+        self.frame_index += 1;
         self.objects.clear();
+        self.measurements.clear();
         match given {
             Some(boxes) => {
                 for b in boxes {
-                    push_ranged(&mut self.objects, &self.ranging, b.class, b.bbox, b.light);
+                    let r = self.ranging.range_outline(b.class, b.bbox);
+                    push_measured(&mut self.measurements, &mut self.objects, b.class, b.bbox, r, b.light);
                 }
             }
-            None => {
+            None if detect_now => {
                 if let Some(det) = &mut self.detect {
                     if let Ok(found) = det.run_rgb(frame) {
                         for d in &found {
@@ -225,16 +351,40 @@ impl Pipeline {
                                 (r.y + r.height) as f64 - 0.5,
                             ];
                             let light = d.light.as_ref().map(|l| light_color(l, frame, r));
-                            push_ranged(&mut self.objects, &self.ranging, class, bbox, light);
+                            let range = self.ranging.range_in_image(frame, class, bbox);
+                            push_measured(&mut self.measurements, &mut self.objects, class, bbox, range, light);
                         }
                     }
                 }
             }
+            None => {}
         }
-        // 4. Dead reckoning: the previous command, held since the previous frame.
+        // 3. Dead reckoning: the previous command, held since the previous frame.
+        let odometry_before = self.dead.odometry_m;
         if dt_s.is_finite() && dt_s > 0.0 {
             self.dead.advance(self.last_throttle, dt_s);
             self.time_s += dt_s;
+        }
+        // 4. Tracks: predicted by odometry, updated on detection frames; the objects reported.
+        self.tracker.predict(dt_s, self.dead.odometry_m - odometry_before);
+        if detect_now {
+            self.tracker.update(&self.measurements);
+        }
+        for t in self.tracker.tracks() {
+            if !(t.matched_now || (!detect_now && t.missed == 0 && t.hits >= 2)) {
+                continue;
+            }
+            self.objects.push(RangedObject {
+                class: t.class,
+                bbox: t.bbox,
+                distance_m: Some(t.distance_m),
+                lateral_m: Some(t.lateral_m),
+                light: t.extra,
+                distance_sigma_m: Some(t.sigma_m()),
+                measured_m: t.matched_now.then_some(t.measured_m),
+                track_id: Some(t.id),
+                predicted: !t.matched_now,
+            });
         }
         // 5. Behaviour.
         let obs = self.observations(lane.error.is_some());
@@ -339,21 +489,45 @@ impl Pipeline {
     }
 }
 
-fn push_ranged(
-    out: &mut Vec<RangedObject>,
-    ranging: &BoxRanging,
+/// The tracker options of `[ranging]`.
+fn tracker_options(cfg: &Config) -> TrackerOptions {
+    TrackerOptions {
+        accel_sigma: cfg.ranging.track_accel_sigma,
+        odometry_sigma: cfg.ranging.track_odometry_sigma,
+        max_missed: cfg.ranging.track_max_missed,
+        ..Default::default()
+    }
+}
+
+/// A ranged box goes to the tracker; one without a range (above the horizon) is reported as
+/// it is, without a distance.
+fn push_measured(
+    meas: &mut Vec<Measurement<Option<LightColor>>>,
+    objects: &mut Vec<RangedObject>,
     class: ObjectClass,
     bbox: [f64; 4],
+    range: Option<crate::ranging::BoxRange>,
     light: Option<LightColor>,
 ) {
-    let r = ranging.range(class, bbox);
-    out.push(RangedObject {
-        class,
-        bbox,
-        distance_m: r.map(|x| x.0),
-        lateral_m: r.map(|x| x.1),
-        light,
-    });
+    match range {
+        Some(range) => meas.push(Measurement {
+            class,
+            bbox,
+            range,
+            extra: light,
+        }),
+        None => objects.push(RangedObject {
+            class,
+            bbox,
+            distance_m: None,
+            lateral_m: None,
+            light,
+            distance_sigma_m: None,
+            measured_m: None,
+            track_id: None,
+            predicted: false,
+        }),
+    }
 }
 
 /// The colour of a traffic light in box `r`: the hue of the most saturated bright pixel (the

@@ -16,6 +16,28 @@
 //! `z = 0` this is Eq. 5 itself. (The alternative, finding the post's foot in the image, needs
 //! the post to be visible and segmented; the known mounting height needs one tape measure.)
 //!
+//! **Detector boxes** ([`BoxRanging::range_detector`]). A cascade's box is the object's face
+//! outline (plus the training margin `m`), widened to the cascade window's aspect, at a size
+//! and position quantised by the detector's scale steps. Two cues, both from the pinhole
+//! model with the tilt (camera frame: depth along the optical axis of a point `z` above the
+//! floor at forward distance `d` is `Z = d·cos α + (h − z)·sin α`):
+//!
+//! ```text
+//!     width:  w_px = f·W / Z(z_top)                      (a fronto-parallel edge of width W)
+//!     height: h_px = f·H·d / (Z(z_b)·Z(z_t))             (a vertical edge from z_b to z_t)
+//!     box:    h_box = m·max(h_px, w_px / aspect),  centre row = (v(z_b) + v(z_t)) / 2,
+//!             v(z) = v0 + a_y·tan(atan((h − z)/d) − α)   (Eq. 5 inverted)
+//! ```
+//!
+//! (the height formula is the difference of two Eq. 5 rows: `tan(a − α) = (k − d·t)/(d + k·t)`
+//! with `k = h − z`, `t = tan α`, and `d + k·t = Z / cos α`). The distance that reproduces the
+//! box's height and the one that reproduces its centre row (or, for an obstacle of unknown
+//! size, Eq. 5 on the outline's bottom row `v_c + h_box/(2m)` at the contact height) are fused
+//! by inverse variance, `d = Σ(d_i/σ_i²) / Σ(1/σ_i²)`, `σ_d² = 1 / Σ(1/σ_i²)`, each `σ_i`
+//! from the box noise through the cue's derivative. [`BoxRanging::range_refined`] does the
+//! same on a pixel-sharp colour outline found inside the box (src/ranging/refine.rs), and
+//! [`track`] follows each object across frames (Kalman filter, odometry as control input).
+//!
 //! Calibration ([`fit`]) finds `α` and `v0` (and optionally `a_y`) from measured pairs
 //! (box-bottom row, true distance) by nonlinear least squares (Gauss–Newton with a
 //! Levenberg–Marquardt damping), minimising the error in the predicted *row*, where the pixel
@@ -24,6 +46,9 @@
 //! Units: metres, radians, pixels.
 
 use crate::camera::PinholeCamera;
+
+pub mod refine;
+pub mod track;
 use serde::{Deserialize, Serialize};
 
 /// The parameters of Eq. 5.
@@ -285,52 +310,328 @@ impl ObjectClass {
     }
 }
 
-/// Ranges image boxes: Eq. 5 on the box bottom at the class's contact height for the
-/// distance, and the camera ray through the bottom centre, cut at that height, for the
-/// lateral position.
+/// What a detector's box of one class frames (`[ranging]`): the object's face, where it
+/// hangs, and how much looser than the face the trained boxes are.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClassBox {
+    /// Width of the face the box spans (a stop sign's face), metres; 0 = unknown (no width cue).
+    pub width_m: f64,
+    /// Height of the face the box spans (a light's housing), metres; 0 = unknown.
+    pub height_m: f64,
+    /// Height above the floor of the face's lower edge, metres (0: it stands on the floor).
+    pub bottom_m: f64,
+    /// Size of the detector's box over the face's outline (the training crops' margin,
+    /// training/src/simgen.rs): 1 = tight, 1.2 = 10% of floor either side.
+    pub margin: f64,
+}
+
+/// One range from one detector box: the fused distance, its uncertainty, and the cues.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoxRange {
+    /// Forward distance from the lens to the object's face, metres (inverse-variance fusion).
+    pub distance_m: f64,
+    /// Its standard deviation, metres.
+    pub sigma_m: f64,
+    /// Lateral offset of the face's bottom centre, metres, left positive.
+    pub lateral_m: f64,
+    /// The distance from the box's size alone and its σ, metres (objects of known size).
+    pub by_size: Option<(f64, f64)>,
+    /// The distance from the box's row alone and its σ, metres.
+    pub by_row: Option<(f64, f64)>,
+}
+
+/// Ranges image boxes.
+///
+/// * [`BoxRanging::range`]: a tight outline (the simulator's true boxes): Eq. 5 on the box
+///   bottom at the class's contact height for the distance, and the camera ray through the
+///   bottom centre, cut at that height, for the lateral position.
+/// * [`BoxRanging::range_detector`]: a cascade's box (fixed aspect, a training margin, size
+///   and position quantised by the pyramid): the pinhole model of the face (module notes)
+///   predicts the box's height and centre row from the distance; each is inverted for a
+///   distance and the two are fused by their inverse variances.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BoxRanging {
     /// Eq. 5 with the calibrated tilt, v0 and a_y.
     pub tilt: TiltRanging,
     /// The camera with the same calibration (for the lateral position).
     pub camera: PinholeCamera,
-    /// Box-bottom heights above the floor: stop sign, traffic light, obstacle, metres.
-    pub bottom_m: [f64; 3],
+    /// What each class's box frames: stop sign, traffic light, obstacle.
+    pub classes: [ClassBox; 3],
+    /// σ of a detector box's centre row, pixels.
+    pub centre_sigma_px: f64,
+    /// σ of a detector box's size, relative (0.04 = 4%).
+    pub size_sigma: f64,
+    /// Refine detector boxes by colour (src/ranging/refine.rs) before ranging.
+    pub refine: bool,
+    /// The share of a stop sign's face (across the flats) that is red inside its white rim.
+    pub red_fraction: f64,
 }
 
 impl BoxRanging {
     /// From `[camera]` (tilt, possibly calibrated) and `[ranging]` (v0 offset, a_y scale,
-    /// contact heights).
+    /// what each class's box frames, box noise).
     pub fn from_config(cam: &crate::config::CameraConfig, r: &crate::config::RangingConfig) -> Self {
         let mut camera = PinholeCamera::from_config(cam);
         camera.v0 += r.v0_offset_px;
         camera.f_px *= r.a_y_scale;
+        let class = |size: [f64; 2], bottom_m: f64, margin: f64| ClassBox {
+            width_m: size[0],
+            height_m: size[1],
+            bottom_m,
+            margin,
+        };
         Self {
             tilt: TiltRanging::from_camera(&camera),
             camera,
-            bottom_m: [r.stop_sign_bottom_m, r.traffic_light_bottom_m, r.obstacle_bottom_m],
+            classes: [
+                class(r.stop_sign_size_m, r.stop_sign_bottom_m, r.stop_sign_box_margin),
+                class(r.traffic_light_size_m, r.traffic_light_bottom_m, r.traffic_light_box_margin),
+                class(r.obstacle_size_m, r.obstacle_bottom_m, r.obstacle_box_margin),
+            ],
+            centre_sigma_px: r.box_centre_sigma_px,
+            size_sigma: r.box_size_sigma,
+            refine: r.refine_by_colour,
+            red_fraction: r.stop_sign_red_fraction,
         }
     }
 
     /// The contact height of a class's box bottom, metres.
     pub fn bottom_of(&self, class: ObjectClass) -> f64 {
-        self.bottom_m[class as usize]
+        self.classes[class as usize].bottom_m
     }
 
     /// Forward distance and lateral offset (left positive) from the lens of an object of
-    /// `class` whose box is `[left, top, right, bottom]` (pixel-centre coordinates; a detector
-    /// box of rows y..y+h−1 has its bottom edge at y + h − 0.5). `None` above the horizon.
+    /// `class` whose tight outline is `[left, top, right, bottom]` (pixel-centre coordinates;
+    /// a box of rows y..y+h−1 has its bottom edge at y + h − 0.5). `None` above the horizon.
     pub fn range(&self, class: ObjectClass, bbox: [f64; 4]) -> Option<(f64, f64)> {
         let z = self.bottom_of(class);
         // 1. Eq. 5 on the bottom row gives the forward distance to the plane at height z.
         let d = self.tilt.distance(bbox[3], z)?;
-        // 2. The ray through the bottom centre, scaled to that forward distance, gives the side.
+        Some((d, self.lateral(bbox, d)))
+    }
+
+    /// [`BoxRanging::range`] with a σ: the row is known to half a pixel (snapped to the pixel
+    /// grid), `σ = 0.5 / |∂v/∂d|` (the derivative of Eq. 5's inverse).
+    pub fn range_outline(&self, class: ObjectClass, bbox: [f64; 4]) -> Option<BoxRange> {
+        let (d, lateral_m) = self.range(class, bbox)?;
+        let z = self.bottom_of(class);
+        let slope = ((self.tilt.row(d * 1.001, z) - self.tilt.row(d * 0.999, z)) / (0.002 * d)).abs();
+        let sigma = (0.5 / slope.max(1e-9)).max(1e-4);
+        Some(BoxRange {
+            distance_m: d,
+            sigma_m: sigma,
+            lateral_m,
+            by_size: None,
+            by_row: Some((d, sigma)),
+        })
+    }
+
+    /// The lateral offset of an object at forward distance `d` whose box is `bbox`: the ray
+    /// through the box's centre column at the bottom row, scaled to that forward distance.
+    fn lateral(&self, bbox: [f64; 4], d: f64) -> f64 {
         let r = self.camera.ray((bbox[0] + bbox[2]) / 2.0, bbox[3]);
         if r[0] <= 1e-9 {
+            return self.camera.lateral_m;
+        }
+        self.camera.lateral_m + d * r[1] / r[0]
+    }
+
+    /// Depth along the optical axis of a point `z` above the floor at forward distance `d`:
+    /// `Z = d cos α + (h − z) sin α`, metres.
+    pub fn depth(&self, d: f64, z: f64) -> f64 {
+        let (s, c) = self.tilt.alpha.sin_cos();
+        d * c + (self.tilt.h - z) * s
+    }
+
+    /// The detector box height (pixels) and centre row the class's face at forward distance
+    /// `d` gives, for boxes of aspect `aspect` (width / height): the face's outline
+    /// (rows by Eq. 5, width `f·W/Z` at its top edge), widened to the aspect, times the margin.
+    /// The centre row is `None` when the face's height is unknown.
+    pub fn predicted_box(&self, class: ObjectClass, d: f64, aspect: f64) -> (f64, Option<f64>) {
+        let cb = &self.classes[class as usize];
+        let z_top = cb.bottom_m + cb.height_m;
+        let v_bottom = self.tilt.row(d, cb.bottom_m);
+        let (mut h, mut centre) = (0.0f64, None);
+        if cb.height_m > 0.0 {
+            let v_top = self.tilt.row(d, z_top);
+            h = v_bottom - v_top;
+            centre = Some((v_bottom + v_top) / 2.0);
+        }
+        if cb.width_m > 0.0 && aspect > 0.0 {
+            // A fronto-parallel edge of width W at depth Z spans f·W/Z pixels; for a camera
+            // looking down the top edge is the nearest, so the widest.
+            h = h.max(self.camera.f_px * cb.width_m / self.depth(d, z_top) / aspect);
+        }
+        (h * cb.margin, centre)
+    }
+
+    /// The fused range of a detector box `bbox` of `class` (pixel-centre coordinates).
+    /// `None` when no cue gives a distance (box above the horizon, or of a size the face cannot
+    /// have in 0.05..50 m).
+    ///
+    /// 1. Size cue (face width and/or height known): the distance whose predicted box height
+    ///    equals the box's (bisection; the height falls monotonically with distance there);
+    ///    σ = σ_size·h / |∂h/∂d|.
+    /// 2. Row cue: with a known face height, the distance whose predicted centre row equals
+    ///    the box's (the margin and the widening to the aspect are symmetric about it), σ =
+    ///    σ_centre / |∂v/∂d|; without (an obstacle), Eq. 5 on the outline's bottom row
+    ///    `v_c + h/(2·margin)` at the contact height, σ from the row's σ (centre and size).
+    /// 3. Inverse-variance fusion: `d = Σ d_i/σ_i² / Σ 1/σ_i²`, `σ² = 1 / Σ 1/σ_i²`.
+    pub fn range_detector(&self, class: ObjectClass, bbox: [f64; 4]) -> Option<BoxRange> {
+        let cb = self.classes[class as usize];
+        let (hb, wb) = (bbox[3] - bbox[1], bbox[2] - bbox[0]);
+        if !(hb > 0.0 && wb > 0.0) {
             return None;
         }
-        Some((d, self.camera.lateral_m + d * r[1] / r[0]))
+        let (aspect, vc) = (wb / hb, (bbox[1] + bbox[3]) / 2.0);
+        let deriv = |f: &dyn Fn(f64) -> f64, d: f64| (f(d * 1.001) - f(d * 0.999)) / (0.002 * d);
+        // 1. Size.
+        let by_size = if cb.width_m > 0.0 || cb.height_m > 0.0 {
+            let hf = |d: f64| self.predicted_box(class, d, aspect).0;
+            solve_monotone(&hf, hb, 0.05, 50.0).map(|d| {
+                let slope = deriv(&hf, d).abs().max(1e-9);
+                (d, self.size_sigma * hb / slope)
+            })
+        } else {
+            None
+        };
+        // 2. Row.
+        let by_row = if cb.height_m > 0.0 {
+            let cf = |d: f64| self.predicted_box(class, d, aspect).1.unwrap_or(f64::NAN);
+            solve_monotone(&cf, vc, 0.05, 50.0).map(|d| {
+                let slope = deriv(&cf, d).abs().max(1e-9);
+                (d, self.centre_sigma_px / slope)
+            })
+        } else {
+            let half = hb / (2.0 * cb.margin);
+            self.tilt.distance(vc + half, cb.bottom_m).map(|d| {
+                let slope = deriv(&|x: f64| self.tilt.row(x, cb.bottom_m), d).abs().max(1e-9);
+                let sv = (self.centre_sigma_px.powi(2) + (self.size_sigma * half).powi(2)).sqrt();
+                (d, sv / slope)
+            })
+        };
+        // 3. Fusion.
+        let (mut num, mut den) = (0.0, 0.0);
+        for (d, s) in [by_size, by_row].into_iter().flatten() {
+            let w = 1.0 / (s * s).max(1e-12);
+            num += w * d;
+            den += w;
+        }
+        if den <= 0.0 {
+            return None;
+        }
+        let d = num / den;
+        // The face's bottom edge, for the lateral ray: the box shrunk by its margin.
+        let mut outline = bbox;
+        outline[3] = vc + hb / (2.0 * cb.margin);
+        Some(BoxRange {
+            distance_m: d,
+            sigma_m: den.sqrt().recip(),
+            lateral_m: self.lateral(outline, d),
+            by_size,
+            by_row,
+        })
     }
+}
+
+impl BoxRanging {
+    /// The range of a detector box, refined by the object's colour when `[ranging]
+    /// refine_by_colour` is on and the outline found agrees with the box (within 3σ of the box's
+    /// own range, or within 25%: the box's σ underestimates its worst scale errors):
+    /// [`BoxRanging::range_refined`], else [`BoxRanging::range_detector`].
+    pub fn range_in_image(&self, img: &image::RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<BoxRange> {
+        let coarse = self.range_detector(class, bbox);
+        if !self.refine {
+            return coarse;
+        }
+        let fine = refine::outline(img, class, bbox).and_then(|o| self.range_refined(class, o));
+        match (coarse, fine) {
+            (Some(c), Some(f)) if (f.distance_m - c.distance_m).abs() <= (3.0 * c.sigma_m).max(0.25 * c.distance_m) => Some(f),
+            (None, Some(f)) => Some(f),
+            (c, _) => c,
+        }
+    }
+
+    /// The range of a colour outline (src/ranging/refine.rs) of a stop sign's red area or a
+    /// light's housing, each edge known to `σ_e = 0.5` px. Cues, fused by inverse variance:
+    ///
+    /// 1. width (stop sign): the red area, `red_fraction·W` wide, is widest at the face's
+    ///    centre height z_c: `Z = f·W_r / w_px`, `d = (Z − (h − z_c)·sin α) / cos α`;
+    /// 2. height: a vertical edge from z_b to z_t at forward distance d spans
+    ///    `f·H·d / (Z_b·Z_t)` rows (`Z_i = d cos α + (h − z_i) sin α`), solved for d;
+    /// 3. bottom row: Eq. 5 at z_b.
+    pub fn range_refined(&self, class: ObjectClass, o: [f64; 4]) -> Option<BoxRange> {
+        const SIGMA_EDGE: f64 = 0.5;
+        let cb = self.classes[class as usize];
+        let (w_px, h_px) = (o[2] - o[0], o[3] - o[1]);
+        if !(w_px > 0.0 && h_px > 0.0) || cb.height_m <= 0.0 {
+            return None;
+        }
+        // The coloured part: the red area of a sign (centred on the face), a light's housing.
+        let k = if class == ObjectClass::StopSign { self.red_fraction } else { 1.0 };
+        let (hh, zc) = (cb.height_m * k, cb.bottom_m + cb.height_m / 2.0);
+        let (zb, zt) = (zc - hh / 2.0, zc + hh / 2.0);
+        let (s, c) = self.tilt.alpha.sin_cos();
+        let f = self.camera.f_px;
+        let mut cues: [Option<(f64, f64)>; 3] = [None; 3];
+        let sw = SIGMA_EDGE * std::f64::consts::SQRT_2;
+        // 1. Width.
+        if class == ObjectClass::StopSign && cb.width_m > 0.0 {
+            let z = f * cb.width_m * k / w_px;
+            let d = (z - (self.tilt.h - zc) * s) / c;
+            if d > 0.0 {
+                cues[0] = Some((d, z / w_px / c * sw));
+            }
+        }
+        // 2. Height.
+        let hf = |d: f64| f * hh * d / (self.depth(d, zb) * self.depth(d, zt));
+        if let Some(d) = solve_monotone(&hf, h_px, 0.05, 50.0) {
+            let slope = ((hf(d * 1.001) - hf(d * 0.999)) / (0.002 * d)).abs().max(1e-9);
+            cues[1] = Some((d, sw / slope));
+        }
+        // 3. Bottom row.
+        if let Some(d) = self.tilt.distance(o[3], zb) {
+            let slope = ((self.tilt.row(d * 1.001, zb) - self.tilt.row(d * 0.999, zb)) / (0.002 * d)).abs();
+            cues[2] = Some((d, SIGMA_EDGE / slope.max(1e-9)));
+        }
+        let (mut num, mut den) = (0.0, 0.0);
+        for (d, sd) in cues.into_iter().flatten() {
+            let w = 1.0 / (sd * sd).max(1e-12);
+            num += w * d;
+            den += w;
+        }
+        if den <= 0.0 {
+            return None;
+        }
+        let d = num / den;
+        Some(BoxRange {
+            distance_m: d,
+            sigma_m: den.sqrt().recip(),
+            lateral_m: self.lateral(o, d),
+            by_size: cues[0].or(cues[1]),
+            by_row: cues[2],
+        })
+    }
+}
+
+/// The `d` in `[lo, hi]` where the monotonic function `f` equals `target` (bisection on
+/// log d), or `None` when `target` is outside `f`'s range there.
+fn solve_monotone(f: &dyn Fn(f64) -> f64, target: f64, lo: f64, hi: f64) -> Option<f64> {
+    let (flo, fhi) = (f(lo), f(hi));
+    if !(flo.is_finite() && fhi.is_finite() && target.is_finite()) || target > flo.max(fhi) || target < flo.min(fhi) {
+        return None;
+    }
+    let falling = flo > fhi;
+    let (mut a, mut b) = (lo.ln(), hi.ln());
+    for _ in 0..60 {
+        let m = 0.5 * (a + b);
+        if (f(m.exp()) > target) == falling {
+            a = m;
+        } else {
+            b = m;
+        }
+    }
+    Some((0.5 * (a + b)).exp())
 }
 
 /// Parses `row,distance[,height]` lines (a header line and `#` comments are skipped). Errors
@@ -488,6 +789,60 @@ mod tests {
             fit(&[p, p, bad], nominal(), FitOptions::default()),
             Err(FitError::BadPair { index: 2, .. })
         ));
+    }
+
+    fn box_ranging() -> BoxRanging {
+        BoxRanging::from_config(&CameraConfig::default(), &crate::config::RangingConfig::default())
+    }
+
+    #[test]
+    fn the_height_formula_is_the_difference_of_two_eq5_rows() {
+        let b = box_ranging();
+        let f = b.camera.f_px;
+        for &d in &[0.3, 0.7, 1.5] {
+            let (zb, zt) = (0.10, 0.22);
+            let rows = b.tilt.row(d, zb) - b.tilt.row(d, zt);
+            let formula = f * (zt - zb) * d / (b.depth(d, zb) * b.depth(d, zt));
+            assert!((rows - formula).abs() < 1e-9, "{rows} vs {formula}");
+        }
+    }
+
+    #[test]
+    fn a_box_the_model_predicts_is_ranged_back_to_its_distance() {
+        let b = box_ranging();
+        for class in [ObjectClass::StopSign, ObjectClass::TrafficLight, ObjectClass::Obstacle] {
+            for &d in &[0.3, 0.8, 1.5] {
+                let aspect = if class == ObjectClass::TrafficLight { 0.4 } else { 1.25 };
+                let cb = b.classes[class as usize];
+                let (h, c) = b.predicted_box(class, d, aspect);
+                // An obstacle (size unknown): a box whose outline bottom is on Eq. 5's row.
+                let c = c.unwrap_or_else(|| b.tilt.row(d, cb.bottom_m) - h / (2.0 * cb.margin));
+                let u = b.camera.u0;
+                let bbox = [u - aspect * h / 2.0, c - h / 2.0, u + aspect * h / 2.0, c + h / 2.0];
+                let r = b.range_detector(class, bbox).unwrap();
+                assert!((r.distance_m - d).abs() < 1e-6 * d, "{class:?} at {d}: {r:?}");
+                assert!(r.sigma_m > 0.0 && r.sigma_m < 0.2 * d);
+                // Fusion never gives more weight than the better cue deserves.
+                let best = [r.by_size, r.by_row].into_iter().flatten().map(|c| c.1).fold(f64::INFINITY, f64::min);
+                assert!(r.sigma_m <= best + 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn an_exact_colour_outline_is_ranged_back_to_its_distance() {
+        let b = box_ranging();
+        let cam = b.camera;
+        for &d in &[0.3, 0.8, 1.5] {
+            // A sign's red area: 0.09 m square centred 0.17 m up, straight ahead.
+            let (_, t) = cam.project([d, 0.045, 0.215]).unwrap();
+            let (r, _) = cam.project([d, -0.045, 0.17]).unwrap();
+            let (_, bo) = cam.project([d, 0.0, 0.125]).unwrap();
+            // The widest row is the centre: use its width, the face's top and bottom rows.
+            let (l2, _) = cam.project([d, 0.045, 0.17]).unwrap();
+            let got = b.range_refined(ObjectClass::StopSign, [l2, t, r, bo]).unwrap();
+            assert!(((got.distance_m - d) / d).abs() < 1e-3, "at {d}: {got:?}");
+        }
     }
 
     #[test]

@@ -1,11 +1,22 @@
 //! Where frames come from: the camera, a folder of recorded images, or the simulator.
 //!
 //! A [`FrameSource`] yields frames one by one. A frame that cannot be used (unreadable file,
-//! too small) is reported as an `Err` for that frame only, so the caller can name it, count
-//! it and go on: one bad frame never ends a run.
+//! damaged, too small, too large) is reported as an `Err` for that frame only, so the caller
+//! can name it, count it and go on: one bad frame never ends a run.
+//!
+//! Reading an image file ([`read_image`]) goes in three steps:
+//! 1. structure check of the bytes ([`image_damage`]): a JPEG must reach its end-of-image
+//!    marker (a JPEG cut short otherwise decodes with its missing part filled grey, with no
+//!    error), a PNG must have every chunk complete with a matching CRC and an IEND;
+//! 2. the size from the header, against [`crate::config::limits`], before any pixel is
+//!    allocated;
+//! 3. the decode itself ([`decode_image`], one function so another decoder can replace it).
+//!
+//! File names are kept lossless ([`escape_name`]) and output names unique ([`output_name`]).
 
 use crate::pipeline::GivenBox;
 use image::RgbImage;
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 
 /// One frame and where it came from.
@@ -15,7 +26,8 @@ pub struct Frame {
     pub index: u64,
     /// Time since the start of the sequence, seconds: the time the pipeline sees (dt).
     pub time_s: f64,
-    /// File name or label.
+    /// File name or label, escaped by [`escape_name`] (lossless for any file name); the
+    /// same string names the frame in telemetry and, through [`output_name`], on disk.
     pub name: String,
     /// The image, resized to the configured camera size.
     pub image: RgbImage,
@@ -85,12 +97,12 @@ impl FrameError {
 #[derive(Debug, thiserror::Error)]
 pub enum SourceError {
     /// The folder cannot be listed.
-    #[error("{path}: cannot read folder: {source}")]
+    #[error("{path}: cannot read folder: {error}")]
     Io {
         /// The folder.
         path: PathBuf,
-        /// Underlying error.
-        source: std::io::Error,
+        /// Underlying error (in the message, not repeated as a source).
+        error: std::io::Error,
     },
     /// The folder has no PNG or JPEG files.
     #[error("{0}: no .png/.jpg/.jpeg frames in this folder")]
@@ -117,6 +129,8 @@ pub struct ReplayDir {
     width: u32,
     height: u32,
     min_size: (u32, u32),
+    /// A recording's frame times (frame index → seconds), see [`ReplayDir::with_recorded_times`].
+    times: Option<std::collections::BTreeMap<u64, f64>>,
 }
 
 fn is_frame_file(p: &Path) -> bool {
@@ -130,23 +144,32 @@ fn is_frame_file(p: &Path) -> bool {
 }
 
 impl ReplayDir {
-    /// Lists `dir`. Frames are `1/fps` seconds apart and resized to `width × height`; a frame
+    /// Lists `dir`: its PNG/JPEG files in name order, then the frames of its segment folders
+    /// `seg_*` (a recording, see `record`), folder by folder. Frames are `1/fps` seconds apart and resized to `width × height`; a frame
     /// smaller than `min_size` (the ROI's extent) is refused rather than blown up.
     pub fn open(dir: &Path, fps: f64, width: u32, height: u32, min_size: (u32, u32)) -> Result<Self, SourceError> {
-        let entries = std::fs::read_dir(dir).map_err(|source| SourceError::Io {
+        let entries = std::fs::read_dir(dir).map_err(|error| SourceError::Io {
             path: dir.into(),
-            source,
+            error,
         })?;
         let mut files = Vec::new();
         let mut ignored = Vec::new();
+        let mut segments = Vec::new();
         for e in entries {
-            let e = e.map_err(|source| SourceError::Io {
+            let e = e.map_err(|error| SourceError::Io {
                 path: dir.into(),
-                source,
+                error,
             })?;
             let p = e.path();
-            let name = e.file_name().to_string_lossy().to_string();
-            if name.starts_with('.') || p.is_dir() {
+            let name = escape_name(&e.file_name());
+            if name.starts_with('.') {
+                continue;
+            }
+            if p.is_dir() {
+                // A recording (src/record.rs) keeps its frames in segment folders seg_NNNNNN.
+                if name.starts_with(crate::record::SEGMENT_PREFIX) {
+                    segments.push(p);
+                }
                 continue;
             }
             if is_frame_file(&p) {
@@ -155,10 +178,25 @@ impl ReplayDir {
                 ignored.push(name);
             }
         }
+        files.sort();
+        // Then each segment's frames, segments in name (= time) order.
+        segments.sort();
+        for seg in &segments {
+            let entries = std::fs::read_dir(seg).map_err(|error| SourceError::Io {
+                path: seg.clone(),
+                error,
+            })?;
+            let mut in_seg: Vec<PathBuf> = entries
+                .flatten()
+                .map(|e| e.path())
+                .filter(|p| is_frame_file(p) && !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with('.')))
+                .collect();
+            in_seg.sort();
+            files.extend(in_seg);
+        }
         if files.is_empty() {
             return Err(SourceError::Empty(dir.into()));
         }
-        files.sort();
         ignored.sort();
         Ok(Self {
             files,
@@ -168,7 +206,17 @@ impl ReplayDir {
             width,
             height,
             min_size,
+            times: None,
         })
+    }
+
+    /// Uses a recording's own frame numbers and times (`crate::record::recorded_times`) for the
+    /// frames named `frame_NNNNNNNNN.jpg`, so a replay sees the time steps the car saw (the car
+    /// drops late frames; they are not always 1/fps apart). Other names keep 1/fps.
+    pub fn with_recorded_times(mut self, times: std::collections::BTreeMap<u64, f64>) -> Self {
+        self.ignored.retain(|n| n != crate::record::TELEMETRY_FILE);
+        self.times = Some(times);
+        self
     }
 
     /// Files in the folder that are not frames (named in the summary, never silently dropped).
@@ -177,28 +225,7 @@ impl ReplayDir {
     }
 
     fn load(&self, path: &Path) -> Result<RgbImage, String> {
-        let meta = std::fs::metadata(path).map_err(|e| e.to_string())?;
-        if meta.len() == 0 {
-            return Err("empty file (0 bytes)".into());
-        }
-        let img = image::ImageReader::open(path)
-            .and_then(|r| r.with_guessed_format())
-            .map_err(|e| e.to_string())?
-            .decode()
-            .map_err(|e| format!("not a readable image: {e}"))?
-            .to_rgb8();
-        let (w, h) = img.dimensions();
-        if w < self.min_size.0 || h < self.min_size.1 {
-            return Err(format!(
-                "{w}×{h} is smaller than the ROI (needs at least {}×{})",
-                self.min_size.0, self.min_size.1
-            ));
-        }
-        Ok(if (w, h) == (self.width, self.height) {
-            img
-        } else {
-            image::imageops::resize(&img, self.width, self.height, image::imageops::FilterType::Triangle)
-        })
+        load_frame(path, self.width, self.height, self.min_size)
     }
 }
 
@@ -207,17 +234,331 @@ impl FrameSource for ReplayDir {
         let path = self.files.get(self.next)?.clone();
         let index = self.next as u64;
         self.next += 1;
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().to_string())
-            .unwrap_or_default();
+        let name = path.file_name().map(escape_name).unwrap_or_default();
+        let (index, time_s) = self
+            .times
+            .as_ref()
+            .and_then(|t| {
+                let i = crate::record::frame_index(&name)?;
+                Some((i, *t.get(&i)?))
+            })
+            .unwrap_or((index, index as f64 / self.fps));
         Some(match self.load(&path) {
-            Ok(image) => Ok(Frame::new(index, index as f64 / self.fps, name, image)),
+            Ok(image) => Ok(Frame::new(index, time_s, name, image)),
             Err(reason) => Err(FrameError::bad(index, name, reason)),
         })
     }
 
     fn len_hint(&self) -> Option<usize> {
         Some(self.files.len())
+    }
+}
+
+/// A file name as text, lossless: valid UTF-8 is kept, a backslash becomes `\\`, and every
+/// byte that is not UTF-8 becomes `\xNN` (so two different names never give the same text).
+pub fn escape_name(name: &OsStr) -> String {
+    #[cfg(unix)]
+    let bytes: std::borrow::Cow<[u8]> = {
+        use std::os::unix::ffi::OsStrExt;
+        std::borrow::Cow::Borrowed(name.as_bytes())
+    };
+    #[cfg(not(unix))]
+    let bytes: std::borrow::Cow<[u8]> = std::borrow::Cow::Owned(name.to_string_lossy().into_owned().into_bytes());
+    let mut out = String::with_capacity(bytes.len());
+    for chunk in bytes.utf8_chunks() {
+        out.push_str(&chunk.valid().replace('\\', "\\\\"));
+        for b in chunk.invalid() {
+            out.push_str(&format!("\\x{b:02X}"));
+        }
+    }
+    out
+}
+
+/// The output file name for a frame named `name` (an [`escape_name`] text): the whole name,
+/// extension included, plus `.png` (`a.jpg` → `a.jpg.png`, `a.png` → `a.png.png`), so frames
+/// `a.jpg` and `a.png` of one folder never overwrite each other's output.
+pub fn output_name(name: &str) -> String {
+    format!("{name}.png")
+}
+
+/// The smallest frame worth resizing for an ROI `src` on a `width × height` camera: the ROI's
+/// extent (a smaller frame would be blown up, not measured).
+pub fn min_frame_size(src: &[[f64; 2]; 4], width: u32, height: u32) -> (u32, u32) {
+    let max_x = src.iter().map(|p| p[0]).fold(0.0f64, f64::max);
+    let max_y = src.iter().map(|p| p[1]).fold(0.0f64, f64::max);
+    ((max_x.ceil() as u32).min(width), (max_y.ceil() as u32).min(height))
+}
+
+/// Reads an image file for the pipeline: [`read_image`], refused when smaller than `min_size`,
+/// resized to `width × height`.
+pub fn load_frame(path: &Path, width: u32, height: u32, min_size: (u32, u32)) -> Result<RgbImage, String> {
+    let img = read_image(path)?.to_rgb8();
+    let (w, h) = img.dimensions();
+    if w < min_size.0 || h < min_size.1 {
+        return Err(format!(
+            "{w}×{h} is smaller than the ROI (needs at least {}×{})",
+            min_size.0, min_size.1
+        ));
+    }
+    Ok(if (w, h) == (width, height) {
+        img
+    } else {
+        image::imageops::resize(&img, width, height, image::imageops::FilterType::Triangle)
+    })
+}
+
+/// Reads, checks and decodes one image file (PNG or JPEG). The error says what is wrong
+/// (without the file name, which the caller adds).
+pub fn read_image(path: &Path) -> Result<image::DynamicImage, String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read: {e}"))?;
+    if bytes.is_empty() {
+        return Err("empty file (0 bytes)".into());
+    }
+    if let Some(why) = image_damage(&bytes) {
+        return Err(why);
+    }
+    decode_image(&bytes)
+}
+
+/// Decodes image bytes after checking the size in the header against
+/// [`crate::config::limits`]; the one place that calls the decoder.
+pub fn decode_image(bytes: &[u8]) -> Result<image::DynamicImage, String> {
+    use crate::config::limits::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
+    let reader = || {
+        image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| format!("cannot read: {e}"))
+    };
+    let (w, h) = reader()?
+        .into_dimensions()
+        .map_err(|e| format!("not a readable image: {e}"))?;
+    if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE || w as u64 * h as u64 > MAX_IMAGE_PIXELS {
+        return Err(format!(
+            "{w}×{h} pixels is outside the image limit (1..={MAX_IMAGE_SIDE} per side, at most {} megapixels)",
+            MAX_IMAGE_PIXELS / 1_000_000
+        ));
+    }
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE);
+    limits.max_alloc = Some(MAX_IMAGE_PIXELS * 8);
+    let mut r = reader()?;
+    r.limits(limits);
+    r.decode().map_err(|e| format!("not a readable image: {e}"))
+}
+
+/// Damage a decoder would not report: a JPEG whose data ends before its end-of-image marker
+/// (cut short while copying: the missing part would decode as flat grey), a PNG chunk that
+/// is cut short or fails its CRC, a PNG without IEND. `None` when the structure is whole
+/// (or the format is neither, left to the decoder).
+pub fn image_damage(bytes: &[u8]) -> Option<String> {
+    if bytes.starts_with(&[0xFF, 0xD8]) {
+        jpeg_damage(bytes)
+    } else if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        png_damage(bytes)
+    } else {
+        None
+    }
+}
+
+/// Walks the JPEG marker segments and entropy-coded scans up to EOI.
+fn jpeg_damage(b: &[u8]) -> Option<String> {
+    let n = b.len();
+    let truncated = |at: usize, what: &str| {
+        Some(format!(
+            "damaged JPEG: the file ends at byte {n} {what} (at byte {at}), before the end-of-image marker; it was cut short (the missing part would decode as grey)"
+        ))
+    };
+    let mut pos = 2;
+    let mut scans = 0;
+    loop {
+        // 1. A marker: 0xFF, optional fill bytes, the code.
+        if pos >= n {
+            return truncated(pos, "between segments");
+        }
+        if b[pos] != 0xFF {
+            return Some(format!(
+                "damaged JPEG: byte {pos} should start a marker (0xFF), found 0x{:02X}",
+                b[pos]
+            ));
+        }
+        while pos < n && b[pos] == 0xFF {
+            pos += 1;
+        }
+        if pos >= n {
+            return truncated(pos, "inside a marker");
+        }
+        let code = b[pos];
+        pos += 1;
+        match code {
+            0xD9 => {
+                return (scans == 0).then(|| "damaged JPEG: it ends (EOI) before any image data".to_string());
+            }
+            0xD0..=0xD7 | 0x01 => continue,
+            _ => {}
+        }
+        // 2. A segment with a length.
+        if pos + 2 > n {
+            return truncated(pos, &format!("inside the length of segment 0xFF{code:02X}"));
+        }
+        let len = u16::from_be_bytes([b[pos], b[pos + 1]]) as usize;
+        if len < 2 {
+            return Some(format!(
+                "damaged JPEG: segment 0xFF{code:02X} at byte {pos} has length {len}"
+            ));
+        }
+        if pos + len > n {
+            return truncated(pos, &format!("inside segment 0xFF{code:02X} of {len} bytes"));
+        }
+        pos += len;
+        if code == 0xDA {
+            // 3. Entropy-coded data: runs until a marker other than a stuffed 0xFF00 or RSTn.
+            scans += 1;
+            let start = pos;
+            loop {
+                match b[pos..].iter().position(|&x| x == 0xFF) {
+                    None => return truncated(start, "inside the image data of a scan"),
+                    Some(k) => {
+                        pos += k;
+                        let mut q = pos + 1;
+                        while q < n && b[q] == 0xFF {
+                            q += 1;
+                        }
+                        if q >= n {
+                            return truncated(start, "inside the image data of a scan");
+                        }
+                        match b[q] {
+                            0x00 | 0xD0..=0xD7 => pos = q + 1,
+                            _ => break,
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Walks the PNG chunks: complete, CRC-checked, up to IEND.
+fn png_damage(b: &[u8]) -> Option<String> {
+    let n = b.len();
+    let mut pos = 8;
+    let mut first = true;
+    loop {
+        if pos + 8 > n {
+            return Some(format!(
+                "damaged PNG: the file ends at byte {n}, before the IEND chunk; it was cut short"
+            ));
+        }
+        let len = u32::from_be_bytes([b[pos], b[pos + 1], b[pos + 2], b[pos + 3]]) as usize;
+        let kind = &b[pos + 4..pos + 8];
+        let name = String::from_utf8_lossy(kind).into_owned();
+        if first && kind != b"IHDR" {
+            return Some("damaged PNG: the first chunk is not IHDR".into());
+        }
+        first = false;
+        if len > n || pos + 12 + len > n {
+            return Some(format!(
+                "damaged PNG: chunk {name} at byte {pos} needs {len} bytes but the file ends at byte {n}; it was cut short"
+            ));
+        }
+        let crc = u32::from_be_bytes([b[pos + 8 + len], b[pos + 9 + len], b[pos + 10 + len], b[pos + 11 + len]]);
+        if crc32(&b[pos + 4..pos + 8 + len]) != crc {
+            return Some(format!(
+                "damaged PNG: chunk {name} at byte {pos} fails its CRC (the bytes were changed)"
+            ));
+        }
+        if kind == b"IEND" {
+            return None;
+        }
+        pos += 12 + len;
+    }
+}
+
+/// CRC-32 (IEEE, as PNG uses it).
+fn crc32(data: &[u8]) -> u32 {
+    static TABLE: std::sync::OnceLock<[u32; 256]> = std::sync::OnceLock::new();
+    let t = TABLE.get_or_init(|| {
+        let mut t = [0u32; 256];
+        for (i, e) in t.iter_mut().enumerate() {
+            let mut c = i as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            }
+            *e = c;
+        }
+        t
+    });
+    !data
+        .iter()
+        .fold(!0u32, |c, &x| t[((c ^ x as u32) & 0xFF) as usize] ^ (c >> 8))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn png_bytes() -> Vec<u8> {
+        let img = RgbImage::from_fn(40, 30, |x, y| image::Rgb([(x * 6) as u8, (y * 8) as u8, 90]));
+        let mut out = std::io::Cursor::new(Vec::new());
+        img.write_to(&mut out, image::ImageFormat::Png).unwrap();
+        out.into_inner()
+    }
+
+    fn jpeg_bytes() -> Vec<u8> {
+        let img = RgbImage::from_fn(64, 48, |x, y| {
+            image::Rgb([(x * 4) as u8, (y * 5) as u8, ((x ^ y) * 3) as u8])
+        });
+        let mut out = std::io::Cursor::new(Vec::new());
+        img.write_to(&mut out, image::ImageFormat::Jpeg).unwrap();
+        out.into_inner()
+    }
+
+    #[test]
+    fn whole_files_pass_and_cut_files_are_named() {
+        for (kind, b) in [("PNG", png_bytes()), ("JPEG", jpeg_bytes())] {
+            assert_eq!(image_damage(&b), None, "{kind}");
+            assert!(decode_image(&b).is_ok(), "{kind}");
+            for cut in [b.len() / 2, b.len() - 1, 20] {
+                let why = image_damage(&b[..cut]).unwrap_or_else(|| panic!("{kind} cut at {cut} passed"));
+                assert!(why.contains(kind) && why.contains("cut short"), "{why}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_image_crate_does_not_see_a_jpeg_cut_in_half() {
+        // Why the structure check exists: the decoder fills the missing half and says nothing.
+        let b = jpeg_bytes();
+        let half = &b[..b.len() / 2];
+        if let Ok(img) = decode_image(half) {
+            assert_eq!(img.width(), 64);
+        }
+        assert!(image_damage(half).is_some());
+    }
+
+    #[test]
+    fn png_byte_flip_fails_the_crc() {
+        let mut b = png_bytes();
+        let k = b.len() - 20;
+        b[k] ^= 0x10;
+        let why = image_damage(&b).unwrap();
+        assert!(why.contains("CRC"), "{why}");
+    }
+
+    #[test]
+    fn names_are_escaped_losslessly_and_outputs_are_unique() {
+        use std::os::unix::ffi::OsStrExt;
+        assert_eq!(escape_name(OsStr::new("a.png")), "a.png");
+        assert_eq!(escape_name(OsStr::from_bytes(b"fr\xFFame.png")), "fr\\xFFame.png");
+        // A name that already reads like an escape stays distinct.
+        assert_eq!(escape_name(OsStr::new("fr\\xFFame.png")), "fr\\\\xFFame.png");
+        assert_ne!(output_name("a.jpg"), output_name("a.png"));
+        assert_eq!(output_name("a.jpg"), "a.jpg.png");
+    }
+
+    #[test]
+    fn min_frame_size_is_the_roi_extent() {
+        let src = crate::config::WarpConfig::default().src;
+        assert_eq!(min_frame_size(&src, 320, 240), (309, 151));
     }
 }

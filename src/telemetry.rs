@@ -75,6 +75,9 @@ pub struct FrameRecord {
     /// Frames the source produced that the loop never saw, so far (it takes the newest).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dropped: Option<u64>,
+    /// The ultrasonic sensor's (median-filtered) distance, metres (the car's HC-SR04).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ultrasonic_m: Option<f64>,
     /// Events of the run at this frame: an operator's change (`kp=0.9 from dashboard`), a
     /// stall, the emergency brake. Explains a run afterwards.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -117,6 +120,7 @@ impl FrameRecord {
             latency_ms: None,
             period_ms: None,
             dropped: None,
+            ultrasonic_m: None,
             events: Vec::new(),
         }
     }

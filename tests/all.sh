@@ -18,6 +18,9 @@ DEB_PACKAGES=(
   libclang-dev                                 # the `camera` feature (nokhwa's V4L2 bindings)
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
   chromium chromium-driver                     # the dashboard's headless-browser stage
+  socat                                        # a silent pty pair for rccar drive's bad-port test
+  rustc-web cargo-web libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user  # cross stage (Pi)
+  opencv-doc                                   # OpenCV's stereo chessboard pairs (calib parity stage)
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   missing=()
@@ -25,6 +28,8 @@ if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   if [ ${#missing[@]} -gt 0 ]; then
     echo "== installing Debian packages: ${missing[*]}"
     SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO=sudo
+    # :arm64 packages need arm64 as a foreign architecture (only arm64: armhf broke apt once)
+    case " ${missing[*]}" in *:arm64*) dpkg --print-foreign-architectures | grep -qx arm64 || $SUDO dpkg --add-architecture arm64 ;; esac
     $SUDO apt-get update -qq && $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null \
       || { echo "apt-get install failed"; exit 1; }
   fi
@@ -72,12 +77,18 @@ stage protocol-c make -C firmware test
 stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
 stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
 stage link-hil cargo test --release --features serial --test link_hil
+# the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr
+# (one test at a time: each needs a core for the emulator on the wall clock; ~5 min)
+stage drive-fil cargo test --release --features serial --test drive_fil --test drive_cli -- --test-threads 1
 stage camera cargo test --release --features camera --lib camera_source
+stage gpio cargo test --release --features gpio --lib gpio
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
 stage dashboard-security cargo test --release --features dashboard --test dashboard_security
 # builds target/release/rccar with the dashboard (the browser test runs that binary)
 stage dashboard-browser bash -c 'cargo build --release --features dashboard && "$RCCAR_PYTHON" tests/dashboard/browser_test.py'
+stage cross bash tests/cross/run.sh
+stage calib-parity "$RCCAR_PYTHON" tests/parity/calib_parity.py
 
 echo
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi

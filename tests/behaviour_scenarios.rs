@@ -37,6 +37,8 @@ fn use_detector(cfg: &Config) -> bool {
 
 fn cfg() -> Config {
     let mut c = Config::default().with_override("steering.ki=0").unwrap();
+    // Default paths are relative to the config folder.
+    c.resolve_paths(&Path::new(ROOT).join("config"));
     // Cascades from elsewhere (e.g. a training run not yet committed).
     if let Ok(dir) = std::env::var("RCCAR_CASCADES") {
         let d = Path::new(&dir);

@@ -55,29 +55,28 @@ fn drive(sim: &Sim, log: &Path, out: &Path, extra: &[&str]) -> Child {
         .arg(out)
         .args(["--arm", "--status-every", "5"])
         .args(extra)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
+        .stdin(Stdio::null())
+        .stdout(std::fs::File::create(out.with_extension("stdout")).unwrap())
+        .stderr(std::fs::File::create(out.with_extension("stderr")).unwrap());
+    std::fs::create_dir_all(out).unwrap();
     c.spawn().expect("start rccar drive")
 }
 
-fn wait(child: &mut Child, limit: Duration) -> (Option<i32>, String, String) {
+/// Waits for `drive` (its output went to `out.stdout` / `out.stderr`).
+fn wait(child: &mut Child, out: &Path, limit: Duration) -> (Option<i32>, String, String) {
     let end = Instant::now() + limit;
+    let read = |ext: &str| std::fs::read_to_string(out.with_extension(ext)).unwrap_or_default();
     loop {
         if let Some(st) = child.try_wait().unwrap() {
-            let out = child.wait_with_output().unwrap();
-            return (
-                st.code(),
-                String::from_utf8_lossy(&out.stdout).into_owned(),
-                String::from_utf8_lossy(&out.stderr).into_owned(),
-            );
+            return (st.code(), read("stdout"), read("stderr"));
         }
         if Instant::now() > end {
             let _ = child.kill();
-            let out = child.wait_with_output().unwrap();
+            let _ = child.wait();
             panic!(
                 "rccar drive did not end in {limit:?}\nstdout:\n{}\nstderr:\n{}",
-                String::from_utf8_lossy(&out.stdout),
-                String::from_utf8_lossy(&out.stderr)
+                read("stdout"),
+                read("stderr")
             );
         }
         std::thread::sleep(Duration::from_millis(50));
@@ -148,7 +147,7 @@ fn firmware_in_the_loop_drives_a_lap_like_the_pure_simulation() {
             &format!("detect.enabled={detect}"),
         ],
     );
-    let (code, stdout, stderr) = wait(&mut child, Duration::from_secs(150 * laps as u64 + 120));
+    let (code, stdout, stderr) = wait(&mut child, &out, Duration::from_secs(150 * laps as u64 + 120));
     println!("{stdout}");
     assert_eq!(code, Some(0), "stderr: {stderr}");
     let fil = summary(&out);
@@ -254,7 +253,7 @@ fn ctrl_c_sends_neutral_before_exit() {
         }
         std::thread::sleep(Duration::from_millis(2));
     }
-    let (code, stdout, _) = wait(&mut child, Duration::from_secs(10));
+    let (code, stdout, _) = wait(&mut child, &out, Duration::from_secs(10));
     let exit_wall = t0.elapsed();
     let neutral_wall = neutral_wall.expect("ESC neutral after Ctrl-C");
     println!(
@@ -281,7 +280,7 @@ fn a_stalled_camera_sends_neutral_within_half_a_second_and_driving_resumes() {
         &out,
         &["--seconds", "9", "--sim-stall", "4:1", "--set", "detect.enabled=false"],
     );
-    let (code, stdout, stderr) = wait(&mut child, Duration::from_secs(60));
+    let (code, stdout, stderr) = wait(&mut child, &out, Duration::from_secs(60));
     assert_eq!(code, Some(0), "{stderr}");
     let stall_line = stdout.lines().find(|l| l.contains("camera stalled")).expect("stall reported");
     println!("{stall_line}");
@@ -311,6 +310,17 @@ fn a_stalled_camera_sends_neutral_within_half_a_second_and_driving_resumes() {
         last_drive_before / 1e6
     );
     assert!(resumed, "driving did not resume after the stall");
+    // Neutral within 0.5 s of the last frame's command (both in the emulator's time): the last
+    // DRIVE at the UART more than 50 ms before the neutral pulse is the last frame's.
+    let t_neutral = pulses[neutral_idx].1;
+    let last_frame_drive = sim
+        .rx_times(rccar::link::protocol::id::DRIVE)
+        .into_iter()
+        .filter(|&t| t < t_neutral - 50e3)
+        .fold(f64::NAN, f64::max);
+    let after_ms = (t_neutral - last_frame_drive) / 1e3;
+    println!("stall: ESC neutral {after_ms:.0} ms after the last frame's DRIVE (bound 500 ms + one 20 ms PWM period)");
+    assert!(after_ms <= 520.0, "neutral {after_ms} ms after the last frame");
     let lat = tel.iter().filter_map(|r| r["latency_ms"].as_f64()).fold(0.0, f64::max);
     assert!(lat < 500.0, "a frame's latency {lat} ms");
 }
@@ -341,7 +351,7 @@ fn a_vanished_pty_reconnects_and_nothing_moves_until_armed_again() {
     println!("after the button: driving again {ok}");
     assert!(ok, "not driving after re-arming");
     let _ = Proc::new("kill").args(["-INT", &child.id().to_string()]).status();
-    let (code, _, _) = wait(&mut child, Duration::from_secs(10));
+    let (code, _, _) = wait(&mut child, &out, Duration::from_secs(10));
     assert_eq!(code, Some(130));
 }
 
@@ -356,7 +366,7 @@ fn bit_errors_at_1e_3_for_a_lap_cause_no_departure() {
         &out,
         &["--laps", "1", "--link-bit-errors", "1e-3", "--set", "detect.enabled=false"],
     );
-    let (code, stdout, stderr) = wait(&mut child, Duration::from_secs(300));
+    let (code, stdout, stderr) = wait(&mut child, &out, Duration::from_secs(300));
     assert_eq!(code, Some(0), "{stdout}\n{stderr}");
     let s = summary(&out);
     println!(

@@ -30,7 +30,7 @@ fn lab_pairs_fit_and_merge_into_the_override() {
         .arg(&local)
         .arg("--sim-pairs-out")
         .arg(&csv)
-        .args(["--local", "/nonexistent.toml"])
+        .arg("--no-local")
         .output()
         .unwrap();
     let out = String::from_utf8_lossy(&o.stdout);
@@ -42,7 +42,7 @@ fn lab_pairs_fit_and_merge_into_the_override() {
     assert_eq!(t["steering"]["kp"].as_float(), Some(0.9), "other keys kept");
     // The written pairs read back and fit the same way (dry run).
     let o = rccar()
-        .args(["calibrate", "ranging", "--dry-run", "--local", "/nonexistent.toml"])
+        .args(["calibrate", "ranging", "--dry-run", "--no-local"])
         .arg(&csv)
         .output()
         .unwrap();
@@ -50,7 +50,7 @@ fn lab_pairs_fit_and_merge_into_the_override() {
     // A bad line is named.
     std::fs::write(&csv, "row_px,distance_m\n120,0.5\n130,abc\n").unwrap();
     let o = rccar()
-        .args(["calibrate", "ranging", "--dry-run", "--local", "/nonexistent.toml"])
+        .args(["calibrate", "ranging", "--dry-run", "--no-local"])
         .arg(&csv)
         .output()
         .unwrap();

@@ -1,14 +1,24 @@
 //! `rccar calibrate ranging PAIRS.csv`: fits the camera tilt α and principal-point row v0 (and
 //! a_y with `--fit-ay`) of tilt ranging (src/ranging.rs, Eq. 5) to measured (box-bottom row,
 //! true distance[, height]) pairs, prints the residuals and writes the result into a config
-//! override (default config/local.toml; other keys in it are kept). `--from-sim N` makes the
+//! override (default: local.toml beside the configuration), edited in place so the student's
+//! comments and other keys stay, with a backup of the old file. `--from-sim N` makes the
 //! pairs in the simulator's calibration lab instead (src/sim/scenario_lab.rs).
+//!
+//! It never writes a value it cannot stand behind: degenerate pairs (too few distinct rows,
+//! rows outside the image, heights at or above the camera, NaN/inf anywhere) are refused
+//! before the fit; a fit with an undefined residual or an rms row error above `--max-rms-px`
+//! is refused after it; the merged configuration is validated before anything is written;
+//! `--dry-run` prints the diff of the override file instead of writing it.
 
 use super::common::ConfigArgs;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use rccar::camera::PinholeCamera;
+use rccar::config::LoadedConfig;
+use rccar::ranging::Pair;
 use rccar::ranging::{fit, parse_pairs_csv, FitOptions, TiltRanging};
+use std::path::Path;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -17,6 +27,10 @@ use std::process::ExitCode;
 pub enum CalibrateCmd {
     /// Fit tilt and v0 (and a_y) of monocular ranging to measured pairs.
     Ranging(RangingArgs),
+    /// Intrinsics and lens distortion of one camera from checkerboard photos (JSON results).
+    Camera(super::calib_board::CameraArgs),
+    /// A stereo pair from checkerboard photo pairs: both cameras, R, T, rectification.
+    Stereo(super::calib_board::StereoArgs),
 }
 
 /// `rccar calibrate ranging` flags.
@@ -27,12 +41,17 @@ pub struct RangingArgs {
     /// Also fit a_y (needs pairs spread over many rows).
     #[arg(long)]
     pub fit_ay: bool,
-    /// Config override file to write the result into (existing keys are kept).
-    #[arg(long, default_value = "config/local.toml")]
-    pub write: PathBuf,
-    /// Print only; write nothing.
+    /// Config override file to write the result into (comments and other keys are kept; the
+    /// old file is kept as FILE.bak) [default: local.toml beside the configuration].
+    #[arg(long)]
+    pub write: Option<PathBuf>,
+    /// Print the fit and the change to the override file as a diff; write nothing.
     #[arg(long)]
     pub dry_run: bool,
+    /// Refuse a fit whose rms row error is above this, pixels (a good tape-measure
+    /// calibration is below 1 px).
+    #[arg(long, default_value_t = 2.0)]
+    pub max_rms_px: f64,
     /// Make N pairs in the simulator's lab instead of reading a CSV.
     #[arg(long, value_name = "N")]
     pub from_sim: Option<usize>,
@@ -59,14 +78,41 @@ pub struct RangingArgs {
 pub fn run(c: CalibrateCmd) -> Result<ExitCode> {
     match c {
         CalibrateCmd::Ranging(a) => ranging(a),
+        CalibrateCmd::Camera(a) => super::calib_board::run_camera(a),
+        CalibrateCmd::Stereo(a) => super::calib_board::run_stereo(a),
     }
 }
 
+/// Largest `--from-sim` pair count (the lab renders one frame per pair).
+const MAX_SIM_PAIRS: usize = 10_000;
+
 fn ranging(a: RangingArgs) -> Result<ExitCode> {
-    let cfg = a.config.load()?;
+    let loaded = a.config.load_full()?;
+    let cfg = loaded.cfg.clone();
+    if !(a.max_rms_px.is_finite() && a.max_rms_px > 0.0) {
+        bail!("--max-rms-px {}: must be a finite number of pixels > 0", a.max_rms_px);
+    }
+    if !(a.v0_sigma_px.is_finite() && a.v0_sigma_px >= 0.0) {
+        bail!(
+            "--v0-sigma-px {}: must be a finite number of pixels >= 0 (0 = free)",
+            a.v0_sigma_px
+        );
+    }
     // 1. The pairs: measured, or made in the simulator's lab.
     let pairs = match (&a.pairs, a.from_sim) {
         (_, Some(n)) => {
+            if !(3..=MAX_SIM_PAIRS).contains(&n) {
+                bail!("--from-sim {n}: must be 3..={MAX_SIM_PAIRS} pairs");
+            }
+            if !(a.sim_tilt_error_deg.is_finite() && a.sim_tilt_error_deg.abs() <= 30.0) {
+                bail!(
+                    "--sim-tilt-error-deg {}: must be -30..=30 degrees",
+                    a.sim_tilt_error_deg
+                );
+            }
+            if !(a.sim_tape_sigma_m.is_finite() && (0.0..=0.5).contains(&a.sim_tape_sigma_m)) {
+                bail!("--sim-tape-sigma-m {}: must be 0..=0.5 m", a.sim_tape_sigma_m);
+            }
             let mut real = cfg.clone();
             real.camera.tilt_deg += a.sim_tilt_error_deg;
             let p = rccar::sim::scenario_lab::calibration_pairs(&real, n, a.sim_tape_sigma_m, a.sim_seed)?;
@@ -81,7 +127,7 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
                 for q in &p {
                     text += &format!("{:.1},{:.4},{}\n", q.v, q.d, q.z);
                 }
-                std::fs::write(out, text).with_context(|| format!("{}: cannot write", out.display()))?;
+                write_file(out, &text)?;
                 println!("lab pairs written to {}", out.display());
             }
             p
@@ -92,7 +138,13 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         }
         (None, None) => bail!("give a PAIRS.csv or --from-sim N"),
     };
-    // 2. Fit from the configured (nominal) camera.
+    let origin = match (&a.pairs, a.from_sim) {
+        (Some(p), None) => p.display().to_string(),
+        _ => "lab pairs".into(),
+    };
+    // 2. Refuse data that cannot determine the unknowns.
+    check_pairs(&pairs, &cfg, a.fit_ay).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
+    // 3. Fit from the configured (nominal) camera.
     let cam = PinholeCamera::from_config(&cfg.camera);
     let mut start = TiltRanging::from_camera(&cam);
     start.v0 += cfg.ranging.v0_offset_px;
@@ -106,8 +158,8 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         },
         ..Default::default()
     };
-    let f = fit(&pairs, start, opts)?;
-    // 3. Report.
+    let f = fit(&pairs, start, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
+    // 4. Report.
     println!(
         "{:>8} {:>9} {:>10} {:>10} {:>7}",
         "row px", "true m", "fitted m", "resid m", "resid %"
@@ -129,46 +181,235 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         "fit: tilt {tilt:.3} deg (was {:.3}), v0 {:.2} px (offset {v0_off:+.2}), a_y {:.1} px (scale {ay_scale:.4}); rms row error {:.2} px",
         cfg.camera.tilt_deg, f.ranging.v0, f.ranging.a_y, f.rms_row_px
     );
-    // 4. Merge into the override file.
-    if a.dry_run {
-        return Ok(ExitCode::SUCCESS);
+    // 5. Refuse a fit that does not explain the data.
+    if let Some(i) = f.residuals_m.iter().position(|r| !r.is_finite()) {
+        bail!(
+            "{origin}: pair {} (row {} px, {} m): the fitted camera does not see that row on the floor (above its horizon); the pairs do not belong together; nothing written",
+            i + 1,
+            pairs[i].v,
+            pairs[i].d
+        );
     }
-    let mut table: toml::Table = if a.write.exists() {
-        let text = std::fs::read_to_string(&a.write).with_context(|| format!("{}: cannot read", a.write.display()))?;
-        text.parse()
-            .with_context(|| format!("{}: not valid TOML", a.write.display()))?
-    } else {
-        toml::Table::new()
-    };
-    let mut set = |section: &str, key: &str, v: f64| {
-        let t = table
-            .entry(section)
-            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
-        if let toml::Value::Table(t) = t {
-            t.insert(key.into(), toml::Value::Float((v * 1e4).round() / 1e4));
+    if !(f.rms_row_px.is_finite() && f.rms_row_px <= a.max_rms_px) {
+        bail!(
+            "{origin}: rms row error {:.2} px is above the bound {} px (--max-rms-px): the rows and distances do not fit one camera; check the measurements; nothing written",
+            f.rms_row_px,
+            a.max_rms_px
+        );
+    }
+    for (what, v) in [("tilt", tilt), ("v0 offset", v0_off), ("a_y scale", ay_scale)] {
+        if !v.is_finite() {
+            bail!("{origin}: the fitted {what} is {v}; nothing written");
         }
-    };
-    set("camera", "tilt_deg", tilt);
-    set("ranging", "v0_offset_px", v0_off);
-    set("ranging", "a_y_scale", ay_scale);
-    let text = format!(
-        "# Written by `rccar calibrate ranging` over config/car.toml;\n# other keys are kept, comments are not.\n{}",
-        toml::to_string(&table)?
-    );
-    if let Some(dir) = a.write.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     }
-    std::fs::write(&a.write, text).with_context(|| format!("{}: cannot write", a.write.display()))?;
-    // The merged configuration must still load.
-    rccar::config::Config::load(&a.config.config, std::slice::from_ref(&a.write), &[]).with_context(|| {
-        format!(
-            "{}: written, but the merged configuration is invalid",
-            a.write.display()
+    // 6. The new override file, validated merged with the configuration before writing.
+    let target = a.write.clone().unwrap_or_else(|| loaded.dir.join("local.toml"));
+    let old = match std::fs::read_to_string(&target) {
+        Ok(t) => Some(t),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => bail!("{}: cannot read: {e}", target.display()),
+    };
+    let round = |v: f64| (v * 1e4).round() / 1e4;
+    let new = edit_override(
+        old.as_deref(),
+        &[
+            ("camera", "tilt_deg", round(tilt)),
+            ("ranging", "v0_offset_px", round(v0_off)),
+            ("ranging", "a_y_scale", round(ay_scale)),
+        ],
+    )
+    .with_context(|| format!("{}: cannot update", target.display()))?;
+    let base = &loaded.files[0];
+    let others: Vec<PathBuf> = loaded.files[1..].to_vec();
+    LoadedConfig::check_with_text(base, &others, &target, &new).map_err(|e| {
+        anyhow::anyhow!(
+            "the fit gives a configuration that does not validate, so {} is left as it was:\n{e}",
+            target.display()
         )
     })?;
+    if a.dry_run {
+        println!(
+            "--- {} (now)\n+++ {} (after calibration)",
+            target.display(),
+            target.display()
+        );
+        print!("{}", line_diff(old.as_deref().unwrap_or(""), &new));
+        println!("dry run: nothing written");
+        return Ok(ExitCode::SUCCESS);
+    }
+    // 7. Back up, then replace atomically (a full disk leaves the old file in place).
+    if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    }
+    if old.is_some() {
+        let backup = backup_name(&target);
+        std::fs::copy(&target, &backup)
+            .with_context(|| format!("{}: cannot back up to {}", target.display(), backup.display()))?;
+        println!("old {} kept as {}", target.display(), backup.display());
+    }
+    write_file(&target, &new)?;
     println!(
         "wrote camera.tilt_deg, ranging.v0_offset_px, ranging.a_y_scale to {}",
-        a.write.display()
+        target.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// Why these pairs cannot calibrate the camera, if they cannot. `pairs` are 1-based in
+/// messages, as a student counts the rows of the CSV.
+fn check_pairs(pairs: &[Pair], cfg: &rccar::config::Config, fit_ay: bool) -> Result<(), String> {
+    let h_img = cfg.camera.height as f64;
+    let h_cam = cfg.camera.height_m;
+    for (i, p) in pairs.iter().enumerate() {
+        let n = i + 1;
+        if !(p.v.is_finite() && p.d.is_finite() && p.z.is_finite()) {
+            return Err(format!(
+                "pair {n} ({}, {}, {}): every value must be a finite number (NaN and inf are not allowed)",
+                p.v, p.d, p.z
+            ));
+        }
+        if !(0.0..h_img).contains(&p.v) {
+            return Err(format!(
+                "pair {n}: row {} px is outside the image (rows 0..{} of camera.height = {})",
+                p.v,
+                h_img - 1.0,
+                cfg.camera.height
+            ));
+        }
+        if !(p.d > 0.0 && p.d <= 100.0) {
+            return Err(format!("pair {n}: distance {} m must be > 0 and <= 100 m", p.d));
+        }
+        if !(p.z >= 0.0 && p.z < h_cam) {
+            return Err(format!(
+                "pair {n}: height {} m must be >= 0 and below the camera (camera.height_m = {h_cam} m): a ray from the lens only reaches lower points",
+                p.z
+            ));
+        }
+    }
+    let need = if fit_ay { 4 } else { 3 };
+    let mut rows: Vec<f64> = pairs.iter().map(|p| p.v).collect();
+    rows.sort_by(f64::total_cmp);
+    rows.dedup_by(|a, b| (*a - *b).abs() < 0.5);
+    if rows.len() < need {
+        return Err(format!(
+            "{} pair(s) on only {} distinct row(s) (rows closer than 0.5 px count as one); fitting {} needs at least {need} distinct rows: measure at more distances",
+            pairs.len(),
+            rows.len(),
+            if fit_ay { "tilt, v0 and a_y" } else { "tilt and v0" }
+        ));
+    }
+    Ok(())
+}
+
+/// The override file's text with `values` set (section, key, value): existing comments,
+/// formatting and other keys are kept; a missing section or key is added.
+fn edit_override(old: Option<&str>, values: &[(&str, &str, f64)]) -> Result<String> {
+    let mut doc: toml_edit::DocumentMut = match old {
+        Some(t) => t.parse().context("not valid TOML (fix it or move it away first)")?,
+        None => "# Personal overrides of the car's configuration (git-ignored).\n# `rccar calibrate ranging` updates its keys here in place.\n"
+            .parse()
+            .context("header")?,
+    };
+    for &(section, key, v) in values {
+        let item = doc
+            .as_table_mut()
+            .entry(section)
+            .or_insert_with(|| toml_edit::Item::Table(toml_edit::Table::new()));
+        let table = item
+            .as_table_like_mut()
+            .with_context(|| format!("`{section}` is not a table"))?;
+        match table.get_mut(key) {
+            Some(it) => {
+                let decor = it
+                    .as_value()
+                    .with_context(|| format!("`{section}.{key}` is not a value"))?
+                    .decor()
+                    .clone();
+                let mut nv = toml_edit::Value::from(v);
+                *nv.decor_mut() = decor;
+                *it = toml_edit::Item::Value(nv);
+            }
+            None => {
+                table.insert(key, toml_edit::value(v));
+            }
+        }
+    }
+    Ok(doc.to_string())
+}
+
+/// `FILE.bak`, or `FILE.bak2`, `FILE.bak3`... when that exists (no backup is overwritten).
+fn backup_name(target: &Path) -> PathBuf {
+    let base = target.as_os_str().to_owned();
+    for n in 1..10_000 {
+        let mut name = base.clone();
+        name.push(if n == 1 { ".bak".to_string() } else { format!(".bak{n}") });
+        let p = PathBuf::from(name);
+        if !p.exists() {
+            return p;
+        }
+    }
+    let mut name = base;
+    name.push(".bak");
+    PathBuf::from(name)
+}
+
+/// Writes `text` to `path`; errors name `path`. A regular file (or a symlink to one) is
+/// replaced atomically: the text goes to a temporary file beside the real file, which is then
+/// renamed over it, so a full disk leaves the old file untouched and a symlink stays a
+/// symlink. Anything else (a new file, a device such as /dev/null) is written directly.
+fn write_file(path: &Path, text: &str) -> Result<()> {
+    use std::io::Write;
+    let fail = |e: std::io::Error| anyhow::anyhow!("{}: cannot write: {e}", path.display());
+    let real = std::fs::canonicalize(path).ok().filter(|p| p.is_file());
+    let Some(real) = real else {
+        return std::fs::write(path, text).map_err(fail);
+    };
+    let mut tmp = real.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    let res = (|| -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(text.as_bytes())?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, &real)
+    })();
+    if let Err(e) = res {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(fail(e));
+    }
+    Ok(())
+}
+
+/// A line diff (`-` old, `+` new, two spaces unchanged) by longest common subsequence; the
+/// files are a few dozen lines.
+fn line_diff(old: &str, new: &str) -> String {
+    let a: Vec<&str> = old.lines().collect();
+    let b: Vec<&str> = new.lines().collect();
+    let (n, m) = (a.len(), b.len());
+    let mut l = vec![vec![0u32; m + 1]; n + 1];
+    for i in (0..n).rev() {
+        for j in (0..m).rev() {
+            l[i][j] = if a[i] == b[j] {
+                l[i + 1][j + 1] + 1
+            } else {
+                l[i + 1][j].max(l[i][j + 1])
+            };
+        }
+    }
+    let (mut i, mut j) = (0, 0);
+    let mut out = String::new();
+    while i < n || j < m {
+        if i < n && j < m && a[i] == b[j] {
+            out += &format!("  {}\n", a[i]);
+            i += 1;
+            j += 1;
+        } else if i < n && (j == m || l[i + 1][j] >= l[i][j + 1]) {
+            out += &format!("- {}\n", a[i]);
+            i += 1;
+        } else {
+            out += &format!("+ {}\n", b[j]);
+            j += 1;
+        }
+    }
+    out
 }

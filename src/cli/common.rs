@@ -1,40 +1,96 @@
-//! Flags shared by every subcommand that needs the car's configuration.
+//! Flags shared by every subcommand that needs the car's configuration, and where the
+//! configuration is found.
+//!
+//! The base file is `--config FILE` when given, else `$RCCAR_CONFIG`, else `config/car.toml`
+//! in the working directory or the nearest folder above it (so `rccar` works from any
+//! subfolder of the project). Overrides: `--local FILE` (must exist when named), else
+//! `local.toml` beside the base file when it exists (`--no-local`: none); then
+//! `--set key=value`. Relative paths inside a file resolve against that file's folder (see
+//! `rccar::config::LoadedConfig`).
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 use clap::Args;
-use rccar::config::Config;
-use std::path::PathBuf;
+use rccar::config::{Config, LoadedConfig};
+use std::path::{Path, PathBuf};
 
 /// Where the configuration comes from.
-#[derive(Args, Debug, Clone)]
+#[derive(Args, Debug, Clone, Default)]
 pub struct ConfigArgs {
-    /// The car's configuration file.
-    #[arg(long, default_value = "config/car.toml")]
-    pub config: PathBuf,
-    /// Personal overrides layered on top (git-ignored). Used when it exists.
-    #[arg(long, default_value = "config/local.toml")]
-    pub local: PathBuf,
+    /// The car's configuration file [default: $RCCAR_CONFIG, else config/car.toml in this
+    /// folder or the nearest folder above it].
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Personal overrides layered on top (git-ignored); an error if named and missing
+    /// [default: local.toml beside the configuration, when it exists].
+    #[arg(long, conflicts_with = "no_local")]
+    pub local: Option<PathBuf>,
+    /// Use no override file, even if local.toml exists (reproducible runs, tests).
+    #[arg(long)]
+    pub no_local: bool,
     /// Override one value, e.g. `--set steering.kp=0.8` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
 }
 
 impl ConfigArgs {
-    /// Loads, merges and validates the configuration.
+    /// The base configuration file this command uses.
+    pub fn base_file(&self) -> Result<PathBuf> {
+        match &self.config {
+            Some(p) => Ok(p.clone()),
+            None => Ok(rccar::config::find_config(
+                Path::new("."),
+                std::env::var_os("RCCAR_CONFIG").as_deref(),
+            )?),
+        }
+    }
+
+    /// The override file: `--local` (must exist), else `local.toml` beside `base` if present.
+    pub fn local_file(&self, base: &Path) -> Result<Option<PathBuf>> {
+        if self.no_local {
+            return Ok(None);
+        }
+        match &self.local {
+            Some(p) if p.is_file() => Ok(Some(p.clone())),
+            Some(p) => bail!(
+                "--local {}: no such file (leave --local out to use local.toml beside the configuration when it exists)",
+                p.display()
+            ),
+            None => {
+                let p = base.parent().unwrap_or(Path::new("")).join("local.toml");
+                Ok(p.is_file().then_some(p))
+            }
+        }
+    }
+
+    /// Where a change saved by this command goes (a dashboard's "save"): `--local` if named,
+    /// else `local.toml` beside the configuration (created when missing).
+    pub fn local_target(&self) -> Result<PathBuf> {
+        if let Some(p) = &self.local {
+            return Ok(p.clone());
+        }
+        let base = self.base_file()?;
+        Ok(base.parent().unwrap_or(Path::new("")).join("local.toml"))
+    }
+
+    /// Loads, merges and validates the configuration: the values, the base file's folder and
+    /// every file read. Path keys in the result are absolute.
+    pub fn load_full(&self) -> Result<LoadedConfig> {
+        let base = self.base_file()?;
+        let locals: Vec<PathBuf> = self.local_file(&base)?.into_iter().collect();
+        Ok(LoadedConfig::load(&base, &locals, &self.set)?)
+    }
+
+    /// Loads, merges and validates the configuration (path keys absolute).
     pub fn load(&self) -> Result<Config> {
-        let locals: Vec<PathBuf> = if self.local.exists() {
-            vec![self.local.clone()]
-        } else {
-            vec![]
-        };
-        Ok(Config::load(&self.config, &locals, &self.set)?)
+        Ok(self.load_full()?.cfg)
     }
 }
 
 /// Loads the `[detect]` cascades that exist and says once, on stderr, which are missing (the
-/// pipeline then runs without them: lane keeping only when none exists).
+/// pipeline then runs without them: lane keeping only when none exists). The paths in `cfg`
+/// are absolute after [`ConfigArgs::load`].
 pub fn load_detector(cfg: &Config) -> Result<Option<rccar::detect::DetectStage>> {
-    let (stage, missing) = rccar::pipeline::load_detector(&cfg.detect, std::path::Path::new("."))?;
+    let (stage, missing) = rccar::pipeline::load_detector(&cfg.detect, Path::new("."))?;
     if !missing.is_empty() {
         let names: Vec<String> = missing.iter().map(|p| p.display().to_string()).collect();
         eprintln!(

@@ -1,7 +1,7 @@
 //! `rccar config check [FILE]` and `rccar config roi`.
 
 use super::common::ConfigArgs;
-use anyhow::Result;
+use anyhow::{bail, Result};
 use clap::Subcommand;
 use rccar::camera::PinholeCamera;
 use std::process::ExitCode;
@@ -37,7 +37,7 @@ pub fn run(cmd: ConfigCmd) -> Result<ExitCode> {
     match cmd {
         ConfigCmd::Check { file, mut args } => {
             if let Some(f) = file {
-                args.config = f;
+                args.config = Some(f);
             }
             check(&args)
         }
@@ -47,11 +47,29 @@ pub fn run(cmd: ConfigCmd) -> Result<ExitCode> {
             far,
             half_width,
         } => {
+            // The rectangle must be a real one in front of the camera: near < far, both ahead,
+            // a positive width (a zero width gives collinear corners and an infinite scale).
+            for (flag, v) in [("--near", near), ("--far", far), ("--half-width", half_width)] {
+                if !v.is_finite() || v <= 0.0 || v > 100.0 {
+                    bail!("{flag} {v}: must be a distance in metres, > 0 and <= 100");
+                }
+            }
+            if near >= far {
+                bail!("--near {near} must be less than --far {far} (the near edge is closer to the car)");
+            }
             let cfg = args.load()?;
             let cam = PinholeCamera::from_config(&cfg.camera);
             let roi = cam
                 .roi_of_ground_rect(near, far, half_width)
                 .ok_or_else(|| anyhow::anyhow!("the rectangle is behind or above the camera"))?;
+            // The result must pass the same check as a file (ordering, not degenerate).
+            let mut warp = cfg.warp.clone();
+            warp.src = roi;
+            let mut check = cfg.clone();
+            check.warp = warp;
+            check
+                .validate()
+                .map_err(|e| anyhow::anyhow!("the ROI of this rectangle is not usable:\n{e}"))?;
             let pts: Vec<String> = roi.iter().map(|p| format!("[{:.2}, {:.2}]", p[0], p[1])).collect();
             println!("[warp]\nsrc = [{}]", pts.join(", "));
             let w = cfg.warp.out_width as f64 - 1.0;
@@ -67,10 +85,17 @@ pub fn run(cmd: ConfigCmd) -> Result<ExitCode> {
 
 /// Loads and prints the configuration, or every error (exit code 1).
 fn check(args: &ConfigArgs) -> Result<ExitCode> {
-    match args.load() {
-        Ok(cfg) => {
-            print!("{}", cfg.to_toml());
-            eprintln!("config OK: {}", args.config.display());
+    match args.load_full() {
+        Ok(l) => {
+            print!("{}", l.cfg.to_toml());
+            let files: Vec<String> = l.files.iter().map(|p| p.display().to_string()).collect();
+            if l.values_in_files == 0 {
+                eprintln!(
+                    "note: no values are set in {}: every value is a default",
+                    files.join(" + ")
+                );
+            }
+            eprintln!("config OK: {}", files.join(" + "));
             Ok(ExitCode::SUCCESS)
         }
         Err(e) => {

@@ -1,11 +1,14 @@
 //! `rccar detect --cascade FILE [--cascade FILE…] IMAGE…`: runs OpenCV cascades (Haar or
 //! LBP, current or old XML format) on images; prints one JSON line per image with the boxes
-//! and writes an annotated copy of each image.
+//! and writes an annotated copy of each image (`<file name>.detect.png`, extension kept). A
+//! damaged or unreadable image is named, counted and skipped; the run goes on with the next
+//! one and exits 1 at the end if any failed.
 
 use anyhow::{Context, Result};
 use clap::Args;
 use image::{Rgb, RgbImage};
 use rccar::detect::{gray_from_rgb, light_state, Cascade, DetectParams, Detector, Rect};
+use rccar::source::escape_name;
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -19,7 +22,7 @@ pub struct DetectArgs {
     /// Images (PNG or JPEG; colour is converted to grey as OpenCV's cvtColor does).
     #[arg(required = true)]
     pub images: Vec<PathBuf>,
-    /// Ratio between pyramid levels (> 1).
+    /// Ratio between pyramid levels (1.01..=4; below 1.01 the pyramid needs hundreds of levels).
     #[arg(long, default_value_t = 1.1)]
     pub scale_factor: f64,
     /// Raw hits a box needs beyond itself; 0 prints raw hits.
@@ -66,8 +69,19 @@ const COLOURS: [[u8; 3]; 6] = [
     [0, 220, 220],
 ];
 
+/// Bounds of `--scale-factor`: at 1.01 a 4096-pixel image already has ~500 pyramid levels.
+const SCALE_FACTOR: (f64, f64) = (1.01, 4.0);
+
 /// Runs the detectors and reports.
 pub fn run(args: DetectArgs) -> Result<ExitCode> {
+    if !(args.scale_factor >= SCALE_FACTOR.0 && args.scale_factor <= SCALE_FACTOR.1) {
+        anyhow::bail!(
+            "--scale-factor {}: must be {}..={} (the ratio between pyramid levels; nearer 1 means more levels: 1.0000001 would ask for millions)",
+            args.scale_factor,
+            SCALE_FACTOR.0,
+            SCALE_FACTOR.1
+        );
+    }
     let params = DetectParams {
         scale_factor: args.scale_factor,
         min_neighbors: args.min_neighbors,
@@ -77,57 +91,88 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
     };
     let mut detectors = Vec::new();
     for path in &args.cascades {
-        detectors.push((path.display().to_string(), Detector::new(Cascade::from_file(path)?)));
+        detectors.push((escape_name(path.as_os_str()), Detector::new(Cascade::from_file(path)?)));
     }
     if !args.no_annotate {
-        std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+        std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create", args.out.display()))?;
     }
+    let mut failed = 0usize;
+    let mut used = std::collections::HashSet::new();
     for path in &args.images {
-        let img = image::open(path).with_context(|| format!("reading {}", path.display()))?;
-        let rgb = img.to_rgb8();
-        let gray = match &img {
-            image::DynamicImage::ImageLuma8(g) => g.clone(),
-            _ => {
-                let mut g = image::GrayImage::new(0, 0);
-                gray_from_rgb(&rgb, &mut g);
-                g
+        let shown = escape_name(path.as_os_str());
+        match detect_one(&args, &params, &mut detectors, path, &shown, &mut used) {
+            Ok(()) => {}
+            Err(DetectFailure::Skip(why)) => {
+                eprintln!("skipped {shown}: {why}");
+                failed += 1;
             }
-        };
-        let mut annotated = rgb.clone();
-        let mut boxes = Vec::new();
-        for (ci, (name, det)) in detectors.iter_mut().enumerate() {
-            let found = det
-                .detect(&gray, &params)
-                .with_context(|| format!("{}: {name}", path.display()))?;
-            for d in found {
-                let mut b = json!({
-                    "cascade": name,
-                    "x": d.rect.x, "y": d.rect.y, "width": d.rect.width, "height": d.rect.height,
-                    "neighbors": d.neighbors,
-                });
-                if args.light {
-                    b["light"] = serde_json::to_value(light_state(&rgb, d.rect))?;
-                }
-                boxes.push(b);
-                draw_box(&mut annotated, d.rect, COLOURS[ci % COLOURS.len()]);
-            }
+            Err(DetectFailure::Fatal(e)) => return Err(e),
         }
-        println!(
-            "{}",
-            json!({"image": path.display().to_string(), "width": gray.width(), "height": gray.height(), "boxes": boxes})
-        );
-        if !args.no_annotate {
-            let stem = path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            let out = args.out.join(format!("{stem}.detect.png"));
-            annotated
-                .save(&out)
-                .with_context(|| format!("writing {}", out.display()))?;
-        }
+    }
+    if failed > 0 {
+        eprintln!("{failed} of {} image(s) failed", args.images.len());
+        return Ok(ExitCode::from(1));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// A problem with one image (skip it) or with the run (stop: e.g. the output disk is full).
+enum DetectFailure {
+    Skip(String),
+    Fatal(anyhow::Error),
+}
+
+fn detect_one(
+    args: &DetectArgs,
+    params: &DetectParams,
+    detectors: &mut [(String, Detector)],
+    path: &std::path::Path,
+    shown: &str,
+    used: &mut std::collections::HashSet<String>,
+) -> Result<(), DetectFailure> {
+    let img = rccar::source::read_image(path).map_err(DetectFailure::Skip)?;
+    let rgb = img.to_rgb8();
+    let gray = match &img {
+        image::DynamicImage::ImageLuma8(g) => g.clone(),
+        _ => {
+            let mut g = image::GrayImage::new(0, 0);
+            gray_from_rgb(&rgb, &mut g);
+            g
+        }
+    };
+    let mut annotated = rgb.clone();
+    let mut boxes = Vec::new();
+    for (ci, (name, det)) in detectors.iter_mut().enumerate() {
+        let found = det
+            .detect(&gray, params)
+            .map_err(|e| DetectFailure::Skip(format!("{name}: {e}")))?;
+        for d in found {
+            let mut b = json!({
+                "cascade": name,
+                "x": d.rect.x, "y": d.rect.y, "width": d.rect.width, "height": d.rect.height,
+                "neighbors": d.neighbors,
+            });
+            if args.light {
+                b["light"] =
+                    serde_json::to_value(light_state(&rgb, d.rect)).map_err(|e| DetectFailure::Fatal(e.into()))?;
+            }
+            boxes.push(b);
+            draw_box(&mut annotated, d.rect, COLOURS[ci % COLOURS.len()]);
+        }
+    }
+    println!(
+        "{}",
+        json!({"image": shown, "width": gray.width(), "height": gray.height(), "boxes": boxes})
+    );
+    if !args.no_annotate {
+        let name = super::stages::unique(path.file_name().map(escape_name).unwrap_or_default(), used);
+        let out = args.out.join(format!("{name}.detect.png"));
+        annotated
+            .save(&out)
+            .with_context(|| format!("{}: cannot write", out.display()))
+            .map_err(DetectFailure::Fatal)?;
+    }
+    Ok(())
 }
 
 /// A 2-pixel outline, clipped to the image.

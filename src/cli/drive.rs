@@ -30,7 +30,7 @@ use rccar::telemetry::JsonlWriter;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Flags of `rccar drive`.
 #[derive(Args, Debug)]
@@ -60,6 +60,14 @@ pub struct DriveArgs {
     /// T` lines); the simulated car then moves by those pulse widths, not by the commands.
     #[arg(long, value_name = "FILE")]
     pub pwm_log: Option<PathBuf>,
+    /// Keep the camera frames (JPEG, `record.jpeg_quality`) and telemetry in this folder, within
+    /// a disk budget; `rccar replay DIR` replays it with the same time steps.
+    #[arg(long, value_name = "DIR")]
+    pub record: Option<PathBuf>,
+    /// Disk budget of the recording, megabytes (default `record.max_mb`); the oldest frames go
+    /// first, the telemetry is always kept.
+    #[arg(long, value_name = "MB")]
+    pub record_max_mb: Option<f64>,
     /// Output folder for telemetry.jsonl and summary.json.
     #[arg(long, short, default_value = "out/drive")]
     pub out: PathBuf,
@@ -97,6 +105,20 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     if a.port.is_some() && a.dry_run {
         bail!("--port and --dry-run: choose one");
     }
+    if let Some(mb) = a.record_max_mb {
+        cfg = cfg.with_override(&format!("record.max_mb={mb}"))?;
+    }
+    // Everything that can fail is checked before the car can move: the recording folder…
+    let mut recorder = match &a.record {
+        Some(dir) => Some(RecordObs {
+            rec: rccar::record::Recorder::create(dir, cfg.record.options())
+                .with_context(|| format!("--record {}", dir.display()))?,
+            warned: false,
+        }),
+        None => None,
+    };
+    // …and the GPIO (button, LED, ultrasonic brake).
+    let mut gpio = open_gpio(&cfg)?;
     let stop = super::signals::install();
     let clock = Arc::new(WallClock::new());
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
@@ -174,13 +196,23 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         events: Vec::new(),
     };
     let mut score = world.clone().map(SimScore::new);
+    let mut none_rec = rccar::drive::NoObserver;
+    let mut none_gpio = rccar::drive::NoObserver;
+    let rec_obs: &mut dyn Observer = match recorder.as_mut() {
+        Some(r) => r,
+        None => &mut none_rec,
+    };
+    let gpio_obs: &mut dyn Observer = match gpio.as_mut() {
+        Some(g) => g.as_mut(),
+        None => &mut none_gpio,
+    };
     let mut arming = Arming {
         sink: &mut *sink,
-        presses: super::signals::button_presses(),
+        presses: super::signals::button_presses() + GPIO_PRESSES.load(std::sync::atomic::Ordering::SeqCst),
     };
     // --dashboard: the page's Arm also arms the link (as the button does); its disarm,
     // e-stop and lost heartbeat send neutral through the gate (docs/dashboard.md).
-    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local.clone(), None, &stop, None, Some(|| {
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, None, &stop, None, Some(|| {
         ARM_REQUEST.store(true, std::sync::atomic::Ordering::SeqCst)
     }))?;
     let mut arming = dash.sink(&mut arming);
@@ -208,6 +240,13 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     };
     // Neutral has gone out (the loop's guard); now the files.
     drop(source);
+    if let Some(r) = recorder {
+        let dir = r.rec.dir().to_path_buf();
+        match r.rec.finish() {
+            Ok(st) => println!("  recording: {}/ ({st:?}); replay with `rccar replay {}`", dir.display(), dir.display()),
+            Err(e) => eprintln!("  recording: {}: {e}", dir.display()),
+        }
+    }
     let tel_lines = tel.lines();
     tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;
     println!("  telemetry: {} ({} frames)", tel_path.display(), tel_lines);
@@ -307,7 +346,7 @@ struct Arming<'a> {
 }
 impl CommandSink for Arming<'_> {
     fn send(&mut self, c: Command, t: f64) -> Result<(), SinkError> {
-        let p = super::signals::button_presses();
+        let p = super::signals::button_presses() + GPIO_PRESSES.load(std::sync::atomic::Ordering::SeqCst);
         if p != self.presses {
             self.presses = p;
             if self.sink.armed() {
@@ -321,6 +360,15 @@ impl CommandSink for Arming<'_> {
             self.sink.arm()?;
         }
         if self.sink.armed() {
+            // The ultrasonic emergency brake overrides vision: no forward throttle.
+            let c = if BRAKE.load(std::sync::atomic::Ordering::SeqCst) {
+                Command {
+                    steer: c.steer,
+                    throttle: c.throttle.min(0.0),
+                }
+            } else {
+                c
+            };
             self.sink.send(c, t)
         } else {
             self.sink.send(Command::NEUTRAL, t)
@@ -330,6 +378,11 @@ impl CommandSink for Arming<'_> {
         self.sink.stop()
     }
 }
+
+/// Set while the ultrasonic sensor says something is nearer than `gpio.brake_m`.
+static BRAKE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// Presses of the GPIO start/stop button (the same as SIGUSR1 at the desk).
+static GPIO_PRESSES: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
 
 /// Raised by `--arm` after the first frame, by the start button, or by a dashboard.
 static ARM_REQUEST: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
@@ -430,6 +483,15 @@ impl CommandSink for LinkSink {
         use rccar::link::protocol::to_permille;
         self.check_reconnect();
         if self.armed {
+            // Our own pause (a stalled camera) let the firmware's 250 ms failsafe trip: the car
+            // stood at neutral; this session armed it and still wants to drive, so arm again.
+            // (A reconnect, by contrast, disarms: see check_reconnect.)
+            if let Some((t, _)) = self.link.telemetry() {
+                if t.state == rccar::link::protocol::State::Failsafe && c != Command::NEUTRAL {
+                    eprintln!("link: firmware failsafe had tripped (no command for its timeout); arming again");
+                    self.link.arm().map_err(|e| SinkError(e.to_string()))?;
+                }
+            }
             self.link.drive(to_permille(c.steer), to_permille(c.throttle));
         }
         Ok(())
@@ -573,11 +635,8 @@ impl FrameSource for PacedSimCamera {
             }
             std::thread::sleep(Duration::from_secs_f64((due - now).min(0.002)));
         }
-        let now = self.clock.now_s();
-        // The newest tick: ticks we were too late for are dropped, never queued.
-        self.tick = ((now - self.t0) * self.fps).floor() as u64;
-        let t = now - self.t0;
         // 2. A scripted camera stall: nothing for D seconds; tell the loop every 0.5 s.
+        let t = self.clock.now_s() - self.t0;
         if let Some((at, dur)) = self.stall {
             if t >= at && t < at + dur {
                 let until = (t + 0.5).min(at + dur);
@@ -595,7 +654,11 @@ impl FrameSource for PacedSimCamera {
                 }
             }
         }
-        // 3. Render the view at the car's pose now.
+        // 3. Render the view at the car's pose now: the newest tick (ticks we were too late
+        //    for are dropped, never queued).
+        let now = self.advance_to_now();
+        self.tick = ((now - self.t0) * self.fps).floor() as u64;
+        let t = now - self.t0;
         let mut w = lock(&self.world);
         let truth = w.render(self.tick, t, &mut self.image, self.truth_rows.clone());
         drop(w);
@@ -772,5 +835,77 @@ impl Observer for Status {
 
     fn on_skip(&mut self, e: &FrameError) {
         println!("t={:6.1} s  skipped {e}", self.clock.now_s());
+    }
+}
+
+// ---- recording and GPIO ------------------------------------------------------------------------
+
+/// Keeps each frame (JPEG) and its telemetry line in the recording; a failed write is counted
+/// and reported once, never the end of the run.
+struct RecordObs {
+    rec: rccar::record::Recorder,
+    warned: bool,
+}
+
+impl Observer for RecordObs {
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        let a = self.rec.write_frame(ctx.frame.index, &ctx.frame.image);
+        let b = self.rec.write_telemetry_line(&ctx.record.to_json_line());
+        if let Err(e) = a.and(b) {
+            if !self.warned {
+                eprintln!("recording: {e} (counted; the run goes on)");
+                self.warned = true;
+            }
+        }
+        Ok(Flow::Continue)
+    }
+}
+
+#[cfg(feature = "gpio")]
+fn open_gpio(cfg: &Config) -> Result<Option<Box<dyn Observer>>> {
+    if !cfg.gpio.enabled {
+        return Ok(None);
+    }
+    let dev = rccar::gpio::pi::GpioDevices::open(&cfg.gpio.options())?;
+    Ok(Some(Box::new(GpioObs { dev, distance: None, braking: false })))
+}
+
+#[cfg(not(feature = "gpio"))]
+fn open_gpio(cfg: &Config) -> Result<Option<Box<dyn Observer>>> {
+    if cfg.gpio.enabled {
+        bail!("gpio.enabled = true but this rccar was built without the GPIO: cargo build --release --features gpio (on the Pi)");
+    }
+    Ok(None)
+}
+
+/// The Pi's button, LED and ultrasonic brake, polled between frames.
+#[cfg(feature = "gpio")]
+struct GpioObs {
+    dev: rccar::gpio::pi::GpioDevices,
+    distance: Option<f64>,
+    braking: bool,
+}
+
+#[cfg(feature = "gpio")]
+impl Observer for GpioObs {
+    fn before_frame(&mut self, _p: &mut Pipeline) -> Flow {
+        use rccar::gpio::LedState;
+        use std::sync::atomic::Ordering;
+        let driving = !BRAKE.load(Ordering::SeqCst);
+        let ev = self.dev.poll(LedState::from_status(false, true, true, driving));
+        if ev.presses > 0 {
+            GPIO_PRESSES.fetch_add(ev.presses, Ordering::SeqCst);
+        }
+        BRAKE.store(ev.brake, Ordering::SeqCst);
+        self.distance = ev.distance_m;
+        Flow::Continue
+    }
+    fn decorate(&mut self, r: &mut rccar::telemetry::FrameRecord) {
+        r.ultrasonic_m = self.distance;
+        let b = BRAKE.load(std::sync::atomic::Ordering::SeqCst);
+        if b != self.braking {
+            r.events.push(if b { "ultrasonic brake on".into() } else { "ultrasonic brake off".into() });
+            self.braking = b;
+        }
     }
 }

@@ -1,6 +1,7 @@
 //! Subcommands of the `rccar` binary. Each file parses its flags with clap, wires library
 //! parts together and reports; the work itself is library code.
 
+pub mod calib_board;
 pub mod calibrate;
 pub mod common;
 pub mod config;

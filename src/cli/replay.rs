@@ -64,11 +64,7 @@ impl Observer for Summary {
                 &out.lane,
                 &out.command,
             );
-            let stem = std::path::Path::new(&ctx.frame.name)
-                .file_stem()
-                .map(|s| s.to_string_lossy().to_string())
-                .unwrap_or_default();
-            let p = dir.join(format!("{stem}.png"));
+            let p = dir.join(rccar::source::output_name(&ctx.frame.name));
             img.save(&p)
                 .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
         }
@@ -95,6 +91,15 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         ((max_x.ceil() as u32).min(w), (max_y.ceil() as u32).min(h))
     };
     let mut source = ReplayDir::open(&a.dir, cfg.camera.fps, w, h, min_size)?;
+    // A recording of `rccar drive --record`: replay with the time steps the car saw.
+    if a.dir.join(rccar::record::TELEMETRY_FILE).is_file() {
+        if let Ok(t) = rccar::record::recorded_times(&a.dir) {
+            if !t.times.is_empty() {
+                println!("replay: a recording; frame times from its telemetry ({} frames)", t.times.len());
+                source = source.with_recorded_times(t.times);
+            }
+        }
+    }
     let annotate_dir = a.out.join("annotated");
     let annotate_frames = cfg.replay.annotate && !a.no_annotate;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;

@@ -88,6 +88,7 @@ pub fn install() -> StopSignal {
     .clone()
 }
 
+#[cfg_attr(not(feature = "serial"), allow(dead_code))]
 /// Registers something that brings the car to rest from any thread (e.g. neutral through the
 /// link). Run on the second signal, before the process exits.
 pub fn on_emergency(f: impl Fn() + Send + Sync + 'static) {

@@ -89,7 +89,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut camera = SimCamera::new(world.clone()).ending_with_world(!a.dash.dashboard);
     // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
     let fps = cfg.camera.fps;
-    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local.clone(), Some(world.clone()), &stop, Some(fps), None)?;
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, Some(world.clone()), &stop, Some(fps), None)?;
     let mut vehicle = dash.sink(SimVehicle::new(world.clone()));
     let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
     let mut pipeline = Pipeline::new(&cfg)?;
@@ -317,6 +317,7 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
         jobs,
         track.name
     );
+    let stop = super::signals::install();
     let next = std::sync::atomic::AtomicUsize::new(0);
     let results: Vec<std::sync::Mutex<Option<Result<Summary, String>>>> =
         (0..cfgs.len()).map(|_| std::sync::Mutex::new(None)).collect();
@@ -331,7 +332,8 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
                     .map_err(|e| e.to_string())
                     .map(|mut sim| {
                         sim.set_full_frames(false);
-                        sim.run(&mut NoTimer, |_, _| Ok::<(), ()>(()))
+                        // Ctrl-C ends every run of the sweep at its next frame
+                        sim.run(&mut NoTimer, |_, _| if stop.is_set() { Err(()) } else { Ok(()) })
                             .unwrap_or_else(|_| sim.summary())
                     });
                 if let Ok(mut slot) = results[i].lock() {
@@ -378,6 +380,10 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
         }
     }
     std::fs::write(&csv_path, csv).with_context(|| format!("{}: cannot write", csv_path.display()))?;
+    if let Some(why) = stop.reason() {
+        println!("sweep: interrupted; the rows above cover each run up to that moment");
+        return Ok(ExitCode::from(why.exit_code()));
+    }
     println!("  table: {}", csv_path.display());
     if let Some(font) = font {
         plot::register_font(font);

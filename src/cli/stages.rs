@@ -7,6 +7,7 @@ use super::common::ConfigArgs;
 use anyhow::{Context, Result};
 use clap::Args;
 use rccar::lane::LaneDetector;
+use rccar::source::{escape_name, load_frame, min_frame_size};
 use rccar::timing::{NoTimer, StageTimes};
 use std::io::Write;
 use std::path::PathBuf;
@@ -25,61 +26,77 @@ pub struct StagesArgs {
     pub config: ConfigArgs,
 }
 
-/// Dumps the stages of each image.
+/// Dumps the stages of each image. A damaged, unreadable or too small image is named,
+/// counted and skipped (exit 1 at the end); outputs are named `<file name>.bird.png` etc.
+/// (extension kept, so `a.jpg` and `a.png` do not collide).
 pub fn run(a: StagesArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
     let mut det = LaneDetector::from_config(&cfg)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
-    let mut index = std::fs::File::create(a.out.join("stages.jsonl"))?;
+    let index_path = a.out.join("stages.jsonl");
+    let mut index = std::io::BufWriter::new(
+        std::fs::File::create(&index_path).with_context(|| format!("{}: cannot create", index_path.display()))?,
+    );
     let m = det.warp_map().homography().inverse().map(|h| h.0).unwrap_or_default();
+    let min_size = min_frame_size(&cfg.warp.src, cfg.camera.width, cfg.camera.height);
     let mut failed = 0;
+    let mut used = std::collections::HashSet::new();
     for path in &a.images {
-        let img = match image::open(path) {
-            Ok(i) => i.to_rgb8(),
+        let shown = escape_name(path.as_os_str());
+        let img = match load_frame(path, cfg.camera.width, cfg.camera.height, min_size) {
+            Ok(i) => i,
             Err(e) => {
-                eprintln!("skipped {}: {e}", path.display());
+                eprintln!("skipped {shown}: {e}");
                 failed += 1;
                 continue;
             }
         };
-        let img = if img.dimensions() == (cfg.camera.width, cfg.camera.height) {
-            img
-        } else {
-            image::imageops::resize(
-                &img,
-                cfg.camera.width,
-                cfg.camera.height,
-                image::imageops::FilterType::Triangle,
-            )
-        };
         let lane = det.measure(&img, &mut NoTimer, &mut StageTimes::default());
-        let stem = path
-            .file_stem()
-            .map(|s| s.to_string_lossy().to_string())
-            .unwrap_or_default();
+        let stem = unique(path.file_name().map(escape_name).unwrap_or_default(), &mut used);
         let im = det.images();
-        im.bird.save(a.out.join(format!("{stem}.bird.png")))?;
-        im.edges.save(a.out.join(format!("{stem}.edges.png")))?;
-        im.binary.save(a.out.join(format!("{stem}.binary.png")))?;
+        for (what, pic) in [("bird", &im.bird), ("edges", &im.edges), ("binary", &im.binary)] {
+            let p = a.out.join(format!("{stem}.{what}.png"));
+            pic.save(&p).with_context(|| format!("{}: cannot write", p.display()))?;
+        }
         // The bird's-eye → camera matrix, row-major, so another tool can warp identically.
         let inv: Vec<f64> = (0..3).flat_map(|r| (0..3).map(move |c| m[(r, c)])).collect();
         writeln!(
             index,
             "{}",
             serde_json::json!({
-                "image": path.display().to_string(), "stem": stem, "level": im.level,
+                "image": shown, "stem": stem, "level": im.level,
                 "band_rows": im.band_rows, "hist": im.hist, "bird_to_camera": inv, "lane": lane,
             })
-        )?;
+        )
+        .and_then(|_| index.flush())
+        .with_context(|| format!("{}: cannot write", index_path.display()))?;
     }
+    index
+        .flush()
+        .with_context(|| format!("{}: cannot write", index_path.display()))?;
     println!(
         "wrote stages of {} image(s) to {}",
         a.images.len() - failed,
         a.out.display()
     );
+    if failed > 0 {
+        eprintln!("{failed} of {} image(s) skipped", a.images.len());
+    }
     Ok(if failed > 0 {
         ExitCode::from(1)
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// `name`, or `name~2`, `name~3`... if an earlier image of this run already used it (the same
+/// file name in two folders).
+pub fn unique(name: String, used: &mut std::collections::HashSet<String>) -> String {
+    if used.insert(name.clone()) {
+        return name;
+    }
+    (2..)
+        .map(|k| format!("{name}~{k}"))
+        .find(|n| used.insert(n.clone()))
+        .unwrap_or(name)
 }

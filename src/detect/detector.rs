@@ -28,8 +28,7 @@
 
 use super::cascade::{Cascade, FeatureType};
 use super::group::{group_rectangles, Rect};
-use super::integral::Integrals;
-use super::resize::Resizer;
+use super::pyramid::Pyramid;
 use image::GrayImage;
 
 /// OpenCV's `GROUP_EPS`.
@@ -271,42 +270,16 @@ impl Compiled {
     }
 }
 
-/// Scratch buffers of one worker: pyramid level, its integrals, resize tables.
-#[derive(Debug, Clone, Default)]
-struct Scratch {
-    level: Vec<u8>,
-    ii: Integrals,
-    resizer: Resizer,
-    hits: Vec<Rect>,
-    /// Hits per level, in the order this worker scanned its levels (parallel mode).
-    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
-    counts: Vec<usize>,
-}
-
-/// One pyramid level to scan.
-#[derive(Debug, Clone, Copy)]
-struct Level {
-    scale: f32,
-    width: usize,
-    height: usize,
-    step: usize,
-}
-
 /// A cascade ready to run on frames; keeps its buffers between calls, so steady-state
 /// detection allocates little.
 #[derive(Debug, Clone)]
 pub struct Detector {
     cascade: Cascade,
     compiled: Compiled,
-    scratch: Scratch,
-    levels: Vec<Level>,
     raw: Vec<Rect>,
-    /// One scratch set per worker thread (parallel mode), kept between calls.
-    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
-    pool: Vec<Scratch>,
-    /// Worker of each level (parallel mode).
-    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
-    assign: Vec<usize>,
+    /// Pyramid buffers for [`Detector::detect`] (a [`super::DetectStage`] shares one pyramid
+    /// between its detectors instead).
+    own: Box<Pyramid>,
 }
 
 impl Detector {
@@ -315,11 +288,8 @@ impl Detector {
         Self {
             cascade,
             compiled: Compiled::default(),
-            scratch: Scratch::default(),
-            levels: Vec::new(),
             raw: Vec::new(),
-            pool: Vec::new(),
-            assign: Vec::new(),
+            own: Box::default(),
         }
     }
 
@@ -343,25 +313,36 @@ impl Detector {
         params: &DetectParams,
     ) -> Result<Vec<Detection>, DetectError> {
         self.detect_raw(img, width, height, params)?;
-        let groups = if params.min_neighbors > 0 {
-            group_rectangles(&self.raw, params.min_neighbors.min(i32::MAX as u32) as i32, GROUP_EPS)
+        Ok(self.grouped(width, height, params.min_neighbors))
+    }
+
+    /// Step 7 on the raw hits of the last call: grouped (or raw when `min_neighbors` is 0)
+    /// and clipped to the `width` × `height` image.
+    pub(crate) fn grouped(&self, width: usize, height: usize, min_neighbors: u32) -> Vec<Detection> {
+        let groups = if min_neighbors > 0 {
+            group_rectangles(&self.raw, min_neighbors.min(i32::MAX as u32) as i32, GROUP_EPS)
         } else {
             self.raw.iter().map(|&r| (r, 1)).collect()
         };
         // clipObjects: keep the part inside the image, drop empty boxes.
         let frame = Rect::new(0, 0, width as i32, height as i32);
-        Ok(groups
+        groups
             .into_iter()
             .filter_map(|(r, n)| {
                 let c = r.intersect(&frame);
                 (c.area() > 0).then_some(Detection { rect: c, neighbors: n })
             })
-            .collect())
+            .collect()
     }
 
     /// The raw (ungrouped) window hits of the last call, in input-image pixels.
     pub fn raw_hits(&self) -> &[Rect] {
         &self.raw
+    }
+
+    /// The raw hits, for the shared pyramid to fill.
+    pub(crate) fn raw_mut(&mut self) -> &mut Vec<Rect> {
+        &mut self.raw
     }
 
     /// Runs steps 1–6 and leaves the raw hits in [`Detector::raw_hits`].
@@ -372,97 +353,10 @@ impl Detector {
         height: usize,
         params: &DetectParams,
     ) -> Result<(), DetectError> {
-        self.raw.clear();
-        if !(params.scale_factor.is_finite() && params.scale_factor > 1.0) {
-            return Err(DetectError::BadScaleFactor(params.scale_factor));
-        }
-        if width.saturating_mul(height) > 8 << 20 || width > 1 << 16 || height > 1 << 16 {
-            return Err(DetectError::ImageTooLarge(width as u32, height as u32));
-        }
-        if img.len() < width * height {
-            return Err(DetectError::BufferTooSmall {
-                len: img.len(),
-                width,
-                height,
-            });
-        }
-        let (cw, ch) = (self.cascade.width, self.cascade.height);
-        if width < cw as usize || height < ch as usize {
-            return Ok(());
-        }
-        // 1. Scales.
-        let scales = scales(cw, ch, width as i32, height as i32, params);
-        if scales.is_empty() {
-            return Ok(());
-        }
-        self.levels.clear();
-        for &sc in &scales {
-            self.levels.push(Level {
-                scale: sc,
-                width: (width as f32 / sc).round_ties_even() as usize,
-                height: (height as f32 / sc).round_ties_even() as usize,
-                step: if sc >= 2.0 { 1 } else { 2 },
-            });
-        }
-        // 3. One layout for all levels: the stride and row count of the largest.
-        let stride = self.levels.iter().map(|l| l.width + 1).max().unwrap_or(1);
-        let rows = self.levels.iter().map(|l| l.height + 1).max().unwrap_or(1);
-        let tofs = if self.cascade.has_tilted { rows * stride } else { 0 };
-        if self.compiled.stride != stride || self.compiled.tilted_offset != tofs || self.compiled.span == 0 {
-            self.compiled = Compiled::new(&self.cascade, stride, tofs);
-        }
-        let job = Job {
-            cascade: &self.cascade,
-            compiled: &self.compiled,
-            img,
-            width,
-            height,
-            rows,
-        };
-        #[cfg(feature = "parallel")]
-        if params.parallel && self.levels.len() > 1 && rayon::current_num_threads() > 1 {
-            use rayon::prelude::*;
-            // Levels go to workers largest first, each to the least loaded worker (by pixel
-            // count), so the workers finish together; each worker keeps its buffers in `pool`.
-            let t = rayon::current_num_threads().min(self.levels.len());
-            if self.pool.len() < t {
-                self.pool.resize_with(t, Scratch::default);
-            }
-            let mut load = [0usize; 64];
-            let t = t.min(load.len());
-            self.assign.clear();
-            for l in &self.levels {
-                let g = (0..t).min_by_key(|&g| load[g]).unwrap_or(0);
-                load[g] += l.width * l.height;
-                self.assign.push(g);
-            }
-            let (levels, assign) = (&self.levels, &self.assign);
-            self.pool[..t].par_iter_mut().enumerate().for_each(|(g, s)| {
-                s.hits.clear();
-                s.counts.clear();
-                for (l, _) in levels.iter().zip(assign).filter(|(_, &a)| a == g) {
-                    let before = s.hits.len();
-                    job.run_level(l, s);
-                    s.counts.push(s.hits.len() - before);
-                }
-            });
-            // Hits in level order, as the sequential scan gives them.
-            let mut next = [(0usize, 0usize); 64]; // per worker: (count index, hit index)
-            for &g in &self.assign {
-                let s = &self.pool[g];
-                let (ci, hi) = next[g];
-                let n = s.counts[ci];
-                self.raw.extend_from_slice(&s.hits[hi..hi + n]);
-                next[g] = (ci + 1, hi + n);
-            }
-            return Ok(());
-        }
-        for l in &self.levels {
-            job.run_level(l, &mut self.scratch);
-            self.raw.extend_from_slice(&self.scratch.hits);
-            self.scratch.hits.clear();
-        }
-        Ok(())
+        let mut own = std::mem::take(&mut self.own);
+        let out = own.run(img, width, height, std::slice::from_mut(self), &[*params], &[None], params.parallel);
+        self.own = own;
+        out
     }
 }
 
@@ -518,78 +412,174 @@ fn scales(cw: i32, ch: i32, iw: i32, ih: i32, p: &DetectParams) -> Vec<f32> {
     out
 }
 
-/// Everything a worker needs to scan levels (shared, read-only).
-#[derive(Clone, Copy)]
-struct Job<'a> {
-    cascade: &'a Cascade,
-    compiled: &'a Compiled,
-    img: &'a [u8],
-    width: usize,
-    height: usize,
-    rows: usize,
+
+/// One pyramid level: the input resized by `1/scale` (shared by every cascade that uses it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Level {
+    /// The scale factor of the level (f32, as OpenCV stores it).
+    pub scale: f32,
+    /// Level size, pixels.
+    pub width: usize,
+    /// Level size, pixels.
+    pub height: usize,
+    /// Scan step, pixels: 1 from scale 2 on, else 2.
+    pub step: usize,
 }
 
-impl Job<'_> {
-    /// Steps 2–6 for one pyramid level; hits are appended to `s.hits`.
-    fn run_level(&self, l: &Level, s: &mut Scratch) {
-        let c = self.cascade;
-        let k = self.compiled;
-        let (cw, ch) = (c.width as usize, c.height as usize);
-        // 2. The pyramid level.
-        let level: &[u8] = if (l.width, l.height) == (self.width, self.height) {
-            self.img
-        } else {
-            s.level.resize(l.width * l.height, 0);
-            s.resizer
-                .resize(self.img, self.width, self.height, &mut s.level, l.width, l.height);
-            &s.level
+impl Level {
+    /// The level of `scale` for a `width` × `height` input (steps 2 and 4).
+    pub fn new(scale: f32, width: usize, height: usize) -> Self {
+        Self {
+            scale,
+            width: (width as f32 / scale).round_ties_even() as usize,
+            height: (height as f32 / scale).round_ties_even() as usize,
+            step: if scale >= 2.0 { 1 } else { 2 },
+        }
+    }
+}
+
+/// The window positions one cascade scans on one level: top-left corners `x` in
+/// `xa..=xb`, `y` in `ya..=yb`, all on the level's step grid (level pixels).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct WinRange {
+    pub xa: usize,
+    pub xb: usize,
+    pub ya: usize,
+    pub yb: usize,
+}
+
+impl Detector {
+    /// Step 1 for this cascade on a `width` × `height` image, after the input checks.
+    pub(crate) fn scales_for(&self, width: usize, height: usize, params: &DetectParams) -> Result<Vec<f32>, DetectError> {
+        if !(params.scale_factor.is_finite() && params.scale_factor > 1.0) {
+            return Err(DetectError::BadScaleFactor(params.scale_factor));
+        }
+        let (cw, ch) = (self.cascade.width, self.cascade.height);
+        if width < cw as usize || height < ch as usize {
+            return Ok(Vec::new());
+        }
+        Ok(scales(cw, ch, width as i32, height as i32, params))
+    }
+
+    /// Compiles the feature offsets for an integral layout (no-op when unchanged).
+    pub(crate) fn prepare(&mut self, stride: usize, tilted_offset: usize) {
+        let tofs = if self.cascade.has_tilted { tilted_offset } else { 0 };
+        if self.compiled.stride != stride || self.compiled.tilted_offset != tofs || self.compiled.span == 0 {
+            self.compiled = Compiled::new(&self.cascade, stride, tofs);
+        }
+    }
+
+    /// The window positions of level `l` whose boxes lie inside `region` (input pixels;
+    /// `None` = the whole input), or `None` when there are none. The boxes are step 7's:
+    /// `(round(x·scale), round(y·scale), round(W·scale), round(H·scale))`.
+    pub(crate) fn window_range(&self, l: &Level, region: Option<Rect>) -> Option<WinRange> {
+        let (cw, ch) = (self.cascade.width as usize, self.cascade.height as usize);
+        let xs = (l.width + 1).checked_sub(cw)?; // positions 0..xs fit the level
+        let ys = (l.height + 1).checked_sub(ch)?;
+        if xs == 0 || ys == 0 {
+            return None;
+        }
+        let last = |n: usize| (n - 1) / l.step * l.step;
+        let Some(r) = region else {
+            return Some(WinRange {
+                xa: 0,
+                xb: last(xs),
+                ya: 0,
+                yb: last(ys),
+            });
         };
-        // 3. Its integral images.
-        s.ii.compute(level, l.width, l.height, k.stride, self.rows, c.has_tilted);
-        // 4. Scan.
+        let ww = (self.cascade.width as f32 * l.scale).round_ties_even() as i64;
+        let wh = (self.cascade.height as f32 * l.scale).round_ties_even() as i64;
+        let span = |n: usize, lo: i32, hi: i64, win: i64| {
+            let mut out: Option<(usize, usize)> = None;
+            for p in (0..n).step_by(l.step) {
+                let b = (p as f32 * l.scale).round_ties_even() as i64;
+                if b >= lo as i64 && b + win <= hi {
+                    out = Some(out.map_or((p, p), |(a, _)| (a, p)));
+                }
+            }
+            out
+        };
+        let (xa, xb) = span(xs, r.x, r.x as i64 + r.width as i64, ww)?;
+        let (ya, yb) = span(ys, r.y, r.y as i64 + r.height as i64, wh)?;
+        Some(WinRange { xa, xb, ya, yb })
+    }
+
+    /// The cascade's window size, pixels.
+    pub(crate) fn window(&self) -> (usize, usize) {
+        (self.cascade.width as usize, self.cascade.height as usize)
+    }
+
+    /// Steps 4–6 on level `l` for the windows `win`; `data`/`sq` are the level's integral
+    /// tables (layout [`Detector::prepare`]d) starting at level row `row0`. Hits are appended
+    /// to `hits` in input pixels.
+    ///
+    /// OpenCV's scan skips the next x position after a window that fails the first stage, so
+    /// whether the first window of `win` is scanned depends on the windows left of it. It is
+    /// found without scanning them: going left from `xa`, count the windows whose result
+    /// would be 0 (first stage failed) until one whose result is not 0 (or x = 0); the window
+    /// after a non-zero one is always scanned, and each further 0 flips the answer.
+    pub(crate) fn scan(&self, data: &[i32], sq: &[u64], row0: usize, l: &Level, win: WinRange, hits: &mut Vec<Rect>) {
+        let c = &self.cascade;
+        let k = &self.compiled;
+        let (cw, ch) = (c.width as usize, c.height as usize);
         let ww = (c.width as f32 * l.scale).round_ties_even() as i32;
         let wh = (c.height as f32 * l.scale).round_ties_even() as i32;
-        let xs = (l.width + 1).saturating_sub(cw);
-        let ys = (l.height + 1).saturating_sub(ch);
-        let data = &s.ii.data[..];
-        let sq = &s.ii.sqsum[..];
         let area = ((cw - 2) * (ch - 2)) as f64;
-        let mut y = 0;
-        while y < ys {
-            let mut x = 0;
-            while x < xs {
-                let p = y * k.stride + x;
-                let result = match c.feature_type {
-                    FeatureType::Haar => {
-                        // 5. Window normalisation.
-                        let n = &k.norm;
-                        let d = &data[p..];
-                        let vs = rect_sum(d[n[0] as usize], d[n[1] as usize], d[n[2] as usize], d[n[3] as usize]);
-                        let q = &sq[p..];
-                        let vq = (q[n[0] as usize] + q[n[3] as usize]).wrapping_sub(q[n[1] as usize] + q[n[2] as usize])
-                            as u32;
-                        let nf = area * vq as f64 - vs as f64 * vs as f64;
-                        if nf > 0.0 {
-                            let inv = (1.0 / nf.sqrt()) as f32;
-                            if area * (inv as f64) < 0.1 {
-                                // Panics only on a bug in the level geometry, never on input.
-                                let d = &data[p..p + k.span];
-                                if c.max_nodes_per_tree == 1 {
-                                    eval_stumps(c, k, d, inv)
-                                } else {
-                                    eval_trees(c, k, d, inv)
-                                }
+        let step = l.step;
+        // Result of the window at element p: 1 = passed, ≤ 0 = −(stage failed), −1 also flat.
+        let eval = |p: usize, first_only: bool| -> i32 {
+            match c.feature_type {
+                FeatureType::Haar => {
+                    // 5. Window normalisation.
+                    let n = &k.norm;
+                    let d = &data[p..];
+                    let vs = rect_sum(d[n[0] as usize], d[n[1] as usize], d[n[2] as usize], d[n[3] as usize]);
+                    let q = &sq[p..];
+                    let vq = (q[n[0] as usize] + q[n[3] as usize]).wrapping_sub(q[n[1] as usize] + q[n[2] as usize]) as u32;
+                    let nf = area * vq as f64 - vs as f64 * vs as f64;
+                    if nf > 0.0 {
+                        let inv = (1.0 / nf.sqrt()) as f32;
+                        if area * (inv as f64) < 0.1 {
+                            // Panics only on a bug in the level geometry, never on input.
+                            let d = &data[p..p + k.span];
+                            if c.max_nodes_per_tree == 1 {
+                                eval_stumps(c, k, d, inv, first_only)
                             } else {
-                                -1
+                                eval_trees(c, k, d, inv, first_only)
                             }
                         } else {
                             -1
                         }
+                    } else {
+                        -1
                     }
-                    FeatureType::Lbp => eval_lbp(c, k, &data[p..p + k.span]),
-                };
+                }
+                FeatureType::Lbp => eval_lbp(c, k, &data[p..p + k.span], first_only),
+            }
+        };
+        let _ = (cw, ch);
+        let mut y = win.ya;
+        while y <= win.yb {
+            let base = (y - row0) * k.stride;
+            // 4. Is the first window scanned? (see above)
+            let mut x = win.xa;
+            let mut zeros = 0usize;
+            let mut p = x;
+            while p >= step {
+                p -= step;
+                if eval(base + p, true) != 0 {
+                    break;
+                }
+                zeros += 1;
+            }
+            if zeros % 2 == 1 {
+                x += step;
+            }
+            while x <= win.xb {
+                let result = eval(base + x, false);
                 if result > 0 {
-                    s.hits.push(Rect::new(
+                    hits.push(Rect::new(
                         (x as f32 * l.scale).round_ties_even() as i32,
                         (y as f32 * l.scale).round_ties_even() as i32,
                         ww,
@@ -597,20 +587,21 @@ impl Job<'_> {
                     ));
                 }
                 if result == 0 {
-                    x += l.step;
+                    x += step;
                 }
-                x += l.step;
+                x += step;
             }
-            y += l.step;
+            y += step;
         }
     }
 }
 
 /// Steps 5–6 for a stump cascade: 1 if the window passes every stage, else −(failed stage).
 #[inline]
-fn eval_stumps(c: &Cascade, k: &Compiled, d: &[i32], inv: f32) -> i32 {
+fn eval_stumps(c: &Cascade, k: &Compiled, d: &[i32], inv: f32, first_only: bool) -> i32 {
     let mut first = 0;
-    for (si, st) in c.stages.iter().enumerate() {
+    let n = if first_only { c.stages.len().min(1) } else { c.stages.len() };
+    for (si, st) in c.stages[..n].iter().enumerate() {
         let mut sum = 0.0f64;
         for stump in &k.stumps[first..first + st.tree_count] {
             let v = stump.f.calc(d) * inv;
@@ -625,8 +616,9 @@ fn eval_stumps(c: &Cascade, k: &Compiled, d: &[i32], inv: f32) -> i32 {
 }
 
 /// Steps 5–6 for a cascade of trees.
-fn eval_trees(c: &Cascade, k: &Compiled, d: &[i32], inv: f32) -> i32 {
-    for (si, st) in c.stages.iter().enumerate() {
+fn eval_trees(c: &Cascade, k: &Compiled, d: &[i32], inv: f32, first_only: bool) -> i32 {
+    let n = if first_only { c.stages.len().min(1) } else { c.stages.len() };
+    for (si, st) in c.stages[..n].iter().enumerate() {
         let mut sum = 0.0f64;
         for t in &c.trees[st.first_tree..st.first_tree + st.tree_count] {
             let mut idx = 0i32;
@@ -648,9 +640,10 @@ fn eval_trees(c: &Cascade, k: &Compiled, d: &[i32], inv: f32) -> i32 {
 }
 
 /// Steps 5–6 for an LBP cascade (category stumps or trees).
-fn eval_lbp(c: &Cascade, k: &Compiled, d: &[i32]) -> i32 {
+fn eval_lbp(c: &Cascade, k: &Compiled, d: &[i32], first_only: bool) -> i32 {
     let ss = c.subset_size;
-    for (si, st) in c.stages.iter().enumerate() {
+    let n = if first_only { c.stages.len().min(1) } else { c.stages.len() };
+    for (si, st) in c.stages[..n].iter().enumerate() {
         let mut sum = 0.0f64;
         for t in &c.trees[st.first_tree..st.first_tree + st.tree_count] {
             let mut idx = 0i32;

@@ -54,7 +54,32 @@ impl Integrals {
         rows_capacity: usize,
         tilted: bool,
     ) {
-        assert!(img.len() >= width * height, "image buffer smaller than width*height");
+        self.compute_strided(img, width, width, height, stride, rows_capacity, tilted);
+    }
+
+    /// Same as [`Integrals::compute`] for an image whose rows are `img_stride` ≥ `width` bytes
+    /// apart (a crop of a wider image: the first `width` columns of each row are used).
+    ///
+    /// The tables of a crop give the same rectangle sums as the whole image's for every
+    /// rectangle inside the crop, upright or tilted: a sum is a signed combination of corner
+    /// values in which every pixel outside the rectangle cancels, so which pixels beyond the
+    /// crop the corners would have included does not matter.
+    #[allow(clippy::too_many_arguments)]
+    pub fn compute_strided(
+        &mut self,
+        img: &[u8],
+        img_stride: usize,
+        width: usize,
+        height: usize,
+        stride: usize,
+        rows_capacity: usize,
+        tilted: bool,
+    ) {
+        assert!(img_stride >= width, "image stride below its width");
+        assert!(
+            height == 0 || img.len() >= img_stride * (height - 1) + width,
+            "image buffer smaller than its rows"
+        );
         let stride = stride.max(width + 1);
         let rows = rows_capacity.max(height + 1);
         self.width = width;
@@ -72,7 +97,7 @@ impl Integrals {
         self.data[..width + 1].fill(0);
         self.sqsum[..width + 1].fill(0);
         for y in 0..height {
-            let src = &img[y * width..(y + 1) * width];
+            let src = &img[y * img_stride..y * img_stride + width];
             let (above, below) = self.data.split_at_mut((y + 1) * stride);
             let prev = &above[y * stride..y * stride + width + 1];
             let cur = &mut below[..width + 1];
@@ -92,15 +117,15 @@ impl Integrals {
             }
         }
         if tilted {
-            self.compute_tilted(img);
+            self.compute_tilted(img, img_stride);
         }
     }
 
     /// 2. The tilted table, row by row with Lienhart's recurrence (see the module header).
-    fn compute_tilted(&mut self, img: &[u8]) {
+    fn compute_tilted(&mut self, img: &[u8], img_stride: usize) {
         let (w, h, stride) = (self.width, self.height, self.stride);
         let t = &mut self.data[self.tilted_offset..];
-        let pix = |x: usize, y: usize| img[y * w + x] as i32;
+        let pix = |x: usize, y: usize| img[y * img_stride + x] as i32;
         t[..w + 1].fill(0);
         if h == 0 {
             return;
@@ -182,6 +207,42 @@ mod tests {
                     assert_eq!(ii.sum_at(xx, yy) as i64, s, "sum {w}x{h} at {xx},{yy}");
                     assert_eq!(ii.sqsum_at(xx, yy), q, "sqsum {w}x{h} at {xx},{yy}");
                     assert_eq!(ii.tilted_at(xx, yy) as i64, t, "tilted {w}x{h} at {xx},{yy}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_crop_gives_the_same_rectangle_sums() {
+        // Upright and tilted rectangle sums inside a crop equal the whole image's.
+        let (w, h) = (23, 19);
+        let img = image(w, h, 7);
+        let mut full = Integrals::new();
+        full.compute(&img, w, h, w + 1, h + 1, true);
+        let (cx, cy, cw, ch) = (0, 5, 17, 11); // crops start at column 0 (as the pyramid's do)
+        let mut crop = Integrals::new();
+        crop.compute_strided(&img[cy * w + cx..], w, cw, ch, w + 1, h + 1, true);
+        for y in 0..ch {
+            for x in 0..cw {
+                for (rw, rh) in [(1, 1), (3, 2), (cw - x, ch - y)] {
+                    if x + rw > cw || y + rh > ch {
+                        continue;
+                    }
+                    let s = |t: &Integrals, ox: usize, oy: usize| {
+                        t.sum_at(ox + x + rw, oy + y + rh) - t.sum_at(ox + x, oy + y + rh) - t.sum_at(ox + x + rw, oy + y)
+                            + t.sum_at(ox + x, oy + y)
+                    };
+                    assert_eq!(s(&crop, 0, 0), s(&full, cx, cy));
+                }
+                // A tilted square of side 2 with its top corner at (x, y): OpenCV's corners.
+                let (rw, rh) = (2usize, 2usize);
+                if x >= rh && x + rw <= cw && y + rw + rh <= ch {
+                    let t = |ii: &Integrals, ox: usize, oy: usize| {
+                        let (x, y) = (ox + x, oy + y);
+                        ii.tilted_at(x, y) - ii.tilted_at(x - rh, y + rh) - ii.tilted_at(x + rw, y + rw)
+                            + ii.tilted_at(x + rw - rh, y + rw + rh)
+                    };
+                    assert_eq!(t(&crop, 0, 0), t(&full, cx, cy), "tilted at {x},{y}");
                 }
             }
         }

@@ -8,7 +8,9 @@
 //!   -> light_state(&rgb, rect)       traffic-light colour inside a box
 //! ```
 //!
-//! [`DetectStage`] bundles labelled cascades (stop, light, obstacle) for the pipeline.
+//! [`DetectStage`] bundles labelled cascades (stop, light, obstacle) for the pipeline and runs
+//! them on one shared image pyramid ([`pyramid`]), each in its own region of the frame and
+//! size range.
 //!
 //! The boxes are OpenCV 4's `detectMultiScale` boxes for the same grey image (see
 //! `docs/detect.md` and `tests/parity/detect_parity.py` for the measured agreement).
@@ -18,6 +20,7 @@ pub mod detector;
 pub mod group;
 pub mod integral;
 pub mod light;
+pub mod pyramid;
 pub mod resize;
 pub mod stage;
 

@@ -74,12 +74,39 @@ impl Resizer {
     /// Resizes the row-major `sw` × `sh` image `src` into `dst` (`dw` × `dh`, row-major),
     /// as `cv::resize(src, dst, Size(dw, dh), 0, 0, INTER_LINEAR_EXACT)`.
     pub fn resize(&mut self, src: &[u8], sw: usize, sh: usize, dst: &mut [u8], dw: usize, dh: usize) {
-        assert!(src.len() >= sw * sh && dst.len() >= dw * dh, "resize buffers too small");
-        if dw == 0 || dh == 0 || sw == 0 || sh == 0 {
+        self.resize_part(src, sw, sh, dst, dw, dh, 0..dh, dw);
+    }
+
+    /// Only part of [`Resizer::resize`]'s output: destination rows `rows` and columns
+    /// `0..cols`, written row-major into `dst` (`rows.len()` × `cols`, stride `cols`). Every
+    /// pixel is the one the whole resize gives (each output pixel depends only on its own
+    /// sampling position), so a detector that reads only part of a pyramid level resizes
+    /// only that part.
+    #[allow(clippy::too_many_arguments)]
+    pub fn resize_part(
+        &mut self,
+        src: &[u8],
+        sw: usize,
+        sh: usize,
+        dst: &mut [u8],
+        dw: usize,
+        dh: usize,
+        rows: std::ops::Range<usize>,
+        cols: usize,
+    ) {
+        let cols = cols.min(dw);
+        let rows = rows.start.min(dh)..rows.end.min(dh);
+        assert!(
+            src.len() >= sw * sh && dst.len() >= rows.len() * cols,
+            "resize buffers too small"
+        );
+        if dw == 0 || dh == 0 || sw == 0 || sh == 0 || cols == 0 || rows.is_empty() {
             return;
         }
         if (sw, sh) == (dw, dh) {
-            dst[..dw * dh].copy_from_slice(&src[..sw * sh]);
+            for (k, y) in rows.enumerate() {
+                dst[k * cols..(k + 1) * cols].copy_from_slice(&src[y * sw..y * sw + cols]);
+            }
             return;
         }
         if self.last != (sw, sh, dw, dh) {
@@ -87,11 +114,11 @@ impl Resizer {
             self.y.build(sh, dh);
             self.last = (sw, sh, dw, dh);
         }
-        self.line0.resize(dw, 0);
-        self.line1.resize(dw, 0);
+        self.line0.resize(cols, 0);
+        self.line1.resize(cols, 0);
         let mut have = (usize::MAX, usize::MAX); // source rows now in line0, line1
-        for dy in 0..dh {
-            let out = &mut dst[dy * dw..(dy + 1) * dw];
+        for (k, dy) in rows.enumerate() {
+            let out = &mut dst[k * cols..(k + 1) * cols];
             if dy < self.y.min || dy >= self.y.max {
                 // Rows outside the interpolated band copy the first/last source row.
                 let sy = if dy < self.y.min { 0 } else { sh - 1 };
@@ -121,18 +148,41 @@ impl Resizer {
             }
         }
     }
+
+    /// The source rows that destination rows `rows` read when `sh` rows are resized to `dh`
+    /// (a half-open range; empty for an empty `rows`).
+    pub fn source_rows(sh: usize, dh: usize, rows: std::ops::Range<usize>) -> std::ops::Range<usize> {
+        if rows.is_empty() || sh == 0 || dh == 0 {
+            return 0..0;
+        }
+        if sh == dh {
+            return rows.start.min(sh)..rows.end.min(sh);
+        }
+        let scale = 1.0 / (dh as f64 / sh as f64);
+        let src_of = |d: usize| {
+            let f = (scale * (d as f64 + 0.5) - 0.5).floor();
+            if f < 0.0 {
+                0
+            } else {
+                (f as usize).min(sh - 1)
+            }
+        };
+        src_of(rows.start)..(src_of(rows.end - 1) + 2).min(sh)
+    }
 }
 
 /// One source row interpolated horizontally into 8.8 fixed point.
+/// `out` may be shorter than the destination row (the first `out.len()` columns).
 fn hline(ax: &Axis, row: &[u8], out: &mut [u16]) {
     let n = out.len();
     let first = row[0] as u16 * 256;
-    let last_src = row[ax.offset[n - 1] as usize] as u16 * 256;
-    out[..ax.min.min(n)].fill(first);
-    for ((o, &i), &b) in out[ax.min..ax.max]
+    let last_src = row[row.len() - 1] as u16 * 256;
+    let (lo, hi) = (ax.min.min(n), ax.max.min(n));
+    out[..lo].fill(first);
+    for ((o, &i), &b) in out[lo..hi.max(lo)]
         .iter_mut()
-        .zip(&ax.offset[ax.min..ax.max])
-        .zip(&ax.weight[ax.min..ax.max])
+        .zip(&ax.offset[lo..hi.max(lo)])
+        .zip(&ax.weight[lo..hi.max(lo)])
     {
         let i = i as usize;
         *o = (256 - b) * row[i] as u16 + b * row[i + 1] as u16;
@@ -152,6 +202,39 @@ mod tests {
         let mut dst = vec![0u8; 23 * 17];
         Resizer::new().resize(&src, 50, 40, &mut dst, 23, 17);
         assert!(dst.iter().all(|&v| v == 77));
+    }
+
+    #[test]
+    fn a_part_is_the_same_as_the_whole() {
+        let (sw, sh) = (37, 29);
+        let mut seed = 3u32;
+        let src: Vec<u8> = (0..sw * sh)
+            .map(|_| {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                (seed >> 24) as u8
+            })
+            .collect();
+        for (dw, dh) in [(30, 24), (17, 13), (37, 29), (5, 4)] {
+            let mut whole = vec![0u8; dw * dh];
+            Resizer::new().resize(&src, sw, sh, &mut whole, dw, dh);
+            let mut r = Resizer::new();
+            for (rows, cols) in [(0..dh, dw), (2..dh - 1, dw - 3), (dh / 2..dh, 1), (1..2, dw)] {
+                let mut part = vec![0u8; rows.len() * cols];
+                r.resize_part(&src, sw, sh, &mut part, dw, dh, rows.clone(), cols);
+                for (k, y) in rows.clone().enumerate() {
+                    assert_eq!(&part[k * cols..(k + 1) * cols], &whole[y * dw..y * dw + cols], "{dw}x{dh} row {y}");
+                }
+                // The source rows it reads: changing any other row changes nothing.
+                let used = Resizer::source_rows(sh, dh, rows.clone());
+                let mut other = src.clone();
+                for y in (0..sh).filter(|y| !used.contains(y)) {
+                    other[y * sw..(y + 1) * sw].fill(99);
+                }
+                let mut part2 = vec![0u8; rows.len() * cols];
+                r.resize_part(&other, sw, sh, &mut part2, dw, dh, rows.clone(), cols);
+                assert_eq!(part, part2, "{dw}x{dh} rows {rows:?} read outside {used:?}");
+            }
+        }
     }
 
     #[test]

@@ -3,13 +3,17 @@
 //! cascades marked as lights (Rivera & Andaluz 2021, Sec. 3.2 iii–iv).
 //!
 //! Cascades are loaded once ([`DetectStage::load`]); [`DetectStage::run`] is called per frame
-//! and reuses every detector's buffers. Units: pixels of the frame.
+//! and builds one image pyramid for all of them ([`super::pyramid`]): each scale is resized and
+//! integrated once, and every cascade scans it in its own region of the frame
+//! ([`DetectStage::set_region`]). Units: pixels of the frame.
 
 use super::cascade::{Cascade, CascadeError};
 use super::detector::{DetectError, DetectParams, Detector};
 use super::group::Rect;
 use super::light::{light_state, LightReading};
+use super::pyramid::Pyramid;
 use image::{GrayImage, RgbImage};
+use std::ops::Range;
 use std::path::PathBuf;
 
 /// One cascade to run: what it finds and how.
@@ -41,7 +45,13 @@ pub struct DetectedObject {
 /// Labelled detectors, loaded once and run on every frame.
 #[derive(Debug, Clone)]
 pub struct DetectStage {
-    entries: Vec<(CascadeSpec, Detector)>,
+    specs: Vec<CascadeSpec>,
+    dets: Vec<Detector>,
+    /// Per cascade: where in the frame its boxes may lie (`None` = anywhere).
+    regions: Vec<Option<Rect>>,
+    /// Per cascade: its options (the spec's, with the size limits set by the pipeline).
+    params: Vec<DetectParams>,
+    pyramid: Pyramid,
     /// Grey copy of the last colour frame (reused).
     gray: GrayImage,
 }
@@ -61,27 +71,100 @@ impl DetectStage {
     pub fn load(specs: &[CascadeSpec]) -> Result<Self, CascadeError> {
         let entries = specs
             .iter()
-            .map(|s| Ok((s.clone(), Detector::new(Cascade::from_file(&s.path)?))))
+            .map(|s| Ok((s.clone(), Cascade::from_file(&s.path)?)))
             .collect::<Result<_, CascadeError>>()?;
-        Ok(Self {
-            entries,
-            gray: GrayImage::new(0, 0),
-        })
+        Ok(Self::from_cascades(entries))
     }
 
     /// A stage from cascades already in memory (tests, the simulator).
     pub fn from_cascades(entries: Vec<(CascadeSpec, Cascade)>) -> Self {
+        let n = entries.len();
+        let (specs, dets): (Vec<_>, Vec<_>) = entries.into_iter().map(|(s, c)| (s, Detector::new(c))).unzip();
         Self {
-            entries: entries.into_iter().map(|(s, c)| (s, Detector::new(c))).collect(),
+            params: specs.iter().map(|s| s.params).collect(),
+            specs,
+            dets,
+            regions: vec![None; n],
+            pyramid: Pyramid::new(),
             gray: GrayImage::new(0, 0),
         }
     }
 
-    /// Runs every cascade on a colour frame (the pipeline's input): grey conversion into a
-    /// reused buffer, then [`DetectStage::run`] with the light reading enabled.
+    /// Restricts cascade `label` to boxes lying inside `region` (frame pixels; `None` = the
+    /// whole frame), and sets its smallest and largest window (width, height; `(0, 0)` = no
+    /// limit, as [`DetectParams`]). Windows outside are never scanned, and the pyramid is
+    /// only built where some cascade looks. Returns false when no cascade has that label.
+    pub fn set_limits(
+        &mut self,
+        label: &str,
+        region: Option<Rect>,
+        min_size: (u32, u32),
+        max_size: (u32, u32),
+    ) -> bool {
+        let mut found = false;
+        for (i, s) in self.specs.iter().enumerate() {
+            if s.label == label {
+                self.regions[i] = region;
+                self.params[i].min_size = min_size;
+                self.params[i].max_size = max_size;
+                found = true;
+            }
+        }
+        found
+    }
+
+    /// Restricts cascade `label` to boxes inside `region` (see [`DetectStage::set_limits`]).
+    pub fn set_region(&mut self, label: &str, region: Option<Rect>) -> bool {
+        let mut found = false;
+        for (i, s) in self.specs.iter().enumerate() {
+            if s.label == label {
+                self.regions[i] = region;
+                found = true;
+            }
+        }
+        found
+    }
+
+    /// Spread the pyramid levels over threads (feature `parallel`) for every cascade.
+    pub fn set_parallel(&mut self, parallel: bool) {
+        for p in &mut self.params {
+            p.parallel = parallel;
+        }
+    }
+
+    /// The region, minimum and maximum window of each cascade, in run order.
+    pub fn limits(&self) -> impl Iterator<Item = (&str, Option<Rect>, (u32, u32), (u32, u32))> {
+        self.specs
+            .iter()
+            .zip(&self.regions)
+            .zip(&self.params)
+            .map(|((s, r), p)| (s.label.as_str(), *r, p.min_size, p.max_size))
+    }
+
+    /// The frame rows a `width` × `height` frame must have filled in for [`DetectStage::run`]
+    /// to see what it would see in the whole frame: sorted, disjoint half-open ranges (the
+    /// pyramid levels' rows, mapped back through the resize). A renderer may leave every
+    /// other row unset.
+    pub fn rows_needed(&mut self, width: u32, height: u32) -> Vec<Range<usize>> {
+        let (w, h) = (width as usize, height as usize);
+        match self.pyramid.plan(w, h, &self.dets, &self.params, &self.regions) {
+            Ok(()) => self.pyramid.source_rows(),
+            Err(_) => Vec::new(),
+        }
+    }
+
+    /// Runs every cascade on a colour frame (the pipeline's input): grey conversion of the rows
+    /// the pyramid reads ([`DetectStage::rows_needed`]) into a reused buffer, then
+    /// [`DetectStage::run`] with the light reading enabled.
     pub fn run_rgb(&mut self, rgb: &RgbImage) -> Result<Vec<DetectedObject>, DetectError> {
         let mut gray = std::mem::take(&mut self.gray);
-        gray_from_rgb(rgb, &mut gray);
+        if gray.dimensions() != rgb.dimensions() {
+            gray = GrayImage::new(rgb.width(), rgb.height());
+        }
+        let spans = self.rows_needed(rgb.width(), rgb.height());
+        for r in spans {
+            crate::lane::warp::rgb_to_gray_rows(rgb, &mut gray, r.start as u32..r.end as u32);
+        }
         let out = self.run(&gray, Some(rgb));
         self.gray = gray;
         out
@@ -90,9 +173,13 @@ impl DetectStage {
     /// Runs every cascade on the grey frame; `rgb` (the same frame in colour) enables the
     /// traffic-light reading.
     pub fn run(&mut self, gray: &GrayImage, rgb: Option<&RgbImage>) -> Result<Vec<DetectedObject>, DetectError> {
+        let (w, h) = (gray.width() as usize, gray.height() as usize);
+        let parallel = self.params.iter().any(|p| p.parallel);
+        self.pyramid
+            .run(gray.as_raw(), w, h, &mut self.dets, &self.params, &self.regions, parallel)?;
         let mut out = Vec::new();
-        for (spec, det) in &mut self.entries {
-            for d in det.detect(gray, &spec.params)? {
+        for ((spec, det), params) in self.specs.iter().zip(&self.dets).zip(&self.params) {
+            for d in det.grouped(w, h, params.min_neighbors) {
                 out.push(DetectedObject {
                     label: spec.label.clone(),
                     rect: d.rect,
@@ -109,7 +196,7 @@ impl DetectStage {
 
     /// The labels, in run order.
     pub fn labels(&self) -> impl Iterator<Item = &str> {
-        self.entries.iter().map(|(s, _)| s.label.as_str())
+        self.specs.iter().map(|s| s.label.as_str())
     }
 }
 

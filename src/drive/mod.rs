@@ -108,6 +108,9 @@ pub trait Observer {
     fn before_frame(&mut self, _pipeline: &mut Pipeline) -> Flow {
         Flow::Continue
     }
+    /// Adds what this observer knows to the frame's record before anyone sees it (a sensor
+    /// reading, an operator's change): the record stays the one record of the frame.
+    fn decorate(&mut self, _record: &mut FrameRecord) {}
     /// A processed frame.
     fn on_frame(&mut self, _ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
         Ok(Flow::Continue)
@@ -133,6 +136,11 @@ impl<const N: usize> Observer for [&mut dyn Observer; N] {
             }
         }
         f
+    }
+    fn decorate(&mut self, record: &mut FrameRecord) {
+        for o in self.iter_mut() {
+            o.decorate(record);
+        }
     }
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
         let mut f = Flow::Continue;
@@ -220,6 +228,7 @@ pub struct Driver {
     last_cmd_clock: Option<f64>,
     stats: LoopStats,
     ended: Option<LoopEnd>,
+    resync: bool,
 }
 
 impl Driver {
@@ -232,6 +241,7 @@ impl Driver {
             last_cmd_clock: None,
             stats: LoopStats::default(),
             ended: None,
+            resync: false,
         }
     }
 
@@ -277,6 +287,8 @@ impl Driver {
                 sink.send(Command::NEUTRAL, self.last_time_s.unwrap_or(0.0))?;
                 self.stats.stalls += 1;
                 self.last_cmd_clock = None;
+                // frames missing after a stall were never made: not dropped
+                self.resync = true;
                 observer.on_stall(&e);
                 return Ok(Step::Stalled);
             }
@@ -289,9 +301,10 @@ impl Driver {
             Some(Ok(f)) => f,
         };
         let captured = frame.captured_s.unwrap_or_else(|| clock.now_s());
-        if frame.index > self.next_index {
+        if frame.index > self.next_index && !self.resync {
             self.stats.dropped += frame.index - self.next_index;
         }
+        self.resync = false;
         self.next_index = frame.index + 1;
         // 4. dt from the frames' own times: skipped and dropped frames still count as time.
         let dt = self.last_time_s.map_or(1.0 / self.fps, |t| frame.time_s - t);
@@ -326,6 +339,7 @@ impl Driver {
         if self.stats.dropped > 0 {
             record.dropped = Some(self.stats.dropped);
         }
+        observer.decorate(&mut record);
         // 7. Observers.
         let flow = observer.on_frame(&FrameContext {
             frame: &frame,
@@ -443,8 +457,9 @@ mod tests {
         assert_eq!(end, LoopEnd::SourceEnded);
         let s = d.stats();
         assert_eq!((s.frames, s.skipped, s.stalls), (4, 1, 1));
-        // 2, 3 dropped; 5 skipped (error at position 4 names index 4 -> next 5), 6 stalled
-        assert_eq!(s.dropped, 2 + 1);
+        // 2, 3 dropped; the skipped frame names index 4; after the stall the gap to 7 is not
+        // counted (a stalled camera made no frames)
+        assert_eq!(s.dropped, 2);
         // 4 frame commands + the stall's neutral + the final neutral
         assert_eq!(sink.log.len(), 6);
         assert_eq!(sink.log[4].1, Command::NEUTRAL, "stall sends neutral");

@@ -8,6 +8,7 @@
 //! Units: metres, seconds, radians (degrees only in files). World frame x east, y north,
 //! z up; headings counter-clockwise from +x.
 
+pub mod board;
 pub mod glyphs;
 pub mod plot;
 pub mod render;

@@ -18,16 +18,36 @@ use serde::Deserialize;
 use std::f64::consts::{PI, TAU};
 use std::path::{Path, PathBuf};
 
+/// Bounds on what a track file may ask for, checked before anything is allocated: the
+/// simulator's scene keeps a 2 cm grid over the whole floor (4 bytes a cell), so a 50 m ×
+/// 50 m floor is 25 MB; a classroom track is a few metres.
+pub mod limits {
+    /// Most `[[segments]]`.
+    pub const MAX_SEGMENTS: usize = 1000;
+    /// Most `[[objects]]`.
+    pub const MAX_OBJECTS: usize = 1000;
+    /// Longest straight, metres.
+    pub const MAX_STRAIGHT_M: f64 = 50.0;
+    /// Largest arc radius, metres.
+    pub const MAX_RADIUS_M: f64 = 20.0;
+    /// Longest centre line (sum of all segments), metres.
+    pub const MAX_LENGTH_M: f64 = 500.0;
+    /// Largest floor side (the road's extent plus `floor.margin_m` each way), metres.
+    pub const MAX_FLOOR_SIDE_M: f64 = 50.0;
+    /// Largest distance of `[start]` from the origin, metres.
+    pub const MAX_COORD_M: f64 = 10_000.0;
+}
+
 /// Everything that can be wrong with a track file.
 #[derive(Debug, thiserror::Error)]
 pub enum TrackError {
     /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read: {error}")]
     Io {
         /// The track file.
         path: PathBuf,
-        /// Underlying error.
-        source: std::io::Error,
+        /// Underlying error (in the message, not repeated as a source).
+        error: std::io::Error,
     },
     /// TOML syntax, an unknown key or a value of the wrong type (the message names the key
     /// and the line).
@@ -511,9 +531,9 @@ pub struct Track {
 impl Track {
     /// Reads and checks a track file.
     pub fn load(path: &Path) -> Result<Track, TrackError> {
-        let text = std::fs::read_to_string(path).map_err(|source| TrackError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| TrackError::Io {
             path: path.into(),
-            source,
+            error,
         })?;
         Track::from_toml_str(&text, &path.display().to_string())
     }
@@ -598,6 +618,27 @@ impl Track {
                 "must be finite",
             ));
         }
+        if st.x.abs() > limits::MAX_COORD_M || st.y.abs() > limits::MAX_COORD_M {
+            return Err(bad(
+                "start".into(),
+                format!("({}, {})", st.x, st.y),
+                &format!("x and y must be within ±{} m", limits::MAX_COORD_M),
+            ));
+        }
+        if spec.segments.len() > limits::MAX_SEGMENTS {
+            return Err(bad(
+                "segments".into(),
+                format!("{} segments", spec.segments.len()),
+                &format!("at most {} segments", limits::MAX_SEGMENTS),
+            ));
+        }
+        if spec.objects.len() > limits::MAX_OBJECTS {
+            return Err(bad(
+                "objects".into(),
+                format!("{} objects", spec.objects.len()),
+                &format!("at most {} objects", limits::MAX_OBJECTS),
+            ));
+        }
         if spec.segments.is_empty() {
             return Err(bad(
                 "segments".into(),
@@ -627,6 +668,13 @@ impl Track {
                             "a straight must be longer than zero",
                         ));
                     }
+                    if length_m > limits::MAX_STRAIGHT_M {
+                        return Err(bad(
+                            format!("segments[{i}].length_m"),
+                            length_m.to_string(),
+                            &format!("a straight may be at most {} m long", limits::MAX_STRAIGHT_M),
+                        ));
+                    }
                     Piece::Line {
                         p0: p,
                         dir: [h.cos(), h.sin()],
@@ -639,6 +687,13 @@ impl Track {
                             format!("segments[{i}].radius_m"),
                             radius_m.to_string(),
                             "an arc needs a radius greater than zero",
+                        ));
+                    }
+                    if radius_m > limits::MAX_RADIUS_M {
+                        return Err(bad(
+                            format!("segments[{i}].radius_m"),
+                            radius_m.to_string(),
+                            &format!("an arc's radius may be at most {} m", limits::MAX_RADIUS_M),
                         ));
                     }
                     if !(angle_deg.abs() > 1e-6 && angle_deg.abs() <= 360.0) {
@@ -668,6 +723,13 @@ impl Track {
             };
             piece_s0.push(s);
             s += piece.length();
+            if s > limits::MAX_LENGTH_M {
+                return Err(bad(
+                    format!("segments[0..={i}]"),
+                    format!("{s:.1} m"),
+                    &format!("the centre line may be at most {} m long in all", limits::MAX_LENGTH_M),
+                ));
+            }
             let (end, heading) = piece.pose_at(piece.length());
             p = end;
             h = heading;
@@ -727,6 +789,17 @@ impl Track {
             bb[2] + f.margin_m,
             bb[3] + f.margin_m,
         ];
+        let (fw, fh) = (floor_rect[2] - floor_rect[0], floor_rect[3] - floor_rect[1]);
+        if !(fw <= limits::MAX_FLOOR_SIDE_M && fh <= limits::MAX_FLOOR_SIDE_M) {
+            return Err(bad(
+                "segments / floor.margin_m".into(),
+                format!("a floor of {fw:.1} × {fh:.1} m"),
+                &format!(
+                    "the floor (the road's extent plus floor.margin_m each way) may be at most {0} × {0} m",
+                    limits::MAX_FLOOR_SIDE_M
+                ),
+            ));
+        }
 
         // Objects.
         let mut objects = Vec::new();

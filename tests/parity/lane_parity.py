@@ -141,7 +141,7 @@ def apply(cfg, sets):
 def run_variant(args, cfg, size, tmp, inputs, label, sets):
     """Runs rccar and OpenCV on every input with one configuration variant; (passed, failed)."""
     out = tmp / f"stages_{label}"
-    r = subprocess.run([args.rccar, "stages", "--config", args.config, "--local", "/nonexistent", "--out", str(out)]
+    r = subprocess.run([args.rccar, "stages", "--config", args.config, "--no-local", "--out", str(out)]
                        + [a for kv in sets for a in ("--set", kv)] + [str(p) for p in inputs],
                        capture_output=True, text=True)
     if r.returncode != 0:

@@ -94,14 +94,16 @@ fn apply(h: &[f64; 9], x: f64, y: f64) -> Option<(f64, f64)> {
     (w.abs() > 1e-12).then(|| ((h[0] * x + h[1] * y + h[2]) / w, (h[3] * x + h[4] * y + h[5]) / w))
 }
 
-fn gauss(rng: &mut SplitMix64) -> f64 {
+/// A standard normal draw.
+pub fn gauss(rng: &mut SplitMix64) -> f64 {
     // Box–Muller.
     let u1 = rng.next_f64().max(1e-12);
     let u2 = rng.next_f64();
     (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
 
-fn blur(img: &mut [f32], w: usize, h: usize, sigma: f64) {
+/// Separable Gaussian blur of a grey `w` × `h` float image, in place (edges clamped).
+pub fn blur(img: &mut [f32], w: usize, h: usize, sigma: f64) {
     let r = (3.0 * sigma).ceil().max(1.0) as isize;
     let k: Vec<f32> = (-r..=r)
         .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp() as f32)
@@ -130,6 +132,64 @@ fn blur(img: &mut [f32], w: usize, h: usize, sigma: f64) {
     }
 }
 
+/// Composites template `t` onto the grey `cw` × `ch` canvas with its corners (top-left,
+/// top-right, bottom-right, bottom-left) at `dst` (pixels; inverse warping, bilinear, the
+/// alpha channel as mask), grey = `(g − 128)·contrast + 128 + bright`. `false` when the corners
+/// are degenerate.
+pub fn paste(
+    canvas: &mut [f32],
+    cw: u32,
+    ch: u32,
+    t: &RgbaImage,
+    dst: [[f64; 2]; 4],
+    contrast: f64,
+    bright: f64,
+) -> bool {
+    let (tw, th) = (t.width() as f64, t.height() as f64);
+    let src = [[0.0, 0.0], [tw, 0.0], [tw, th], [0.0, th]];
+    let Some(hinv) = homography(dst, src) else { return false };
+    // Only the bounding box of the corners can change.
+    let x0b = dst.iter().map(|p| p[0]).fold(f64::MAX, f64::min).floor().max(0.0) as u32;
+    let y0b = dst.iter().map(|p| p[1]).fold(f64::MAX, f64::min).floor().max(0.0) as u32;
+    let x1b = (dst.iter().map(|p| p[0]).fold(f64::MIN, f64::max).ceil().max(0.0) as u32).min(cw);
+    let y1b = (dst.iter().map(|p| p[1]).fold(f64::MIN, f64::max).ceil().max(0.0) as u32).min(ch);
+    for y in y0b..y1b {
+        for x in x0b..x1b {
+            let Some((sx, sy)) = apply(&hinv, x as f64 + 0.5, y as f64 + 0.5) else {
+                continue;
+            };
+            let (fx, fy) = (sx - 0.5, sy - 0.5);
+            if fx < -0.5 || fy < -0.5 || fx > tw - 0.5 || fy > th - 0.5 {
+                continue;
+            }
+            let (x0, y0) = (fx.floor().max(0.0) as u32, fy.floor().max(0.0) as u32);
+            let (x1, y1) = ((x0 + 1).min(t.width() - 1), (y0 + 1).min(t.height() - 1));
+            let (ax, ay) = ((fx - x0 as f64).clamp(0.0, 1.0), (fy - y0 as f64).clamp(0.0, 1.0));
+            let mut g = 0.0;
+            let mut al = 0.0;
+            for (px, py, wgt) in [
+                (x0, y0, (1.0 - ax) * (1.0 - ay)),
+                (x1, y0, ax * (1.0 - ay)),
+                (x0, y1, (1.0 - ax) * ay),
+                (x1, y1, ax * ay),
+            ] {
+                let p = t.get_pixel(px, py).0;
+                let grey = (9798 * p[0] as u32 + 19235 * p[1] as u32 + 3735 * p[2] as u32 + 16384) >> 15;
+                let a = p[3] as f64 / 255.0;
+                g += wgt * grey as f64 * a;
+                al += wgt * a;
+            }
+            if al <= 0.0 {
+                continue;
+            }
+            let v = (g / al - 128.0) * contrast + 128.0 + bright;
+            let i = (y * cw + x) as usize;
+            canvas[i] = (canvas[i] as f64 * (1.0 - al) + v * al) as f32;
+        }
+    }
+    true
+}
+
 /// Writes `o.count` distorted samples of `templates` over `backgrounds` into `dir` with an
 /// `info.dat`; returns its path. Backgrounds must be at least as big as the largest object.
 pub fn generate(
@@ -145,6 +205,9 @@ pub fn generate(
     let list = dir.join("info.dat");
     let mut out =
         std::io::BufWriter::new(std::fs::File::create(&list).map_err(|e| format!("{}: {e}", list.display()))?);
+    // The window the samples were made for: `rccar-train train` takes -W/-H from this line.
+    writeln!(out, "# rccar-train distort window {}x{}", o.window.0, o.window.1)
+        .map_err(|e| format!("{}: {e}", list.display()))?;
     let mut rng = SplitMix64::new(mix(o.seed ^ 0xD157_0127));
     let u = |rng: &mut SplitMix64, lo: f64, hi: f64| lo + (hi - lo) * rng.next_f64();
     let mut n = 0;
@@ -185,41 +248,11 @@ pub fn generate(
             );
             dst[i] = [ccx + ca * px - sa * py, ccy + sa * px + ca * py];
         }
-        let (tw, th) = (t.width() as f64, t.height() as f64);
-        let src = [[0.0, 0.0], [tw, 0.0], [tw, th], [0.0, th]];
-        let Some(hinv) = homography(dst, src) else { continue };
         // 3. Composite (bilinear template sample, alpha mask), with brightness/contrast.
         let contrast = u(&mut rng, o.contrast.0, o.contrast.1);
         let bright = u(&mut rng, -o.max_brightness, o.max_brightness);
-        for y in 0..ch {
-            for x in 0..cw {
-                let Some((sx, sy)) = apply(&hinv, x as f64 + 0.5, y as f64 + 0.5) else {
-                    continue;
-                };
-                let (fx, fy) = (sx - 0.5, sy - 0.5);
-                if fx < -0.5 || fy < -0.5 || fx > tw - 0.5 || fy > th - 0.5 {
-                    continue;
-                }
-                let (x0, y0) = (fx.floor().max(0.0) as u32, fy.floor().max(0.0) as u32);
-                let (x1, y1) = ((x0 + 1).min(t.width() - 1), (y0 + 1).min(t.height() - 1));
-                let (ax, ay) = ((fx - x0 as f64).clamp(0.0, 1.0), (fy - y0 as f64).clamp(0.0, 1.0));
-                let mut g = 0.0;
-                let mut al = 0.0;
-                for (px, py, wgt) in [
-                    (x0, y0, (1.0 - ax) * (1.0 - ay)),
-                    (x1, y0, ax * (1.0 - ay)),
-                    (x0, y1, (1.0 - ax) * ay),
-                    (x1, y1, ax * ay),
-                ] {
-                    let p = t.get_pixel(px, py).0;
-                    let grey = (9798 * p[0] as u32 + 19235 * p[1] as u32 + 3735 * p[2] as u32 + 16384) >> 15;
-                    g += wgt * grey as f64;
-                    al += wgt * p[3] as f64 / 255.0;
-                }
-                let v = (g / al.max(1e-6) - 128.0) * contrast + 128.0 + bright;
-                let i = (y * cw + x) as usize;
-                crop[i] = (crop[i] as f64 * (1.0 - al) + v * al) as f32;
-            }
+        if !paste(&mut crop, cw, ch, t, dst, contrast, bright) {
+            continue;
         }
         // 4. Blur and noise.
         let sigma = u(&mut rng, 0.0, o.max_blur);

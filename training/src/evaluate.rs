@@ -45,6 +45,8 @@ pub struct Report {
     pub iou: f64,
     /// Scale factor used.
     pub scale_factor: f64,
+    /// Smallest window searched, pixels ((0, 0): the cascade's size).
+    pub min_size: (u32, u32),
     /// One point per minNeighbors.
     pub points: Vec<Point>,
     /// Median / mean / max time of a full `detect` call per frame, ms.
@@ -100,13 +102,15 @@ pub fn group(raw: &[Rect], min_neighbors: u32, w: u32, h: u32) -> Vec<Rect> {
         .collect()
 }
 
-/// Evaluates `cascade` on `(name, frame, boxes)` items at every minNeighbors in `mns`;
-/// `report_mn` picks the per-frame detail.
+/// Evaluates `cascade` on `(name, frame, boxes)` items at every minNeighbors in `mns`, with
+/// the detector's `scale_factor` and `min_size` (pixels, (0, 0) = the cascade's window: as
+/// `rccar detect` with `[detect] min_size_px`); `report_mn` picks the per-frame detail.
 pub fn evaluate(
     cascade: Cascade,
     name: &str,
     frames: &[(String, GrayImage, Vec<Rect>)],
     scale_factor: f64,
+    min_size: (u32, u32),
     iou: f64,
     mns: &[u32],
     report_mn: u32,
@@ -114,6 +118,7 @@ pub fn evaluate(
     let mut det = Detector::new(cascade);
     let params = DetectParams {
         scale_factor,
+        min_size,
         min_neighbors: 0,
         ..DetectParams::default()
     };
@@ -169,6 +174,7 @@ pub fn evaluate(
         boxes,
         iou,
         scale_factor,
+        min_size,
         points,
         ms_median: sorted.get(sorted.len() / 2).copied().unwrap_or(0.0),
         ms_mean: times.iter().sum::<f64>() / times.len().max(1) as f64,

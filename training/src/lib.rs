@@ -9,15 +9,21 @@
 //! train     stage loop: mine hard negatives, precompute, boost, save            (train.rs)
 //!           features.rs (Haar pool), boost.rs (Gentle/Real/Discrete/Logit), model.rs (XML)
 //! evaluate  recall, precision, FP per frame, curve over minNeighbors            (evaluate.rs)
+//! boxes     a boxes CSV to info.dat, with previews                              (annotate.rs)
+//! plan      window and sample counts chosen from the data                       (plan.rs)
+//! photoset  photo-like labelled frames: the sim's sign on system photos         (photogen.rs)
 //! ```
 //!
 //! Usage: `training/README.md`, `docs/training.md`.
 
+pub mod annotate;
 pub mod boost;
 pub mod distort;
 pub mod evaluate;
 pub mod features;
 pub mod model;
+pub mod photogen;
+pub mod plan;
 pub mod samples;
 pub mod scan;
 pub mod simgen;

@@ -31,59 +31,170 @@ enum Cmd {
     Evaluate(EvalArgs),
     /// Positives from template images, distorted over backgrounds (opencv_createsamples -img).
     Distort(DistortArgs),
+    /// Boxes from a CSV (file,x,y,w,h per line) to info.dat, with preview pictures.
+    Boxes(BoxesArgs),
+    /// Photo-like labelled frames: the simulator's stop sign pasted on photographs.
+    Photoset(PhotosetArgs),
 }
 
 #[derive(clap::Args)]
 struct DistortArgs {
-    /// Template images (PNG with alpha: transparent pixels show the background).
-    #[arg(long = "template", required = true)]
-    templates: Vec<PathBuf>,
-    /// Backgrounds (bg.txt).
+    /// Template images: files, folders (every .png/.jpg in them) or globs like `crops/*.jpg`;
+    /// repeat or list several. PNG with alpha: transparent pixels show the background; a JPEG
+    /// or opaque PNG crop is pasted whole (the rectangle is the object).
+    #[arg(long = "template", num_args = 1..)]
+    templates: Vec<String>,
+    /// Use the boxes of these info.dat files (e.g. from `rccar-train boxes`) as templates: each
+    /// box is cut out of its photo.
+    #[arg(long = "templates-from-info", num_args = 1..)]
+    templates_from_info: Vec<PathBuf>,
+    /// Backgrounds to paste onto (bg.txt: one image per line). Another set than training's --bg
+    /// is better (docs/training.md, "Which backgrounds").
     #[arg(long = "bg", required = true)]
     bg: Vec<PathBuf>,
-    /// Samples.
-    #[arg(long, default_value_t = 1000)]
+    /// Samples to write. Train with --num-pos up to about count / 1.1 (each stage drops a few).
+    #[arg(long, default_value_t = 1500)]
     count: usize,
     /// Seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Window WxH.
-    #[arg(long, default_value = "24x24")]
-    window: String,
+    /// Window WxH the samples are made for: the pasted object is at least this big. Written
+    /// into info.dat; `train` then uses it for -W/-H. Default: from the templates' boxes
+    /// (with --templates-from-info), else 24x24.
+    #[arg(long)]
+    window: Option<String>,
     /// Output folder (PNG crops + info.dat).
     #[arg(long)]
     out: PathBuf,
-    /// Largest rotation, degrees.
-    #[arg(long, default_value_t = 15.0)]
+    /// Largest in-plane rotation, degrees.
+    #[arg(long, default_value_t = 10.0)]
     max_angle_deg: f64,
     /// Largest corner displacement (perspective), fraction of the object size.
     #[arg(long, default_value_t = 0.12)]
     max_skew: f64,
-    /// Object size range, multiples of the window.
+    /// Smallest object, multiple of the window.
     #[arg(long, default_value_t = 1.0)]
     min_scale: f64,
-    /// Object size range, multiples of the window.
+    /// Largest object, multiple of the window.
     #[arg(long, default_value_t = 3.0)]
     max_scale: f64,
 }
 
+/// Expands files, folders and simple globs (`*`, `?` in the file name) to image files.
+fn expand_images(specs: &[String]) -> anyhow::Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for s in specs {
+        let p = PathBuf::from(s);
+        let name = p.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+        if name.contains('*') || name.contains('?') {
+            let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+            let mut m: Vec<PathBuf> = std::fs::read_dir(dir)
+                .with_context(|| format!("{s}: cannot list {}", dir.display()))?
+                .filter_map(|e| e.ok())
+                .map(|e| e.path())
+                .filter(|f| f.file_name().is_some_and(|n| glob_match(&name, &n.to_string_lossy())))
+                .collect();
+            if m.is_empty() {
+                bail!("{s}: matches no file");
+            }
+            m.sort();
+            out.extend(m);
+        } else if p.is_dir() {
+            let found = rccar_train::photogen::list_photos(std::slice::from_ref(&p));
+            if found.is_empty() {
+                bail!("{s}: no .png/.jpg files in this folder");
+            }
+            out.extend(found);
+        } else {
+            out.push(p);
+        }
+    }
+    Ok(out)
+}
+
+fn glob_match(pat: &str, s: &str) -> bool {
+    let (p, t): (Vec<char>, Vec<char>) = (pat.chars().collect(), s.chars().collect());
+    let (mut pi, mut ti, mut star, mut mark) = (0, 0, None, 0);
+    while ti < t.len() {
+        if pi < p.len() && (p[pi] == '?' || p[pi] == t[ti]) {
+            pi += 1;
+            ti += 1;
+        } else if pi < p.len() && p[pi] == '*' {
+            star = Some(pi);
+            mark = ti;
+            pi += 1;
+        } else if let Some(sp) = star {
+            pi = sp + 1;
+            mark += 1;
+            ti = mark;
+        } else {
+            return false;
+        }
+    }
+    while pi < p.len() && p[pi] == '*' {
+        pi += 1;
+    }
+    pi == p.len()
+}
+
 fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
     let mut templates = Vec::new();
-    for t in &a.templates {
+    for t in expand_images(&a.templates)? {
         templates.push(
-            image::open(t)
+            image::open(&t)
                 .with_context(|| format!("{}: cannot read template", t.display()))?
                 .to_rgba8(),
         );
     }
+    let mut info_lines = Vec::new();
+    for f in &a.templates_from_info {
+        let (lines, skipped) = samples::read_info(f)?;
+        for s in &skipped {
+            eprintln!("{s}");
+        }
+        for l in &lines {
+            let img = match image::open(&l.path) {
+                Ok(i) => i.to_rgba8(),
+                Err(e) => {
+                    eprintln!("{}:{}: skipped: {}: {e}", f.display(), l.line, l.path.display());
+                    continue;
+                }
+            };
+            for b in &l.boxes {
+                if b.x < 0 || b.y < 0 || b.width <= 0 || b.height <= 0
+                    || (b.x + b.width) as u32 > img.width() || (b.y + b.height) as u32 > img.height()
+                {
+                    eprintln!("{}:{}: skipped: box {:?} is outside {}", f.display(), l.line, b, l.path.display());
+                    continue;
+                }
+                templates.push(
+                    image::imageops::crop_imm(&img, b.x as u32, b.y as u32, b.width as u32, b.height as u32).to_image(),
+                );
+            }
+        }
+        info_lines.extend(lines);
+    }
+    if templates.is_empty() {
+        bail!("no templates: give --template FILE|FOLDER|GLOB or --templates-from-info info.dat");
+    }
+    let window = match &a.window {
+        Some(w) => parse_wh(w)?,
+        None => rccar_train::plan::choose_window(&info_lines).map_or((24, 24), |c| {
+            eprintln!("{}", c.why);
+            c.size
+        }),
+    };
     let (bgs, skipped) = samples::load_backgrounds(&a.bg)?;
     for s in &skipped {
         eprintln!("{s}");
     }
+    if bgs.is_empty() {
+        bail!("no readable background image in {:?}", a.bg);
+    }
     let o = rccar_train::distort::DistortOptions {
         count: a.count,
         seed: a.seed,
-        window: parse_wh(&a.window)?,
+        window,
         max_angle: a.max_angle_deg.to_radians(),
         max_skew: a.max_skew,
         scale: (a.min_scale, a.max_scale),
@@ -91,7 +202,137 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
     };
     let imgs: Vec<image::GrayImage> = bgs.into_iter().map(|b| b.img).collect();
     let list = rccar_train::distort::generate(&templates, &imgs, &o, &a.out).map_err(anyhow::Error::msg)?;
-    eprintln!("{}: {} samples", list.display(), a.count);
+    println!(
+        "{}: {} samples from {} templates over {} backgrounds, window {}x{}",
+        list.display(),
+        a.count,
+        templates.len(),
+        imgs.len(),
+        window.0,
+        window.1
+    );
+    println!(
+        "next: rccar-train train --pos {} --bg <backgrounds> --out <dir>   (-W {} -H {} and --num-pos {} are taken from it)",
+        list.display(),
+        window.0,
+        window.1,
+        rccar_train::plan::max_num_pos(a.count, 20, 0.995)
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+#[derive(clap::Args)]
+struct BoxesArgs {
+    /// The boxes: one per line `file,x,y,w,h` (pixels, top-left corner; paths relative to the
+    /// CSV); `file` alone marks a frame without the object.
+    #[arg(long)]
+    csv: PathBuf,
+    /// info.dat to write (frames with boxes).
+    #[arg(long)]
+    out: PathBuf,
+    /// bg.txt to write for the frames without the object (default: bg.txt beside --out, when
+    /// there are such lines).
+    #[arg(long)]
+    bg_out: Option<PathBuf>,
+    /// Folder for previews: every labelled image with its boxes drawn, and crops.png.
+    #[arg(long)]
+    preview: Option<PathBuf>,
+}
+
+fn run_boxes(a: BoxesArgs) -> anyhow::Result<ExitCode> {
+    let labels = match rccar_train::annotate::read_csv(&a.csv) {
+        Ok(l) => l,
+        Err(errors) => {
+            for e in &errors {
+                eprintln!("{e}");
+            }
+            bail!("{}: {} bad lines, nothing written", a.csv.display(), errors.len());
+        }
+    };
+    let has_empty = labels.images.iter().any(|(_, b)| b.is_empty());
+    let bg = a
+        .bg_out
+        .clone()
+        .or_else(|| has_empty.then(|| a.out.with_file_name("bg.txt")));
+    let (imgs, boxes, empty) = rccar_train::annotate::write_lists(&labels, &a.out, bg.as_deref())
+        .with_context(|| a.out.display().to_string())?;
+    println!("{}: {boxes} boxes in {imgs} images", a.out.display());
+    if let Some(bg) = &bg {
+        println!("{}: {empty} frames without the object", bg.display());
+    }
+    if let Some(dir) = &a.preview {
+        let files = rccar_train::annotate::previews(&labels, dir, 64).map_err(anyhow::Error::msg)?;
+        println!("{}: {} preview pictures (crops.png shows every box)", dir.display(), files.len());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+#[derive(clap::Args)]
+struct PhotosetArgs {
+    /// Photo folders or files (.jpg/.png). Default: the system's (opencv-doc samples,
+    /// scikit-image data).
+    #[arg(long = "photos", num_args = 1..)]
+    photos: Vec<PathBuf>,
+    /// Which half of the sorted photo list (0 or 1; `all` uses every photo): train on one
+    /// half, test on the other.
+    #[arg(long, default_value = "all")]
+    half: String,
+    /// Frames with a stop sign.
+    #[arg(long, default_value_t = 48)]
+    with_sign: usize,
+    /// Frames without.
+    #[arg(long, default_value_t = 350)]
+    without: usize,
+    /// Seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Smallest and largest sign face, pixels (MINxMAX).
+    #[arg(long, default_value = "24x96")]
+    sign_px: String,
+    /// Track file whose scene paints the sign.
+    #[arg(long, default_value = "config/tracks/default.toml")]
+    track: PathBuf,
+    /// Output folder (frames/, info.dat, bg.txt, boxes.csv).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+fn run_photoset(a: PhotosetArgs) -> anyhow::Result<ExitCode> {
+    use rccar_train::photogen;
+    let dirs = if a.photos.is_empty() { photogen::system_photo_dirs() } else { a.photos.clone() };
+    let all = photogen::list_photos(&dirs);
+    let photos = match a.half.as_str() {
+        "all" => all,
+        "0" => photogen::half(&all, 0),
+        "1" => photogen::half(&all, 1),
+        h => bail!("--half `{h}`: expected 0, 1 or all"),
+    };
+    if photos.is_empty() {
+        bail!("no .jpg/.png photos in {dirs:?} (install Debian's opencv-doc, or give --photos DIR)");
+    }
+    let (lo, hi) = parse_wh(&a.sign_px)?;
+    let track = if a.track.exists() {
+        a.track.clone()
+    } else {
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(&a.track)
+    };
+    let t = photogen::stop_sign_template(&track, 96).map_err(anyhow::Error::msg)?;
+    let o = photogen::PhotoSetOptions {
+        with_sign: a.with_sign,
+        without: a.without,
+        seed: a.seed,
+        sign_px: (lo as f64, hi as f64),
+    };
+    let set = photogen::generate(&photos, &t, &o, &a.out).map_err(anyhow::Error::msg)?;
+    println!(
+        "{}: {} frames with a sign; {}: {} without; {} (the same as a boxes CSV); from {} photos",
+        set.info.display(),
+        a.with_sign,
+        set.bg.display(),
+        a.without,
+        set.csv.display(),
+        photos.len()
+    );
     Ok(ExitCode::SUCCESS)
 }
 
@@ -109,9 +350,13 @@ struct EvalArgs {
     /// minNeighbors whose numbers are printed as the operating point.
     #[arg(long, default_value_t = 3)]
     min_neighbors: u32,
-    /// Scale factor.
+    /// Scale factor (as `[detect] scale_factor`).
     #[arg(long, default_value_t = 1.1)]
     scale_factor: f64,
+    /// Smallest search window, pixels: N (square) or WxH; 0 = the cascade's own size (as
+    /// `[detect] min_size_px`, so the numbers match `rccar detect`).
+    #[arg(long, default_value = "0")]
+    min_size: String,
     /// IoU for a match.
     #[arg(long, default_value_t = 0.5)]
     iou: f64,
@@ -144,6 +389,7 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
         &a.cascade.display().to_string(),
         &frames,
         a.scale_factor,
+        parse_size(&a.min_size)?,
         a.iou,
         &mns,
         a.min_neighbors,
@@ -166,7 +412,10 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
     } else {
         eprintln!("{FONT} not found (Debian fonts-dejavu-core): no curve.png");
     }
-    println!("{} frames, {} boxes, IoU >= {}", rep.frames, rep.boxes, rep.iou);
+    println!(
+        "{} frames, {} boxes, IoU >= {}, scale factor {}, min size {}x{}",
+        rep.frames, rep.boxes, rep.iou, rep.scale_factor, rep.min_size.0, rep.min_size.1
+    );
     println!("minNeighbors  recall  precision  FP/frame   TP   FP  miss");
     for p in &rep.points {
         println!(
@@ -225,7 +474,20 @@ struct GenArgs {
 
 fn parse_wh(s: &str) -> anyhow::Result<(u32, u32)> {
     let (a, b) = s.split_once('x').with_context(|| format!("`{s}`: expected WxH"))?;
-    Ok((a.trim().parse()?, b.trim().parse()?))
+    Ok((
+        a.trim().parse().with_context(|| format!("`{s}`: expected WxH"))?,
+        b.trim().parse().with_context(|| format!("`{s}`: expected WxH"))?,
+    ))
+}
+
+/// `N` (square) or `WxH`.
+fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
+    if s.contains('x') {
+        parse_wh(s)
+    } else {
+        let n: u32 = s.trim().parse().with_context(|| format!("`{s}`: expected N or WxH pixels"))?;
+        Ok((n, n))
+    }
 }
 
 fn run_gen(a: GenArgs) -> anyhow::Result<ExitCode> {
@@ -263,25 +525,27 @@ struct TrainArgs {
     /// Output folder (cascade.xml, stages.json).
     #[arg(long)]
     out: PathBuf,
-    /// Positives: info.dat files (`path count x y w h ...`).
-    #[arg(long = "pos", required = true)]
+    /// Positives: info.dat files (`path count x y w h ...`); repeat for several.
+    #[arg(long = "pos", required = true, num_args = 1..)]
     pos: Vec<PathBuf>,
     /// Backgrounds: bg.txt / info.dat files (boxes on a line are kept out of the negatives).
-    #[arg(long = "bg", required = true)]
+    #[arg(long = "bg", required = true, num_args = 1..)]
     bg: Vec<PathBuf>,
-    /// Window width, pixels.
-    #[arg(short = 'W', long, default_value_t = 24)]
-    width: i32,
-    /// Window height, pixels.
-    #[arg(short = 'H', long, default_value_t = 24)]
-    height: i32,
-    /// Stages.
+    /// Window width, pixels. Default: the window `distort` wrote into the info.dat, else chosen
+    /// from the boxes (median aspect; the 5th-percentile size, 12-24 px).
+    #[arg(short = 'W', long)]
+    width: Option<i32>,
+    /// Window height, pixels (default: as -W).
+    #[arg(short = 'H', long)]
+    height: Option<i32>,
+    /// Stages at most.
     #[arg(long, default_value_t = 20)]
     num_stages: u32,
-    /// Positives per stage.
-    #[arg(long, default_value_t = 1000)]
-    num_pos: usize,
-    /// Negatives per stage.
+    /// Positives per stage. Default: as many as exist, less what the stages will drop
+    /// (available / (1 + (stages-1)(1-min-hit-rate))); a larger number is reduced, with a note.
+    #[arg(long)]
+    num_pos: Option<usize>,
+    /// Negatives per stage (windows the cascade so far wrongly accepts).
     #[arg(long, default_value_t = 1000)]
     num_neg: usize,
     /// Per-stage hit rate.
@@ -302,15 +566,33 @@ struct TrainArgs {
     /// Most weak classifiers per stage.
     #[arg(long, default_value_t = 100)]
     max_weak_count: u32,
-    /// Memory for precomputed feature values, MiB.
+    /// Memory for the training data, MiB: backgrounds, samples and the precomputed feature
+    /// values (what is left after the data; features that do not fit are sampled).
     #[arg(long, default_value_t = 512)]
     mem_mb: usize,
     /// Seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Scale step used when mining negatives (the detector's scaleFactor).
+    /// Scale step of the negative pool's pyramid (the detector's scaleFactor).
     #[arg(long, default_value_t = 1.1)]
     scale_factor: f64,
+    /// Also draw negatives from mirror images of the backgrounds (twice as many windows).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    mirror_negatives: bool,
+    /// Held-out frames (info.dat with boxes and/or bg.txt without), never trained on: after
+    /// every stage the cascade is run over them and training stops once the false positives
+    /// per frame reach --target-fp-per-frame.
+    #[arg(long = "holdout", num_args = 1..)]
+    holdout: Vec<PathBuf>,
+    /// Early-stop target: false positives per held-out frame.
+    #[arg(long, default_value_t = 0.01)]
+    target_fp_per_frame: f64,
+    /// minNeighbors of the held-out check (as `[detect] min_neighbors`).
+    #[arg(long, default_value_t = 3)]
+    holdout_min_neighbors: u32,
+    /// Smallest window of the held-out check, N or WxH pixels (as `[detect] min_size_px`).
+    #[arg(long, default_value = "0")]
+    holdout_min_size: String,
     /// Continue from the last finished stage in --out.
     #[arg(long)]
     resume: bool,
@@ -319,13 +601,18 @@ struct TrainArgs {
     threads: Option<usize>,
 }
 
-/// Progress on stderr: a bar per stage (on a terminal) and one line per finished stage.
+/// Progress on stderr: on a terminal a bar per stage; otherwise (a log file, a pipe) plain
+/// lines only. One line per finished stage either way.
 struct Bars {
     bar: Option<indicatif::ProgressBar>,
+    tty: bool,
 }
 
 impl Progress for Bars {
     fn stage_start(&mut self, stage: usize, max_weak: usize) {
+        if !self.tty {
+            return;
+        }
         let b = indicatif::ProgressBar::new(max_weak as u64);
         b.set_style(
             indicatif::ProgressStyle::with_template("stage {prefix:>2} [{bar:30}] {pos:>3} weak  {msg}")
@@ -344,16 +631,22 @@ impl Progress for Bars {
         if let Some(b) = self.bar.take() {
             b.finish_and_clear();
         }
+        let ho = match (l.holdout_recall, l.holdout_fp_per_frame) {
+            (Some(r), Some(f)) => format!(", held-out recall {r:.3} FP/frame {f:.4}"),
+            (None, Some(f)) => format!(", held-out FP/frame {f:.4}"),
+            _ => String::new(),
+        };
         eprintln!(
-            "stage {:>2}: {:>3} weak, hit {:.4}, false alarm {:.4}, pos {}, neg {} (acceptance {:.2e}), {} features, {:.1}+{:.1}+{:.1} = {:.1} s",
+            "stage {:>2}: {:>3} weak, hit {:.4}, false alarm {:.4}, pos {}, neg {}{} (acceptance {:.2e}){}, {:.1}+{:.1}+{:.1} = {:.1} s",
             l.stage,
             l.weak_count,
             l.hit_rate,
             l.false_alarm,
             l.num_pos,
             l.num_neg,
+            if l.negatives_exhausted { " (all the backgrounds hold)" } else { "" },
             l.acceptance_ratio,
-            l.features_used,
+            ho,
             l.seconds_mining,
             l.seconds_precompute,
             l.seconds_boost,
@@ -361,18 +654,64 @@ impl Progress for Bars {
         );
     }
     fn note(&mut self, msg: &str) {
-        eprintln!("{msg}");
+        if let Some(b) = &self.bar {
+            b.suspend(|| eprintln!("{msg}"));
+        } else {
+            eprintln!("{msg}");
+        }
     }
 }
 
+fn load_frames(files: &[PathBuf]) -> anyhow::Result<Vec<(String, image::GrayImage, Vec<rccar::detect::Rect>)>> {
+    let mut frames = Vec::new();
+    for f in files {
+        let (lines, skipped) = samples::read_info(f)?;
+        for s in &skipped {
+            eprintln!("{s}");
+        }
+        for l in lines {
+            match samples::load_gray(&l.path) {
+                Ok(img) => frames.push((l.path.display().to_string(), img, l.boxes)),
+                Err(e) => eprintln!("{}:{}: skipped: {e}", f.display(), l.line),
+            }
+        }
+    }
+    Ok(frames)
+}
+
 fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
+    use rccar_train::plan;
+    use std::io::IsTerminal;
     if let Some(t) = a.threads {
         rayon::ThreadPoolBuilder::new().num_threads(t).build_global().ok();
     }
-    let (w, h) = (a.width as usize, a.height as usize);
-    if a.width < 3 || a.height < 3 {
-        bail!("window {}x{}: each side must be at least 3 px", a.width, a.height);
+    let t = std::time::Instant::now();
+    // 1. The window: given, written by distort, or chosen from the boxes.
+    let mut lines = Vec::new();
+    let mut hint = None;
+    for f in &a.pos {
+        let text = std::fs::read_to_string(f).with_context(|| format!("{}: cannot read", f.display()))?;
+        hint = hint.or(plan::window_hint(&text));
+        lines.extend(samples::parse_info(&text, f).0);
     }
+    let (width, height, why) = match (a.width, a.height) {
+        (Some(w), Some(h)) => (w, h, "given".to_string()),
+        (Some(w), None) => (w, w, "given (-H = -W)".to_string()),
+        (None, Some(h)) => (h, h, "given (-W = -H)".to_string()),
+        (None, None) => match hint {
+            Some((w, h)) => (w as i32, h as i32, "the window distort made the positives for".to_string()),
+            None => {
+                let c = plan::choose_window(&lines).context("no boxes in the --pos files")?;
+                (c.size.0 as i32, c.size.1 as i32, c.why)
+            }
+        },
+    };
+    if !(3..=256).contains(&width) || !(3..=256).contains(&height) {
+        bail!("window {width}x{height}: each side must be 3..=256 px");
+    }
+    eprintln!("window {width}x{height}: {why}");
+    let (w, h) = (width as usize, height as usize);
+    // 2. Positives and backgrounds.
     let (pos, skipped) = samples::load_positives(&a.pos, w, h)?;
     for s in skipped.iter().take(20) {
         eprintln!("{s}");
@@ -384,15 +723,41 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
     if pos.is_empty() {
         bail!("no usable positive in {:?}", a.pos);
     }
+    let (num_pos, note) = plan::choose_num_pos(a.num_pos, pos.len(), a.num_stages, a.min_hit_rate);
+    if let Some(n) = &note {
+        eprintln!("note: {n}");
+    }
     let (bgs, bskipped) = samples::load_backgrounds(&a.bg)?;
     for s in &bskipped {
         eprintln!("{s}");
     }
     eprintln!("{} background images", bgs.len());
+    let holdout = if a.holdout.is_empty() {
+        None
+    } else {
+        let frames = load_frames(&a.holdout)?;
+        if frames.is_empty() {
+            bail!("no readable held-out frame in {:?}", a.holdout);
+        }
+        eprintln!(
+            "{} held-out frames ({} boxes): training stops at {} false positives per frame",
+            frames.len(),
+            frames.iter().map(|f| f.2.len()).sum::<usize>(),
+            a.target_fp_per_frame
+        );
+        Some(train::Holdout {
+            frames,
+            min_neighbors: a.holdout_min_neighbors,
+            min_size: parse_size(&a.holdout_min_size)?,
+            scale_factor: a.scale_factor,
+            iou: 0.5,
+            target_fp_per_frame: a.target_fp_per_frame,
+        })
+    };
     let opts = TrainOptions {
         params: ModelParams {
-            width: a.width,
-            height: a.height,
+            width,
+            height,
             mode: a.mode,
             boost: a.boost,
             min_hit_rate: a.min_hit_rate,
@@ -401,22 +766,38 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
             max_weak_count: a.max_weak_count,
             num_stages: a.num_stages,
         },
-        num_pos: a.num_pos,
+        num_pos,
         num_neg: a.num_neg,
         mem_mb: a.mem_mb,
         seed: a.seed,
         scale_factor: a.scale_factor,
+        mirror_negatives: a.mirror_negatives,
     };
-    let t = std::time::Instant::now();
-    let out = train::train(&opts, &pos, &bgs, &a.out, a.resume, &mut Bars { bar: None })
+    let mut bars = Bars {
+        bar: None,
+        tty: std::io::stderr().is_terminal(),
+    };
+    let out = train::train_with_holdout(&opts, &pos, &bgs, holdout.as_ref(), &a.out, a.resume, &mut bars)
         .with_context(|| format!("training into {}", a.out.display()))?;
-    eprintln!(
-        "{}: {} stages in {:.1} s ({})",
-        out.xml.display(),
-        out.stages,
-        t.elapsed().as_secs_f64(),
-        out.reason
-    );
+    // 3. The summary, on stdout.
+    println!("cascade      {}", out.xml.display());
+    println!("stages       {} ({})", out.stages, out.reason);
+    println!("window       {width}x{height} ({why})");
+    println!("positives    {num_pos} per stage of {} usable", pos.len());
+    println!("negatives    {} per stage from {} backgrounds", a.num_neg, bgs.len());
+    if let Some(c) = out.holdout {
+        println!(
+            "held-out     {} false positives per frame (target {}){} at minNeighbors {}",
+            format_args!("{:.4}", c.fp_per_frame),
+            a.target_fp_per_frame,
+            c.recall.map(|r| format!(", recall {r:.4}")).unwrap_or_default(),
+            a.holdout_min_neighbors
+        );
+    }
+    println!("time         {:.1} s", t.elapsed().as_secs_f64());
+    if let Some(n) = note {
+        println!("note         {n}");
+    }
     Ok(ExitCode::SUCCESS)
 }
 
@@ -427,6 +808,8 @@ fn main() -> ExitCode {
         Cmd::Gen(a) => run_gen(a),
         Cmd::Evaluate(a) => run_evaluate(a),
         Cmd::Distort(a) => run_distort(a),
+        Cmd::Boxes(a) => run_boxes(a),
+        Cmd::Photoset(a) => run_photoset(a),
     };
     match r {
         Ok(c) => c,

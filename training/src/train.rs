@@ -23,7 +23,6 @@ use crate::features::{self, SampleIntegral};
 use crate::model::{Model, ModelParams, StageModel};
 use crate::samples::Background;
 use crate::scan;
-use rayon::prelude::*;
 use rccar::detect::integral::Integrals;
 use rccar::detect::Cascade;
 use rccar::sim::rng::{mix, SplitMix64};
@@ -70,8 +69,11 @@ pub struct TrainOptions {
     pub mem_mb: usize,
     /// Seed of every random choice.
     pub seed: u64,
-    /// Scale step when mining negatives (the detector's `scaleFactor`).
+    /// Scale step of the negative pool's pyramid (the detector's `scaleFactor`).
     pub scale_factor: f64,
+    /// Also draw negatives from the backgrounds' mirror images (twice the pool).
+    #[serde(default)]
+    pub mirror_negatives: bool,
 }
 
 /// One finished stage's record in `stages.json`.
@@ -108,6 +110,66 @@ pub struct StageLog {
     pub seconds_boost: f64,
     /// Seconds for the whole stage.
     pub seconds: f64,
+    /// Window positions in the negative pool (all backgrounds, scales, offsets).
+    #[serde(default)]
+    pub pool_windows: u64,
+    /// Whether every window of the pool had to be checked to find this stage's negatives
+    /// (they are all the backgrounds hold).
+    #[serde(default)]
+    pub negatives_exhausted: bool,
+    /// Recall on the held-out frames after this stage (when they have boxes).
+    #[serde(default)]
+    pub holdout_recall: Option<f64>,
+    /// False positives per held-out frame after this stage.
+    #[serde(default)]
+    pub holdout_fp_per_frame: Option<f64>,
+}
+
+/// Frames kept out of training, checked after every stage: training stops once their false
+/// positives per frame are at most `target_fp_per_frame`.
+#[derive(Debug, Clone)]
+pub struct Holdout {
+    /// (name, grey frame, object boxes); frames without boxes count false positives only.
+    pub frames: Vec<(String, image::GrayImage, Vec<rccar::detect::Rect>)>,
+    /// Detector settings the check uses (as `rccar detect` would run).
+    pub min_neighbors: u32,
+    /// Smallest window, pixels ((0, 0) = the cascade's size).
+    pub min_size: (u32, u32),
+    /// Scale step.
+    pub scale_factor: f64,
+    /// IoU for a detection to count as finding a box.
+    pub iou: f64,
+    /// Stop when false positives per frame ≤ this.
+    pub target_fp_per_frame: f64,
+}
+
+/// Held-out figures after a stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HoldoutCheck {
+    /// Recall (None when the frames have no boxes).
+    pub recall: Option<f64>,
+    /// False positives per frame.
+    pub fp_per_frame: f64,
+}
+
+/// Runs `cascade` over the held-out frames.
+pub fn check_holdout(cascade: &Cascade, h: &Holdout) -> Result<HoldoutCheck, TrainError> {
+    let rep = crate::evaluate::evaluate(
+        cascade.clone(),
+        "holdout",
+        &h.frames,
+        h.scale_factor,
+        h.min_size,
+        h.iou,
+        &[h.min_neighbors],
+        h.min_neighbors,
+    )
+    .map_err(|e| TrainError::Invalid(format!("held-out check: {e}")))?;
+    let p = &rep.points[0];
+    Ok(HoldoutCheck {
+        recall: (rep.boxes > 0).then_some(p.recall),
+        fp_per_frame: p.fp_per_frame,
+    })
 }
 
 /// `stages.json`: everything needed to resume, plus the log.
@@ -168,6 +230,10 @@ pub struct TrainOutcome {
     pub stages: usize,
     /// Why it stopped.
     pub reason: String,
+    /// Held-out figures of the final cascade (when a held-out set was given).
+    pub holdout: Option<HoldoutCheck>,
+    /// Whether training ended because the negatives ran out before the targets.
+    pub negatives_ran_out: bool,
 }
 
 /// Trains (or resumes) a cascade into `out_dir` (`cascade.xml`, `stages.json`).
@@ -175,6 +241,29 @@ pub fn train(
     opts: &TrainOptions,
     positives: &[Vec<u8>],
     backgrounds: &[Background],
+    out_dir: &Path,
+    resume: bool,
+    progress: &mut dyn Progress,
+) -> Result<TrainOutcome, TrainError> {
+    train_with_holdout(opts, positives, backgrounds, None, out_dir, resume, progress)
+}
+
+/// Bytes the training data takes besides the feature matrix: backgrounds, positives' and
+/// negatives' integral tables (two `i32` tables of `(w+1)·(h+1)` each) and raw windows.
+pub fn data_bytes(backgrounds: &[Background], positives: usize, num_neg: usize, w: usize, h: usize) -> usize {
+    let bg: usize = backgrounds.iter().map(|b| b.img.as_raw().len()).sum();
+    let per = 2 * (w + 1) * (h + 1) * 4 + 64;
+    bg + (positives + num_neg) * per + 2 * num_neg * (w * h + 24) + positives * (w * h + 24)
+}
+
+/// [`train`] with an optional held-out set checked after every stage (early stop at its
+/// false-positive target).
+#[allow(clippy::too_many_arguments)]
+pub fn train_with_holdout(
+    opts: &TrainOptions,
+    positives: &[Vec<u8>],
+    backgrounds: &[Background],
+    holdout: Option<&Holdout>,
     out_dir: &Path,
     resume: bool,
     progress: &mut dyn Progress,
@@ -296,11 +385,39 @@ pub fn train(
                 xml: xml_path,
                 stages: model.stages.len(),
                 reason,
+                holdout: None,
+                negatives_ran_out: false,
             });
         }
     }
 
-    let budget = opts.mem_mb.saturating_mul(1 << 20);
+    // The feature matrix gets what the data leaves of --mem-mb.
+    let budget_total = opts.mem_mb.saturating_mul(1 << 20);
+    let data = data_bytes(backgrounds, positives.len(), opts.num_neg, w, h) + (24 << 20);
+    if data >= budget_total {
+        return Err(TrainError::Invalid(format!(
+            "--mem-mb {}: the backgrounds and samples alone take about {} MiB (plus 24 for the program); \
+             give at least {} MiB, or fewer/smaller backgrounds",
+            opts.mem_mb,
+            data >> 20,
+            (data >> 20) + 32
+        )));
+    }
+    let budget = budget_total - data;
+    // 2b. The negative pool: every window of every background at every scale.
+    let pool = scan::NegativePool::new(backgrounds, w, h, opts.scale_factor, opts.mirror_negatives);
+    progress.note(&format!(
+        "negative pool: {} windows of {w}x{h} in {} backgrounds (every offset and scale{}); \
+         feature values get {} MiB of --mem-mb {}",
+        pool.windows(),
+        backgrounds.len(),
+        if opts.mirror_negatives { ", mirrored too" } else { "" },
+        budget >> 20,
+        opts.mem_mb
+    ));
+    let required_fa = p.max_false_alarm.powi(p.num_stages as i32);
+    let mut last_check: Option<HoldoutCheck> = None;
+    let mut ran_out = false;
     let reason;
     loop {
         let si = model.stages.len();
@@ -310,6 +427,24 @@ pub fn train(
         }
         let t0 = Instant::now();
         let cascade: Option<Cascade> = if si == 0 { None } else { Some(model.to_cascade()?) };
+        // 2c. The held-out check of the cascade so far (its early stop).
+        if let (Some(hd), Some(c)) = (holdout, cascade.as_ref()) {
+            if last_check.is_none() {
+                let chk = check_holdout(c, hd)?;
+                last_check = Some(chk);
+            }
+            if let Some(chk) = last_check {
+                if chk.fp_per_frame <= hd.target_fp_per_frame {
+                    reason = format!(
+                        "held-out target reached after {si} stages: {:.4} false positives per frame <= {}{}",
+                        chk.fp_per_frame,
+                        hd.target_fp_per_frame,
+                        chk.recall.map(|r| format!(", recall {r:.4}")).unwrap_or_default()
+                    );
+                    break;
+                }
+            }
+        }
         // 3. Positives the cascade so far accepts.
         let compiled = cascade.as_ref().map(|c| scan::compile_for_samples(c, w, h));
         let pos: Vec<&SampleIntegral> = pos_pool
@@ -324,45 +459,24 @@ pub fn train(
                 pos_pool.len()
             )));
         }
-        // 4. Negatives: hard ones from the backgrounds, in a seeded order.
-        let mut order: Vec<usize> = (0..backgrounds.len()).collect();
-        let mut orng = SplitMix64::new(mix(opts.seed ^ (si as u64 + 1) * 0x9E37));
-        for i in (1..order.len()).rev() {
-            let j = (orng.next_u64() % (i as u64 + 1)) as usize;
-            order.swap(i, j);
-        }
-        let cap = (2 * opts.num_neg).div_ceil(backgrounds.len()).max(2);
-        let mut negs: Vec<Vec<u8>> = Vec::new();
-        let (mut scanned, mut accepted) = (0u64, 0u64);
-        for chunk in order.chunks(rayon::current_num_threads().max(1) * 4) {
-            let results: Vec<scan::ScanResult> = chunk
-                .par_iter()
-                .map(|&bi| {
-                    scan::scan(
-                        &backgrounds[bi],
-                        cascade.as_ref(),
-                        w,
-                        h,
-                        opts.scale_factor,
-                        cap,
-                        mix(opts.seed ^ ((si as u64) << 32) ^ bi as u64),
-                    )
-                })
-                .collect();
-            for r in results {
-                scanned += r.windows;
-                accepted += r.hits;
-                for k in r.kept {
-                    if negs.len() < opts.num_neg {
-                        negs.push(k);
-                    }
-                }
-            }
-            if negs.len() >= opts.num_neg {
-                break;
-            }
-        }
+        // 4. Negatives: windows of the pool the cascade so far wrongly accepts.
+        let mined = pool.mine(
+            backgrounds,
+            cascade.as_ref(),
+            opts.num_neg,
+            mix(opts.seed ^ (si as u64 + 1).wrapping_mul(0x9E37)),
+        );
+        let (scanned, accepted) = (mined.evaluated, mined.accepted);
         let t_mine = t0.elapsed().as_secs_f64();
+        if si > 0 && mined.acceptance() <= required_fa && !mined.windows.is_empty() {
+            reason = format!(
+                "done after {si} stages: the cascade accepts {:.2e} of the background windows, \
+                 below max_false_alarm^num_stages = {required_fa:.2e}",
+                mined.acceptance()
+            );
+            break;
+        }
+        let negs = mined.windows;
         if negs.is_empty() {
             if si == 0 {
                 return Err(TrainError::Invalid(format!(
@@ -370,17 +484,36 @@ pub fn train(
                     backgrounds.len()
                 )));
             }
-            reason =
-                format!("done after {si} stages: the cascade accepts no window of the backgrounds ({scanned} scanned)");
+            reason = format!(
+                "done after {si} stages: the cascade accepts none of the {scanned} background windows{}",
+                if holdout.is_some() && last_check.is_some_and(|c| c.fp_per_frame > holdout.map_or(0.0, |h| h.target_fp_per_frame)) {
+                    format!("; {}", more_backgrounds_advice(backgrounds.len(), 0.0, opts.num_neg, pool.windows()))
+                } else {
+                    String::new()
+                }
+            );
+            ran_out = holdout.is_some();
             break;
         }
-        let min_neg = (opts.num_neg / 50).max(10);
-        if negs.len() < min_neg {
+        let min_neg = (opts.num_neg / 10).max(10);
+        if mined.exhausted && negs.len() < min_neg {
             reason = format!(
-                "done after {si} stages: only {} false alarms left in {scanned} background windows (< {min_neg})",
-                negs.len()
+                "negatives ran out after {si} stages: only {} windows of the {} in the backgrounds \
+                 (every offset and scale) still pass the cascade, fewer than {min_neg} (num_neg/10). {}",
+                negs.len(),
+                pool.windows(),
+                more_backgrounds_advice(backgrounds.len(), accepted as f64 / scanned.max(1) as f64, opts.num_neg, pool.windows())
             );
+            ran_out = true;
             break;
+        }
+        if mined.exhausted {
+            progress.note(&format!(
+                "stage {si}: only {} negatives left in all {} background windows (asked {}): training on them",
+                negs.len(),
+                pool.windows(),
+                opts.num_neg
+            ));
         }
         let neg: Vec<SampleIntegral> = negs.iter().map(|s| SampleIntegral::new(s, w, h, &mut ii)).collect();
         let (np, nn) = (pos.len(), neg.len());
@@ -461,8 +594,22 @@ pub fn train(
             seconds_mining: t_mine,
             seconds_precompute: t_pre,
             seconds_boost: t_boost,
-            seconds: t0.elapsed().as_secs_f64(),
+            seconds: 0.0,
+            pool_windows: pool.windows(),
+            negatives_exhausted: mined.exhausted,
+            holdout_recall: None,
+            holdout_fp_per_frame: None,
         };
+        let mut log = log;
+        // 8. The held-out check of the new cascade.
+        if let Some(hd) = holdout {
+            let c = model.to_cascade()?;
+            let chk = check_holdout(&c, hd)?;
+            log.holdout_recall = chk.recall;
+            log.holdout_fp_per_frame = Some(chk.fp_per_frame);
+            last_check = Some(chk);
+        }
+        log.seconds = t0.elapsed().as_secs_f64();
         progress.stage_end(&log);
         file.stages.push(stage);
         file.log.push(log);
@@ -470,6 +617,15 @@ pub fn train(
         write_atomic(&log_path, &serde_json::to_string_pretty(&file).unwrap_or_default())?;
     }
     progress.note(&reason);
+    if let (Some(hd), Some(chk)) = (holdout, last_check) {
+        if chk.fp_per_frame > hd.target_fp_per_frame && !ran_out {
+            progress.note(&format!(
+                "held-out false positives {:.4} per frame are above the target {}: more stages (--num-stages), \
+                 more backgrounds like the frames with false positives, or a higher --holdout-min-neighbors",
+                chk.fp_per_frame, hd.target_fp_per_frame
+            ));
+        }
+    }
     file.finished = Some(reason.clone());
     if model.stages.is_empty() {
         return Err(TrainError::Invalid(format!("no stage could be trained: {reason}")));
@@ -480,5 +636,28 @@ pub fn train(
         xml: xml_path,
         stages: model.stages.len(),
         reason,
+        holdout: last_check,
+        negatives_ran_out: ran_out,
     })
+}
+
+/// What to add when the negatives run out: at acceptance ratio `acc` per window, `num_neg`
+/// negatives need `num_neg / acc` windows; the pool has `pool` in `n_bg` backgrounds.
+pub fn more_backgrounds_advice(n_bg: usize, acc: f64, num_neg: usize, pool: u64) -> String {
+    let per_bg = pool as f64 / n_bg.max(1) as f64;
+    if acc > 0.0 {
+        let need = (num_neg as f64 / acc / per_bg).ceil() as u64;
+        format!(
+            "To train further add background images without the object — frames like the ones the car \
+             will see (the track, the room, the floor), and above all frames where it gives false positives: \
+             about {} more of this size ({} in all) would hold {num_neg} false alarms. Or stop here: \
+             check the held-out result (rccar-train evaluate).",
+            need.saturating_sub(n_bg as u64).max(1),
+            need.max(n_bg as u64 + 1)
+        )
+    } else {
+        "To train further add background images without the object, above all frames where the cascade \
+         gives false positives (rccar-train evaluate lists them in report.json)."
+            .to_string()
+    }
 }

@@ -1,0 +1,341 @@
+//! One image pyramid for several cascades (issue 13): each frame is resized and integrated
+//! once per scale, and every cascade that searches that scale scans the same level.
+//!
+//! OpenCV's `detectMultiScale` builds level `k` as the input resized to
+//! `round(w/s_k)` × `round(h/s_k)` with `s_k = (f32)(f^k)` (Viola & Jones 2001, Sec. 4: the
+//! detector is scanned across scales and locations). A level therefore depends only on its
+//! scale, not on the cascade: cascades with different window sizes (16×16, 8×20, 20×16) and
+//! different size limits use different *sets* of scales of the same sequence, and where two
+//! sets meet they need the same pixels and the same integral images. So:
+//!
+//! 1. **Plan** (once per frame size / parameter set): every cascade's scale list (step 1 of
+//!    `detector.rs`, with its own min/max size), and per scale the window positions whose boxes
+//!    lie in the cascade's *region* of the frame ([`Detector::window_range`]). The level is
+//!    needed only in the rows those windows cover (`row0..row1`) and only left of the last
+//!    window's right edge (`0..cols`).
+//! 2. **Build** each needed level once: that part of the bit-exact resize
+//!    ([`Resizer::resize_part`]) and its integral images (sum, squared sum, tilted when any
+//!    cascade has tilted features), all levels in one row stride so every cascade's feature
+//!    offsets are compiled once.
+//! 3. **Scan** every cascade's windows on it ([`Detector::scan`]); raw hits per cascade stay in
+//!    ascending scale order, as OpenCV produces them, so grouping gives OpenCV's boxes.
+//!
+//! With no region (the whole frame) a cascade's raw hits are exactly those of its own
+//! `detectMultiScale`; with a region, exactly the subset whose boxes lie inside it (the scan
+//! reproduces OpenCV's skip-after-a-failed-first-stage chain at the region's left edge).
+//! Units: pixels.
+
+use super::detector::{DetectError, DetectParams, Detector, Level, WinRange};
+use super::group::Rect;
+use super::integral::Integrals;
+use super::resize::Resizer;
+use std::ops::Range;
+
+/// Scratch buffers of one worker: the level crop, its integrals, resize tables, hits.
+#[derive(Debug, Clone, Default)]
+struct Scratch {
+    level: Vec<u8>,
+    ii: Integrals,
+    resizer: Resizer,
+    hits: Vec<Rect>,
+    /// Hits per scan job, in the order this worker ran them (parallel mode).
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+    counts: Vec<usize>,
+}
+
+/// One level to build and the cascades to scan on it.
+#[derive(Debug, Clone)]
+struct Plan {
+    level: Level,
+    /// Level rows built.
+    row0: usize,
+    row1: usize,
+    /// Level columns built (from 0).
+    cols: usize,
+    /// (detector index, its windows).
+    jobs: Vec<(usize, WinRange)>,
+}
+
+/// What a plan was made for (re-planned when any of it changes).
+#[derive(Debug, Clone, Default, PartialEq)]
+struct Key {
+    width: usize,
+    height: usize,
+    params: Vec<DetectParams>,
+    regions: Vec<Option<Rect>>,
+    windows: Vec<(usize, usize)>,
+}
+
+/// A pyramid shared by several detectors; keeps its plan and buffers between frames.
+#[derive(Debug, Clone, Default)]
+pub struct Pyramid {
+    key: Option<Key>,
+    plans: Vec<Plan>,
+    stride: usize,
+    rows: usize,
+    tilted: bool,
+    scratch: Scratch,
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+    pool: Vec<Scratch>,
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+    assign: Vec<usize>,
+}
+
+fn check_size(width: usize, height: usize) -> Result<(), DetectError> {
+    if width.saturating_mul(height) > 8 << 20 || width > 1 << 16 || height > 1 << 16 {
+        return Err(DetectError::ImageTooLarge(width as u32, height as u32));
+    }
+    Ok(())
+}
+
+impl Pyramid {
+    /// An empty pyramid; buffers grow on first use.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Step 1: plans the levels for `dets` on a `width` × `height` input (cached).
+    pub(crate) fn plan(
+        &mut self,
+        width: usize,
+        height: usize,
+        dets: &[Detector],
+        params: &[DetectParams],
+        regions: &[Option<Rect>],
+    ) -> Result<(), DetectError> {
+        assert!(dets.len() == params.len() && dets.len() == regions.len(), "one parameter set and region per detector");
+        check_size(width, height)?;
+        let same = self.key.as_ref().is_some_and(|k| {
+            k.width == width
+                && k.height == height
+                && k.params == params
+                && k.regions == regions
+                && k.windows.iter().copied().eq(dets.iter().map(Detector::window))
+        });
+        if same {
+            return Ok(());
+        }
+        self.key = None;
+        self.plans.clear();
+        for (i, d) in dets.iter().enumerate() {
+            let scales = d.scales_for(width, height, &params[i])?;
+            // Not clipped to the frame: OpenCV's rounded boxes may reach a pixel past it, and a
+            // region covering the frame must keep them as no region does.
+            let region = regions[i];
+            if region.is_some_and(|r| r.width <= 0 || r.height <= 0) {
+                continue;
+            }
+            for sc in scales {
+                let level = Level::new(sc, width, height);
+                let Some(win) = d.window_range(&level, region) else {
+                    continue;
+                };
+                let (cw, ch) = d.window();
+                let (r0, r1, c1) = (win.ya, win.yb + ch, win.xb + cw);
+                match self.plans.iter_mut().find(|p| p.level.scale == sc) {
+                    Some(p) => {
+                        p.row0 = p.row0.min(r0);
+                        p.row1 = p.row1.max(r1);
+                        p.cols = p.cols.max(c1);
+                        p.jobs.push((i, win));
+                    }
+                    None => self.plans.push(Plan {
+                        level,
+                        row0: r0,
+                        row1: r1,
+                        cols: c1,
+                        jobs: vec![(i, win)],
+                    }),
+                }
+            }
+        }
+        self.plans.sort_by(|a, b| a.level.scale.total_cmp(&b.level.scale));
+        // 2. One layout for all levels: the stride and row count of the largest.
+        self.stride = self.plans.iter().map(|p| p.level.width + 1).max().unwrap_or(1);
+        self.rows = self.plans.iter().map(|p| p.level.height + 1).max().unwrap_or(1);
+        self.tilted = self
+            .plans
+            .iter()
+            .flat_map(|p| &p.jobs)
+            .any(|&(i, _)| dets[i].cascade().has_tilted);
+        self.key = Some(Key {
+            width,
+            height,
+            params: params.to_vec(),
+            regions: regions.to_vec(),
+            windows: dets.iter().map(Detector::window).collect(),
+        });
+        Ok(())
+    }
+
+    /// The input rows the planned levels read, as sorted, disjoint half-open ranges (after
+    /// [`Pyramid::plan`]; empty when nothing is scanned).
+    pub(crate) fn source_rows(&self) -> Vec<Range<usize>> {
+        let Some(key) = &self.key else {
+            return Vec::new();
+        };
+        let mut spans: Vec<Range<usize>> = self
+            .plans
+            .iter()
+            .map(|p| Resizer::source_rows(key.height, p.level.height, p.row0..p.row1))
+            .filter(|r| !r.is_empty())
+            .collect();
+        spans.sort_by_key(|r| r.start);
+        let mut out: Vec<Range<usize>> = Vec::with_capacity(spans.len());
+        for r in spans {
+            match out.last_mut() {
+                Some(l) if r.start <= l.end => l.end = l.end.max(r.end),
+                _ => out.push(r),
+            }
+        }
+        out
+    }
+
+    /// Steps 1–3 for every detector on the row-major `width` × `height` image `img`, with
+    /// detector `i`'s options `params[i]` and region `regions[i]` (input pixels; `None` = the
+    /// whole image). Each detector's raw hits are left in [`Detector::raw_hits`].
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn run(
+        &mut self,
+        img: &[u8],
+        width: usize,
+        height: usize,
+        dets: &mut [Detector],
+        params: &[DetectParams],
+        regions: &[Option<Rect>],
+        parallel: bool,
+    ) -> Result<(), DetectError> {
+        for d in dets.iter_mut() {
+            d.raw_mut().clear();
+        }
+        check_size(width, height)?;
+        if img.len() < width * height {
+            return Err(DetectError::BufferTooSmall {
+                len: img.len(),
+                width,
+                height,
+            });
+        }
+        self.plan(width, height, dets, params, regions)?;
+        if self.plans.is_empty() {
+            return Ok(());
+        }
+        let tofs = if self.tilted { self.rows * self.stride } else { 0 };
+        for d in dets.iter_mut() {
+            d.prepare(self.stride, tofs);
+        }
+        let ctx = Ctx {
+            img,
+            width,
+            height,
+            stride: self.stride,
+            rows: self.rows,
+            tilted: self.tilted,
+        };
+        #[cfg(feature = "parallel")]
+        if parallel && self.plans.len() > 1 && rayon::current_num_threads() > 1 {
+            self.run_parallel(&ctx, dets);
+            return Ok(());
+        }
+        let _ = parallel;
+        let s = &mut self.scratch;
+        for p in &self.plans {
+            ctx.build(p, s);
+            for &(i, win) in &p.jobs {
+                let mut hits = std::mem::take(dets[i].raw_mut());
+                dets[i].scan(&s.ii.data, &s.ii.sqsum, p.row0, &p.level, win, &mut hits);
+                *dets[i].raw_mut() = hits;
+            }
+        }
+        Ok(())
+    }
+
+    /// Levels spread over rayon's threads, largest first to the least loaded worker; raw hits
+    /// are then put back in level order.
+    #[cfg(feature = "parallel")]
+    fn run_parallel(&mut self, ctx: &Ctx<'_>, dets: &mut [Detector]) {
+        use rayon::prelude::*;
+        let t = rayon::current_num_threads().min(self.plans.len()).min(64);
+        if self.pool.len() < t {
+            self.pool.resize_with(t, Scratch::default);
+        }
+        let mut load = [0usize; 64];
+        self.assign.clear();
+        for p in &self.plans {
+            let g = (0..t).min_by_key(|&g| load[g]).unwrap_or(0);
+            load[g] += p.cols * (p.row1 - p.row0) * (1 + p.jobs.len());
+            self.assign.push(g);
+        }
+        let (plans, assign) = (&self.plans, &self.assign);
+        let shared: &[Detector] = dets;
+        self.pool[..t].par_iter_mut().enumerate().for_each(|(g, s)| {
+            s.hits.clear();
+            s.counts.clear();
+            for (p, _) in plans.iter().zip(assign).filter(|(_, &a)| a == g) {
+                ctx.build(p, s);
+                for &(i, win) in &p.jobs {
+                    let before = s.hits.len();
+                    let mut hits = std::mem::take(&mut s.hits);
+                    shared[i].scan(&s.ii.data, &s.ii.sqsum, p.row0, &p.level, win, &mut hits);
+                    s.hits = hits;
+                    s.counts.push(s.hits.len() - before);
+                }
+            }
+        });
+        // Hits in level order, as the sequential scan gives them.
+        let mut next = [(0usize, 0usize); 64]; // per worker: (count index, hit index)
+        for (p, &g) in self.plans.iter().zip(&self.assign) {
+            let s = &self.pool[g];
+            for &(i, _) in &p.jobs {
+                let (ci, hi) = next[g];
+                let n = s.counts[ci];
+                dets[i].raw_mut().extend_from_slice(&s.hits[hi..hi + n]);
+                next[g] = (ci + 1, hi + n);
+            }
+        }
+    }
+}
+
+/// The frame and layout every worker builds its levels from (read-only).
+struct Ctx<'a> {
+    img: &'a [u8],
+    width: usize,
+    height: usize,
+    stride: usize,
+    rows: usize,
+    tilted: bool,
+}
+
+impl Ctx<'_> {
+    /// Step 2 for one level: its planned part, resized and integrated into `s.ii`.
+    fn build(&self, p: &Plan, s: &mut Scratch) {
+        let l = &p.level;
+        let n = p.row1 - p.row0;
+        if (l.width, l.height) == (self.width, self.height) {
+            // Scale 1: the input itself.
+            s.ii.compute_strided(
+                &self.img[p.row0 * self.width..],
+                self.width,
+                p.cols,
+                n,
+                self.stride,
+                self.rows,
+                self.tilted,
+            );
+        } else {
+            s.level.resize(p.cols * n, 0);
+            s.resizer.resize_part(
+                self.img,
+                self.width,
+                self.height,
+                &mut s.level,
+                l.width,
+                l.height,
+                p.row0..p.row1,
+                p.cols,
+            );
+            s.ii
+                .compute_strided(&s.level, p.cols, p.cols, n, self.stride, self.rows, self.tilted);
+        }
+    }
+}

@@ -1,0 +1,841 @@
+//! Issue 15: nothing a student does loses their work or leaves a wrong number. Every case of
+//! the issue (except Ctrl-C/SIGTERM, which the drive loop's tests cover) as the exact command
+//! a student would type, run on a copy of the project in a temporary folder: the exit code,
+//! the message, and that no file the student had was changed or lost.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const ROOT: &str = env!("CARGO_MANIFEST_DIR");
+const OPENCV_DATA: &str = "/usr/share/doc/opencv-doc/examples/data";
+
+/// A copy of the project's config folder (car.toml, tracks, cascades) in a temporary folder.
+fn project() -> tempfile::TempDir {
+    let t = tempfile::tempdir().unwrap();
+    let cfg = t.path().join("config");
+    for sub in ["tracks", "cascades"] {
+        std::fs::create_dir_all(cfg.join(sub)).unwrap();
+        for e in std::fs::read_dir(Path::new(ROOT).join("config").join(sub)).unwrap() {
+            let e = e.unwrap();
+            std::fs::copy(e.path(), cfg.join(sub).join(e.file_name())).unwrap();
+        }
+    }
+    std::fs::copy(Path::new(ROOT).join("config/car.toml"), cfg.join("car.toml")).unwrap();
+    t
+}
+
+struct Out {
+    code: Option<i32>,
+    stdout: String,
+    stderr: String,
+}
+
+impl Out {
+    fn all(&self) -> String {
+        format!("{}{}", self.stdout, self.stderr)
+    }
+}
+
+fn rccar(cwd: &Path, args: &[&str]) -> Out {
+    rccar_env(cwd, args, &[])
+}
+
+fn rccar_env(cwd: &Path, args: &[&str], env: &[(&str, &str)]) -> Out {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_rccar"));
+    c.current_dir(cwd).args(args).env_remove("RCCAR_CONFIG");
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    let o = c.output().unwrap();
+    let out = Out {
+        code: o.status.code(),
+        stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
+    };
+    assert!(
+        !out.stderr.contains("panicked"),
+        "rccar {args:?} panicked:\n{}",
+        out.stderr
+    );
+    out
+}
+
+/// Every file under `dir` (except `skip` folders) with its bytes.
+fn snapshot(dir: &Path, skip: &[&str]) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut m = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            let rel = p.strip_prefix(dir).unwrap().to_path_buf();
+            if skip.iter().any(|s| rel.starts_with(s)) {
+                continue;
+            }
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                m.insert(rel, std::fs::read(&p).unwrap_or_default());
+            }
+        }
+    }
+    m
+}
+
+fn assert_unchanged(before: &BTreeMap<PathBuf, Vec<u8>>, dir: &Path, skip: &[&str], what: &str) {
+    let after = snapshot(dir, skip);
+    let b: Vec<_> = before.keys().collect();
+    let a: Vec<_> = after.keys().collect();
+    assert_eq!(b, a, "{what}: files were added or removed");
+    for (k, v) in before {
+        assert!(after[k] == *v, "{what}: {} changed", k.display());
+    }
+}
+
+const LOCAL: &str = "# Maria's settings (keep these comments!)\n[steering]\nkp = 1.2  # tuned on the long straight\n\n[camera]\n# measured with a protractor\ntilt_deg = 20.0 # was 19\n";
+
+// ---------------------------------------------------------------------------------------
+// Calibration writes nothing it cannot stand behind.
+
+/// `rccar calibrate ranging FILE.csv` on bad data: exit 2, the reason, local.toml untouched.
+#[test]
+fn calibration_refuses_degenerate_pairs_and_leaves_local_toml_alone() {
+    let p = project();
+    let dir = p.path();
+    std::fs::write(dir.join("config/local.toml"), LOCAL).unwrap();
+    let cases: [(&str, &str, &str); 5] = [
+        (
+            "same.csv",
+            "row_px,distance_m\n150,0.8\n150,0.8\n150,0.8\n150,0.8\n",
+            "4 pair(s) on only 1 distinct row(s)",
+        ),
+        (
+            "outside.csv",
+            "150,0.8\n400,0.5\n120,1.0\n",
+            "pair 2: row 400 px is outside the image",
+        ),
+        (
+            "high.csv",
+            "150,0.8,0.3\n100,1.0\n120,1.1\n",
+            "pair 1: height 0.3 m must be >= 0 and below the camera",
+        ),
+        ("nan.csv", "150,nan\n100,1.0\n120,1.1\n", "NaN and inf are not allowed"),
+        // Rows and distances that belong to no camera: the fit's rms row error is ~55 px.
+        (
+            "bad_rms.csv",
+            "200,0.3\n150,2.5\n120,0.4\n100,3.0\n",
+            "is above the bound 2 px (--max-rms-px)",
+        ),
+    ];
+    for (name, text, want) in cases {
+        std::fs::write(dir.join(name), text).unwrap();
+        let before = snapshot(dir, &[]);
+        let o = rccar(dir, &["calibrate", "ranging", name]);
+        assert_eq!(o.code, Some(2), "{name}: {}", o.all());
+        assert!(
+            o.stderr.contains(want) && o.stderr.contains("nothing written"),
+            "{name}: {}",
+            o.stderr
+        );
+        assert!(
+            o.stderr.starts_with(&format!("error: {name}: ")),
+            "{name}: {}",
+            o.stderr
+        );
+        assert_unchanged(&before, dir, &[], name);
+    }
+}
+
+/// `--fit-ay` on pairs from a much longer lens: the fitted a_y scale (2.7) is out of range, so
+/// the merged configuration is checked first and nothing is written (before issue 15 it was
+/// written, and every later command failed).
+#[test]
+fn calibration_validates_the_merged_config_before_writing() {
+    let p = project();
+    let dir = p.path();
+    std::fs::write(dir.join("config/local.toml"), LOCAL).unwrap();
+    let o = rccar(
+        dir,
+        &[
+            "calibrate",
+            "ranging",
+            "--from-sim",
+            "12",
+            "--set",
+            "camera.hfov_deg=25",
+            "--sim-pairs-out",
+            "narrow.csv",
+            "--dry-run",
+        ],
+    );
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    let before = snapshot(dir, &[]);
+    let o = rccar(
+        dir,
+        &["calibrate", "ranging", "narrow.csv", "--fit-ay", "--v0-sigma-px", "0"],
+    );
+    assert_eq!(o.code, Some(2), "{}", o.all());
+    assert!(
+        o.stderr.contains("does not validate") && o.stderr.contains("ranging.a_y_scale = 2.7"),
+        "{}",
+        o.stderr
+    );
+    assert_unchanged(&before, dir, &[], "--fit-ay out of range");
+    // Every later command still works.
+    assert_eq!(rccar(dir, &["config", "check"]).code, Some(0));
+}
+
+/// A good calibration edits local.toml in place: the student's comments and keys stay, the old
+/// file is kept as local.toml.bak, and `--dry-run` shows the diff and writes nothing.
+#[test]
+fn calibration_keeps_comments_makes_a_backup_and_dry_run_shows_the_diff() {
+    let p = project();
+    let dir = p.path();
+    let local = dir.join("config/local.toml");
+    std::fs::write(&local, LOCAL).unwrap();
+    let args = [
+        "calibrate",
+        "ranging",
+        "--from-sim",
+        "12",
+        "--sim-tilt-error-deg",
+        "1.5",
+    ];
+    let before = snapshot(dir, &[]);
+    let mut dry: Vec<&str> = args.to_vec();
+    dry.push("--dry-run");
+    let o = rccar(dir, &dry);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    assert!(o.stdout.contains("- tilt_deg = 20.0 # was 19"), "{}", o.stdout);
+    assert!(o.stdout.contains("+ tilt_deg = 21.5"), "{}", o.stdout);
+    assert!(o.stdout.contains("+ [ranging]") && o.stdout.contains("dry run: nothing written"));
+    assert_unchanged(&before, dir, &[], "--dry-run");
+
+    let o = rccar(dir, &args);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    let new = std::fs::read_to_string(&local).unwrap();
+    for kept in [
+        "# Maria's settings (keep these comments!)",
+        "kp = 1.2  # tuned on the long straight",
+        "# measured with a protractor",
+        " # was 19",
+    ] {
+        assert!(new.contains(kept), "lost `{kept}`:\n{new}");
+    }
+    let t: toml::Table = new.parse().unwrap();
+    let tilt = t["camera"]["tilt_deg"].as_float().unwrap();
+    assert!((tilt - 21.5).abs() < 0.3, "tilt {tilt} (true 21.5)");
+    assert_eq!(
+        std::fs::read_to_string(dir.join("config/local.toml.bak")).unwrap(),
+        LOCAL
+    );
+    // A second calibration keeps the first backup and makes another.
+    assert_eq!(rccar(dir, &args).code, Some(0));
+    assert_eq!(
+        std::fs::read_to_string(dir.join("config/local.toml.bak")).unwrap(),
+        LOCAL
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.join("config/local.toml.bak2")).unwrap(),
+        new
+    );
+}
+
+// ---------------------------------------------------------------------------------------
+// Paths and where the config lives.
+
+/// `cd /tmp && rccar sim`: no project here; the message says how to point at one, once.
+#[test]
+fn outside_the_project_the_error_says_how_to_point_at_a_config() {
+    let t = tempfile::tempdir().unwrap();
+    let o = rccar(t.path(), &["sim"]);
+    assert_eq!(o.code, Some(2));
+    assert!(
+        o.stderr.contains("no config/car.toml in") && o.stderr.contains("--config FILE or RCCAR_CONFIG=FILE"),
+        "{}",
+        o.stderr
+    );
+    let o = rccar(t.path(), &["sim", "--config", "nope/car.toml"]);
+    assert_eq!(o.code, Some(2));
+    assert_eq!(o.stderr.matches("No such file or directory").count(), 1, "{}", o.stderr);
+    assert!(o.stderr.contains("nope/car.toml: cannot read") && o.stderr.contains("--config FILE"));
+    let o = rccar_env(t.path(), &["config", "check"], &[("RCCAR_CONFIG", "/nope/car.toml")]);
+    assert_eq!(o.code, Some(1));
+    assert_eq!(o.stderr.matches("No such file or directory").count(), 1, "{}", o.stderr);
+    assert_eq!(snapshot(t.path(), &[]).len(), 0, "nothing written");
+}
+
+/// `--config /abs/car.toml` from elsewhere: the track and cascades come from the config's
+/// folder, so the simulator runs (with the detectors) from any working directory.
+#[test]
+fn paths_in_a_config_resolve_against_its_folder() {
+    let p = project();
+    let elsewhere = tempfile::tempdir().unwrap();
+    let car = p.path().join("config/car.toml");
+    let o = rccar(
+        elsewhere.path(),
+        &["config", "check", "--config", car.to_str().unwrap()],
+    );
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    let want = p.path().join("config/tracks/default.toml");
+    assert!(
+        o.stdout.contains(&format!("track = \"{}\"", want.display())),
+        "{}",
+        o.stdout
+    );
+    let o = rccar(
+        elsewhere.path(),
+        &[
+            "sim",
+            "--config",
+            car.to_str().unwrap(),
+            "--seconds",
+            "0.3",
+            "--no-timing",
+            "-o",
+            "out",
+        ],
+    );
+    assert_eq!(o.code, Some(1), "0 of 3 laps in 0.3 s: exit 1, but it ran: {}", o.all());
+    assert!(
+        o.stdout.contains("sim: 9 frames") && !o.stderr.contains("detect: missing"),
+        "{}",
+        o.all()
+    );
+    // A relative path in local.toml resolves against local.toml's folder, one given with
+    // --set against the working directory.
+    let sub = p.path().join("mine");
+    std::fs::create_dir_all(&sub).unwrap();
+    std::fs::copy(p.path().join("config/tracks/default.toml"), sub.join("t.toml")).unwrap();
+    std::fs::write(sub.join("local.toml"), "[sim]\ntrack = \"t.toml\"\n").unwrap();
+    let o = rccar(p.path(), &["config", "check", "--local", "mine/local.toml"]);
+    assert!(
+        o.stdout
+            .contains(&format!("track = \"{}\"", sub.join("t.toml").display())),
+        "{}",
+        o.all()
+    );
+    let o = rccar(&sub, &["config", "check", "--set", "sim.track=t.toml"]);
+    assert!(
+        o.stdout
+            .contains(&format!("track = \"{}\"", sub.join("t.toml").display())),
+        "{}",
+        o.all()
+    );
+}
+
+/// Found from a subfolder, or from RCCAR_CONFIG.
+#[test]
+fn the_config_is_found_from_a_subfolder_or_rccar_config() {
+    let p = project();
+    let deep = p.path().join("labs/week3");
+    std::fs::create_dir_all(&deep).unwrap();
+    let o = rccar(&deep, &["config", "check"]);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    assert!(
+        o.stderr
+            .contains(&format!("config OK: {}", p.path().join("config/car.toml").display())),
+        "{}",
+        o.stderr
+    );
+    let other = tempfile::tempdir().unwrap();
+    let car = p.path().join("config/car.toml");
+    let o = rccar_env(
+        other.path(),
+        &["config", "check"],
+        &[("RCCAR_CONFIG", car.to_str().unwrap())],
+    );
+    assert_eq!(o.code, Some(0), "{}", o.all());
+}
+
+/// A mistyped `--local` is an error, not silently ignored.
+#[test]
+fn a_named_local_that_does_not_exist_is_an_error() {
+    let p = project();
+    let o = rccar(p.path(), &["config", "check", "--local", "config/locl.toml"]);
+    assert_eq!(o.code, Some(1));
+    assert!(
+        o.stderr.contains("--local config/locl.toml: no such file"),
+        "{}",
+        o.stderr
+    );
+    let o = rccar(p.path(), &["sim", "--local", "config/locl.toml"]);
+    assert_eq!(o.code, Some(2));
+    assert!(
+        o.stderr.contains("--local config/locl.toml: no such file"),
+        "{}",
+        o.stderr
+    );
+}
+
+/// An empty config passes `config check` and says every value is a default.
+#[test]
+fn an_empty_config_says_every_value_is_a_default() {
+    let p = project();
+    std::fs::write(p.path().join("empty.toml"), "").unwrap();
+    let o = rccar(p.path(), &["config", "check", "empty.toml"]);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    assert!(
+        o.stderr
+            .contains("note: no values are set in empty.toml: every value is a default"),
+        "{}",
+        o.stderr
+    );
+    let o = rccar(p.path(), &["config", "check"]);
+    assert!(!o.stderr.contains("every value is a default"), "{}", o.stderr);
+}
+
+// ---------------------------------------------------------------------------------------
+// Damaged and clashing files.
+
+fn sample_png(i: usize) -> PathBuf {
+    Path::new(ROOT).join(format!("tests/data/lane_sample/frame_{i:03}.png"))
+}
+
+fn jpeg_of(png: &Path) -> Vec<u8> {
+    let img = image::open(png).unwrap().to_rgb8();
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Jpeg).unwrap();
+    out.into_inner()
+}
+
+/// `rccar replay DIR` with a JPEG cut in half (ours, and OpenCV's baboon.jpg when installed):
+/// a named, counted skip, not a grey frame.
+#[test]
+fn a_jpeg_cut_in_half_is_a_named_skip_in_replay_and_stages() {
+    let p = project();
+    let frames = p.path().join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    std::fs::copy(sample_png(0), frames.join("a_good.png")).unwrap();
+    let j = jpeg_of(&sample_png(1));
+    std::fs::write(frames.join("b_half.jpg"), &j[..j.len() / 2]).unwrap();
+    let baboon = Path::new(OPENCV_DATA).join("baboon.jpg");
+    let mut halves = 1;
+    if let Ok(b) = std::fs::read(&baboon) {
+        std::fs::write(frames.join("c_baboon_half.jpg"), &b[..b.len() / 2]).unwrap();
+        halves += 1;
+    }
+    let before = snapshot(p.path(), &["out"]);
+    let o = rccar(p.path(), &["replay", "frames", "-o", "out", "--no-timing"]);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    assert!(o.stdout.contains("replayed 1 frames"), "{}", o.stdout);
+    assert!(o.stdout.contains(&format!("skipped {halves} frame(s)")), "{}", o.stdout);
+    assert!(
+        o.all().contains("b_half.jpg: damaged JPEG") && o.all().contains("cut short"),
+        "{}",
+        o.all()
+    );
+    let tel = std::fs::read_to_string(p.path().join("out/telemetry.jsonl")).unwrap();
+    assert_eq!(tel.lines().count(), 1);
+    // stages: the same frames, and a 1×1 image that replay would refuse too.
+    image::RgbImage::new(1, 1).save(frames.join("d_tiny.png")).unwrap();
+    let before = {
+        let mut b = before;
+        b.insert(
+            PathBuf::from("frames/d_tiny.png"),
+            std::fs::read(frames.join("d_tiny.png")).unwrap(),
+        );
+        b
+    };
+    let o = rccar(
+        p.path(),
+        &[
+            "stages",
+            "frames/a_good.png",
+            "frames/b_half.jpg",
+            "frames/d_tiny.png",
+            "-o",
+            "out/st",
+        ],
+    );
+    assert_eq!(o.code, Some(1), "{}", o.all());
+    assert!(
+        o.stderr.contains("skipped frames/b_half.jpg: damaged JPEG"),
+        "{}",
+        o.stderr
+    );
+    assert!(
+        o.stderr
+            .contains("skipped frames/d_tiny.png: 1×1 is smaller than the ROI"),
+        "{}",
+        o.stderr
+    );
+    assert!(o.stderr.contains("2 of 3 image(s) skipped"), "{}", o.stderr);
+    assert!(p.path().join("out/st/a_good.png.bird.png").is_file());
+    assert_unchanged(&before, p.path(), &["out"], "replay/stages");
+}
+
+/// `a.jpg` and `a.png` in one folder: two frames, two annotated files (`a.jpg.png`, `a.png.png`).
+#[test]
+fn same_stem_frames_get_distinct_outputs() {
+    let p = project();
+    let frames = p.path().join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    std::fs::copy(sample_png(2), frames.join("a.png")).unwrap();
+    std::fs::write(frames.join("a.jpg"), jpeg_of(&sample_png(3))).unwrap();
+    let o = rccar(p.path(), &["replay", "frames", "-o", "out", "--no-timing"]);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    let mut names: Vec<String> = std::fs::read_dir(p.path().join("out/annotated"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["a.jpg.png", "a.png.png"]);
+    let o = rccar(p.path(), &["stages", "frames/a.png", "frames/a.jpg", "-o", "out/st"]);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    assert!(p.path().join("out/st/a.png.bird.png").is_file() && p.path().join("out/st/a.jpg.bird.png").is_file());
+}
+
+/// A non-UTF-8 frame name: the same escaped name in telemetry and on disk.
+#[test]
+fn a_non_utf8_frame_name_is_kept_lossless() {
+    use std::os::unix::ffi::OsStrExt;
+    let p = project();
+    let frames = p.path().join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    let name = std::ffi::OsStr::from_bytes(b"fr\xFFame.png");
+    std::fs::copy(sample_png(4), frames.join(name)).unwrap();
+    let o = rccar(p.path(), &["replay", "frames", "-o", "out", "--no-timing"]);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    let tel = std::fs::read_to_string(p.path().join("out/telemetry.jsonl")).unwrap();
+    let rec: serde_json::Value = serde_json::from_str(tel.lines().next().unwrap()).unwrap();
+    let escaped = rec["file"].as_str().unwrap();
+    assert_eq!(escaped, "fr\\xFFame.png");
+    assert!(p.path().join("out/annotated").join(format!("{escaped}.png")).is_file());
+}
+
+fn cascade_path(p: &Path) -> String {
+    p.join("config/cascades/stop_sign.xml").display().to_string()
+}
+
+/// `rccar detect` with an unreadable image in the middle: the others still run; exit 1.
+#[test]
+fn detect_goes_on_after_a_bad_image_and_fails_at_the_end() {
+    let p = project();
+    let d = p.path();
+    std::fs::copy(sample_png(5), d.join("one.png")).unwrap();
+    std::fs::write(d.join("two.png"), b"not an image at all").unwrap();
+    let j = jpeg_of(&sample_png(6));
+    std::fs::write(d.join("three.jpg"), &j[..j.len() * 2 / 3]).unwrap();
+    std::fs::copy(sample_png(7), d.join("four.png")).unwrap();
+    let c = cascade_path(d);
+    let o = rccar(
+        d,
+        &[
+            "detect",
+            "--cascade",
+            &c,
+            "one.png",
+            "two.png",
+            "three.jpg",
+            "four.png",
+            "--out",
+            "out",
+        ],
+    );
+    assert_eq!(o.code, Some(1), "{}", o.all());
+    let lines: Vec<&str> = o.stdout.lines().collect();
+    assert_eq!(lines.len(), 2, "{}", o.stdout);
+    assert!(
+        lines[0].contains("\"one.png\"") && lines[1].contains("\"four.png\""),
+        "{}",
+        o.stdout
+    );
+    assert!(
+        o.stderr.contains("skipped two.png: not a readable image"),
+        "{}",
+        o.stderr
+    );
+    assert!(o.stderr.contains("skipped three.jpg: damaged JPEG"), "{}", o.stderr);
+    assert!(o.stderr.contains("2 of 4 image(s) failed"), "{}", o.stderr);
+    assert!(d.join("out/one.png.detect.png").is_file() && d.join("out/four.png.detect.png").is_file());
+}
+
+/// `detect --scale-factor 1.0000001` is refused at once instead of running 10,000 levels.
+#[test]
+fn detect_refuses_a_scale_factor_that_means_a_huge_pyramid() {
+    let p = project();
+    std::fs::copy(sample_png(8), p.path().join("one.png")).unwrap();
+    let c = cascade_path(p.path());
+    let t = std::time::Instant::now();
+    let o = rccar(
+        p.path(),
+        &["detect", "--cascade", &c, "--scale-factor", "1.0000001", "one.png"],
+    );
+    assert_eq!(o.code, Some(2));
+    assert!(
+        o.stderr.contains("--scale-factor 1.0000001: must be 1.01..=4"),
+        "{}",
+        o.stderr
+    );
+    assert!(t.elapsed().as_secs_f64() < 2.0);
+}
+
+/// Disk full (/dev/full): the error names the file, and the old local.toml survives.
+#[test]
+fn disk_full_errors_name_the_file() {
+    let p = project();
+    let d = p.path();
+    std::fs::copy(sample_png(9), d.join("one.png")).unwrap();
+    let c = cascade_path(d);
+    std::fs::create_dir_all(d.join("out")).unwrap();
+    std::os::unix::fs::symlink("/dev/full", d.join("out/one.png.detect.png")).unwrap();
+    let o = rccar(d, &["detect", "--cascade", &c, "one.png", "--out", "out"]);
+    assert_eq!(o.code, Some(2), "{}", o.all());
+    assert!(
+        o.stderr.contains("out/one.png.detect.png: cannot write") && o.stderr.contains("No space left on device"),
+        "{}",
+        o.stderr
+    );
+    std::fs::create_dir_all(d.join("st")).unwrap();
+    std::os::unix::fs::symlink("/dev/full", d.join("st/stages.jsonl")).unwrap();
+    let o = rccar(d, &["stages", "one.png", "-o", "st"]);
+    assert_eq!(o.code, Some(2), "{}", o.all());
+    assert!(
+        o.stderr.contains("st/stages.jsonl: cannot write") && o.stderr.contains("No space left"),
+        "{}",
+        o.stderr
+    );
+    // calibrate: the new local.toml cannot be written; the old one is intact.
+    std::fs::write(d.join("config/local.toml"), LOCAL).unwrap();
+    std::os::unix::fs::symlink("/dev/full", d.join("config/local.toml.tmp")).unwrap();
+    let o = rccar(d, &["calibrate", "ranging", "--from-sim", "8"]);
+    assert_eq!(o.code, Some(2), "{}", o.all());
+    assert!(
+        o.stderr
+            .contains("config/local.toml: cannot write: No space left on device"),
+        "{}",
+        o.stderr
+    );
+    assert_eq!(std::fs::read_to_string(d.join("config/local.toml")).unwrap(), LOCAL);
+    let o = rccar(
+        d,
+        &[
+            "calibrate",
+            "ranging",
+            "--from-sim",
+            "8",
+            "--dry-run",
+            "--sim-pairs-out",
+            "/dev/full",
+        ],
+    );
+    assert_eq!(o.code, Some(2), "{}", o.all());
+    assert!(o.stderr.contains("/dev/full: cannot write"), "{}", o.stderr);
+}
+
+// ---------------------------------------------------------------------------------------
+// Sizes nobody checked.
+
+/// A closed track with `radius_m = 1000` (1.6 GB) or `1e6`: refused before any allocation,
+/// naming the key and the bound.
+#[test]
+fn a_huge_track_is_refused_before_allocation() {
+    let p = project();
+    for r in ["1000", "1e6"] {
+        let text = format!(
+            "name = \"huge\"\n[road]\nlane_width_m = 0.3\n[[segments]]\ntype = \"arc\"\nradius_m = {r}\nangle_deg = 360\n"
+        );
+        std::fs::write(p.path().join("huge.toml"), text).unwrap();
+        let t = std::time::Instant::now();
+        let o = rccar(p.path(), &["sim", "--track", "huge.toml", "--seconds", "0.1"]);
+        assert_eq!(o.code, Some(2), "{}", o.all());
+        assert!(
+            o.stderr.contains("huge.toml: `segments[0].radius_m`") && o.stderr.contains("at most 20 m"),
+            "{}",
+            o.stderr
+        );
+        assert!(t.elapsed().as_secs_f64() < 2.0);
+    }
+    // A long straight, and a floor too large for the scene's grid.
+    let text = "[road]\nlane_width_m = 0.3\n[[segments]]\ntype = \"straight\"\nlength_m = 1e9\n";
+    std::fs::write(p.path().join("long.toml"), text).unwrap();
+    let o = rccar(p.path(), &["sim", "--track", "long.toml"]);
+    assert!(
+        o.code == Some(2) && o.stderr.contains("segments[0].length_m") && o.stderr.contains("at most 50 m"),
+        "{}",
+        o.all()
+    );
+    let text = "[road]\nlane_width_m = 0.3\n[floor]\nmargin_m = 30\n[[segments]]\ntype = \"arc\"\nradius_m = 1\nangle_deg = 360\n";
+    std::fs::write(p.path().join("wide.toml"), text).unwrap();
+    let o = rccar(p.path(), &["sim", "--track", "wide.toml"]);
+    assert!(
+        o.code == Some(2) && o.stderr.contains("floor.margin_m") && o.stderr.contains("at most 50 × 50 m"),
+        "{}",
+        o.all()
+    );
+}
+
+/// `config roi --near 1.0 --far 0.4` and `--half-width 0` are refused; `config check` refuses
+/// an upside-down ROI.
+#[test]
+fn roi_upside_down_or_degenerate_is_refused() {
+    let p = project();
+    let d = p.path();
+    let o = rccar(d, &["config", "roi", "--near", "1.0", "--far", "0.4"]);
+    assert_eq!(o.code, Some(2));
+    assert!(
+        o.stderr.contains("--near 1 must be less than --far 0.4"),
+        "{}",
+        o.stderr
+    );
+    assert!(o.stdout.is_empty());
+    let o = rccar(d, &["config", "roi", "--half-width", "0"]);
+    assert_eq!(o.code, Some(2));
+    assert!(
+        o.stderr.contains("--half-width 0: must be a distance in metres, > 0"),
+        "{}",
+        o.stderr
+    );
+    let o = rccar(
+        d,
+        &["config", "roi", "--near", "0.4", "--far", "1.0", "--half-width", "0.25"],
+    );
+    assert_eq!(o.code, Some(0));
+    assert!(
+        o.stdout
+            .contains("[[93.72, 78.96], [225.28, 78.96], [308.75, 150.02], [10.25, 150.02]]"),
+        "{}",
+        o.stdout
+    );
+    // What `config roi --near 1.0 --far 0.4` used to print, pasted into local.toml.
+    std::fs::write(
+        d.join("config/local.toml"),
+        "[warp]\nsrc = [[10.25, 150.02], [308.75, 150.02], [225.28, 78.96], [93.72, 78.96]]\n",
+    )
+    .unwrap();
+    let o = rccar(d, &["config", "check"]);
+    assert_eq!(o.code, Some(1));
+    assert!(
+        o.stderr.contains("warp.src") && o.stderr.contains("looks at the floor upside down"),
+        "{}",
+        o.stderr
+    );
+    let o = rccar(d, &["replay", "frames"]);
+    assert_eq!(o.code, Some(2));
+    assert!(o.stderr.contains("upside down"), "{}", o.stderr);
+}
+
+/// Numbers: `--set steering.kp=1e309`, `--seconds nan`, inf: the key, what was typed, and
+/// that inf/NaN are not allowed. `--laps 0` means "no lap target": the run ends by time.
+#[test]
+fn numbers_name_the_key_and_what_was_typed() {
+    let p = project();
+    let d = p.path();
+    let o = rccar(d, &["sim", "--set", "steering.kp=1e309"]);
+    assert_eq!(o.code, Some(2));
+    assert!(
+        o.stderr
+            .contains("`steering.kp` = `1e309` is not a finite number (inf and NaN are not allowed)"),
+        "{}",
+        o.stderr
+    );
+    let o = rccar(d, &["sim", "--seconds", "nan"]);
+    assert_eq!(o.code, Some(2));
+    assert!(
+        o.stderr.contains("`sim.max_seconds` = `NaN` is not a finite number"),
+        "{}",
+        o.stderr
+    );
+    let o = rccar(d, &["config", "check", "--set", "steering.kp=-inf"]);
+    assert_eq!(o.code, Some(1));
+    assert!(
+        o.stderr.contains("`steering.kp` = `-inf` is not a finite number"),
+        "{}",
+        o.stderr
+    );
+    std::fs::write(d.join("config/local.toml"), "[steering]\nkd = nan\n").unwrap();
+    let o = rccar(d, &["config", "check"]);
+    assert_eq!(o.code, Some(1));
+    assert!(
+        o.stderr
+            .contains("local.toml: `steering.kd` = `NaN` is not a finite number"),
+        "{}",
+        o.stderr
+    );
+    std::fs::remove_file(d.join("config/local.toml")).unwrap();
+    let o = rccar(d, &["config", "check", "--set", "steering.kp=fast"]);
+    assert_eq!(o.code, Some(1));
+    assert!(
+        o.stderr
+            .contains("`steering.kp` = \"fast\": invalid type: string \"fast\", expected f64"),
+        "{}",
+        o.stderr
+    );
+    let o = rccar(
+        d,
+        &["sim", "--laps", "0", "--seconds", "0.2", "--no-timing", "-o", "out"],
+    );
+    assert!(
+        o.stdout.contains("ended: TimeUp") && o.stdout.contains("laps completed:   0"),
+        "{}",
+        o.all()
+    );
+    let car = std::fs::read_to_string(d.join("config/car.toml")).unwrap();
+    assert!(car.contains("0 = no lap target: drive until\n# max_seconds"));
+}
+
+/// Other sizes a flag controls: the camera (render size), a sweep's count, the lab's pairs,
+/// and an image whose header claims 100000 × 100000 pixels.
+#[test]
+fn every_size_a_flag_or_file_controls_is_bounded() {
+    let p = project();
+    let d = p.path();
+    let o = rccar(d, &["config", "check", "--set", "camera.width=100000"]);
+    assert!(
+        o.code == Some(1)
+            && o.stderr
+                .contains("camera.width = 100000 is out of range (allowed: 16 ..= 4096)"),
+        "{}",
+        o.all()
+    );
+    let o = rccar(d, &["sim", "--sweep", "steering.kp=0:1:100000"]);
+    assert!(
+        o.code == Some(2) && o.stderr.contains("N must be 1..=1000"),
+        "{}",
+        o.all()
+    );
+    let o = rccar(d, &["calibrate", "ranging", "--from-sim", "100000000"]);
+    assert!(
+        o.code == Some(2) && o.stderr.contains("--from-sim 100000000: must be 3..=10000"),
+        "{}",
+        o.all()
+    );
+    std::fs::write(d.join("big.png"), png_claiming(100_000, 100_000)).unwrap();
+    let o = rccar(d, &["stages", "big.png", "-o", "out"]);
+    assert!(
+        o.code == Some(1) && o.stderr.contains("100000×100000 pixels is outside the image limit"),
+        "{}",
+        o.all()
+    );
+}
+
+/// A structurally whole PNG whose header claims `w × h` (one tiny IDAT).
+fn png_claiming(w: u32, h: u32) -> Vec<u8> {
+    fn crc(data: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in data {
+            c ^= b as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            }
+        }
+        !c
+    }
+    fn chunk(out: &mut Vec<u8>, kind: &[u8], data: &[u8]) {
+        out.extend((data.len() as u32).to_be_bytes());
+        let mut body = kind.to_vec();
+        body.extend(data);
+        out.extend(&body);
+        out.extend(crc(&body).to_be_bytes());
+    }
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = Vec::new();
+    ihdr.extend(w.to_be_bytes());
+    ihdr.extend(h.to_be_bytes());
+    ihdr.extend([8, 2, 0, 0, 0]);
+    chunk(&mut out, b"IHDR", &ihdr);
+    chunk(&mut out, b"IDAT", &[0x78, 0x9C, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]);
+    chunk(&mut out, b"IEND", &[]);
+    out
+}

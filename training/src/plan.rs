@@ -1,0 +1,165 @@
+//! Training settings chosen from the data, with the reason for each, so a student with 42
+//! photos and a student with 3000 renders both get a sensible run without tuning flags.
+//!
+//! * Window: the `# rccar-train distort window WxH` line `distort` writes, else from the
+//!   positives' boxes: aspect = the median box width / height; the shorter side = the 5th
+//!   percentile of the boxes' shorter sides (the smallest objects you labelled are the farthest
+//!   ones that matter: a box smaller than the window cannot be used, and the window is the
+//!   smallest object the cascade can find), clamped to 12–24 px (below 12 the features see
+//!   little; above 24 training is slow for no gain at the car's 320 × 240).
+//! * Positives per stage: each stage loses up to `1 − min_hit_rate` of the positives it
+//!   keeps, so `num_stages` stages need `num_pos · (1 + (num_stages − 1)(1 − min_hit_rate))`
+//!   (the rule in OpenCV's traincascade documentation); `num_pos` defaults to the largest that
+//!   fits what exists, and a larger request is reduced, with a note.
+//!
+//! Units: pixels.
+
+use crate::samples::InfoLine;
+
+/// Smallest and largest side of an automatically chosen window, pixels.
+pub const AUTO_SIDE: (u32, u32) = (12, 24);
+
+/// Fewer positives than this: the advice is to make more with `distort`.
+pub const FEW_POSITIVES: usize = 500;
+
+/// The window `distort` wrote into an info.dat (`# rccar-train distort window WxH`), if any.
+pub fn window_hint(text: &str) -> Option<(u32, u32)> {
+    text.lines().find_map(|l| {
+        let rest = l.trim().strip_prefix("# rccar-train distort window ")?;
+        let (a, b) = rest.trim().split_once('x')?;
+        Some((a.parse().ok()?, b.parse().ok()?))
+    })
+}
+
+/// A window chosen from boxes, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WindowChoice {
+    /// Width, height, pixels.
+    pub size: (u32, u32),
+    /// One line explaining it.
+    pub why: String,
+}
+
+/// Chooses the window from the boxes of `lines` (see the module notes); `None` without boxes.
+pub fn choose_window(lines: &[InfoLine]) -> Option<WindowChoice> {
+    let boxes: Vec<(f64, f64)> = lines
+        .iter()
+        .flat_map(|l| l.boxes.iter())
+        .filter(|b| b.width > 0 && b.height > 0)
+        .map(|b| (b.width as f64, b.height as f64))
+        .collect();
+    if boxes.is_empty() {
+        return None;
+    }
+    let mut aspects: Vec<f64> = boxes.iter().map(|(w, h)| w / h).collect();
+    aspects.sort_by(|a, b| a.total_cmp(b));
+    let aspect = aspects[aspects.len() / 2];
+    let mut short: Vec<f64> = boxes.iter().map(|(w, h)| w.min(*h)).collect();
+    short.sort_by(|a, b| a.total_cmp(b));
+    let p5 = short[(short.len() as f64 * 0.05) as usize];
+    let side = (p5.floor() as u32).clamp(AUTO_SIDE.0, AUTO_SIDE.1);
+    let size = if aspect >= 1.0 {
+        (((side as f64 * aspect).round() as u32).min(64), side)
+    } else {
+        (side, ((side as f64 / aspect).round() as u32).min(64))
+    };
+    Some(WindowChoice {
+        size,
+        why: format!(
+            "window {}x{} from {} boxes: median aspect {:.2}, 5% of boxes are under {:.0} px on their shorter side \
+             (sides kept within {}-{} px)",
+            size.0,
+            size.1,
+            boxes.len(),
+            aspect,
+            p5,
+            AUTO_SIDE.0,
+            AUTO_SIDE.1
+        ),
+    })
+}
+
+/// The most positives per stage `available` positives can feed through `num_stages` stages.
+pub fn max_num_pos(available: usize, num_stages: u32, min_hit_rate: f64) -> usize {
+    let k = 1.0 + (num_stages.max(1) - 1) as f64 * (1.0 - min_hit_rate).max(0.0);
+    ((available as f64 / k).floor() as usize).max(1).min(available)
+}
+
+/// Positives per stage: `asked` (or the most that fit) reduced to what exists, and a note when
+/// it was reduced or the positives are few.
+pub fn choose_num_pos(
+    asked: Option<usize>,
+    available: usize,
+    num_stages: u32,
+    min_hit_rate: f64,
+) -> (usize, Option<String>) {
+    let fit = max_num_pos(available, num_stages, min_hit_rate);
+    let n = asked.map_or(fit, |a| a.min(fit));
+    let mut notes = Vec::new();
+    if let Some(a) = asked {
+        if a > fit {
+            notes.push(format!(
+                "--num-pos {a} asked, but there are {available} usable positives and {num_stages} stages at hit rate \
+                 {min_hit_rate} need {:.2} × num_pos: using {n} per stage",
+                1.0 + (num_stages.max(1) - 1) as f64 * (1.0 - min_hit_rate)
+            ));
+        }
+    }
+    if available < FEW_POSITIVES {
+        notes.push(format!(
+            "only {available} positives: a cascade trained on so few finds mostly those very views. Make \
+             1000-2000 with `rccar-train distort --template <your crops> --count 1500` (docs/training.md, step 3) \
+             and train on its info.dat"
+        ));
+    }
+    (n, (!notes.is_empty()).then(|| notes.join("; ")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rccar::detect::Rect;
+    use std::path::PathBuf;
+
+    fn lines(boxes: &[(i32, i32)]) -> Vec<InfoLine> {
+        boxes
+            .iter()
+            .enumerate()
+            .map(|(i, &(w, h))| InfoLine {
+                path: PathBuf::from("x.png"),
+                boxes: vec![Rect::new(0, 0, w, h)],
+                line: i + 1,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn window_follows_the_boxes_aspect_and_small_end() {
+        // Square boxes from 20 to 119 px: the 5th percentile is 25 → clamped to 24.
+        let sq: Vec<(i32, i32)> = (20..120).map(|s| (s, s)).collect();
+        assert_eq!(choose_window(&lines(&sq)).expect("boxes").size, (24, 24));
+        // Tall boxes (aspect 0.4), 15-59 px wide: the 5th percentile (index 2) is 17 → 17 × 43.
+        let tall: Vec<(i32, i32)> = (15..60).map(|s| (s, (s as f64 / 0.4).round() as i32)).collect();
+        let c = choose_window(&lines(&tall)).expect("boxes");
+        assert_eq!(c.size.0, 17, "{}", c.why);
+        assert!((42..=43).contains(&c.size.1), "{}", c.why);
+        // Tiny boxes: never below 12.
+        assert_eq!(choose_window(&lines(&[(8, 8); 10])).expect("boxes").size, (12, 12));
+        assert!(choose_window(&[]).is_none());
+        assert_eq!(window_hint("# rccar-train distort window 20x16\na.png 1 0 0 20 16\n"), Some((20, 16)));
+        assert_eq!(window_hint("a.png 1 0 0 20 16\n"), None);
+    }
+
+    #[test]
+    fn positives_are_never_silently_fewer_than_asked() {
+        // 42 positives, 1000 asked: reduced, said, and the advice to distort.
+        let (n, note) = choose_num_pos(Some(1000), 42, 20, 0.995);
+        assert_eq!(n, 38); // 42 / 1.095
+        let note = note.expect("a note");
+        assert!(note.contains("--num-pos 1000") && note.contains("using 38") && note.contains("distort"), "{note}");
+        // Plenty: the default is what fits, no note.
+        let (n, note) = choose_num_pos(None, 3000, 20, 0.995);
+        assert_eq!(n, 2739);
+        assert!(note.is_none());
+    }
+}
