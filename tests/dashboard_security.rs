@@ -27,6 +27,14 @@ fn server() -> &'static Server {
         let dir = std::env::temp_dir().join(format!("rccar-dash-sec-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::copy(root.join("config/car.toml"), dir.join("car.toml")).unwrap();
+        // Tracks and cascades are found relative to the config file: link them beside it.
+        for e in std::fs::read_dir(root.join("config")).unwrap() {
+            let name = e.unwrap().file_name();
+            let n = name.to_string_lossy();
+            if n != "car.toml" && !n.ends_with("local.toml") && !dir.join(&name).exists() {
+                std::os::unix::fs::symlink(root.join("config").join(&name), dir.join(&name)).unwrap();
+            }
+        }
         std::fs::write(dir.join("local.toml"), "# local\n").unwrap();
         let port = {
             let l = std::net::TcpListener::bind("127.0.0.2:0").unwrap();

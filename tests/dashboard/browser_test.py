@@ -155,8 +155,8 @@ def main():
     a = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="rccar-dash-")
     cfgdir = os.path.join(tmp, "config")
-    shutil.copy2(os.path.join(ROOT, "config/car.toml"), os.path.join(tmp, "car.toml"))
     os.makedirs(cfgdir)
+    link_config(cfgdir)
     local = os.path.join(cfgdir, "local.toml")
     with open(local, "w") as f:
         f.write("# my overrides (the dashboard must keep this line)\n")
@@ -167,7 +167,7 @@ def main():
     try:
         sim = subprocess.Popen(
             [a.rccar, "sim", "--dashboard", "--listen", f"127.0.0.1:{port}", "--truth-boxes",
-             "--config", os.path.join(tmp, "car.toml"), "--local", local,
+             "--config", os.path.join(cfgdir, "car.toml"), "--local", local,
              "--seconds", "900", "--laps", "1000", "-o", out],
             cwd=ROOT, stdout=open(os.path.join(tmp, "sim.log"), "w"), stderr=subprocess.STDOUT)
         procs.append(sim)
@@ -325,6 +325,16 @@ def main():
         else:
             print(f"kept {tmp}")
     print(f"{passed} passed, {failed} failed")
+
+
+def link_config(dst):
+    """A copy of config/car.toml in `dst` with its neighbours (tracks, cascades) linked, so
+    paths relative to the config file resolve and the repo's files stay untouched."""
+    src = os.path.join(ROOT, "config")
+    shutil.copy2(os.path.join(src, "car.toml"), os.path.join(dst, "car.toml"))
+    for name in os.listdir(src):
+        if name not in ("car.toml", "local.toml") and not name.endswith(".local.toml"):
+            os.symlink(os.path.join(src, name), os.path.join(dst, name))
 
 
 def _fmt(v):

@@ -153,7 +153,11 @@ def main():
     ap.add_argument("--rate", type=float, default=50.0)
     a = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="rccar-dash-load-")
-    shutil.copy2(os.path.join(ROOT, "config/car.toml"), os.path.join(tmp, "car.toml"))
+    src = os.path.join(ROOT, "config")
+    shutil.copy2(os.path.join(src, "car.toml"), os.path.join(tmp, "car.toml"))
+    for name in os.listdir(src):  # tracks, cascades: resolved relative to the config file
+        if name not in ("car.toml", "local.toml") and not name.endswith(".local.toml"):
+            os.symlink(os.path.join(src, name), os.path.join(tmp, name))
     port = free_port()
     host = "127.0.0.1"
     base = f"http://{host}:{port}"
