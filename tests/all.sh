@@ -17,6 +17,7 @@ DEB_PACKAGES=(
   simavr libsimavr-dev libsimavrparts1 libelf-dev  # hardware-in-the-loop harness
   libclang-dev                                 # the `camera` feature (nokhwa's V4L2 bindings)
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
+  chromium chromium-driver                     # the dashboard's headless-browser stage
   socat                                        # a silent pty pair for rccar drive's bad-port test
   rustc-web cargo-web libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user  # cross stage (Pi)
   opencv-doc                                   # OpenCV's stereo chessboard pairs (calib parity stage)
@@ -83,6 +84,9 @@ stage camera cargo test --release --features camera --lib camera_source
 stage gpio cargo test --release --features gpio --lib gpio
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
+stage dashboard-security cargo test --release --features dashboard --test dashboard_security
+# builds target/release/rccar with the dashboard (the browser test runs that binary)
+stage dashboard-browser bash -c 'cargo build --release --features dashboard && "$RCCAR_PYTHON" tests/dashboard/browser_test.py'
 stage cross bash tests/cross/run.sh
 stage calib-parity "$RCCAR_PYTHON" tests/parity/calib_parity.py
 # Last: builds rccar with --features jpeg-turbo (libjpeg-turbo's C code via mozjpeg; needs gcc).

@@ -27,6 +27,14 @@ fn server() -> &'static Server {
         let dir = std::env::temp_dir().join(format!("rccar-dash-sec-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::copy(root.join("config/car.toml"), dir.join("car.toml")).unwrap();
+        // Tracks and cascades are found relative to the config file: link them beside it.
+        for e in std::fs::read_dir(root.join("config")).unwrap() {
+            let name = e.unwrap().file_name();
+            let n = name.to_string_lossy();
+            if n != "car.toml" && !n.ends_with("local.toml") && !dir.join(&name).exists() {
+                std::os::unix::fs::symlink(root.join("config").join(&name), dir.join(&name)).unwrap();
+            }
+        }
         std::fs::write(dir.join("local.toml"), "# local\n").unwrap();
         let port = {
             let l = std::net::TcpListener::bind("127.0.0.2:0").unwrap();
@@ -293,4 +301,40 @@ fn slowloris_clients_are_cut_off_and_the_loop_runs_on() {
     assert!(frames as f64 >= 0.5 * 30.0 * secs * 0.5, "{frames} frames in {secs:.1} s during the attack");
     // And the server still answers.
     assert!(state(s).is_some());
+}
+
+#[test]
+fn a_silent_page_disarms_the_car_after_the_heartbeat_limit() {
+    let s = server();
+    // Arm (retry: another test may be holding the e-stop for a moment).
+    let t0 = Instant::now();
+    loop {
+        let (c, b) = req(s, "POST", "/api/arm", true, "");
+        if c == 200 {
+            break;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(5), "cannot arm: {c} {b}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let armed_at = Instant::now();
+    assert_eq!(state(s).unwrap()["armed"], true);
+    // No heartbeat: disarmed after dashboard.heartbeat_ms (1000 ms) plus the 20 ms watchdog tick.
+    while state(s).unwrap()["armed"] == true {
+        assert!(armed_at.elapsed() < Duration::from_secs(3), "still armed after 3 s without a heartbeat");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let after = armed_at.elapsed();
+    assert!(after >= Duration::from_millis(950), "disarmed too early: {after:?}");
+    // A page that keeps sending heartbeats stays armed.
+    let (c, _) = req(s, "POST", "/api/arm", true, "");
+    if c == 200 {
+        let t = Instant::now();
+        while t.elapsed() < Duration::from_millis(2000) {
+            req(s, "POST", "/api/heartbeat", true, "");
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        let st = state(s).unwrap();
+        assert!(st["armed"] == true || st["estop"] == true, "disarmed despite heartbeats");
+        req(s, "POST", "/api/disarm", true, "");
+    }
 }

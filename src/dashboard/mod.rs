@@ -32,6 +32,7 @@ use crate::telemetry::FrameRecord;
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TryRecvError, TrySendError};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -227,11 +228,33 @@ pub struct Snapshot {
     pub dropped: u64,
 }
 
+/// What the loop updates on every frame (a few atomics, cheaper than a snapshot): the page's
+/// frame counter and pause state are exact even between snapshots.
+#[derive(Debug, Default)]
+pub struct Live {
+    /// The last processed frame's number.
+    pub frame: AtomicU64,
+    /// Its time, seconds (f64 bits).
+    pub time_bits: AtomicU64,
+    /// The loop is waiting in pause.
+    pub paused: AtomicBool,
+    /// Frames processed since the start.
+    pub frames: AtomicU64,
+}
+
+impl Live {
+    /// The last frame's time, seconds.
+    pub fn time_s(&self) -> f64 {
+        f64::from_bits(self.time_bits.load(Ordering::SeqCst))
+    }
+}
+
 /// The loop's side of the dashboard: publishes snapshots, applies control messages between
 /// frames, and hands its events to the telemetry (see [`DashObserver::tag`]).
 pub struct DashObserver {
     rx: Receiver<Control>,
     out: Arc<Latest<Arc<Snapshot>>>,
+    live: Arc<Live>,
     world: Option<SharedWorld>,
     stop: Option<StopSignal>,
     pending: Arc<Mutex<Vec<String>>>,
@@ -245,13 +268,27 @@ pub struct DashObserver {
     stepping: bool,
 }
 
+/// The loop's end and the server's end of a dashboard.
+pub struct Channel {
+    /// Snapshots, newest only.
+    pub slot: Arc<Latest<Arc<Snapshot>>>,
+    /// Per-frame counters.
+    pub live: Arc<Live>,
+    /// The inbox, for the server.
+    pub tx: ControlSender,
+    /// The observer, for the loop.
+    pub observer: DashObserver,
+}
+
 /// The slot the loop publishes into, the inbox sender for the server, and the observer.
-pub fn channel(cfg: &Config, world: Option<SharedWorld>, stop: Option<StopSignal>) -> (Arc<Latest<Arc<Snapshot>>>, ControlSender, DashObserver) {
+pub fn channel(cfg: &Config, world: Option<SharedWorld>, stop: Option<StopSignal>) -> Channel {
     let (tx, rx) = std::sync::mpsc::sync_channel(INBOX_CAPACITY);
     let out = Arc::new(Latest::new());
+    let live = Arc::new(Live::default());
     let obs = DashObserver {
         rx,
         out: out.clone(),
+        live: live.clone(),
         world,
         stop,
         pending: Arc::new(Mutex::new(Vec::new())),
@@ -263,7 +300,12 @@ pub fn channel(cfg: &Config, world: Option<SharedWorld>, stop: Option<StopSignal
         paused: false,
         stepping: false,
     };
-    (out, ControlSender(tx), obs)
+    Channel {
+        slot: out,
+        live,
+        tx: ControlSender(tx),
+        observer: obs,
+    }
 }
 
 impl DashObserver {
@@ -362,6 +404,7 @@ impl Observer for DashObserver {
             }
         }
         // Paused (simulator only): wait for the operator, a stop request ends the wait.
+        self.live.paused.store(self.paused, Ordering::SeqCst);
         while self.paused {
             if self.stop.as_ref().is_some_and(|s| s.reason().is_some()) {
                 break;
@@ -378,11 +421,15 @@ impl Observer for DashObserver {
                 }
             }
         }
+        self.live.paused.store(false, Ordering::SeqCst);
         Flow::Continue
     }
 
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
         let r = ctx.record;
+        self.live.time_bits.store(r.time_s.to_bits(), Ordering::SeqCst);
+        self.live.frame.store(r.frame, Ordering::SeqCst);
+        self.live.frames.fetch_add(1, Ordering::SeqCst);
         self.points.push(PlotPoint {
             t: r.time_s,
             error: r.error,

@@ -155,8 +155,8 @@ def main():
     a = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="rccar-dash-")
     cfgdir = os.path.join(tmp, "config")
-    shutil.copy2(os.path.join(ROOT, "config/car.toml"), os.path.join(tmp, "car.toml"))
     os.makedirs(cfgdir)
+    link_config(cfgdir)
     local = os.path.join(cfgdir, "local.toml")
     with open(local, "w") as f:
         f.write("# my overrides (the dashboard must keep this line)\n")
@@ -167,7 +167,7 @@ def main():
     try:
         sim = subprocess.Popen(
             [a.rccar, "sim", "--dashboard", "--listen", f"127.0.0.1:{port}", "--truth-boxes",
-             "--config", os.path.join(tmp, "car.toml"), "--local", local,
+             "--config", os.path.join(cfgdir, "car.toml"), "--local", local,
              "--seconds", "900", "--laps", "1000", "-o", out],
             cwd=ROOT, stdout=open(os.path.join(tmp, "sim.log"), "w"), stderr=subprocess.STDOUT)
         procs.append(sim)
@@ -175,6 +175,7 @@ def main():
         up = wait(lambda: _state(base), 30, 0.2)
         check("sim --dashboard serves /api/state", bool(up), f"port {port}")
         if not up:
+            print(open(os.path.join(tmp, "sim.log")).read()[-2000:])
             return
         drv = subprocess.Popen(["/usr/bin/chromedriver", f"--port={dport}"],
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -281,6 +282,20 @@ def main():
         resumed = wait(lambda: _state(base)["frame"] > f2 + 5, 5)
         check("resume runs the loop again", bool(resumed))
 
+        # Move the car to s = 10 m with the page's slider and button, then reset it.
+        tel = os.path.join(out, "telemetry.jsonl")
+        for label, action, want in (("place at 10 m", "place", 10.0), ("reset", "reset", 0.0)):
+            f_before = _state(base)["frame"]
+            if action == "place":
+                wd.js("const p=document.getElementById('place');p.value='10';p.dispatchEvent(new Event('input'));")
+                wd.click(wd.find("#placego"))
+            else:
+                wd.click(wd.find("#reset"))
+            rec = wait(lambda: _find_event(tel, f"car placed at s={want:.2f} m", f_before), 5)
+            s_m = rec["truth"]["s_m"] if rec and rec.get("truth") else None
+            check(f"{label}: the car is there on the next frame", s_m is not None and abs(s_m - want) < 0.2,
+                  f"frame {rec['frame'] if rec else '-'}: true s = {s_m} m")
+
         # 5. Save: exactly the changed key lands in local.toml, the comment stays.
         wd.click(wd.find("#save"))
         saved = wait(lambda: "steering" in open(local).read(), 5)
@@ -310,6 +325,16 @@ def main():
         else:
             print(f"kept {tmp}")
     print(f"{passed} passed, {failed} failed")
+
+
+def link_config(dst):
+    """A copy of config/car.toml in `dst` with its neighbours (tracks, cascades) linked, so
+    paths relative to the config file resolve and the repo's files stay untouched."""
+    src = os.path.join(ROOT, "config")
+    shutil.copy2(os.path.join(src, "car.toml"), os.path.join(dst, "car.toml"))
+    for name in os.listdir(src):
+        if name not in ("car.toml", "local.toml") and not name.endswith(".local.toml"):
+            os.symlink(os.path.join(src, name), os.path.join(dst, name))
 
 
 def _fmt(v):

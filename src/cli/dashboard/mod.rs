@@ -207,13 +207,15 @@ impl Dash {
             let arm = ArmState::new();
             let sent = Sent::new();
             let world_given = world.is_some();
-            let (slot, tx, obs) = rccar::dashboard::channel(cfg, world.clone(), Some(stop.clone()));
+            let ch = rccar::dashboard::channel(cfg, world.clone(), Some(stop.clone()));
+            let obs = ch.observer;
             let srv = server::Server::start(server::Options {
                 listen,
                 cfg: cfg.clone(),
                 local,
-                slot,
-                tx,
+                slot: ch.slot,
+                live: ch.live,
+                tx: ch.tx,
                 arm: arm.clone(),
                 sent: sent.clone(),
                 world,

@@ -23,7 +23,7 @@ use super::Sent;
 use anyhow::{Context, Result};
 use image::{Rgb, RgbImage};
 use rccar::config::Config;
-use rccar::dashboard::{self, Control, ControlSender, PlaceRequest, PlotPoint, SetRequest, Snapshot};
+use rccar::dashboard::{self, Control, ControlSender, Live, PlaceRequest, PlotPoint, SetRequest, Snapshot};
 use rccar::drive::{ArmState, Latest, StopSignal};
 use rccar::sim::world::{lock, SharedWorld};
 use serde_json::{json, Value};
@@ -52,6 +52,8 @@ pub struct Options {
     pub local: PathBuf,
     /// The loop's snapshots.
     pub slot: Arc<Latest<Arc<Snapshot>>>,
+    /// The loop's per-frame counters.
+    pub live: Arc<Live>,
     /// The loop's inbox.
     pub tx: ControlSender,
     /// Arming and e-stop.
@@ -102,6 +104,7 @@ struct Shared {
     frames_sent: AtomicU64,
     closed: AtomicBool,
     on_arm: Option<fn()>,
+    live: Arc<Live>,
 }
 
 /// The running server; its threads end when the run's stop signal is set or it is dropped.
@@ -177,6 +180,7 @@ impl Server {
             frames_sent: AtomicU64::new(0),
             closed: AtomicBool::new(false),
             on_arm: o.on_arm,
+            live: o.live,
         });
         if need_token {
             println!(
@@ -208,12 +212,24 @@ impl Server {
     }
 }
 
+/// The web's threads yield to the control loop: nice 10 for this thread (Linux; elsewhere a
+/// no-op). A busy page or a flood of requests then takes CPU only when the loop does not.
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: plain system calls on the calling thread's own id; no memory is passed.
+    unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, 10);
+    }
+}
+
 fn now_ms(sh: &Shared) -> u64 {
     (sh.sent.now() * 1e3) as u64
 }
 
 /// Disarms when the page that armed the car stops sending heartbeats.
 fn watchdog(sh: Arc<Shared>, stop: StopSignal) {
+    // The watchdog disarms the car: it keeps normal priority.
     while !sh.closed.load(Ordering::SeqCst) && !stop.is_set() {
         std::thread::sleep(Duration::from_millis(20));
         if sh.heartbeat_ms == 0 || !sh.armed_by_page.load(Ordering::SeqCst) || !sh.arm.is_armed() {
@@ -236,6 +252,7 @@ fn watchdog(sh: Arc<Shared>, stop: StopSignal) {
 
 /// Takes the loop's snapshots, keeps the plot history, renders and encodes the stream image.
 fn hub(slot: Arc<Latest<Arc<Snapshot>>>, sh: Arc<Shared>) {
+    lower_priority();
     while !sh.closed.load(Ordering::SeqCst) {
         let Some(snap) = slot.wait_take(Duration::from_millis(200)) else {
             if slot.is_closed() {
@@ -513,8 +530,12 @@ fn handle(mut stream: TcpStream, sh: &Shared) {
             return;
         }
     };
-    let who = r.peer.map_or("?".to_string(), |p| p.ip().to_string());
     let path = r.path.as_str();
+    // Everything but the e-stop yields to the control loop from here on.
+    if path != "/api/estop" {
+        lower_priority();
+    }
+    let who = r.peer.map_or("?".to_string(), |p| p.ip().to_string());
     // Only exact routes exist: `..`, `%2e`, `//` and the like are simply not found.
     let get = r.method == "GET";
     let post = r.method == "POST";
@@ -749,8 +770,10 @@ fn state_json(sh: &Shared, since: f64, authorized: bool) -> Value {
     });
     if let Some(sn) = snap {
         let r = &sn.record;
-        o["frame"] = json!(r.frame);
-        o["t"] = json!(r.time_s);
+        // Exact between snapshots: the loop's own counters.
+        o["frame"] = json!(sh.live.frame.load(Ordering::SeqCst));
+        o["t"] = json!(sh.live.time_s());
+        o["snapshot_frame"] = json!(r.frame);
         o["error"] = json!(r.error);
         o["steer"] = json!(r.steer);
         o["throttle"] = json!(r.throttle);
@@ -759,7 +782,7 @@ fn state_json(sh: &Shared, since: f64, authorized: bool) -> Value {
         o["behaviour"] = json!(r.behaviour);
         o["latency_ms"] = json!(r.latency_ms);
         o["period_ms"] = json!(r.period_ms);
-        o["paused"] = json!(sn.paused);
+        o["paused"] = json!(sh.live.paused.load(Ordering::SeqCst));
         o["dropped_snapshots"] = json!(sn.dropped);
         o["objects"] = json!(sn.objects);
         o["transition"] = match &sn.last_transition {
