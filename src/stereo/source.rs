@@ -92,18 +92,9 @@ mod tests {
             let t = *self.0.get(self.1)?;
             self.1 += 1;
             Some(if t < 0.0 {
-                Err(FrameError {
-                    index: self.1 as u64 - 1,
-                    name: "bad".into(),
-                    reason: "unreadable".into(),
-                })
+                Err(FrameError::bad(self.1 as u64 - 1, "bad", "unreadable"))
             } else {
-                Ok(Frame {
-                    index: self.1 as u64 - 1,
-                    time_s: t,
-                    name: format!("{t}"),
-                    image: image::RgbImage::new(1, 1),
-                })
+                Ok(Frame::new(self.1 as u64 - 1, t, format!("{t}"), image::RgbImage::new(1, 1)))
             })
         }
     }
