@@ -97,8 +97,12 @@ pub fn open(
 ) -> Result<CaptureSource, CameraError> {
     let mut g = V4l2Grabber::new(index, fps, width, height);
     g.open().map_err(|reason| CameraError { index, reason })?;
+    let label = g.label();
+    g.close();
+    drop(g);
     Ok(CaptureSource::start(
-        Box::new(g),
+        move || Box::new(V4l2Grabber::new(index, fps, width, height)),
+        label,
         (width, height),
         clock,
         stall_after,

@@ -20,7 +20,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 /// A device that delivers images.
-pub trait Grabber: Send {
+pub trait Grabber {
     /// Opens (or reopens) the device.
     fn open(&mut self) -> Result<(), String>;
     /// The next image; blocks until the device delivers one. An error closes the device and
@@ -51,11 +51,12 @@ pub struct CaptureSource {
 }
 
 impl CaptureSource {
-    /// Starts capturing from `grabber`. Frames must be `width × height`; `stall_after` is the
+    /// Starts capturing from the grabber `make` builds on the capture thread. Frames must be `width × height`; `stall_after` is the
     /// longest wait for a frame before the loop is told the camera stalled (0.5 s on the car).
     /// Reopen attempts are `retry` apart.
     pub fn start(
-        mut grabber: Box<dyn Grabber>,
+        make: impl FnOnce() -> Box<dyn Grabber> + Send + 'static,
+        label: String,
         size: (u32, u32),
         clock: Arc<dyn Clock + Send + Sync>,
         stall_after: Duration,
@@ -64,11 +65,12 @@ impl CaptureSource {
         let slot = Arc::new(Latest::new());
         let fatal = Arc::new(Mutex::new(None));
         let quit = Arc::new(AtomicBool::new(false));
-        let label = grabber.label();
         let (s, f, q) = (slot.clone(), fatal.clone(), quit.clone());
         let thread = std::thread::Builder::new()
             .name("rccar-capture".into())
             .spawn(move || {
+                // The device lives on this thread only (V4L2 handles need not be Send).
+                let mut grabber = make();
                 let mut open = false;
                 let mut index = 0u64;
                 while !q.load(Ordering::SeqCst) {
@@ -222,13 +224,17 @@ mod tests {
     fn a_stall_is_reported_within_its_time_and_frames_come_back() {
         let opens = Arc::new(AtomicU64::new(0));
         let t0 = Instant::now();
+        let o = opens.clone();
         let mut src = CaptureSource::start(
-            Box::new(Script {
-                t0,
-                stall: (0.3, 1.3),
-                size: (32, 24),
-                opens: opens.clone(),
-            }),
+            move || {
+                Box::new(Script {
+                    t0,
+                    stall: (0.3, 1.3),
+                    size: (32, 24),
+                    opens: o,
+                })
+            },
+            "script".into(),
             (32, 24),
             Arc::new(TestClock(t0)),
             Duration::from_millis(500),
@@ -263,12 +269,15 @@ mod tests {
     fn the_wrong_size_ends_the_source_with_a_clear_error() {
         let t0 = Instant::now();
         let mut src = CaptureSource::start(
-            Box::new(Script {
-                t0,
-                stall: (9.0, 9.0),
-                size: (640, 480),
-                opens: Arc::new(AtomicU64::new(0)),
-            }),
+            move || {
+                Box::new(Script {
+                    t0,
+                    stall: (9.0, 9.0),
+                    size: (640, 480),
+                    opens: Arc::new(AtomicU64::new(0)),
+                })
+            },
+            "script".into(),
             (320, 240),
             Arc::new(TestClock(t0)),
             Duration::from_millis(500),

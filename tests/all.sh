@@ -72,23 +72,25 @@ stage() {
 stage build cargo build --release --workspace --all-targets
 stage cargo-test cargo test --release --workspace
 stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
+stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
+stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
+stage calib-parity "$RCCAR_PYTHON" tests/parity/calib_parity.py
 stage firmware make -C firmware all sim
 stage protocol-c make -C firmware test
 stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
 stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
-stage link-hil cargo test --release --features serial --test link_hil
+# Everything behind a cargo feature is tested in ONE feature set (the car's, plus the
+# dashboard), so the library is compiled once more, not once per feature.
+FEAT=serial,camera,gpio,dashboard
+stage link-hil cargo test --release --features $FEAT --test link_hil
 # the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr
 # (one test at a time: each needs a core for the emulator on the wall clock; ~5 min)
-stage drive-fil cargo test --release --features serial --test drive_fil --test drive_cli -- --test-threads 1
-stage camera cargo test --release --features camera --lib camera_source
-stage gpio cargo test --release --features gpio --lib gpio
-stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
-stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
-stage dashboard-security cargo test --release --features dashboard --test dashboard_security
-# builds target/release/rccar with the dashboard (the browser test runs that binary)
-stage dashboard-browser bash -c 'cargo build --release --features dashboard && "$RCCAR_PYTHON" tests/dashboard/browser_test.py'
+stage drive-fil cargo test --release --features $FEAT --test drive_fil --test drive_cli -- --test-threads 1
+stage camera-gpio cargo test --release --features $FEAT --lib -- camera_source capture gpio
+stage dashboard-security cargo test --release --features $FEAT --test dashboard_security
+# the browser test runs target/release/rccar, built here with the dashboard
+stage dashboard-browser bash -c "cargo build --release --features $FEAT && \"\$RCCAR_PYTHON\" tests/dashboard/browser_test.py"
 stage cross bash tests/cross/run.sh
-stage calib-parity "$RCCAR_PYTHON" tests/parity/calib_parity.py
 # Last: builds rccar with --features jpeg-turbo (libjpeg-turbo's C code via mozjpeg; needs gcc).
 stage jpeg-parity "$RCCAR_PYTHON" tests/parity/jpeg_parity.py
 
