@@ -120,6 +120,7 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     // …and the GPIO (button, LED, ultrasonic brake).
     let mut gpio = open_gpio(&cfg)?;
     let stop = super::signals::install();
+    super::signals::install_button();
     let clock = Arc::new(WallClock::new());
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     let tel_path = a.out.join("telemetry.jsonl");

@@ -21,6 +21,15 @@ extern "C" fn on_usr1(_: libc::c_int) {
     BUTTON.fetch_add(1, Ordering::SeqCst);
 }
 
+/// Makes SIGUSR1 the desk's start/stop button (`rccar drive` only: other commands keep the
+/// default action).
+pub fn install_button() {
+    // SAFETY: the handler only touches an atomic.
+    unsafe {
+        libc::signal(libc::SIGUSR1, on_usr1 as *const () as libc::sighandler_t);
+    }
+}
+
 /// How many times SIGUSR1 (the desk's start/stop button) arrived so far.
 pub fn button_presses() -> u32 {
     BUTTON.load(Ordering::SeqCst)
@@ -47,7 +56,6 @@ pub fn install() -> StopSignal {
         unsafe {
             libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
             libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
-            libc::signal(libc::SIGUSR1, on_usr1 as *const () as libc::sighandler_t);
         }
         let s = stop.clone();
         let _ = std::thread::Builder::new().name("rccar-signals".into()).spawn(move || {
