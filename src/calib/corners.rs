@@ -260,11 +260,11 @@ pub fn find_chessboard(img: &GrayImage, board: BoardSize, opts: &CornerOptions) 
 }
 
 /// Puts a grid of rows into the canonical orientation (step 4 of the module doc).
-pub(crate) fn orient<T: Copy>(g: &mut Vec<Vec<T>>)
+pub(crate) fn orient<T>(g: &mut [Vec<T>])
 where
-    T: Into<[f64; 2]>,
+    T: Copy + Into<[f64; 2]>,
 {
-    let p = |g: &Vec<Vec<T>>, r: usize, c: usize| -> [f64; 2] { g[r][c].into() };
+    let p = |g: &[Vec<T>], r: usize, c: usize| -> [f64; 2] { g[r][c].into() };
     let (rn, cn) = (g.len(), g[0].len());
     let a = p(g, 0, 0);
     let rv = [p(g, 0, cn - 1)[0] - a[0], p(g, 0, cn - 1)[1] - a[1]];
@@ -381,7 +381,7 @@ fn neighbour(c: &[Cand], from: usize, dir: f64, used: &[bool]) -> Option<usize> 
         if da > 20f64.to_radians() {
             continue;
         }
-        if best.is_none_or(|b| d < b.1) {
+        if best.map_or(true, |b| d < b.1) {
             best = Some((i, d));
         }
     }
@@ -404,7 +404,7 @@ fn nearest(c: &[Cand], p: [f64; 2], tol: f64, used: &[bool], dirs: [f64; 2]) -> 
             .dirs
             .iter()
             .all(|&a| dirs.iter().any(|&b| angle_diff_mod_pi(a, b) < 30f64.to_radians()));
-        if ok && best.is_none_or(|b| d < b.1) {
+        if ok && best.map_or(true, |b| d < b.1) {
             best = Some((i, d));
         }
     }
@@ -653,7 +653,7 @@ mod tests {
                     let v = y as f64 + (sy as f64 + 0.5) / 4.0 - 0.5 - oy;
                     // Squares from -1 to cols (so `cols` inner corners per row), white margin.
                     let (i, j) = ((u / sq).floor() as i64, (v / sq).floor() as i64);
-                    let inside = i >= -1 && i <= cols as i64 - 1 && j >= -1 && j <= rows as i64 - 1;
+                    let inside = i >= -1 && i < cols as i64 && j >= -1 && j < rows as i64;
                     let white = !inside || (i + j).rem_euclid(2) == 1;
                     acc += if white { 220.0 } else { 30.0 };
                 }

@@ -50,6 +50,7 @@ pub struct StereoCalibration {
 }
 
 /// What a results file holds.
+#[allow(clippy::large_enum_variant)] // read once per run
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum CalibrationFile {

@@ -65,7 +65,10 @@ fn load_gray(path: &Path) -> Result<image::GrayImage> {
 }
 
 /// Corners of each image (None where the board was not found); all images must share a size.
-fn find_all(paths: &[PathBuf], b: &BoardArgs) -> Result<(Vec<Option<Vec<[f64; 2]>>>, (u32, u32))> {
+/// Corners per image (`None`: board not found).
+type Found = Vec<Option<Vec<[f64; 2]>>>;
+
+fn find_all(paths: &[PathBuf], b: &BoardArgs) -> Result<(Found, (u32, u32))> {
     if b.square <= 0.0 || !b.square.is_finite() {
         bail!("--square {} must be a positive length in metres", b.square);
     }

@@ -107,7 +107,7 @@ impl Board {
                         if s > 0.0 {
                             let b = rt * (ray * s - t);
                             let (i, j) = ((b[0] / sq).floor() as i64, (b[1] / sq).floor() as i64);
-                            if i >= -1 && i <= cols - 1 && j >= -1 && j <= rows - 1 {
+                            if i >= -1 && i < cols && j >= -1 && j < rows {
                                 val = Some(if (i + j).rem_euclid(2) == 0 { 35.0 } else { 215.0 });
                             } else if i >= -2 && i <= cols && j >= -2 && j <= rows {
                                 val = Some(215.0);

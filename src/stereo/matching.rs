@@ -10,8 +10,8 @@
 //!    sliding sum; Σ T'·I needs one pass per candidate disparity (Σ T' = 0, so I' = I there).
 //! 2. The best disparity must score ≥ `min_score` (else the object is not in the other view:
 //!    "no range").
-//! 2b. Occlusion prior: an object hides what is behind it, so of the local maxima scoring
-//!    at least `near_peak_ratio` × the best, the one with the largest disparity (nearest) is
+//!    Occlusion prior: an object hides what is behind it, so of the local maxima scoring at
+//!    least `near_peak_ratio` × the best, the one with the largest disparity (nearest) is
 //!    taken. A flat-coloured object over a textured floor otherwise locks onto the floor
 //!    behind it (its lines fill the box); 1.0 turns the prior off.
 //! 3. Sub-pixel: a parabola through the peak and its two neighbours,
@@ -179,7 +179,7 @@ impl Matcher {
             } else {
                 0.0
             };
-            if best.is_none_or(|b| score > b.1) {
+            if best.map_or(true, |b| score > b.1) {
                 best = Some((self.scores.len(), score));
             }
             self.scores.push(score);
@@ -193,7 +193,11 @@ impl Matcher {
             let v = self.scores[k];
             let left = self.scores[k - 1];
             let right = self.scores.get(k + 1).copied().unwrap_or(f64::NEG_INFINITY);
-            if v >= floor && v >= opts.min_score && v >= left && !(right > v) {
+            if v >= floor
+                && v >= opts.min_score
+                && v >= left
+                && right.partial_cmp(&v) != Some(std::cmp::Ordering::Greater)
+            {
                 i = k;
                 score = v;
             }
