@@ -105,6 +105,7 @@ pub fn group(raw: &[Rect], min_neighbors: u32, w: u32, h: u32) -> Vec<Rect> {
 /// Evaluates `cascade` on `(name, frame, boxes)` items at every minNeighbors in `mns`, with
 /// the detector's `scale_factor` and `min_size` (pixels, (0, 0) = the cascade's window: as
 /// `rccar detect` with `[detect] min_size_px`); `report_mn` picks the per-frame detail.
+#[allow(clippy::too_many_arguments)]
 pub fn evaluate(
     cascade: Cascade,
     name: &str,

@@ -503,7 +503,7 @@ fn run_gen(a: GenArgs) -> anyhow::Result<ExitCode> {
     let bar = indicatif::ProgressBar::new(a.count as u64);
     let list = g.generate(&opts, &a.out, &mut |n| bar.set_position(n as u64))?;
     bar.finish_and_clear();
-    eprintln!(
+    println!(
         "{}: {} items in {:.1} s",
         list.display(),
         a.count,

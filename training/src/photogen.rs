@@ -53,8 +53,8 @@ pub fn stop_sign_template(track: &Path, px: u32) -> Result<RgbaImage, String> {
                 // Looking along −x at the panel: +y is the viewer's right.
                 let o = [centre[0] + 1.0, centre[1] + u, centre[2] + w];
                 if let Some(h) = scene.intersect(&prims, o, [-1.0, 0.0, 0.0], 10.0) {
-                    for k in 0..3 {
-                        acc[k] += h.rgb[k];
+                    for (a, c) in acc.iter_mut().zip(h.rgb) {
+                        *a += c;
                     }
                     n += 1;
                 }
