@@ -19,7 +19,6 @@ DEB_PACKAGES=(
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
   chromium chromium-driver                     # the dashboard's headless-browser stage
   socat                                        # a silent pty pair for rccar drive's bad-port test
-  rustc-web cargo-web libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user  # cross stage (Pi)
   opencv-doc                                   # OpenCV's stereo chessboard pairs (calib parity stage)
 )
 if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
