@@ -69,7 +69,7 @@ stage() {
 }
 
 stage build cargo build --release --workspace --all-targets
-stage cargo-test cargo test --release --workspace
+stage cargo-test cargo test --release --workspace --no-fail-fast
 stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick

@@ -460,9 +460,9 @@ mod tests {
         // 2, 3 dropped; the skipped frame names index 4; after the stall the gap to 7 is not
         // counted (a stalled camera made no frames)
         assert_eq!(s.dropped, 2);
-        // 4 frame commands + the stall's neutral + the final neutral
+        // frames 0, 1, 4, the stall's neutral, frame 7, the final neutral
         assert_eq!(sink.log.len(), 6);
-        assert_eq!(sink.log[4].1, Command::NEUTRAL, "stall sends neutral");
+        assert_eq!(sink.log[3].1, Command::NEUTRAL, "stall sends neutral");
         assert_eq!(sink.log.last().unwrap().1, Command::NEUTRAL);
     }
 
