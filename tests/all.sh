@@ -86,7 +86,7 @@ stage link-hil cargo test --release --features $FEAT --test link_hil
 # (one test at a time: each needs a core for the emulator on the wall clock; ~5 min)
 stage drive-fil cargo test --release --features $FEAT --test drive_fil --test drive_cli -- --test-threads 1
 stage camera-gpio cargo test --release --features $FEAT --lib -- camera_source capture gpio
-stage dashboard-security cargo test --release --features $FEAT --test dashboard_security
+stage dashboard-security cargo test --release --features $FEAT --test dashboard_security -- --test-threads 1
 # the browser test runs target/release/rccar, built here with the dashboard
 stage dashboard-browser bash -c "cargo build --release --features $FEAT && \"\$RCCAR_PYTHON\" tests/dashboard/browser_test.py"
 # The Pi cross-build check (tests/cross/run.sh) is not a stage yet: after the drive loop
