@@ -19,7 +19,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use rccar::config::Config;
 use rccar::control::Command;
-use rccar::drive::{Clock, Driver, Flow, FrameContext, LoopEnd, LoopError, LoopStats, Observer, StopReason, StopSignal};
+use rccar::drive::{Clock, Driver, Flow, FrameContext, LoopEnd, LoopError, LoopStats, Observer, Parts, StopReason, StopSignal};
 use rccar::pipeline::Pipeline;
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
@@ -227,15 +227,15 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         let mut obs: [&mut dyn Observer; 6] = [gpio_obs, score_obs, &mut tel, &mut status, &mut dash, rec_obs];
         let mut timer = WallTimer::new();
         let mut driver = Driver::new(cfg.camera.fps);
-        let r = driver.run(
-            &mut *source,
-            &mut pipeline,
-            &mut *arming,
-            &stop,
-            clock.as_ref(),
-            &mut timer,
-            &mut obs,
-        );
+        let r = driver.run(Parts {
+            source: &mut *source,
+            pipeline: &mut pipeline,
+            sink: &mut *arming,
+            stop: &stop,
+            clock: clock.as_ref(),
+            timer: &mut timer,
+            observer: &mut obs,
+        });
         print_loop_stats(driver.stats());
         r
     };

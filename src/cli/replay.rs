@@ -7,7 +7,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use rccar::annotate::annotate;
 use rccar::lane::LaneStatus;
-use rccar::drive::{Clock, Driver, Flow, FrameContext, LoopEnd, LoopError, NoClock, Observer, StopReason};
+use rccar::drive::{Clock, Driver, Flow, FrameContext, LoopEnd, LoopError, NoClock, Observer, Parts, StopReason};
 use rccar::pipeline::Pipeline;
 use rccar::sink::NullSink;
 use rccar::source::{FrameError, FrameSource, ReplayDir};
@@ -136,7 +136,15 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let end = {
         let mut obs: [&mut dyn Observer; 2] = [&mut tel, &mut s];
         // Replay moves nothing: its sink forgets the commands (they are in the telemetry).
-        Driver::new(cfg.camera.fps).run(&mut source, &mut pipeline, &mut NullSink, &stop, clock, timer, &mut obs)?
+        Driver::new(cfg.camera.fps).run(Parts {
+            source: &mut source,
+            pipeline: &mut pipeline,
+            sink: &mut NullSink,
+            stop: &stop,
+            clock,
+            timer,
+            observer: &mut obs,
+        })?
     };
     s.bar.finish_and_clear();
     tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;

@@ -7,7 +7,7 @@ use super::timer::WallTimer;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rccar::config::Config;
-use rccar::drive::{Driver, Flow, FrameContext, LoopEnd, LoopError, Observer, StopReason};
+use rccar::drive::{Driver, Flow, FrameContext, LoopEnd, LoopError, Observer, Parts, StopReason};
 use rccar::pipeline::Pipeline;
 use rccar::sim::plot;
 use rccar::sim::run::{roi_rows, Simulation, Summary};
@@ -132,15 +132,15 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let end = {
         let mut tel = dash.tag(&mut tel);
         let mut obs: [&mut dyn Observer; 4] = [&mut score, &mut tel, &mut report, &mut dash];
-        Driver::new(cfg.camera.fps).run(
-            &mut camera,
-            &mut pipeline,
-            &mut *vehicle,
-            &stop,
-            &clock,
+        Driver::new(cfg.camera.fps).run(Parts {
+            source: &mut camera,
+            pipeline: &mut pipeline,
+            sink: &mut *vehicle,
+            stop: &stop,
+            clock: &clock,
             timer,
-            &mut obs,
-        )?
+            observer: &mut obs,
+        })?
     };
     let interrupted = match end {
         LoopEnd::Stopped(why) => {

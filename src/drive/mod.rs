@@ -217,6 +217,26 @@ pub enum Step {
     End(LoopEnd),
 }
 
+/// What one run of the loop connects: where frames come from, what turns them into commands,
+/// where the commands go, and who watches. [`Driver::step`] and [`Driver::run`] take these
+/// together, so every caller (car, replay, simulator) wires the same seven parts.
+pub struct Parts<'a> {
+    /// The camera, a folder of frames or the simulator's camera.
+    pub source: &'a mut dyn FrameSource,
+    /// Lane keeping, detection, ranging, behaviour and control.
+    pub pipeline: &'a mut Pipeline,
+    /// The serial link, the simulator's vehicle, or nothing.
+    pub sink: &'a mut dyn CommandSink,
+    /// Ctrl-C, SIGTERM, a fault or the button ends the run at the next turn.
+    pub stop: &'a StopSignal,
+    /// Only for reporting latency and loop period ([`NoClock`] for reproducible telemetry).
+    pub clock: &'a dyn Clock,
+    /// Measures the pipeline's stages.
+    pub timer: &'a mut dyn StageTimer,
+    /// Telemetry, scoring, recording, dashboard (several as `[&mut dyn Observer; N]`).
+    pub observer: &'a mut dyn Observer,
+}
+
 /// The loop's state between frames: the previous frame's time (for dt), counters, and the
 /// period measurement. The car, replay, the simulator and the firmware-in-the-loop test all go
 /// through [`Driver::step`].
@@ -255,19 +275,11 @@ impl Driver {
         self.ended
     }
 
-    /// One turn of the loop (see the module notes). `sink` should already be wrapped in
+    /// One turn of the loop (see the module notes). `parts.sink` should already be wrapped in
     /// [`NeutralOnDrop`] by the caller that owns the run ([`Driver::run`] does it).
-    #[allow(clippy::too_many_arguments)]
-    pub fn step(
-        &mut self,
-        source: &mut dyn FrameSource,
-        pipeline: &mut Pipeline,
-        sink: &mut dyn CommandSink,
-        stop: &StopSignal,
-        clock: &dyn Clock,
-        timer: &mut dyn StageTimer,
-        observer: &mut dyn Observer,
-    ) -> Result<Step, LoopError> {
+    pub fn step(&mut self, parts: &mut Parts<'_>) -> Result<Step, LoopError> {
+        let (source, pipeline, sink) = (&mut *parts.source, &mut *parts.pipeline, &mut *parts.sink);
+        let (stop, clock, timer, observer) = (parts.stop, parts.clock, &mut *parts.timer, &mut *parts.observer);
         if let Some(e) = self.ended {
             return Ok(Step::End(e));
         }
@@ -360,33 +372,24 @@ impl Driver {
 
     /// Runs until the source ends, a stop is requested or an observer ends the run. The sink
     /// gets neutral on every way out (see the module notes).
-    #[allow(clippy::too_many_arguments)]
-    pub fn run(
-        &mut self,
-        source: &mut dyn FrameSource,
-        pipeline: &mut Pipeline,
-        sink: &mut dyn CommandSink,
-        stop: &StopSignal,
-        clock: &dyn Clock,
-        timer: &mut dyn StageTimer,
-        observer: &mut dyn Observer,
-    ) -> Result<LoopEnd, LoopError> {
+    pub fn run(&mut self, parts: Parts<'_>) -> Result<LoopEnd, LoopError> {
+        let Parts { source, pipeline, sink, stop, clock, timer, observer } = parts;
         let mut guard = NeutralOnDrop::new(sink);
-        loop {
-            match self.step(source, pipeline, &mut guard, stop, clock, timer, observer)? {
-                Step::End(why) => {
-                    // Neutral now (and exactly once), before the caller flushes files.
-                    guard.into_inner();
-                    return Ok(why);
-                }
+        let mut parts = Parts { source, pipeline, sink: &mut guard, stop, clock, timer, observer };
+        let why = loop {
+            match self.step(&mut parts)? {
+                Step::End(why) => break why,
                 _ => {
                     if let Some(why) = self.ended {
-                        guard.into_inner();
-                        return Ok(why);
+                        break why;
                     }
                 }
             }
-        }
+        };
+        // Neutral now (and exactly once), before the caller flushes files.
+        drop(parts);
+        guard.into_inner();
+        Ok(why)
     }
 }
 
@@ -452,7 +455,15 @@ mod tests {
         let stop = StopSignal::new();
         let mut d = Driver::new(30.0);
         let end = d
-            .run(&mut src, &mut p, &mut sink, &stop, &NoClock, &mut NoTimer, &mut NoObserver)
+            .run(Parts {
+                source: &mut src,
+                pipeline: &mut p,
+                sink: &mut sink,
+                stop: &stop,
+                clock: &NoClock,
+                timer: &mut NoTimer,
+                observer: &mut NoObserver,
+            })
             .unwrap();
         assert_eq!(end, LoopEnd::SourceEnded);
         let s = d.stats();
@@ -488,7 +499,15 @@ mod tests {
         let mut obs = StopAt(9, stop.clone());
         let mut sink = RecordingSink::default();
         let end = Driver::new(30.0)
-            .run(&mut src, &mut p, &mut sink, &stop, &NoClock, &mut NoTimer, &mut obs)
+            .run(Parts {
+                source: &mut src,
+                pipeline: &mut p,
+                sink: &mut sink,
+                stop: &stop,
+                clock: &NoClock,
+                timer: &mut NoTimer,
+                observer: &mut obs,
+            })
             .unwrap();
         assert_eq!(end, LoopEnd::Stopped(StopReason::Interrupt));
         assert_eq!(sink.log.len(), 11, "10 frames + neutral");
@@ -519,15 +538,15 @@ mod tests {
             }
         }
         let mut sink = Shared(log.clone());
-        let r = Driver::new(30.0).run(
-            &mut src,
-            &mut p,
-            &mut sink,
-            &StopSignal::new(),
-            &NoClock,
-            &mut NoTimer,
-            &mut Fails,
-        );
+        let r = Driver::new(30.0).run(Parts {
+            source: &mut src,
+            pipeline: &mut p,
+            sink: &mut sink,
+            stop: &StopSignal::new(),
+            clock: &NoClock,
+            timer: &mut NoTimer,
+            observer: &mut Fails,
+        });
         assert!(r.is_err());
         assert_eq!(log.borrow().last(), Some(&Command::NEUTRAL));
     }

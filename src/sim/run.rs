@@ -13,7 +13,7 @@ use super::truth::FrameTruth;
 use super::vehicle::Vehicle;
 use super::world::{lock, SharedWorld, SimCamera, SimScore, SimVehicle, World};
 use crate::config::Config;
-use crate::drive::{Driver, NoClock, Step, StopSignal};
+use crate::drive::{Driver, NoClock, Parts, Step, StopSignal};
 use crate::pipeline::{FrameOutput, Pipeline, PipelineError};
 use crate::telemetry::FrameRecord;
 use crate::timing::StageTimer;
@@ -174,15 +174,15 @@ impl Simulation {
     /// stages.
     pub fn step(&mut self, timer: &mut dyn StageTimer) -> StepOutput {
         loop {
-            let r = self.driver.step(
-                &mut self.camera,
-                &mut self.pipeline,
-                &mut self.vehicle,
-                &self.stop,
-                &NoClock,
+            let r = self.driver.step(&mut Parts {
+                source: &mut self.camera,
+                pipeline: &mut self.pipeline,
+                sink: &mut self.vehicle,
+                stop: &self.stop,
+                clock: &NoClock,
                 timer,
-                &mut self.score,
-            );
+                observer: &mut self.score,
+            });
             match r {
                 Ok(Step::Frame(b)) => {
                     let (out, record) = *b;
