@@ -118,7 +118,8 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         None => None,
     };
     // …and the GPIO (button, LED, ultrasonic brake).
-    let mut gpio = open_gpio(&cfg)?;
+    let req = Arc::new(Requests::default());
+    let mut gpio = open_gpio(&cfg, req.clone())?;
     let stop = super::signals::install();
     super::signals::install_button();
     let clock = Arc::new(WallClock::new());
@@ -144,7 +145,7 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
                 if a.dry_run {
                     bail!("--pwm-log needs the firmware: give --port, not --dry-run");
                 }
-                pwm = Some(PwmWatcher::start(log, actuators.clone(), clock.clone())?);
+                pwm = Some(PwmWatcher::start(log, actuators.clone(), clock.clone(), req.clone())?);
             } else if !a.dry_run {
                 bail!("--camera sim with --port: name the emulator's report with --pwm-log FILE so the firmware's pulses move the simulated car");
             }
@@ -195,6 +196,7 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         arm_wanted: a.arm,
         armed: false,
         events: Vec::new(),
+        req: req.clone(),
     };
     let mut score = world.clone().map(SimScore::new);
     let mut none_rec = rccar::drive::NoObserver;
@@ -209,12 +211,14 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     };
     let mut arming = Arming {
         sink: &mut *sink,
-        presses: super::signals::button_presses() + GPIO_PRESSES.load(std::sync::atomic::Ordering::SeqCst),
+        presses: req.presses(),
+        req: req.clone(),
     };
     // --dashboard: the page's Arm also arms the link (as the button does); its disarm,
     // e-stop and lost heartbeat send neutral through the gate (docs/dashboard.md).
-    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, None, &stop, None, Some(|| {
-        ARM_REQUEST.store(true, std::sync::atomic::Ordering::SeqCst)
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, None, &stop, None, Some({
+        let req = req.clone();
+        Arc::new(move || req.request_arm())
     }))?;
     let mut arming = dash.sink(&mut arming);
     let end = {
@@ -344,25 +348,26 @@ impl ArmableSink for DirectSink {
 struct Arming<'a> {
     sink: &'a mut dyn ArmableSink,
     presses: u32,
+    req: Arc<Requests>,
 }
 impl CommandSink for Arming<'_> {
     fn send(&mut self, c: Command, t: f64) -> Result<(), SinkError> {
-        let p = super::signals::button_presses() + GPIO_PRESSES.load(std::sync::atomic::Ordering::SeqCst);
+        let p = self.req.presses();
         if p != self.presses {
             self.presses = p;
             if self.sink.armed() {
                 println!("button: stop (disarmed; press again to drive)");
                 self.sink.stop()?;
             } else {
-                ARM_REQUEST.store(true, std::sync::atomic::Ordering::SeqCst);
+                self.req.request_arm();
             }
         }
-        if ARM_REQUEST.swap(false, std::sync::atomic::Ordering::SeqCst) && !self.sink.armed() {
+        if self.req.arm.swap(false, std::sync::atomic::Ordering::SeqCst) && !self.sink.armed() {
             self.sink.arm()?;
         }
         if self.sink.armed() {
             // The ultrasonic emergency brake overrides vision: no forward throttle.
-            let c = if BRAKE.load(std::sync::atomic::Ordering::SeqCst) {
+            let c = if self.req.braking() {
                 Command {
                     steer: c.steer,
                     throttle: c.throttle.min(0.0),
@@ -380,13 +385,32 @@ impl CommandSink for Arming<'_> {
     }
 }
 
-/// Set while the ultrasonic sensor says something is nearer than `gpio.brake_m`.
-static BRAKE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-/// Presses of the GPIO start/stop button (the same as SIGUSR1 at the desk).
-static GPIO_PRESSES: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+/// What the parts of one `rccar drive` run tell the arming sink between frames, shared by
+/// `Arc` (the dashboard's server thread raises `arm` too).
+#[derive(Default)]
+struct Requests {
+    /// Raised by `--arm` after the first frame, by the start button, or by a dashboard.
+    arm: std::sync::atomic::AtomicBool,
+    /// Set while the ultrasonic sensor says something is nearer than `gpio.brake_m`.
+    brake: std::sync::atomic::AtomicBool,
+    /// Presses of the GPIO start/stop button (the same as SIGUSR1 at the desk).
+    gpio_presses: std::sync::atomic::AtomicU32,
+    /// Frames whose commanded servo width is waiting to show up as a pulse: (capture time, µs).
+    pending: Mutex<Vec<(f64, f64)>>,
+}
 
-/// Raised by `--arm` after the first frame, by the start button, or by a dashboard.
-static ARM_REQUEST: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+impl Requests {
+    /// Button presses so far, from SIGUSR1 and the GPIO button.
+    fn presses(&self) -> u32 {
+        super::signals::button_presses() + self.gpio_presses.load(std::sync::atomic::Ordering::SeqCst)
+    }
+    fn request_arm(&self) {
+        self.arm.store(true, std::sync::atomic::Ordering::SeqCst);
+    }
+    fn braking(&self) -> bool {
+        self.brake.load(std::sync::atomic::Ordering::SeqCst)
+    }
+}
 
 #[cfg(not(feature = "serial"))]
 fn open_link(_port: &str, _ber: f64) -> Result<Box<dyn ArmableSink>> {
@@ -681,11 +705,8 @@ struct PwmWatcher {
     quit: Arc<std::sync::atomic::AtomicBool>,
 }
 
-/// Frames whose commanded servo width is waiting to show up as a pulse: (capture time, µs).
-static PENDING: Mutex<Vec<(f64, f64)>> = Mutex::new(Vec::new());
-
 impl PwmWatcher {
-    fn start(path: &PathBuf, actuators: Arc<Mutex<Command>>, clock: Arc<WallClock>) -> Result<Self> {
+    fn start(path: &PathBuf, actuators: Arc<Mutex<Command>>, clock: Arc<WallClock>, req: Arc<Requests>) -> Result<Self> {
         use std::io::{BufRead, Seek};
         let mut f = std::fs::File::open(path).with_context(|| format!("{}: cannot read the emulator's report", path.display()))?;
         // Start from the current end: old pulses are not this run's.
@@ -723,7 +744,7 @@ impl PwmWatcher {
                     let mut a = actuators.lock().unwrap_or_else(|e| e.into_inner());
                     if *pin == "servo" {
                         a.steer = v;
-                        let mut p = PENDING.lock().unwrap_or_else(|e| e.into_inner());
+                        let mut p = req.pending.lock().unwrap_or_else(|e| e.into_inner());
                         if let Some(i) = p.iter().rposition(|&(_, us)| (us - w).abs() <= 1.0) {
                             lat.lock().unwrap_or_else(|e| e.into_inner()).push((now - p[i].0) * 1e3);
                             p.drain(..=i);
@@ -763,13 +784,14 @@ struct Status {
     arm_wanted: bool,
     armed: bool,
     events: Vec<String>,
+    req: Arc<Requests>,
 }
 
 impl Observer for Status {
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
         let r = ctx.record;
         if self.arm_wanted && !self.armed {
-            ARM_REQUEST.store(true, std::sync::atomic::Ordering::SeqCst);
+            self.req.request_arm();
             self.armed = true;
         }
         // Commanded servo width, for the capture -> pulse latency (firmware default end points).
@@ -780,7 +802,7 @@ impl Observer for Status {
                 1500,
                 2000,
             ));
-            let mut p = PENDING.lock().unwrap_or_else(|e| e.into_inner());
+            let mut p = self.req.pending.lock().unwrap_or_else(|e| e.into_inner());
             p.push((c, us));
             let n = p.len();
             if n > 300 {
@@ -863,16 +885,16 @@ impl Observer for RecordObs {
 }
 
 #[cfg(feature = "gpio")]
-fn open_gpio(cfg: &Config) -> Result<Option<Box<dyn Observer>>> {
+fn open_gpio(cfg: &Config, req: Arc<Requests>) -> Result<Option<Box<dyn Observer>>> {
     if !cfg.gpio.enabled {
         return Ok(None);
     }
     let dev = rccar::gpio::pi::GpioDevices::open(&cfg.gpio.options())?;
-    Ok(Some(Box::new(GpioObs { dev, distance: None, braking: false })))
+    Ok(Some(Box::new(GpioObs { dev, distance: None, braking: false, req })))
 }
 
 #[cfg(not(feature = "gpio"))]
-fn open_gpio(cfg: &Config) -> Result<Option<Box<dyn Observer>>> {
+fn open_gpio(cfg: &Config, _req: Arc<Requests>) -> Result<Option<Box<dyn Observer>>> {
     if cfg.gpio.enabled {
         bail!("gpio.enabled = true but this rccar was built without the GPIO: cargo build --release --features gpio (on the Pi)");
     }
@@ -885,6 +907,7 @@ struct GpioObs {
     dev: rccar::gpio::pi::GpioDevices,
     distance: Option<f64>,
     braking: bool,
+    req: Arc<Requests>,
 }
 
 #[cfg(feature = "gpio")]
@@ -892,18 +915,18 @@ impl Observer for GpioObs {
     fn before_frame(&mut self, _p: &mut Pipeline) -> Flow {
         use rccar::gpio::LedState;
         use std::sync::atomic::Ordering;
-        let driving = !BRAKE.load(Ordering::SeqCst);
+        let driving = !self.req.braking();
         let ev = self.dev.poll(LedState::from_status(false, true, true, driving));
         if ev.presses > 0 {
-            GPIO_PRESSES.fetch_add(ev.presses, Ordering::SeqCst);
+            self.req.gpio_presses.fetch_add(ev.presses, Ordering::SeqCst);
         }
-        BRAKE.store(ev.brake, Ordering::SeqCst);
+        self.req.brake.store(ev.brake, Ordering::SeqCst);
         self.distance = ev.distance_m;
         Flow::Continue
     }
     fn decorate(&mut self, r: &mut rccar::telemetry::FrameRecord) {
         r.ultrasonic_m = self.distance;
-        let b = BRAKE.load(std::sync::atomic::Ordering::SeqCst);
+        let b = self.req.braking();
         if b != self.braking {
             r.events.push(if b { "ultrasonic brake on".into() } else { "ultrasonic brake off".into() });
             self.braking = b;

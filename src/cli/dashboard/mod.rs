@@ -72,6 +72,7 @@ pub struct Sent {
     /// When the e-stop request arrived, wall seconds (NaN: not pressed).
     pub estop_wall_s: AtomicF64,
     /// The frame time of the last command before the e-stop arrived.
+    #[cfg_attr(not(feature = "dashboard"), allow(dead_code))]
     pub estop_sim_s: AtomicF64,
     /// First zero-throttle command sent after the e-stop, wall seconds.
     pub neutral_wall_s: AtomicF64,
@@ -97,7 +98,8 @@ impl Sent {
     pub fn now(&self) -> f64 {
         self.start.elapsed().as_secs_f64()
     }
-    /// The e-stop arrived now.
+    /// The e-stop arrived now (the server's e-stop handler).
+    #[cfg_attr(not(feature = "dashboard"), allow(dead_code))]
     pub fn mark_estop(&self) {
         self.neutral_wall_s.set(f64::NAN);
         self.neutral_sim_s.set(f64::NAN);
@@ -192,7 +194,7 @@ impl Dash {
         world: Option<SharedWorld>,
         stop: &StopSignal,
         pace_fps: Option<f64>,
-        on_arm: Option<fn()>,
+        on_arm: Option<std::sync::Arc<dyn Fn() + Send + Sync>>,
     ) -> Result<Dash> {
         if !a.dashboard {
             return Ok(Dash::off());

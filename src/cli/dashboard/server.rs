@@ -65,7 +65,7 @@ pub struct Options {
     /// The run's stop signal (the server's threads end with it).
     pub stop: StopSignal,
     /// Called when the page arms (the car: ask the link to arm as the start button does).
-    pub on_arm: Option<fn()>,
+    pub on_arm: Option<std::sync::Arc<dyn Fn() + Send + Sync>>,
 }
 
 /// The newest state for `GET /api/state`.
@@ -103,7 +103,7 @@ struct Shared {
     connections: AtomicUsize,
     frames_sent: AtomicU64,
     closed: AtomicBool,
-    on_arm: Option<fn()>,
+    on_arm: Option<std::sync::Arc<dyn Fn() + Send + Sync>>,
     live: Arc<Live>,
 }
 
@@ -620,7 +620,7 @@ fn handle(mut stream: TcpStream, sh: &Shared) {
             sh.last_heartbeat_ms.store(now_ms(sh), Ordering::SeqCst);
             if sh.arm.arm() {
                 sh.armed_by_page.store(true, Ordering::SeqCst);
-                if let Some(f) = sh.on_arm {
+                if let Some(f) = &sh.on_arm {
                     f();
                 }
                 sh.tx.send(Control::Note(note("armed")));
