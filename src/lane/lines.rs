@@ -101,11 +101,9 @@ pub fn peak_with(mode: PeakMode, hist: &[u16], range: std::ops::Range<usize>, mi
     }
 }
 
-/// Step 2, the paper's way: the column of the highest histogram value (the first maximum; when
-/// neighbouring columns share that value, the middle of their run, so a flat-topped line is
-/// located at its middle). Not moved by a wide bright blob beside the line unless the blob is
-/// higher. `None` when the maximum is below `min_count`.
-pub fn peak_argmax(hist: &[u16], range: std::ops::Range<usize>, min_count: u16) -> Option<f64> {
+/// The first maximum of `hist[range]` (the range clipped to the histogram): `(start, end,
+/// index, value)`, or `None` when the range is empty or the maximum is 0 or below `min_count`.
+fn first_max(hist: &[u16], range: std::ops::Range<usize>, min_count: u16) -> Option<(usize, usize, usize, u16)> {
     let (start, end) = (range.start, range.end.min(hist.len()));
     if start >= end {
         return None;
@@ -120,6 +118,15 @@ pub fn peak_argmax(hist: &[u16], range: std::ops::Range<usize>, min_count: u16) 
     if max == 0 || max < min_count {
         return None;
     }
+    Some((start, end, imax, max))
+}
+
+/// Step 2, the paper's way: the column of the highest histogram value (the first maximum; when
+/// neighbouring columns share that value, the middle of their run, so a flat-topped line is
+/// located at its middle). Not moved by a wide bright blob beside the line unless the blob is
+/// higher. `None` when the maximum is below `min_count`.
+pub fn peak_argmax(hist: &[u16], range: std::ops::Range<usize>, min_count: u16) -> Option<f64> {
+    let (_, end, imax, max) = first_max(hist, range, min_count)?;
     let mut r = imax;
     while r + 1 < end && hist[r + 1] == max {
         r += 1;
@@ -130,20 +137,7 @@ pub fn peak_argmax(hist: &[u16], range: std::ops::Range<usize>, min_count: u16) 
 /// Step 2: the peak of `hist[range]`: centroid of the half-height run around the first
 /// maximum. `None` when the maximum is below `min_count`.
 pub fn peak(hist: &[u16], range: std::ops::Range<usize>, min_count: u16) -> Option<f64> {
-    let (start, end) = (range.start, range.end.min(hist.len()));
-    if start >= end {
-        return None;
-    }
-    let mut imax = start;
-    for i in start..end {
-        if hist[i] > hist[imax] {
-            imax = i;
-        }
-    }
-    let max = hist[imax];
-    if max == 0 || max < min_count {
-        return None;
-    }
+    let (start, end, imax, max) = first_max(hist, range, min_count)?;
     let half = max.div_ceil(2);
     let (mut l, mut r) = (imax, imax);
     while l > start && hist[l - 1] >= half {
