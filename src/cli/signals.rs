@@ -52,13 +52,8 @@ pub fn install() -> StopSignal {
     static STOP: OnceLock<StopSignal> = OnceLock::new();
     STOP.get_or_init(|| {
         let stop = StopSignal::new();
-        // SAFETY: the handler only touches atomics, which is async-signal-safe.
-        unsafe {
-            libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
-            libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
-        }
         let s = stop.clone();
-        let _ = std::thread::Builder::new().name("rccar-signals".into()).spawn(move || {
+        let watcher = std::thread::Builder::new().name("rccar-signals".into()).spawn(move || {
             let mut seen = 0;
             loop {
                 std::thread::sleep(Duration::from_millis(10));
@@ -84,6 +79,17 @@ pub fn install() -> StopSignal {
                 );
             }
         });
+        // The handlers only count; the watcher acts. Catch the signals only once the watcher
+        // runs: a process that cannot start a thread keeps the default actions, so Ctrl-C and
+        // SIGTERM still end it instead of being counted by nobody.
+        match watcher {
+            // SAFETY: the handler only touches atomics, which is async-signal-safe.
+            Ok(_) => unsafe {
+                libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+                libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+            },
+            Err(e) => eprintln!("warning: no signal thread ({e}): Ctrl-C and SIGTERM end the process at once"),
+        }
         // A panic anywhere stops the run (the main thread's unwinding sends neutral too).
         let p = stop.clone();
         let prev = std::panic::take_hook();

@@ -95,9 +95,24 @@ else
   fail "native build"
   finish
 fi
-# A run under qemu that hangs fails the check instead of hanging the suite (seen once after
-# the drive-loop merge: replay spun at 100 % CPU under qemu with no frame written).
-QEMU=(timeout -k 5 "${RCCAR_CROSS_TIMEOUT:-600}" qemu-aarch64 -L /usr/aarch64-linux-gnu)
+# The guest's glibc must be ONE glibc. `-L /usr/aarch64-linux-gnu` alone gives the loader of
+# libc6-arm64-cross (2.36-8cross1) but not its libc: the guest's ld.so reads the host's
+# /etc/ld.so.cache and the multiarch path, and finds /lib/aarch64-linux-gnu/libc.so.6 of
+# libc6:arm64 (2.36-9+deb12uN, pulled in by libstd-rust-web-dev:arm64). The two disagree on
+# the layout of the loader's private _rtld_global, so the first pthread_create walked a
+# stack-cache list that never ends: 100 % CPU, no frame, after the drive loop (signal
+# thread) and the link (I/O thread) started threads. LD_LIBRARY_PATH puts the cross libc
+# (and libgcc_s) beside its own loader.
+QEMU_RUN=(qemu-aarch64 -L /usr/aarch64-linux-gnu -E LD_LIBRARY_PATH=/usr/aarch64-linux-gnu/lib)
+# A run under qemu that hangs still fails the check instead of hanging the suite.
+QEMU=(timeout -k 5 "${RCCAR_CROSS_TIMEOUT:-600}" "${QEMU_RUN[@]}")
+# The guest's C library must sit beside the loader qemu starts (/usr/aarch64-linux-gnu/lib).
+libs=$("${QEMU_RUN[@]}" -strace "$BIN" --version 2>&1 | sed -nE 's/.*openat\([^,]*,"([^"]*lib(c|m|gcc_s)\.so[^"]*)".*= [0-9]+$/\1/p' | tr '\n' ' ')
+if [[ "$libs" == */usr/aarch64-linux-gnu/lib/libc.so.6* ]] && ! grep -qE '(^| )/lib/' <<<"$libs"; then
+  pass "qemu guest loads the loader's own glibc: ${libs% }"
+else
+  fail "qemu guest glibc not the loader's (libc6-arm64-cross): '${libs% }'"
+fi
 
 # run LABEL OUTDIR COMMAND...: runs it, keeps its output in OUTDIR.log, prints time and exit code.
 run() {
@@ -145,7 +160,7 @@ fi
 if out=$(python3 docs/img/wiring.py --check 2>&1); then pass "$out"; else fail "$out"; fi
 
 echo "note: the camera (V4L2) and the GPIO are compiled, not opened: no device under qemu."
-echo "note: the serial port is not exercised under qemu-user 7.2 (aarch64 spins after"
-echo "      rt_sigprocmask, armv7 lacks the TCGETS2 ioctl): the link is tested natively"
-echo "      (link-hil stage, real firmware in simavr); 'serial' is only compiled here."
+echo "note: the serial port is not exercised under qemu-user 7.2: it does not implement the"
+echo "      TCGETS2 ioctl serialport uses (ENOSYS, aarch64 as armv7); the link is tested"
+echo "      natively (link-hil stage, real firmware in simavr); 'serial' is only compiled here."
 finish
