@@ -13,6 +13,7 @@
 //! tilted). Units: metres, pixels, radians.
 
 pub mod geometry;
+pub mod hsv_sign;
 pub mod matching;
 pub mod source;
 
