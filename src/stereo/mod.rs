@@ -20,6 +20,7 @@ pub mod geometry;
 pub mod hsv_sign;
 pub mod matching;
 pub mod meanshift;
+pub mod ranging;
 pub mod source;
 pub mod speed;
 
