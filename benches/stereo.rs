@@ -12,6 +12,13 @@
 //!    images and times its call with `cv2.setNumThreads(1)`; rounds alternate (20 OpenCV
 //!    calls, 20 of ours) so both see the same machine load.
 //! 3. Median and minimum in ms of each, their ratio, and both peaks (they must agree).
+//!
+//! Then tracking versus detection (issue 12, "must show" 3): 30 left frames of the approach
+//! to a stop sign of tests/stereo_track.rs (1.5 → 1.3 m); per frame, the stop-sign cascade on
+//! the whole frame (detection every frame) against one mean-shift step (`stereo::meanshift`,
+//! back-projection of the window's neighbourhood, and of the whole frame), and OpenCV's
+//! camshiftdemo recipe `cvtColor(HSV)` + `inRange` + `calcBackProject` + `meanShift` on the
+//! whole frame, started from the same box. Also Abdollahi's HSV + template detector per frame.
 
 use rccar::config::Config;
 use rccar::detect::gray_from_rgb;
@@ -161,4 +168,153 @@ fn main() {
         cv["score"].as_f64().unwrap_or(f64::NAN)
     );
     assert!(sink > 0.0);
+    bench_tracking(&python, runs / 20);
+}
+
+const PY_TRACK: &str = r#"
+import cv2, json, sys, time, glob
+cv2.setNumThreads(1)
+files = sorted(glob.glob(sys.argv[1] + "/f*.png"))
+frames = [cv2.imread(f) for f in files]
+x, y, w, h = map(int, sys.argv[2:6])
+hsv = cv2.cvtColor(frames[0], cv2.COLOR_BGR2HSV)
+mask = cv2.inRange(hsv, (0, 60, 32), (180, 255, 255))
+hist = cv2.calcHist([hsv[y:y+h, x:x+w]], [0], mask[y:y+h, x:x+w], [16], [0, 180])
+cv2.normalize(hist, hist, 0, 255, cv2.NORM_MINMAX)
+crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 10, 1)
+for line in sys.stdin:
+    n = int(line)
+    ts = []
+    wins = []
+    for _ in range(n):
+        win = (x, y, w, h)
+        for f in frames[1:]:
+            t0 = time.perf_counter()
+            hsv = cv2.cvtColor(f, cv2.COLOR_BGR2HSV)
+            mask = cv2.inRange(hsv, (0, 60, 32), (180, 255, 255))
+            bp = cv2.calcBackProject([hsv], [0], hist, [0, 180], 1)
+            bp &= mask
+            _, win = cv2.meanShift(bp, win, crit)
+            ts.append((time.perf_counter() - t0) * 1e3)
+            wins.append(list(win))
+    print(json.dumps({"ms": ts, "last": wins[-1]}), flush=True)
+"#;
+
+/// Tracking versus detection per frame, with OpenCV's mean shift side by side.
+fn bench_tracking(python: &str, rounds: usize) {
+    use rccar::detect::{CascadeSpec, DetectParams, DetectStage, Rect};
+    use rccar::sim::scenario_lab::{pose_before_object, stop_sign_picture, straight_with_object};
+    use rccar::sim::stereo::sign_face_box;
+    use rccar::stereo::hsv_sign::{HsvSignDetector, HsvSignOptions};
+    use rccar::stereo::meanshift::{MeanShiftOptions, MeanShiftTracker};
+    let cfg = Config::default();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let track = straight_with_object("stop_sign").expect("road");
+    let sign = track.enabled_objects().next().expect("sign").clone();
+    let mut rig = StereoRig::new(
+        &cfg,
+        Arc::new(Scene::new(&track)),
+        0.06,
+        RenderOptions::from_config(&cfg.sim),
+    );
+    let dir = std::env::temp_dir().join("rccar_track_bench");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let mut frames = vec![];
+    let mut first = Rect::default();
+    for k in 0..30 {
+        let d = 1.5 - 0.2 * k as f64 / 29.0;
+        let pose = pose_before_object(&cfg, &track, d).expect("pose");
+        let (l, _) = rig.render(&pose, k as f64 / 30.0, k);
+        if k == 0 {
+            let (b, _) = sign_face_box(&rig.left, &pose, &sign).expect("sign in view");
+            first = Rect::new(
+                (b[0] + 0.5).round() as i32,
+                (b[1] + 0.5).round() as i32,
+                (b[2] - b[0]).round() as i32,
+                (b[3] - b[1]).round() as i32,
+            );
+        }
+        l.save(dir.join(format!("f{k:02}.png"))).expect("write frame");
+        frames.push(l);
+    }
+    let mut cascade = DetectStage::load(&[CascadeSpec {
+        label: "stop_sign".into(),
+        path: root.join("config/cascades/stop_sign.xml"),
+        traffic_light: false,
+        params: DetectParams::default(),
+    }])
+    .expect("stop-sign cascade");
+    let mut hsv = HsvSignDetector::new(HsvSignOptions::default(), &stop_sign_picture(&cfg)).expect("templates");
+    let mut helper = Command::new(python)
+        .args(["-c", PY_TRACK, dir.to_str().unwrap()])
+        .args(
+            [first.x, first.y, first.width, first.height]
+                .iter()
+                .map(|v| v.to_string()),
+        )
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("running the OpenCV helper");
+    let mut to_cv = helper.stdin.take().unwrap();
+    let mut from_cv = BufReader::new(helper.stdout.take().unwrap());
+    let (mut det, mut ms_local, mut ms_full, mut cv, mut hsv_ms) = (vec![], vec![], vec![], vec![], vec![]);
+    let mut line = String::new();
+    let (mut ours_last, mut cv_last) = (first, serde_json::Value::Null);
+    for _ in 0..rounds.max(1) {
+        writeln!(to_cv, "1").unwrap();
+        line.clear();
+        from_cv.read_line(&mut line).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&line).expect("helper JSON (is cv2 4.x installed?)");
+        cv.extend(v["ms"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()));
+        cv_last = v["last"].clone();
+        for (search, out) in [(1.0, &mut ms_local), (1e4, &mut ms_full)] {
+            let opts = MeanShiftOptions {
+                search,
+                ..MeanShiftOptions::default()
+            };
+            let mut tr = MeanShiftTracker::start(&frames[0], first, opts).expect("model");
+            for f in &frames[1..] {
+                let t0 = Instant::now();
+                let w = tr.track(f);
+                out.push(t0.elapsed().as_secs_f64() * 1e3);
+                ours_last = w;
+            }
+        }
+        for f in &frames[1..] {
+            let t0 = Instant::now();
+            let n = cascade.run_rgb(f).expect("detect").len();
+            det.push(t0.elapsed().as_secs_f64() * 1e3);
+            assert!(n < 100);
+            let t0 = Instant::now();
+            let n = hsv.detect(f).len();
+            hsv_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+            assert!(n < 100);
+        }
+    }
+    drop(to_cv);
+    let _ = helper.wait();
+    let (dm, dmin) = stats(&mut det);
+    let (lm, lmin) = stats(&mut ms_local);
+    let (fm, fmin) = stats(&mut ms_full);
+    let (cm, cmin) = stats(&mut cv);
+    let (hm, hmin) = stats(&mut hsv_ms);
+    println!();
+    println!(
+        "tracking vs detection, 29 frames x {} rounds of the approach 1.5 -> 1.3 m (box {}x{} px at the start); ms per frame",
+        rounds.max(1),
+        first.width,
+        first.height
+    );
+    println!("  stop-sign cascade, whole frame:           median {dm:.4}, min {dmin:.4}");
+    println!("  HSV + template detector, whole frame:     median {hm:.4}, min {hmin:.4}");
+    println!("  mean shift (window neighbourhood):        median {lm:.4}, min {lmin:.4}");
+    println!("  mean shift (whole-frame back-projection): median {fm:.4}, min {fmin:.4}");
+    println!("  cv2 cvtColor+inRange+calcBackProject+meanShift, whole frame: median {cm:.4}, min {cmin:.4}");
+    let every5 = (dm + 4.0 * lm) / 5.0;
+    println!(
+        "  detection every 5th frame + mean shift between: {every5:.4} ms/frame on median = {:.1}x less than detection every frame",
+        dm / every5
+    );
+    println!("  last window: ours {ours_last:?}, OpenCV {cv_last}");
 }

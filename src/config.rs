@@ -104,6 +104,7 @@ pub const PATH_KEYS: &[&str] = &[
     "detect.stop_sign",
     "detect.traffic_light",
     "detect.obstacle",
+    "stereo.calibration",
 ];
 
 /// Bounds on sizes that files and flags control, checked before anything is allocated.
@@ -678,6 +679,9 @@ impl Config {
         c.range("ranging.track_odometry_sigma", r.track_odometry_sigma, 0.0, 1.0);
         c.range("ranging.track_max_missed", r.track_max_missed, 0, 100);
         c.range("ranging.stop_sign_red_fraction", r.stop_sign_red_fraction, 0.1, 1.0);
+        if r.method != "mono" && r.method != "stereo" {
+            c.fail("ranging.method", format!("{:?}", r.method), "\"mono\" or \"stereo\"");
+        }
         if r.stop_sign_bottom_m >= self.camera.height_m || r.traffic_light_bottom_m >= self.camera.height_m {
             c.fail(
                 "ranging.stop_sign_bottom_m",
@@ -750,7 +754,11 @@ impl Config {
         c.range("record.segment_frames", r.segment_frames, 1, 100_000);
         let d = &self.dashboard;
         if d.listen.parse::<std::net::SocketAddr>().is_err() {
-            c.fail("dashboard.listen", format!("{:?}", d.listen), "IP:PORT, e.g. 127.0.0.1:8080");
+            c.fail(
+                "dashboard.listen",
+                format!("{:?}", d.listen),
+                "IP:PORT, e.g. 127.0.0.1:8080",
+            );
         }
         if !d.token.is_empty() && (d.token.len() < 8 || !d.token.chars().all(|ch| ch.is_ascii_alphanumeric())) {
             c.fail("dashboard.token", "(hidden)".into(), "empty, or 8+ letters and digits");
@@ -761,7 +769,11 @@ impl Config {
         let st = &self.stereo;
         c.range("stereo.base_m", st.base_m, 0.01, 2.0);
         if st.reference != "left" && st.reference != "right" {
-            c.fail("stereo.reference", format!("{:?}", st.reference), "\"left\" or \"right\"");
+            c.fail(
+                "stereo.reference",
+                format!("{:?}", st.reference),
+                "\"left\" or \"right\"",
+            );
         }
         c.range("stereo.min_ncc", st.min_ncc, -1.0, 1.0);
         c.range("stereo.max_disparity_px", st.max_disparity_px, 1, cam.width.max(1));
@@ -845,6 +857,7 @@ impl Config {
             &mut self.detect.stop_sign,
             &mut self.detect.traffic_light,
             &mut self.detect.obstacle,
+            &mut self.stereo.calibration,
         ] {
             if !p.is_empty() && Path::new(p.as_str()).is_relative() {
                 *p = absolute(&dir.join(p.as_str())).display().to_string();
@@ -1444,6 +1457,9 @@ pub struct RangingConfig {
     pub refine_by_colour: bool,
     /// Share of a stop sign's face (across the flats) that is red inside its white rim.
     pub stop_sign_red_fraction: f64,
+    /// Where the behaviours' distances come from: "mono" (the tilt and box size of one
+    /// camera) or "stereo" (the pair's disparity, `[stereo]`; docs/stereo.md).
+    pub method: String,
 }
 
 impl Default for RangingConfig {
@@ -1467,6 +1483,7 @@ impl Default for RangingConfig {
             track_max_missed: 3,
             refine_by_colour: true,
             stop_sign_red_fraction: 0.9,
+            method: "mono".into(),
         }
     }
 }

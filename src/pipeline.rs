@@ -205,6 +205,8 @@ pub struct Pipeline {
     measurements: Vec<Measurement<Option<LightColor>>>,
     every_n: u64,
     frame_index: u64,
+    /// Stereo ranging (`ranging.method = "stereo"`), used by [`Pipeline::step_stereo`].
+    stereo: Option<crate::stereo::ranging::StereoRanging>,
 }
 
 impl Pipeline {
@@ -226,10 +228,14 @@ impl Pipeline {
             objects: Vec::with_capacity(16),
             detect_limits: detect_limits(cfg),
             detect_rows: Vec::new(),
-            tracker: Tracker::new(tracker_options(cfg), BoxRanging::from_config(&cfg.camera, &cfg.ranging).camera),
+            tracker: Tracker::new(
+                tracker_options(cfg),
+                BoxRanging::from_config(&cfg.camera, &cfg.ranging).camera,
+            ),
             measurements: Vec::with_capacity(16),
             every_n: cfg.detect.every_n_frames.max(1) as u64,
             frame_index: 0,
+            stereo: (cfg.ranging.method == "stereo").then(|| crate::stereo::ranging::StereoRanging::from_config(cfg)),
         })
     }
 
@@ -244,6 +250,31 @@ impl Pipeline {
             }
             self.detect_rows = d.rows_needed(self.width, self.height);
         }
+    }
+
+    /// Installs (or removes) stereo ranging; [`Pipeline::new`] installs an ideal pair of
+    /// `[camera]` when `ranging.method = "stereo"` (replace it to use a calibration's geometry).
+    pub fn set_stereo(&mut self, stereo: Option<crate::stereo::ranging::StereoRanging>) {
+        self.stereo = stereo;
+    }
+
+    /// The stereo ranging, if installed (its match counts).
+    pub fn stereo(&self) -> Option<&crate::stereo::ranging::StereoRanging> {
+        self.stereo.as_ref()
+    }
+
+    /// Like [`Pipeline::step`] for a stereo pair: lane and detection on `reference` (the
+    /// `[stereo] reference` camera), and with stereo ranging installed each detector box
+    /// ranged by finding it in `other` (docs/stereo.md); a box without a match is ranged by
+    /// the single camera. Without stereo ranging, `other` is ignored.
+    pub fn step_stereo(
+        &mut self,
+        reference: &RgbImage,
+        other: &RgbImage,
+        dt_s: f64,
+        timer: &mut dyn StageTimer,
+    ) -> FrameOutput {
+        self.step_inner(reference, Some(other), dt_s, timer, None)
     }
 
     /// Whether detection runs on the pipeline's step `frame_index` (counted from 0): every
@@ -324,6 +355,17 @@ impl Pipeline {
         timer: &mut dyn StageTimer,
         given: Option<&[GivenBox]>,
     ) -> FrameOutput {
+        self.step_inner(image, None, dt_s, timer, given)
+    }
+
+    fn step_inner(
+        &mut self,
+        image: &RgbImage,
+        other: Option<&RgbImage>,
+        dt_s: f64,
+        timer: &mut dyn StageTimer,
+        given: Option<&[GivenBox]>,
+    ) -> FrameOutput {
         let mut stage_us = StageTimes::default();
         let resized;
         let frame = if image.dimensions() == (self.width, self.height) {
@@ -349,6 +391,14 @@ impl Pipeline {
             }
             None if detect_now => {
                 if let Some(det) = &mut self.detect {
+                    // Stereo ranging needs the other image at the pipeline's size too.
+                    let mut stereo = match (&mut self.stereo, other) {
+                        (Some(st), Some(o)) if o.dimensions() == frame.dimensions() => {
+                            st.set_pair(frame, o);
+                            Some(st)
+                        }
+                        _ => None,
+                    };
                     if let Ok(found) = det.run_rgb(frame) {
                         for d in &found {
                             let Some(class) = ObjectClass::from_label(&d.label) else {
@@ -362,7 +412,11 @@ impl Pipeline {
                                 (r.y + r.height) as f64 - 0.5,
                             ];
                             let light = d.light.as_ref().map(|l| light_color(l, frame, r));
-                            let range = self.ranging.range_in_image(frame, class, bbox);
+                            let range = match stereo {
+                                Some(ref mut st) => st.range(r),
+                                None => None,
+                            }
+                            .or_else(|| self.ranging.range_in_image(frame, class, bbox));
                             push_measured(&mut self.measurements, &mut self.objects, class, bbox, range, light);
                         }
                     }

@@ -22,61 +22,15 @@ use rccar::ranging::{BoxRanging, ObjectClass};
 use rccar::sim::render::RenderOptions;
 use rccar::sim::scene::Scene;
 use rccar::sim::stereo::StereoRig;
-use rccar::sim::track::{ObjectKind, Track};
-use rccar::sim::vehicle::Pose;
+use rccar::sim::track::Track;
 use rccar::stereo::matching::Matcher;
 use rccar::stereo::{MatchOptions, StereoGeometry};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// A straight with one object of `kind` on the driven lane's centre, 3 m ahead of the start
-/// (the track of tests/ranging_sim.rs).
+/// The straight of tests/ranging_sim.rs with one object of `kind` 3 m ahead of the start.
 fn track(kind: &str) -> Track {
-    let text = format!(
-        r#"
-name = "stereo"
-[start]
-x = 0.0
-y = 0.0
-heading_deg = 0.0
-[road]
-lanes = 2
-lane_width_m = 0.30
-line_width_m = 0.02
-line_color = [235, 235, 228]
-centre_line = "dashed"
-centre_line_color = [235, 235, 228]
-dash_m = 0.12
-gap_m = 0.05
-[floor]
-color = [112, 104, 96]
-texture = 0.18
-texture_scale_m = 0.15
-seed = 7
-margin_m = 1.0
-wall_color = [190, 186, 176]
-[[segments]]
-type = "straight"
-length_m = 6.0
-[[segments]]
-type = "arc"
-radius_m = 3.0
-angle_deg = 180
-[[segments]]
-type = "straight"
-length_m = 6.0
-[[segments]]
-type = "arc"
-radius_m = 3.0
-angle_deg = 180
-[[objects]]
-type = "{kind}"
-x = 3.0
-y = -0.15
-yaw_deg = 180
-"#
-    );
-    Track::from_toml_str(&text, "stereo track").unwrap()
+    rccar::sim::scenario_lab::straight_with_object(kind).unwrap()
 }
 
 /// One measurement: true forward distance; (a), (b), (c), mono (None = no range).
@@ -91,7 +45,6 @@ struct Setup {
     stage: DetectStage,
     scene: Arc<Scene>,
     class: ObjectClass,
-    near: f64,
 }
 
 fn setup(kind: &str, class: ObjectClass) -> Option<Setup> {
@@ -110,18 +63,11 @@ fn setup(kind: &str, class: ObjectClass) -> Option<Setup> {
     }])
     .unwrap();
     let t = track(kind);
-    let ob = t.enabled_objects().next().unwrap().clone();
-    let near = if ob.kind == ObjectKind::Obstacle {
-        ob.size[0] / 2.0
-    } else {
-        0.0
-    };
     Some(Setup {
         cfg: Config::default(),
         stage,
         scene: Arc::new(Scene::new(&t)),
         class,
-        near,
     })
 }
 
@@ -129,11 +75,7 @@ fn setup(kind: &str, class: ObjectClass) -> Option<Setup> {
 fn measure(s: &mut Setup, base: f64, d: f64, matcher: &mut Matcher) -> Option<Row> {
     let cfg = &s.cfg;
     let mut rig = StereoRig::new(cfg, s.scene.clone(), base, RenderOptions::from_config(&cfg.sim));
-    let pose = Pose {
-        x: 3.0 - s.near - d - cfg.vehicle.camera_x_m,
-        y: -0.15,
-        yaw: 0.0,
-    };
+    let pose = rccar::sim::scenario_lab::pose_before_object(cfg, &s.scene.track, d).unwrap();
     let (l, r) = rig.render(&pose, 0.0, (1000.0 * d) as u64);
     let truth = rig.truth(&pose, true).into_iter().next()?;
     let found = s.stage.run_rgb(&l).unwrap();

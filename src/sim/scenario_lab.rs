@@ -98,3 +98,102 @@ pub fn calibration_pairs(cfg: &Config, n: usize, tape_sigma_m: f64, seed: u64) -
     }
     Ok(out)
 }
+
+/// The straight test road of the ranging and stereo tests (tests/ranging_sim.rs,
+/// tests/stereo_sim.rs, tests/stereo_track.rs): a 6 m straight (then a loop back), two
+/// 0.30 m lanes with a dashed centre line on a textured floor, and one object of `kind`
+/// (`"stop_sign"`, `"traffic_light"`, `"obstacle"`) facing the car on the driven lane's
+/// centre (y = −0.15 m), 3 m from the start.
+pub fn straight_with_object(kind: &str) -> Result<Track, super::track::TrackError> {
+    let text = format!(
+        r#"
+name = "straight with one {kind}"
+[start]
+x = 0.0
+y = 0.0
+heading_deg = 0.0
+[road]
+lanes = 2
+lane_width_m = 0.30
+line_width_m = 0.02
+line_color = [235, 235, 228]
+centre_line = "dashed"
+centre_line_color = [235, 235, 228]
+dash_m = 0.12
+gap_m = 0.05
+[floor]
+color = [112, 104, 96]
+texture = 0.18
+texture_scale_m = 0.15
+seed = 7
+margin_m = 1.0
+wall_color = [190, 186, 176]
+[[segments]]
+type = "straight"
+length_m = 6.0
+[[segments]]
+type = "arc"
+radius_m = 3.0
+angle_deg = 180
+[[segments]]
+type = "straight"
+length_m = 6.0
+[[segments]]
+type = "arc"
+radius_m = 3.0
+angle_deg = 180
+[[objects]]
+type = "{kind}"
+x = 3.0
+y = -0.15
+yaw_deg = 180
+"#
+    );
+    Track::from_toml_str(&text, "straight_with_object")
+}
+
+/// The car's pose (rear axle, heading +x, on the object's lateral line) with the lens
+/// `d_m` metres before the face a camera sees of `track`'s first enabled object (an
+/// obstacle's near side, a sign's face), for the roads of [`straight_with_object`].
+/// `None` if the track has no object.
+pub fn pose_before_object(cfg: &Config, track: &Track, d_m: f64) -> Option<super::vehicle::Pose> {
+    let ob = track.enabled_objects().next()?;
+    let near = if ob.kind == super::track::ObjectKind::Obstacle {
+        ob.size[0] / 2.0
+    } else {
+        0.0
+    };
+    Some(super::vehicle::Pose {
+        x: ob.pos[0] - near - d_m - cfg.vehicle.camera_x_m,
+        y: ob.pos[1],
+        yaw: 0.0,
+    })
+}
+
+/// A frontal picture of the simulator's stop sign, cropped to its face: the camera of `cfg`
+/// 0.35 m before the sign of [`straight_with_object`], rendered without noise or blur. The
+/// template picture of Abdollahi's detector (`stereo::hsv_sign`) in the tests and benches.
+pub fn stop_sign_picture(cfg: &Config) -> image::RgbImage {
+    use super::render::{CameraMount, RenderOptions, Renderer};
+    let track = straight_with_object("stop_sign").expect("the built-in road is valid");
+    let pose = pose_before_object(cfg, &track, 0.35).expect("the road has its sign");
+    let scene = std::sync::Arc::new(super::scene::Scene::new(&track));
+    let mount = CameraMount {
+        camera: crate::camera::PinholeCamera::from_config(&cfg.camera),
+        x_m: cfg.vehicle.camera_x_m,
+    };
+    let mut r = Renderer::new(scene, mount, RenderOptions::clean());
+    let img = r.render_new(&pose, 0.0, 0);
+    let b = track
+        .enabled_objects()
+        .next()
+        .and_then(|ob| super::stereo::sign_face_box(&r, &pose, ob))
+        .map(|(b, _)| b)
+        .unwrap_or([0.0, 0.0, img.width() as f64 - 1.0, img.height() as f64 - 1.0]);
+    let (x0, y0) = ((b[0] + 0.5).max(0.0) as u32, (b[1] + 0.5).max(0.0) as u32);
+    let (x1, y1) = (
+        ((b[2] + 0.5) as u32).min(img.width()),
+        ((b[3] + 0.5) as u32).min(img.height()),
+    );
+    image::imageops::crop_imm(&img, x0, y0, x1.saturating_sub(x0).max(1), y1.saturating_sub(y0).max(1)).to_image()
+}

@@ -96,3 +96,32 @@ impl StereoRig {
             .collect()
     }
 }
+
+/// The image box [left, top, right, bottom] (pixels, pixel centres at integers) of a stop
+/// sign's octagonal face (white rim included) as `r` sees it from `pose`, and whether it is
+/// cut by the image border; `None` for other objects, a corner behind the camera or a face
+/// wholly outside the image. [`Renderer::object_box`] boxes the whole object, pole and all;
+/// a detector boxes the face.
+pub fn sign_face_box(r: &Renderer, pose: &Pose, ob: &super::track::Object) -> Option<([f64; 4], bool)> {
+    if ob.kind != ObjectKind::StopSign {
+        return None;
+    }
+    let half = ob.size[0] / 2.0;
+    let (s, c) = ob.yaw.sin_cos();
+    // The face panel stands 7 mm in front of the pole (src/sim/scene.rs).
+    let (x, y) = (ob.pos[0] + 0.007 * c, ob.pos[1] + 0.007 * s);
+    let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    for (ly, z) in [(-half, -half), (half, -half), (-half, half), (half, half)] {
+        let p = [x - s * ly, y + c * ly, ob.height + z];
+        let (u, v) = r.mount().project_world(pose, p)?;
+        bb = [bb[0].min(u), bb[1].min(v), bb[2].max(u), bb[3].max(v)];
+    }
+    let cam = &r.mount().camera;
+    let (w, h) = (cam.width as f64 - 1.0, cam.height as f64 - 1.0);
+    if bb[2] < 0.0 || bb[3] < 0.0 || bb[0] > w || bb[1] > h {
+        return None;
+    }
+    // Pixel edges are at ±0.5 around the centres.
+    let clipped = bb[0] < -0.5 || bb[1] < -0.5 || bb[2] > w + 0.5 || bb[3] > h + 0.5;
+    Some((bb, clipped))
+}

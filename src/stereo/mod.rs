@@ -8,13 +8,21 @@
 //! - (b) the same triangle with exact pinhole angles atan((x − c_x)/f);
 //! - (c) D = b·f/d (Abdollahi's thesis), algebraically identical to (b) for a rectified pair.
 //!
+//! Abdollahi's stop-sign path: [`hsv_sign`] (HSV threshold + template matching),
+//! [`meanshift`] (colour-histogram mean-shift tracking between detections) and [`speed`]
+//! (relative speed from 5-frame averaged disparities).
+//!
 //! Depths are along the optical axis; [`geometry::StereoGeometry::forward_of_depth`] turns
 //! them into the forward distance on the floor the monocular ranging reports (the camera is
 //! tilted). Units: metres, pixels, radians.
 
 pub mod geometry;
+pub mod hsv_sign;
 pub mod matching;
+pub mod meanshift;
+pub mod ranging;
 pub mod source;
+pub mod speed;
 
 pub use geometry::{StereoGeometry, StereoRange};
 pub use matching::{match_box, MatchOptions, StereoMatch};
