@@ -183,6 +183,31 @@ pub fn detect_limits(cfg: &Config) -> [DetectLimits; 3] {
     ]
 }
 
+/// The frame rows a [`Pipeline`] reads step by step ([`Pipeline::row_plan`]): the lane
+/// warp's rows on every step, and the detection rows too on steps where detection runs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RowPlan {
+    /// Rows read on steps without detection (sorted, disjoint, half-open).
+    pub lane: Vec<std::ops::Range<usize>>,
+    /// Rows read on steps with detection (the lane's included).
+    pub detect: Vec<std::ops::Range<usize>>,
+    /// Detection runs on pipeline steps whose index is a multiple of this.
+    pub every_n: u64,
+    /// The pipeline's step index when the plan was made.
+    pub next_index: u64,
+}
+
+impl RowPlan {
+    /// The rows read on the `k`-th step after the plan was made (k = 0: the next one).
+    pub fn rows(&self, k: u64) -> &[std::ops::Range<usize>] {
+        if (self.next_index + k) % self.every_n.max(1) == 0 {
+            &self.detect
+        } else {
+            &self.lane
+        }
+    }
+}
+
 /// Lane detection, detection, ranging, behaviour and control, with buffers allocated once.
 #[derive(Debug, Clone)]
 pub struct Pipeline {
@@ -296,6 +321,25 @@ impl Pipeline {
             }
         }
         out
+    }
+
+    /// The rows the pipeline will read on each of its next steps, detached from the pipeline
+    /// (for a camera that renders, e.g. the simulator's): [`RowPlan::rows`]`(k)` is
+    /// [`Pipeline::rows_needed`] of the `k`-th step from now.
+    pub fn row_plan(&self) -> RowPlan {
+        let lane = self.lane.warp_map().src_rows();
+        let lane = vec![lane.start as usize..lane.end as usize];
+        let detect = match &self.detect {
+            // Frame index 0 always detects.
+            Some(_) => self.rows_needed(0),
+            None => lane.clone(),
+        };
+        RowPlan {
+            lane,
+            detect,
+            every_n: self.every_n,
+            next_index: self.frame_index,
+        }
     }
 
     /// Whether a detector is installed.
