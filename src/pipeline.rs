@@ -189,12 +189,17 @@ pub fn detect_limits(cfg: &Config) -> [DetectLimits; 3] {
 pub const BAND_SLACK: f64 = 0.35;
 /// Fixed part of the band's slack, pixels.
 pub const BAND_SLACK_PX: f64 = 4.0;
+/// Size slack of the band: the raw hits of one object come from windows up to a few scales
+/// larger or smaller than its box, so the band is made for box widths `W_min/k ..= W_max·k` and
+/// distances up to `far·k`, with this `k`.
+pub const BAND_SIZE_SLACK: f64 = 1.25;
 
 /// The ground-plane band of each class, in the order of [`detect_limits`] (`None` for all
 /// when `detect.ground_band` is off). An object whose box is `W ∈ [W_min, W_max]` metres wide
 /// (`detect.*_box_m`) and whose box bottom is `z` metres above the floor
 /// (`ranging.*_bottom_m`), at a forward distance `d` within `detect.range_m` (from 0.7·near,
-/// for objects off to the side), is `f·W/Z(d)` pixels wide and has its box bottom on row
+/// for objects off to the side; both `W` and `far` widened by [`BAND_SIZE_SLACK`]), is
+/// `f·W/Z(d)` pixels wide and has its box bottom on row
 /// `v(d, z)` of the calibrated pinhole camera (`Z` = depth along the optical axis; Rivera &
 /// Andaluz Eq. 5 read backwards). For every box width the band is the span of those rows,
 /// widened by [`BAND_SLACK`] of the window height plus [`BAND_SLACK_PX`]; windows whose box
@@ -211,7 +216,8 @@ pub fn detect_bands(cfg: &Config) -> [Option<crate::detect::RowBand>; 3] {
         // (lowest, highest) box-bottom row per box width; width up to twice the frame's.
         let n = 2 * w_img + 2;
         let mut rows = vec![(f64::INFINITY, f64::NEG_INFINITY); n];
-        let (near, far) = (0.7 * d.range_m[0], d.range_m[1]);
+        let (near, far) = (0.7 * d.range_m[0], BAND_SIZE_SLACK * d.range_m[1]);
+        let box_m = [box_m[0] / BAND_SIZE_SLACK, box_m[1] * BAND_SIZE_SLACK];
         let steps = 2000;
         for k in 0..=steps {
             let dist = near * (far / near).powf(k as f64 / steps as f64);
