@@ -1391,6 +1391,10 @@ pub struct DetectConfig {
     /// Run the cascades on every Nth frame only; the object tracker (src/ranging/track.rs)
     /// predicts boxes and ranges from odometry on the frames between. 1 = every frame.
     pub every_n_frames: u32,
+    /// Search each class only where its box can stand for its size: the box bottom at the
+    /// class's height (`[ranging] *_bottom_m`) seen at the distances within `range_m` that its
+    /// width allows (`*_box_m`), give or take `pipeline::BAND_SLACK` of the window height.
+    pub ground_band: bool,
 }
 
 impl Default for DetectConfig {
@@ -1411,6 +1415,7 @@ impl Default for DetectConfig {
             traffic_light_box_m: [0.065, 0.10],
             obstacle_box_m: [0.18, 0.45],
             every_n_frames: 2,
+            ground_band: true,
         }
     }
 }

@@ -183,6 +183,100 @@ pub fn detect_limits(cfg: &Config) -> [DetectLimits; 3] {
     ]
 }
 
+/// Slack of the ground-plane band ([`detect_bands`]): a box's bottom edge may lie this
+/// fraction of its height, plus [`BAND_SLACK_PX`], beyond where geometry puts it (trained
+/// boxes carry a margin below the object; raw hits of one object spread by a few pixels).
+pub const BAND_SLACK: f64 = 0.35;
+/// Fixed part of the band's slack, pixels.
+pub const BAND_SLACK_PX: f64 = 4.0;
+/// Size slack of the band: the raw hits of one object come from windows up to a few scales
+/// larger or smaller than its box, so the band is made for box widths `W_min/k ..= W_max·k` and
+/// distances up to `far·k`, with this `k`.
+pub const BAND_SIZE_SLACK: f64 = 1.25;
+
+/// The ground-plane band of each class, in the order of [`detect_limits`] (`None` for all
+/// when `detect.ground_band` is off). An object whose box is `W ∈ [W_min, W_max]` metres wide
+/// (`detect.*_box_m`) and whose box bottom is `z` metres above the floor
+/// (`ranging.*_bottom_m`), at a forward distance `d` within `detect.range_m` (from 0.7·near,
+/// for objects off to the side; both `W` and `far` widened by [`BAND_SIZE_SLACK`]), is
+/// `f·W/Z(d)` pixels wide and has its box bottom on row
+/// `v(d, z)` of the calibrated pinhole camera (`Z` = depth along the optical axis; Rivera &
+/// Andaluz Eq. 5 read backwards). For every box width the band is the span of those rows,
+/// widened by [`BAND_SLACK`] of the window height plus [`BAND_SLACK_PX`]; windows whose box
+/// bottom lies outside are not scanned. Units: pixels, metres.
+pub fn detect_bands(cfg: &Config) -> [Option<crate::detect::RowBand>; 3] {
+    if !cfg.detect.ground_band {
+        return [None, None, None];
+    }
+    let d = &cfg.detect;
+    let r = &cfg.ranging;
+    let cam = BoxRanging::from_config(&cfg.camera, &cfg.ranging).camera;
+    let w_img = cfg.camera.width as usize;
+    let band = |box_m: [f64; 2], z: f64| {
+        // (lowest, highest) box-bottom row per box width; width up to twice the frame's.
+        let n = 2 * w_img + 2;
+        let mut rows = vec![(f64::INFINITY, f64::NEG_INFINITY); n];
+        let (near, far) = (0.7 * d.range_m[0], BAND_SIZE_SLACK * d.range_m[1]);
+        let box_m = [box_m[0] / BAND_SIZE_SLACK, box_m[1] * BAND_SIZE_SLACK];
+        let steps = 2000;
+        for k in 0..=steps {
+            let dist = near * (far / near).powf(k as f64 / steps as f64);
+            let (Some((_, v)), Some((ua, _)), Some((ub, _))) = (
+                cam.project([dist, 0.0, z]),
+                cam.project([dist, -0.5, z]),
+                cam.project([dist, 0.5, z]),
+            ) else {
+                continue;
+            };
+            // Pixels per metre across at that depth.
+            let ppm = (ua - ub).abs();
+            let (w0, w1) = ((ppm * box_m[0]).floor() as usize, (ppm * box_m[1]).ceil() as usize);
+            for e in rows.iter_mut().take(w1.min(n - 1) + 1).skip(w0) {
+                *e = (e.0.min(v), e.1.max(v));
+            }
+        }
+        let by_width = rows
+            .iter()
+            .map(|&(lo, hi)| if lo > hi { (1, 0) } else { (lo.floor() as i32, hi.ceil() as i32) })
+            .collect();
+        crate::detect::RowBand {
+            by_width,
+            slack: BAND_SLACK,
+            slack_px: BAND_SLACK_PX,
+        }
+    };
+    [
+        Some(band(d.stop_sign_box_m, r.stop_sign_bottom_m)),
+        Some(band(d.traffic_light_box_m, r.traffic_light_bottom_m)),
+        Some(band(d.obstacle_box_m, r.obstacle_bottom_m)),
+    ]
+}
+
+/// The frame rows a [`Pipeline`] reads step by step ([`Pipeline::row_plan`]): the lane
+/// warp's rows on every step, and the detection rows too on steps where detection runs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RowPlan {
+    /// Rows read on steps without detection (sorted, disjoint, half-open).
+    pub lane: Vec<std::ops::Range<usize>>,
+    /// Rows read on steps with detection (the lane's included).
+    pub detect: Vec<std::ops::Range<usize>>,
+    /// Detection runs on pipeline steps whose index is a multiple of this.
+    pub every_n: u64,
+    /// The pipeline's step index when the plan was made.
+    pub next_index: u64,
+}
+
+impl RowPlan {
+    /// The rows read on the `k`-th step after the plan was made (k = 0: the next one).
+    pub fn rows(&self, k: u64) -> &[std::ops::Range<usize>] {
+        if (self.next_index + k) % self.every_n.max(1) == 0 {
+            &self.detect
+        } else {
+            &self.lane
+        }
+    }
+}
+
 /// Lane detection, detection, ranging, behaviour and control, with buffers allocated once.
 #[derive(Debug, Clone)]
 pub struct Pipeline {
@@ -199,6 +293,8 @@ pub struct Pipeline {
     last_throttle: f64,
     objects: Vec<RangedObject>,
     detect_limits: [DetectLimits; 3],
+    /// The ground-plane band of each class ([`detect_bands`]).
+    detect_bands: [Option<crate::detect::RowBand>; 3],
     /// Frame rows detection reads (set with the detector).
     detect_rows: Vec<std::ops::Range<usize>>,
     tracker: Tracker<Option<LightColor>>,
@@ -227,6 +323,7 @@ impl Pipeline {
             last_throttle: 0.0,
             objects: Vec::with_capacity(16),
             detect_limits: detect_limits(cfg),
+            detect_bands: detect_bands(cfg),
             detect_rows: Vec::new(),
             tracker: Tracker::new(
                 tracker_options(cfg),
@@ -245,8 +342,9 @@ impl Pipeline {
         self.detect = detect;
         self.detect_rows.clear();
         if let Some(d) = &mut self.detect {
-            for l in &self.detect_limits {
+            for (l, b) in self.detect_limits.iter().zip(self.detect_bands.iter()) {
                 d.set_limits(l.label, Some(l.region), l.min_size, l.max_size);
+                d.set_band(l.label, b.clone());
             }
             self.detect_rows = d.rows_needed(self.width, self.height);
         }
@@ -327,6 +425,25 @@ impl Pipeline {
             }
         }
         out
+    }
+
+    /// The rows the pipeline will read on each of its next steps, detached from the pipeline
+    /// (for a camera that renders, e.g. the simulator's): [`RowPlan::rows`]`(k)` is
+    /// [`Pipeline::rows_needed`] of the `k`-th step from now.
+    pub fn row_plan(&self) -> RowPlan {
+        let lane = self.lane.warp_map().src_rows();
+        let lane = vec![lane.start as usize..lane.end as usize];
+        let detect = match &self.detect {
+            // Frame index 0 always detects.
+            Some(_) => self.rows_needed(0),
+            None => lane.clone(),
+        };
+        RowPlan {
+            lane,
+            detect,
+            every_n: self.every_n,
+            next_index: self.frame_index,
+        }
     }
 
     /// Whether a detector is installed.

@@ -10,7 +10,7 @@ use rccar::config::Config;
 use rccar::drive::{Driver, Flow, FrameContext, LoopEnd, LoopError, Observer, Parts, StopReason};
 use rccar::pipeline::Pipeline;
 use rccar::sim::plot;
-use rccar::sim::run::{roi_rows, Simulation, Summary};
+use rccar::sim::run::{Simulation, Summary};
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
 use rccar::sim::world::{lock, SharedWorld, SimCamera, SimScore, SimVehicle, World};
@@ -100,9 +100,12 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         pipeline.set_detector(super::common::load_detector(&cfg)?);
     }
     // Without recording nobody looks at the frames: render only the rows the pipeline reads
-    // (the same decisions, about twice as fast) unless a detector needs the whole frame.
-    let need_all = a.record.is_some() || dash.enabled() || (pipeline.has_detector() && !a.truth_boxes);
-    camera.set_rows(if need_all { None } else { Some(roi_rows(&cfg)) });
+    // on each frame (the lane's; the detectors' too on detection frames): the same decisions.
+    if a.record.is_some() || dash.enabled() {
+        camera.set_rows(None);
+    } else {
+        camera.set_row_plan(Some(pipeline.row_plan()));
+    }
     if let Some(dir) = &a.record {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     }

@@ -28,4 +28,5 @@ pub use cascade::{Cascade, CascadeError, FeatureType};
 pub use detector::{DetectError, DetectParams, Detection, Detector};
 pub use group::{group_rectangles, Rect};
 pub use light::{light_state, LightReading, LightState};
+pub use pyramid::RowBand;
 pub use stage::{gray_from_rgb, CascadeSpec, DetectStage, DetectedObject};

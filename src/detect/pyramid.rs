@@ -31,6 +31,32 @@ use super::integral::Integrals;
 use super::resize::Resizer;
 use std::ops::Range;
 
+/// Where the bottom edge of a box of each width may lie, frame rows: entry `w` is the range
+/// `lo..=hi` of bottom edges (`y + height`) allowed for a `w` pixels wide box; a width
+/// past the end, or an empty entry, is never searched. Made from the ground-plane geometry
+/// (an object of known size and contact height seen at a distance in a known range, see
+/// `crate::pipeline::detect_limits`): a window whose box is too high or too low in the frame
+/// for its size cannot be such an object, so it is not scanned.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RowBand {
+    /// Per box width (pixels): the bottom edges `lo..=hi` geometry allows.
+    pub by_width: Vec<(i32, i32)>,
+    /// Widening of that range on either side, as a fraction of the box height.
+    pub slack: f64,
+    /// Widening on either side, pixels (added to `slack`'s).
+    pub slack_px: f64,
+}
+
+impl RowBand {
+    /// The allowed bottom edges of a `width` × `height` pixels box, widened by the slack;
+    /// `None` when there are none.
+    pub fn bottoms(&self, width: usize, height: usize) -> Option<(i32, i32)> {
+        let (lo, hi) = self.by_width.get(width).copied().filter(|&(lo, hi)| hi >= lo)?;
+        let m = (self.slack * height as f64 + self.slack_px).ceil() as i32;
+        Some((lo - m, hi + m))
+    }
+}
+
 /// Scratch buffers of one worker: the level crop, its integrals, resize tables, hits.
 #[derive(Debug, Clone, Default)]
 struct Scratch {
@@ -64,6 +90,7 @@ struct Key {
     params: Vec<DetectParams>,
     regions: Vec<Option<Rect>>,
     windows: Vec<(usize, usize)>,
+    bands: Vec<Option<RowBand>>,
 }
 
 /// A pyramid shared by several detectors; keeps its plan and buffers between frames.
@@ -79,6 +106,8 @@ pub struct Pyramid {
     pool: Vec<Scratch>,
     #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
     assign: Vec<usize>,
+    /// Per detector: the row band of its boxes (none = the region only).
+    bands: Vec<Option<RowBand>>,
 }
 
 fn check_size(width: usize, height: usize) -> Result<(), DetectError> {
@@ -92,6 +121,15 @@ impl Pyramid {
     /// An empty pyramid; buffers grow on first use.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Limits detector `i`'s boxes to `bands[i]` (within its region; missing or `None` = no
+    /// limit). Re-plans on the next call.
+    pub(crate) fn set_bands(&mut self, bands: Vec<Option<RowBand>>) {
+        if bands != self.bands {
+            self.bands = bands;
+            self.key = None;
+        }
     }
 
     /// Step 1: plans the levels for `dets` on a `width` × `height` input (cached).
@@ -128,8 +166,27 @@ impl Pyramid {
             if region.is_some_and(|r| r.width <= 0 || r.height <= 0) {
                 continue;
             }
+            let band = self.bands.get(i).and_then(|b| b.as_ref());
             for sc in scales {
                 let level = Level::new(sc, width, height);
+                let region = match band {
+                    None => region,
+                    Some(b) => {
+                        // Boxes whose bottom edge lies in the band for their width.
+                        let (cw, ch) = d.window();
+                        let ww = (cw as f32 * sc).round_ties_even() as usize;
+                        let wh = (ch as f32 * sc).round_ties_even() as i32;
+                        let Some((lo, hi)) = b.bottoms(ww, wh as usize) else {
+                            continue;
+                        };
+                        let r = region.unwrap_or(Rect::new(0, 0, width as i32 + 1, height as i32 + 1));
+                        let (y0, y1) = (r.y.max(lo - wh), (r.y + r.height).min(hi));
+                        if y1 - y0 < wh {
+                            continue;
+                        }
+                        Some(Rect::new(r.x, y0, r.width, y1 - y0))
+                    }
+                };
                 let Some(win) = d.window_range(&level, region) else {
                     continue;
                 };
@@ -167,6 +224,7 @@ impl Pyramid {
             params: params.to_vec(),
             regions: regions.to_vec(),
             windows: dets.iter().map(Detector::window).collect(),
+            bands: self.bands.clone(),
         });
         Ok(())
     }

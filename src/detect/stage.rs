@@ -11,7 +11,7 @@ use super::cascade::{Cascade, CascadeError};
 use super::detector::{DetectError, DetectParams, Detector};
 use super::group::Rect;
 use super::light::{light_state, LightReading};
-use super::pyramid::Pyramid;
+use super::pyramid::{Pyramid, RowBand};
 use image::{GrayImage, RgbImage};
 use std::ops::Range;
 use std::path::PathBuf;
@@ -52,6 +52,9 @@ pub struct DetectStage {
     /// Per cascade: its options (the spec's, with the size limits set by the pipeline).
     params: Vec<DetectParams>,
     pyramid: Pyramid,
+    /// Per cascade: the rows its boxes' bottoms may lie in, per box width (`None` = anywhere
+    /// in the region).
+    bands: Vec<Option<RowBand>>,
     /// Grey copy of the last colour frame (reused).
     gray: GrayImage,
 }
@@ -85,6 +88,7 @@ impl DetectStage {
             specs,
             dets,
             regions: vec![None; n],
+            bands: vec![None; n],
             pyramid: Pyramid::new(),
             gray: GrayImage::new(0, 0),
         }
@@ -110,6 +114,21 @@ impl DetectStage {
                 found = true;
             }
         }
+        found
+    }
+
+    /// Restricts cascade `label` to boxes whose bottom edge lies, for their width, in `band`
+    /// (within its region; `None` = no such limit). Windows outside are never scanned. Returns
+    /// false when no cascade has that label.
+    pub fn set_band(&mut self, label: &str, band: Option<RowBand>) -> bool {
+        let mut found = false;
+        for (i, s) in self.specs.iter().enumerate() {
+            if s.label == label {
+                self.bands[i] = band.clone();
+                found = true;
+            }
+        }
+        self.pyramid.set_bands(self.bands.clone());
         found
     }
 

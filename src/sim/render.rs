@@ -152,6 +152,10 @@ pub struct Renderer {
     /// Camera noise, one signed value per channel, reused at a random offset per frame.
     noise: Vec<i8>,
     prims: Vec<Prim>,
+    /// Scratch: each solid's pixel rectangle [u0, v0, u1, v1] (see the object pass).
+    prim_rects: Vec<[f64; 4]>,
+    /// Scratch: the solids a pixel is cast against.
+    active: Vec<Prim>,
     /// Scratch: one row's lighting, per pixel.
     light: Vec<f32>,
     /// Scratch: one row's texture (faded), per pixel.
@@ -233,6 +237,8 @@ impl Renderer {
             vig,
             noise,
             prims: Vec::new(),
+            prim_rects: Vec::new(),
+            active: Vec::new(),
             light: Vec::new(),
             tex: Vec::new(),
             tilt_sc: cam.tilt_rad.sin_cos(),
@@ -312,7 +318,30 @@ impl Renderer {
             // column.
             let step_len = row.dg[0].hypot(row.dg[1]) as f32;
             let mut probe_from = 0usize;
-            for (u, (px, &vg)) in out.chunks_exact_mut(3).zip(vig).enumerate() {
+            let mut u = 0usize;
+            while u < w {
+                if all_floor && u < probe_from {
+                    // A run of pixels known to be clear of every line: bare floor only (the
+                    // same arithmetic as `floor_color` without a probe), no positions needed.
+                    let end = probe_from.min(w);
+                    let (light, tex) = (&self.light[u..end], &self.tex[..]);
+                    for (j, ((px, &vg), &l)) in out[3 * u..3 * end]
+                        .chunks_exact_mut(3)
+                        .zip(&vig[u..end])
+                        .zip(light)
+                        .enumerate()
+                    {
+                        let t = if textured { tex[u + j] } else { 0.0 };
+                        let c = scene.plain_floor(l, t);
+                        let k = gain * vg;
+                        px[0] = (c[0] * k) as u8;
+                        px[1] = (c[1] * k) as u8;
+                        px[2] = (c[2] * k) as u8;
+                    }
+                    u = end;
+                    continue;
+                }
+                let (px, vg) = (&mut out[3 * u..3 * u + 3], vig[u]);
                 let uf = u as f64;
                 let p = [lens[0] + g0[0] + uf * dg[0], lens[1] + g0[1] + uf * dg[1]];
                 let c = if all_floor || (row.floor && scene.on_floor(p)) {
@@ -338,6 +367,7 @@ impl Renderer {
                 px[0] = (c[0] * k) as u8;
                 px[1] = (c[1] * k) as u8;
                 px[2] = (c[2] * k) as u8;
+                u += 1;
             }
         }
         // 3. Objects, far ones first.
@@ -354,14 +384,58 @@ impl Renderer {
             self.prims.clear();
             scene.object_prims(ob, t_s, &mut self.prims);
             let [u0, v0, u1, v1] = rect;
+            // Each solid's own pixel rectangle (its bounds projected, one pixel of slack for
+            // the ±¼-pixel samples): a pixel is cast only against the solids whose rectangle
+            // holds it, in their order, and not at all outside every one. A ray outside a
+            // solid's rectangle misses it, so the image is the same.
+            self.prim_rects.clear();
+            for p in &self.prims {
+                let mut r = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+                let mut all = true;
+                for c in p.bounds() {
+                    match self.mount.project_world(pose, c) {
+                        Some((u, v)) => r = [r[0].min(u), r[1].min(v), r[2].max(u), r[3].max(v)],
+                        None => all = false,
+                    }
+                }
+                let r = if all && r.iter().all(|x| x.is_finite()) {
+                    [r[0].floor() - 1.0, r[1].floor() - 1.0, r[2].ceil() + 1.0, r[3].ceil() + 1.0]
+                } else {
+                    [f64::NEG_INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::INFINITY]
+                };
+                self.prim_rects.push(r);
+            }
+            let mut mask_of_active = 0u64;
             for v in v0.max(rows.start)..=v1.min(rows.end.saturating_sub(1)) {
                 for u in u0..=u1 {
+                    let (uf, vf) = (u as f64, v as f64);
+                    let mut mask = 0u64;
+                    for (k, r) in self.prim_rects.iter().enumerate().take(64) {
+                        if uf >= r[0] && uf <= r[2] && vf >= r[1] && vf <= r[3] {
+                            mask |= 1 << k;
+                        }
+                    }
+                    if self.prims.len() > 64 {
+                        mask = u64::MAX;
+                    }
+                    if mask == 0 {
+                        continue;
+                    }
+                    if mask != mask_of_active {
+                        self.active.clear();
+                        for (k, p) in self.prims.iter().enumerate() {
+                            if k >= 64 || mask & (1 << k) != 0 {
+                                self.active.push(*p);
+                            }
+                        }
+                        mask_of_active = mask;
+                    }
                     let mut sum = [0f32; 3];
                     let mut hits = 0;
                     for (du, dv) in [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
                         let d = self.world_ray((sy, cy), u as f64 + du, v as f64 + dv);
                         let t_floor = if d[2] < 0.0 { o[2] / -d[2] } else { f64::INFINITY };
-                        if let Some(hit) = scene.intersect(&self.prims, o, d, t_floor) {
+                        if let Some(hit) = scene.intersect(&self.active, o, d, t_floor) {
                             for (acc, c) in sum.iter_mut().zip(hit.rgb) {
                                 *acc += c;
                             }

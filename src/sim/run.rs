@@ -61,7 +61,6 @@ impl StepOutput {
 
 /// A running simulation: world, camera, vehicle, score, the pipeline and the loop.
 pub struct Simulation {
-    cfg: Config,
     world: SharedWorld,
     camera: SimCamera,
     vehicle: SimVehicle,
@@ -84,7 +83,6 @@ impl Simulation {
         let world = World::new(cfg, scene)?.shared();
         let pipeline = Pipeline::new(cfg)?;
         let mut s = Simulation {
-            cfg: cfg.clone(),
             camera: SimCamera::new(world.clone()).ending_with_world(false),
             vehicle: SimVehicle::new(world.clone()),
             score: SimScore::new(world.clone()).ending_the_run(false),
@@ -99,12 +97,15 @@ impl Simulation {
         Ok(s)
     }
 
-    /// Renders all rows, or only those the pipeline reads when nobody looks at the frames and
-    /// no detector needs them (the same decisions, faster).
+    /// Renders all rows, or only those the pipeline reads on each frame when nobody looks at
+    /// the frames (the same decisions, faster).
     fn update_rows(&mut self) {
-        let need_all = self.full_frames || (self.pipeline.has_detector() && !self.truth_boxes);
-        self.camera
-            .set_rows(if need_all { None } else { Some(roi_rows(&self.cfg)) });
+        if self.full_frames {
+            self.camera.set_rows(None);
+        } else {
+            // The lane's rows, and the detection rows on frames where detection runs.
+            self.camera.set_row_plan(Some(self.pipeline.row_plan()));
+        }
     }
 
     /// The shared world (for a dashboard, a stereo camera, or tests).
@@ -118,9 +119,10 @@ impl Simulation {
         lock(&self.world).place_at(s);
     }
 
-    /// Renders only the image rows the lane pipeline reads (its ROI, plus the blur's reach)
-    /// when `false`; the pipeline then decides exactly as on full frames, at about half the
-    /// cost. [`Simulation::image`] then shows only those rows. Default `true`.
+    /// Renders only the image rows the pipeline reads on each frame when `false` (the lane
+    /// ROI, plus the detectors' rows on detection frames, plus the blur's reach; see
+    /// [`SimCamera::set_row_plan`]); the pipeline then decides exactly as on full frames, at
+    /// a fraction of the cost. [`Simulation::image`] then shows only those rows. Default `true`.
     pub fn set_full_frames(&mut self, full: bool) {
         self.full_frames = full;
         self.update_rows();

@@ -120,6 +120,32 @@ pub enum Prim {
     },
 }
 
+impl Prim {
+    /// Eight points whose convex hull holds the solid (world frame, metres), for the renderer
+    /// to bound the pixels it can cover.
+    pub fn bounds(&self) -> [[f64; 3]; 8] {
+        let (center, [c, s], h) = match *self {
+            Prim::Box { center, half, dir, .. } => (center, dir, half),
+            Prim::Panel { center, dir, kind } => {
+                // A flat panel: depth 0 along its normal; half size across and up.
+                let r = match kind {
+                    PanelKind::StopFace { width } => width / 2.0,
+                    PanelKind::Lamp { radius, .. } => radius,
+                };
+                (center, dir, [0.0, r, r])
+            }
+        };
+        let mut out = [[0.0; 3]; 8];
+        for (k, p) in out.iter_mut().enumerate() {
+            let lx = if k & 1 == 0 { -h[0] } else { h[0] };
+            let ly = if k & 2 == 0 { -h[1] } else { h[1] };
+            let lz = if k & 4 == 0 { -h[2] } else { h[2] };
+            *p = [center[0] + c * lx - s * ly, center[1] + s * lx + c * ly, center[2] + lz];
+        }
+        out
+    }
+}
+
 /// The outlines and paints of panels.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PanelKind {
@@ -332,6 +358,15 @@ impl Scene {
     pub fn on_floor(&self, p: [f64; 2]) -> bool {
         let r = &self.track.floor_rect;
         p[0] >= r[0] && p[0] <= r[2] && p[1] >= r[1] && p[1] <= r[3]
+    }
+
+    /// Colour of bare floor (no line near) with texture value `tex`, lit by `light`: what
+    /// [`Scene::floor_color`] gives where it does not probe for lines.
+    #[inline(always)]
+    pub fn plain_floor(&self, light: f32, tex: f32) -> [f32; 3] {
+        let b = 1.0 + self.texture_amp * tex;
+        let c = [self.floor_rgb[0] * b, self.floor_rgb[1] * b, self.floor_rgb[2] * b];
+        [c[0] * light, c[1] * light, c[2] * light]
     }
 
     /// Colour of the floor at world point `p`, seen by a pixel whose footprint on the floor is

@@ -32,7 +32,7 @@ use crate::config::Config;
 use crate::control::behaviour::LightColor;
 use crate::control::Command;
 use crate::drive::{Flow, FrameContext, LoopError, Observer};
-use crate::pipeline::{FrameOutput, GivenBox};
+use crate::pipeline::{FrameOutput, GivenBox, RowPlan};
 use crate::ranging::ObjectClass;
 use crate::sink::{CommandSink, SinkError};
 use crate::source::{Frame, FrameError, FrameSource};
@@ -256,9 +256,36 @@ impl World {
     /// Renders frame `frame` at time `t_s` into `img` (only `rows` when given: the rest keeps
     /// what it had) and returns its ground truth, which is also kept as [`World::last_truth`].
     pub fn render(&mut self, frame: u64, t_s: f64, img: &mut RgbImage, rows: Option<Range<usize>>) -> FrameTruth {
-        let pose = self.vehicle.pose;
         let rows = rows.unwrap_or(0..img.height() as usize);
-        self.renderer.render_rows(&pose, t_s, frame, img, rows);
+        self.render_spans(frame, t_s, img, std::slice::from_ref(&rows))
+    }
+
+    /// Like [`World::render`] with several row ranges (sorted, disjoint), each widened by the
+    /// blur's reach (`3·sim.blur_px`, so every row in `spans` comes out as in a full frame;
+    /// with blur, one range from the first span to the last).
+    pub fn render_spans(&mut self, frame: u64, t_s: f64, img: &mut RgbImage, spans: &[Range<usize>]) -> FrameTruth {
+        let pose = self.vehicle.pose;
+        let reach = if self.cfg.sim.blur_px > 0.0 {
+            (3.0 * self.cfg.sim.blur_px).ceil() as usize + 1
+        } else {
+            0
+        };
+        let mut merged: Vec<Range<usize>> = Vec::with_capacity(spans.len());
+        for r in spans.iter().filter(|r| !r.is_empty()) {
+            let r = r.start.saturating_sub(reach)..r.end + reach;
+            match merged.last_mut() {
+                Some(m) if r.start <= m.end => m.end = m.end.max(r.end),
+                _ => merged.push(r),
+            }
+        }
+        if reach > 0 && merged.len() > 1 {
+            // The blur runs over the whole image on each call: one call for every span.
+            let all = merged[0].start..merged[merged.len() - 1].end;
+            merged = vec![all];
+        }
+        for m in merged {
+            self.renderer.render_rows(&pose, t_s, frame, img, m);
+        }
         let v = &self.vehicle;
         let wb = self.cfg.vehicle.wheelbase_m;
         let mut truth = self.truth.frame(&self.scene, &pose, v.speed, v.wheel_angle, wb);
@@ -461,6 +488,9 @@ pub struct SimCamera {
     fps: f64,
     /// Rows to render: `None` = all (recording, viewing, detection).
     rows: Option<Range<usize>>,
+    /// Rows to render per frame, from the pipeline (overrides `rows`), and the camera frame
+    /// at which the plan was made.
+    plan: Option<(RowPlan, u64)>,
     truth_boxes: bool,
     end_with_world: bool,
 }
@@ -478,6 +508,7 @@ impl SimCamera {
             frame: 0,
             fps,
             rows: None,
+            plan: None,
             truth_boxes: false,
             end_with_world: true,
         }
@@ -495,6 +526,17 @@ impl SimCamera {
     /// nothing else.
     pub fn set_rows(&mut self, rows: Option<Range<usize>>) {
         self.rows = rows;
+        self.plan = None;
+    }
+
+    /// Renders, frame by frame, only the rows the pipeline reads on that frame
+    /// ([`crate::pipeline::Pipeline::row_plan`], made just before the pipeline's next step,
+    /// which gets this camera's next frame): the lane's rows, plus the detection rows on
+    /// frames where detection runs. The pipeline decides exactly as on full frames. `None`:
+    /// back to [`SimCamera::set_rows`]'s all rows.
+    pub fn set_row_plan(&mut self, plan: Option<RowPlan>) {
+        self.rows = None;
+        self.plan = plan.map(|p| (p, self.frame));
     }
 
     /// `true`: each frame carries the objects' true image boxes (a sign's face, a light's
@@ -517,7 +559,10 @@ impl FrameSource for SimCamera {
             return None;
         }
         let t = self.frame as f64 / self.fps;
-        let truth = w.render(self.frame, t, &mut self.image, self.rows.clone());
+        let truth = match &self.plan {
+            Some((plan, base)) => w.render_spans(self.frame, t, &mut self.image, plan.rows(self.frame - base)),
+            None => w.render(self.frame, t, &mut self.image, self.rows.clone()),
+        };
         let given = self.truth_boxes.then(|| w.given_boxes(&truth, t));
         drop(w);
         let mut f = Frame::new(
