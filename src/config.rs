@@ -320,7 +320,8 @@ pub struct SteeringConfig {
     pub max_steer: f64,
     /// Largest change of the steering command per second, steer units per second.
     pub slew_rate: f64,
-    /// Low-pass time constant of the derivative, seconds (0 = none).
+    /// Low-pass time constant of the derivative, seconds (0 = none; default 0.2, measured
+    /// in docs/sim.md "Steering chatter").
     pub derivative_tau: f64,
 }
 
@@ -333,7 +334,7 @@ impl Default for SteeringConfig {
             integral_limit: 0.3,
             max_steer: 1.0,
             slew_rate: 8.0,
-            derivative_tau: 0.05,
+            derivative_tau: 0.2,
         }
     }
 }
