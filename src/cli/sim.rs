@@ -1,10 +1,13 @@
 //! `rccar sim`: drive the simulated car round a track with the real pipeline in the loop,
 //! report the score, write telemetry and plots; `--record` keeps the camera frames for
-//! `rccar replay`; `--sweep key=lo:hi:n` runs a gain sweep in parallel.
+//! `rccar replay`; `--sweep key=lo:hi:n` runs a gain sweep in parallel (given twice: a grid
+//! with a heat map); `--start-offset M` / `--kick T:DY` measure the step response.
 
 use super::common::ConfigArgs;
 use super::timer::WallTimer;
 use anyhow::{bail, Context, Result};
+use rccar::sim::step::{step_metrics, StepOptions};
+use rccar::sim::sweep::{self, Chatter, SweepRun};
 use clap::Args;
 use rccar::config::Config;
 use rccar::drive::{Driver, Flow, FrameContext, LoopEnd, LoopError, Observer, StopReason};
@@ -42,8 +45,17 @@ pub struct SimArgs {
     #[arg(long, short, default_value = "out/sim")]
     pub out: PathBuf,
     /// Gain sweep: `KEY=LO:HI:N`, e.g. `steering.kp=0.2:2.0:10` (any numeric config key).
+    /// Give it twice for a grid over two keys (sweep.csv and the heat map sweep_grid.png).
     #[arg(long, value_name = "KEY=LO:HI:N")]
-    pub sweep: Option<String>,
+    pub sweep: Vec<String>,
+    /// Step response: start the car this many metres left (+) or right (−) of the lane
+    /// centre, then measure rise time, overshoot and settling (step.png, summary "step").
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    pub start_offset: Option<f64>,
+    /// Step response: at simulated time T seconds move the car DY metres sideways (+ = left),
+    /// e.g. `--kick 5:0.05`; then measure as with --start-offset.
+    #[arg(long, value_name = "T:DY")]
+    pub kick: Option<String>,
     /// Parallel runs in a sweep (default: the number of cores).
     #[arg(long)]
     pub jobs: Option<usize>,
@@ -79,12 +91,19 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let track = Track::load(&track_path)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     let font = load_font();
-    if let Some(sweep) = &a.sweep {
-        return run_sweep(&a, &cfg, &track, sweep, font);
+    let step = parse_step(a.start_offset, a.kick.as_deref(), track.spec.road.lane_width_m)?;
+    if !a.sweep.is_empty() {
+        if step.is_some() {
+            bail!("--start-offset/--kick: not with --sweep (one run at a time)");
+        }
+        return run_sweep(&a, &cfg, &track, font);
     }
 
     let stop = super::signals::install();
     let world = World::new(&cfg, Arc::new(Scene::new(&track)))?.shared();
+    if let Some(m) = a.start_offset {
+        lock(&world).kick(m, 0.0);
+    }
     // With a dashboard the operator ends the run (a parked, disarmed car is not "stalled").
     let mut camera = SimCamera::new(world.clone()).ending_with_world(!a.dash.dashboard);
     // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
@@ -126,6 +145,8 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         world: world.clone(),
         record: a.record.clone(),
         series: plot::Series::default(),
+        kick: step.filter(|s| s.kick).map(|s| (s.t, s.dy)),
+        kicked_at: None,
     };
     let started = std::time::Instant::now();
     let clock = super::timer::WallClock::new();
@@ -160,9 +181,28 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         wall_s,
         summary.seconds / wall_s.max(1e-9)
     );
+    let mut sum_json = serde_json::to_value(&summary)?;
+    let mut step_fig = None;
+    if let Some(st) = step {
+        // After a kick the first frame that sees it is the one after the kick's frame.
+        let t0 = if st.kick { report.kicked_at.map(|t| t + 1e-6) } else { Some(0.0) };
+        match t0.map(|t0| step_metrics(&report.series.t, &report.series.xte, t0, &StepOptions::default())) {
+            Some(Ok(m)) => {
+                print_step(&m);
+                sum_json["step"] = serde_json::to_value(&m)?;
+                step_fig = Some(m);
+            }
+            Some(Err(e)) => println!("  step response: {e}"),
+            None => println!("  step response: the run ended before the kick at t = {} s", st.t),
+        }
+    }
     let sum_path = a.out.join("summary.json");
-    std::fs::write(&sum_path, serde_json::to_string_pretty(&summary)?)
+    std::fs::write(&sum_path, serde_json::to_string_pretty(&sum_json)?)
         .with_context(|| format!("{}: cannot write", sum_path.display()))?;
+    // The run's configuration, for `rccar report` (differences from the defaults).
+    let cfg_path = a.out.join("config.json");
+    std::fs::write(&cfg_path, serde_json::to_string_pretty(&cfg)?)
+        .with_context(|| format!("{}: cannot write", cfg_path.display()))?;
     println!("  telemetry: {}", tel_path.display());
     println!("  summary:   {}", sum_path.display());
     if let Some(font) = font {
@@ -172,6 +212,11 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         let p2 = a.out.join("path.png");
         save(&plot::path_plot(&report.series, &scene)?, &p2)?;
         println!("  plots:     {} {}", p1.display(), p2.display());
+        if let Some(m) = &step_fig {
+            let p3 = a.out.join("step.png");
+            save(&plot::step_plot(&report.series.t, &report.series.xte, m)?, &p3)?;
+            println!("  step:      {}", p3.display());
+        }
     } else {
         println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
     }
@@ -201,6 +246,10 @@ struct Report {
     world: SharedWorld,
     record: Option<PathBuf>,
     series: plot::Series,
+    /// `--kick T:DY`: (T seconds, DY metres), done once.
+    kick: Option<(f64, f64)>,
+    /// Time of the frame after which the kick was applied, seconds.
+    kicked_at: Option<f64>,
 }
 
 impl Observer for Report {
@@ -221,17 +270,25 @@ impl Observer for Report {
                 tr.reason
             );
         }
-        if let Some(truth) = lock(&self.world).last_truth() {
+        let mut w = lock(&self.world);
+        if let Some(truth) = w.last_truth() {
             self.series.push_parts(ctx.frame.time_s, truth, ctx.output.command.steer);
+        }
+        if let Some((t, dy)) = self.kick {
+            if self.kicked_at.is_none() && ctx.frame.time_s + 1e-9 >= t {
+                w.kick(dy, 0.0);
+                self.kicked_at = Some(ctx.frame.time_s);
+                println!("  t={:7.2} s  kicked {:+.3} m sideways", ctx.frame.time_s, dy);
+            }
         }
         Ok(Flow::Continue)
     }
 }
 
-const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
+pub(crate) const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 
 /// The plot font, from the system (never committed).
-fn load_font() -> Option<&'static [u8]> {
+pub(crate) fn load_font() -> Option<&'static [u8]> {
     std::fs::read(FONT).ok().map(|b| &*Box::leak(b.into_boxed_slice()))
 }
 
@@ -260,50 +317,68 @@ fn print_summary(s: &Summary) {
     );
 }
 
-/// `key=lo:hi:n` -> (key, values).
-fn parse_sweep(s: &str) -> Result<(String, Vec<f64>)> {
-    let (key, range) = s
-        .split_once('=')
-        .with_context(|| format!("--sweep `{s}`: expected KEY=LO:HI:N, e.g. steering.kp=0.2:2.0:10"))?;
-    let parts: Vec<&str> = range.split(':').collect();
-    if parts.len() != 3 {
-        bail!("--sweep `{s}`: expected KEY=LO:HI:N, e.g. steering.kp=0.2:2.0:10");
-    }
-    let lo: f64 = parts[0]
-        .trim()
-        .parse()
-        .with_context(|| format!("--sweep: LO `{}` is not a number", parts[0]))?;
-    let hi: f64 = parts[1]
-        .trim()
-        .parse()
-        .with_context(|| format!("--sweep: HI `{}` is not a number", parts[1]))?;
-    let n: usize = parts[2]
-        .trim()
-        .parse()
-        .with_context(|| format!("--sweep: N `{}` is not a count", parts[2]))?;
-    if n == 0 || n > 1000 || !lo.is_finite() || !hi.is_finite() {
-        bail!("--sweep `{s}`: N must be 1..=1000 and LO, HI finite");
-    }
-    let vals = (0..n)
-        .map(|i| {
-            if n == 1 {
-                lo
-            } else {
-                lo + (hi - lo) * i as f64 / (n - 1) as f64
-            }
-        })
-        .collect();
-    Ok((key.trim().to_string(), vals))
+/// A step-response request: a start offset (`kick` false, at t = 0) or a kick at `t`.
+#[derive(Debug, Clone, Copy)]
+struct StepReq {
+    kick: bool,
+    t: f64,
+    dy: f64,
 }
 
-fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option<&'static [u8]>) -> Result<ExitCode> {
-    let (key, values) = parse_sweep(sweep)?;
+/// Checks `--start-offset` and `--kick T:DY` (at most a lane width either way).
+fn parse_step(offset: Option<f64>, kick: Option<&str>, lane_width: f64) -> Result<Option<StepReq>> {
+    let check = |what: &str, dy: f64| -> Result<()> {
+        if !dy.is_finite() || dy.abs() > lane_width {
+            bail!("{what}: {dy} m is off the lane; give at most ±{lane_width} m (the lane width)");
+        }
+        Ok(())
+    };
+    match (offset, kick) {
+        (Some(_), Some(_)) => bail!("--start-offset and --kick: give one of them"),
+        (Some(m), None) => {
+            check("--start-offset", m)?;
+            Ok(Some(StepReq { kick: false, t: 0.0, dy: m }))
+        }
+        (None, Some(k)) => {
+            let form = || format!("--kick `{k}`: expected T:DY (seconds:metres), e.g. 5:0.05");
+            let (t, dy) = k.split_once(':').with_context(form)?;
+            let t: f64 = t.trim().parse().ok().filter(|t: &f64| t.is_finite() && *t >= 0.0).with_context(form)?;
+            let dy: f64 = dy.trim().parse().ok().filter(|d: &f64| d.is_finite()).with_context(form)?;
+            check("--kick", dy)?;
+            Ok(Some(StepReq { kick: true, t, dy }))
+        }
+        (None, None) => Ok(None),
+    }
+}
+
+fn print_step(m: &rccar::sim::step::StepMetrics) {
+    let s = |v: Option<f64>| v.map_or("not reached".to_string(), |v| format!("{v:.2} s"));
+    println!(
+        "  step response from {:+.4} m at t = {:.2} s (window {:.1} s):",
+        m.initial_offset_m, m.t0_s, m.window_s
+    );
+    println!("    rise time 10→90 %:  {}", s(m.rise_time_s));
+    println!("    overshoot:          {:.1} % of the offset", m.overshoot_pct);
+    println!(
+        "    settling time:      {} (band ±{:.1} mm = 5 % of the offset, at least 2 mm)",
+        s(m.settling_time_s),
+        m.band_m * 1000.0
+    );
+}
+
+fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, font: Option<&'static [u8]>) -> Result<ExitCode> {
+    let axes = sweep::parse_axes(&a.sweep)?;
+    let keys: Vec<&str> = axes.iter().map(|x| x.key.as_str()).collect();
+    let points = sweep::grid(&axes);
     // Check every value before spending minutes.
-    let cfgs: Vec<Config> = values
+    let cfgs: Vec<Config> = points
         .iter()
-        .map(|v| {
-            cfg.with_override(&format!("{key}={v}"))
-                .with_context(|| format!("--sweep {key}={v}"))
+        .map(|p| {
+            let mut c = cfg.clone();
+            for (k, v) in keys.iter().zip(p) {
+                c = c.with_override(&format!("{k}={v}")).with_context(|| format!("--sweep {k}={v}"))?;
+            }
+            Ok(c)
         })
         .collect::<Result<_>>()?;
     let scene = Arc::new(Scene::new(track));
@@ -312,14 +387,15 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
         .max(1);
     println!(
-        "sweep {key} over {} values on {} thread(s), track {}",
-        values.len(),
+        "sweep {} over {} run(s) on {} thread(s), track {}",
+        keys.join(" × "),
+        cfgs.len(),
         jobs,
         track.name
     );
     let stop = super::signals::install();
     let next = std::sync::atomic::AtomicUsize::new(0);
-    let results: Vec<std::sync::Mutex<Option<Result<Summary, String>>>> =
+    let results: Vec<std::sync::Mutex<Option<Result<(Summary, f64), String>>>> =
         (0..cfgs.len()).map(|_| std::sync::Mutex::new(None)).collect();
     std::thread::scope(|s| {
         for _ in 0..jobs.min(cfgs.len()) {
@@ -332,9 +408,19 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
                     .map_err(|e| e.to_string())
                     .map(|mut sim| {
                         sim.set_full_frames(false);
+                        let mut chatter = Chatter::default();
                         // Ctrl-C ends every run of the sweep at its next frame
-                        sim.run(&mut NoTimer, |_, _| if stop.is_set() { Err(()) } else { Ok(()) })
-                            .unwrap_or_else(|_| sim.summary())
+                        let sum = sim
+                            .run(&mut NoTimer, |_, st| {
+                                chatter.push(st.out.command.steer);
+                                if stop.is_set() {
+                                    Err(())
+                                } else {
+                                    Ok(())
+                                }
+                            })
+                            .unwrap_or_else(|_| sim.summary());
+                        (sum, chatter.rms())
                     });
                 if let Ok(mut slot) = results[i].lock() {
                     *slot = Some(r);
@@ -342,44 +428,40 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
             });
         }
     });
+    let head: Vec<String> = keys.iter().map(|k| format!("{k:>12}")).collect();
     println!(
-        "{:>12} {:>5} {:>10} {:>10} {:>6} {:>10} {:>8}  end",
-        key, "laps", "rms_m", "max_m", "dep", "rev/s", "lost"
+        "{} {:>5} {:>10} {:>10} {:>6} {:>10} {:>9} {:>8}  end",
+        head.join(" "),
+        "laps",
+        "rms_m",
+        "max_m",
+        "dep",
+        "rev/s",
+        "dsteer",
+        "lost"
     );
-    let mut rows = Vec::new();
-    let csv_path = a.out.join("sweep.csv");
-    let mut csv = String::from("value,laps,xte_rms_m,xte_max_m,departures,reversals_per_s,lost_frames,end\n");
-    for (v, slot) in values.iter().zip(results) {
+    let mut runs = Vec::new();
+    for (p, slot) in points.iter().zip(results) {
+        let vals: Vec<String> = p.iter().map(|v| format!("{v:>12.4}")).collect();
+        let vals = vals.join(" ");
         match slot.into_inner().ok().flatten() {
-            Some(Ok(s)) => {
+            Some(Ok((s, chatter))) => {
                 println!(
-                    "{:>12.4} {:>5} {:>10.4} {:>10.4} {:>6} {:>10.2} {:>8}  {:?}",
-                    v,
-                    s.laps,
-                    s.xte_rms_m,
-                    s.xte_max_m,
-                    s.lane_departures,
-                    s.steer_reversals_per_s,
-                    s.lane_lost_frames,
-                    s.end
+                    "{vals} {:>5} {:>10.4} {:>10.4} {:>6} {:>10.2} {:>9.4} {:>8}  {:?}",
+                    s.laps, s.xte_rms_m, s.xte_max_m, s.lane_departures, s.steer_reversals_per_s, chatter, s.lane_lost_frames, s.end
                 );
-                csv += &format!(
-                    "{v},{},{},{},{},{},{},{:?}\n",
-                    s.laps,
-                    s.xte_rms_m,
-                    s.xte_max_m,
-                    s.lane_departures,
-                    s.steer_reversals_per_s,
-                    s.lane_lost_frames,
-                    s.end
-                );
-                rows.push((*v, s));
+                runs.push(SweepRun {
+                    values: p.clone(),
+                    summary: s,
+                    steer_diff_rms: chatter,
+                });
             }
-            Some(Err(e)) => println!("{v:>12.4} error: {e}"),
-            None => println!("{v:>12.4} error: the run panicked"),
+            Some(Err(e)) => println!("{vals} error: {e}"),
+            None => println!("{vals} error: the run panicked"),
         }
     }
-    std::fs::write(&csv_path, csv).with_context(|| format!("{}: cannot write", csv_path.display()))?;
+    let csv_path = a.out.join("sweep.csv");
+    std::fs::write(&csv_path, sweep::csv(&keys, &runs)).with_context(|| format!("{}: cannot write", csv_path.display()))?;
     if let Some(why) = stop.reason() {
         println!("sweep: interrupted; the rows above cover each run up to that moment");
         return Ok(ExitCode::from(why.exit_code()));
@@ -387,9 +469,16 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, sweep: &str, font: Option
     println!("  table: {}", csv_path.display());
     if let Some(font) = font {
         plot::register_font(font);
-        let p = a.out.join("sweep.png");
-        save(&plot::sweep_plot(&key, &rows)?, &p)?;
-        println!("  plot:  {}", p.display());
+        if axes.len() == 1 {
+            let rows: Vec<(f64, Summary)> = runs.iter().map(|r| (r.values[0], r.summary.clone())).collect();
+            let p = a.out.join("sweep.png");
+            save(&plot::sweep_plot(&keys[0], &rows)?, &p)?;
+            println!("  plot:  {}", p.display());
+        } else {
+            let p = a.out.join("sweep_grid.png");
+            save(&plot::grid_plot(keys[0], keys[1], &axes[0].values, &axes[1].values, &runs)?, &p)?;
+            println!("  heat map: {}", p.display());
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

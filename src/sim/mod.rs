@@ -2,7 +2,8 @@
 //! see ([`render`]) and the loop that feeds those frames through the same pipeline the car
 //! runs ([`run`]), scored against ground truth ([`truth`]). [`scene`] holds what the camera
 //! looks at (floor, lines, walls, objects), [`glyphs`] the stroke letters of the signs,
-//! [`plot`] the run's plots, [`rng`] the seeded generator. Usage and the track format:
+//! [`plot`] the run's plots, [`sweep`] gain sweeps over one or two keys, [`step`]
+//! step-response figures, [`rng`] the seeded generator. Usage and the track format:
 //! `docs/sim.md`.
 //!
 //! Units: metres, seconds, radians (degrees only in files). World frame x east, y north,
@@ -18,6 +19,8 @@ pub mod world;
 pub mod scenario_lab;
 pub mod stereo;
 pub mod scene;
+pub mod step;
+pub mod sweep;
 pub mod track;
 pub mod truth;
 pub mod vehicle;

@@ -1,12 +1,16 @@
 //! Plots of a simulator run, drawn with plotters into an in-memory RGB image (the binary
 //! saves them): cross-track error and steering against time, the driven path over a top view
-//! of the track, and a sweep's RMS error against the swept value.
+//! of the track, a sweep's RMS error against the swept value, a two-key sweep's heat map, a
+//! step response with its rise, overshoot and settling marks, and any telemetry fields of
+//! several runs against time (`rccar plot`).
 //!
 //! The font is the system's DejaVu Sans, handed over as bytes by the binary
 //! ([`register_font`]); the library reads no files. Units: metres, seconds.
 
 use super::run::{StepOutput, Summary};
 use super::scene::Scene;
+use super::step::StepMetrics;
+use super::sweep::{axis_label, SweepRun};
 use image::RgbImage;
 use plotters::prelude::*;
 
@@ -198,6 +202,347 @@ pub fn sweep_plot(key: &str, rows: &[(f64, Summary)]) -> Result<RgbImage, PlotEr
         )
         .map_err(err)?;
         c.configure_series_labels().border_style(BLACK).draw().map_err(err)?;
+        root.present().map_err(err)?;
+    }
+    RgbImage::from_raw(w, h, buf).ok_or_else(|| PlotError("buffer size".into()))
+}
+
+/// The viridis colour map (perceptually even, readable in grey), `f` in 0..1.
+pub fn viridis(f: f64) -> RGBColor {
+    const STOPS: [(f64, [f64; 3]); 5] = [
+        (0.0, [68.0, 1.0, 84.0]),
+        (0.25, [59.0, 82.0, 139.0]),
+        (0.5, [33.0, 145.0, 140.0]),
+        (0.75, [94.0, 201.0, 98.0]),
+        (1.0, [253.0, 231.0, 37.0]),
+    ];
+    let f = if f.is_finite() { f.clamp(0.0, 1.0) } else { 0.0 };
+    let i = STOPS.iter().position(|s| s.0 >= f).unwrap_or(4).max(1);
+    let (a, b) = (STOPS[i - 1], STOPS[i]);
+    let u = (f - a.0) / (b.0 - a.0);
+    let c = |k: usize| (a.1[k] + u * (b.1[k] - a.1[k])).round() as u8;
+    RGBColor(c(0), c(1), c(2))
+}
+
+/// A tick label for a swept value: as few decimals as tell the values apart.
+fn tick(v: f64, values: &[f64]) -> String {
+    for d in 0..6 {
+        let shown: Vec<String> = values.iter().map(|x| format!("{x:.d$}")).collect();
+        let mut u = shown.clone();
+        u.dedup();
+        if u.len() == shown.len() && (v - format!("{v:.d$}").parse::<f64>().unwrap_or(v)).abs() < 1e-9 * v.abs().max(1.0) {
+            return format!("{v:.d$}");
+        }
+    }
+    format!("{v}")
+}
+
+/// A two-key sweep as a heat map: one cell per run, coloured by cross-track RMS (viridis,
+/// colour bar in millimetres on the right), the RMS written in each cell, and a red cross
+/// over every run that left the lane (a departure, off the road or stalled). `xs`/`ys` are the
+/// axes' values (cells in that order, labelled with them); `runs` hold `[x, y]` in their
+/// `values`.
+pub fn grid_plot(kx: &str, ky: &str, xs: &[f64], ys: &[f64], runs: &[SweepRun]) -> Result<RgbImage, PlotError> {
+    use plotters::style::text_anchor::{HPos, Pos, VPos};
+    let (w, h) = (1000u32, 720u32);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let (main, _) = root.split_horizontally(w - 150);
+        let (nx, ny) = (xs.len().max(1) as f64, ys.len().max(1) as f64);
+        let rms_mm: Vec<f64> = runs.iter().map(|r| r.summary.xte_rms_m * 1000.0).collect();
+        let vmin = rms_mm.iter().copied().fold(f64::INFINITY, f64::min);
+        let vmax = rms_mm.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let (vmin, vmax) = if vmax > vmin {
+            (vmin, vmax)
+        } else if vmin.is_finite() {
+            (vmin - 0.5, vmin + 0.5)
+        } else {
+            (0.0, 1.0)
+        };
+        let frac = |v: f64| (v - vmin) / (vmax - vmin);
+        // Cell (i, j) spans i−0.5..i+0.5 and j−0.5..j+0.5; ticks are drawn here at the
+        // cells' centres, labelled with the swept values.
+        let mut c = ChartBuilder::on(&main)
+            .caption(
+                format!("cross-track RMS (mm) over {kx} × {ky}   (red × = left the lane)"),
+                ("sans-serif", 18),
+            )
+            .margin(12)
+            .x_label_area_size(55)
+            .y_label_area_size(85)
+            .build_cartesian_2d(-0.5..nx - 0.5, -0.5..ny - 0.5)
+            .map_err(err)?;
+        c.configure_mesh()
+            .disable_mesh()
+            .x_labels(0)
+            .y_labels(0)
+            .x_desc(axis_label(kx))
+            .y_desc(axis_label(ky))
+            .axis_desc_style(("sans-serif", 16))
+            .draw()
+            .map_err(err)?;
+        let idx = |vals: &[f64], v: f64| vals.iter().position(|x| (x - v).abs() <= 1e-9 * x.abs().max(1.0));
+        let cell_px = ((w as f64 - 280.0) / nx).min((h as f64 - 130.0) / ny);
+        let font = (cell_px / 4.0).clamp(9.0, 20.0) as u32;
+        let decimals = if vmax < 10.0 { 2 } else { 1 };
+        for (r, &v) in runs.iter().zip(&rms_mm) {
+            let (Some(i), Some(j)) = (
+                r.values.first().and_then(|&x| idx(xs, x)),
+                r.values.get(1).and_then(|&y| idx(ys, y)),
+            ) else {
+                continue;
+            };
+            let (x, y) = (i as f64, j as f64);
+            let col = viridis(frac(v));
+            c.draw_series(std::iter::once(Rectangle::new([(x - 0.5, y - 0.5), (x + 0.5, y + 0.5)], col.filled())))
+                .map_err(err)?;
+            if r.left_lane() {
+                let d = (cell_px * 0.3) as i32;
+                let red = RGBColor(230, 20, 20).mix(0.8).stroke_width(4);
+                c.draw_series([
+                    EmptyElement::at((x, y)) + PathElement::new(vec![(-d, -d), (d, d)], red),
+                    EmptyElement::at((x, y)) + PathElement::new(vec![(-d, d), (d, -d)], red),
+                ])
+                .map_err(err)?;
+            }
+            let ink = if frac(v) > 0.6 { BLACK } else { WHITE };
+            let style = ("sans-serif", font).into_font().color(&ink).pos(Pos::new(HPos::Center, VPos::Center));
+            c.draw_series(std::iter::once(Text::new(format!("{v:.decimals$}"), (x, y), style)))
+                .map_err(err)?;
+        }
+        // Tick marks and labels at the cells' centres (pixel positions from the chart).
+        let ink = BLACK.stroke_width(1);
+        let below = ("sans-serif", 14).into_font().color(&BLACK).pos(Pos::new(HPos::Center, VPos::Top));
+        let left = ("sans-serif", 14).into_font().color(&BLACK).pos(Pos::new(HPos::Right, VPos::Center));
+        for (i, v) in xs.iter().enumerate() {
+            let (px, py) = c.backend_coord(&(i as f64, -0.5));
+            root.draw(&PathElement::new(vec![(px, py), (px, py + 5)], ink)).map_err(err)?;
+            root.draw(&Text::new(tick(*v, xs), (px, py + 8), below.clone())).map_err(err)?;
+        }
+        for (j, v) in ys.iter().enumerate() {
+            let (px, py) = c.backend_coord(&(-0.5, j as f64));
+            root.draw(&PathElement::new(vec![(px - 5, py), (px, py)], ink)).map_err(err)?;
+            root.draw(&Text::new(tick(*v, ys), (px - 8, py), left.clone())).map_err(err)?;
+        }
+        // The colour bar: 100 bands bottom (vmin) to top (vmax), six labels, drawn in pixels.
+        let (bx, top, bottom) = (w as i32 - 120, 60i32, h as i32 - 80);
+        let n = 100;
+        for k in 0..n {
+            let y1 = bottom - (bottom - top) * k / n;
+            let y0 = bottom - (bottom - top) * (k + 1) / n;
+            root.draw(&Rectangle::new([(bx, y0), (bx + 28, y1)], viridis(k as f64 / (n - 1) as f64).filled()))
+                .map_err(err)?;
+        }
+        root.draw(&Rectangle::new([(bx, top), (bx + 28, bottom)], BLACK.stroke_width(1)))
+            .map_err(err)?;
+        let lab = ("sans-serif", 13).into_font().color(&BLACK).pos(Pos::new(HPos::Left, VPos::Center));
+        for k in 0..=5 {
+            let v = vmin + (vmax - vmin) * k as f64 / 5.0;
+            let py = bottom - (bottom - top) * k / 5;
+            root.draw(&PathElement::new(vec![(bx + 28, py), (bx + 33, py)], ink)).map_err(err)?;
+            root.draw(&Text::new(format!("{v:.decimals$}"), (bx + 36, py), lab.clone())).map_err(err)?;
+        }
+        let t = ("sans-serif", 15).into_font().color(&BLACK).pos(Pos::new(HPos::Center, VPos::Bottom));
+        root.draw(&Text::new("RMS (mm)", (bx + 14, top - 10), t)).map_err(err)?;
+        root.present().map_err(err)?;
+    }
+    RgbImage::from_raw(w, h, buf).ok_or_else(|| PlotError("buffer size".into()))
+}
+
+/// A step response: cross-track error (cm) against time from just before the step to the
+/// end of the analysed window, with the 10 % and 90 % levels, the settling band, and marks at
+/// the rise's start and end, the overshoot's peak and the settling time.
+pub fn step_plot(t: &[f64], xte: &[f64], m: &StepMetrics) -> Result<RgbImage, PlotError> {
+    let (w, h) = (1000u32, 550u32);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let (ta, tb) = (m.t0_s - 0.5, m.t0_s + m.window_s.max(0.5));
+        let pts: Vec<(f64, f64)> = t
+            .iter()
+            .zip(xte)
+            .filter(|(&ti, xi)| ti >= ta && ti <= tb && xi.is_finite())
+            .map(|(&ti, &xi)| (ti, xi * 100.0))
+            .collect();
+        let x0 = m.initial_offset_m * 100.0;
+        let lo = pts.iter().map(|p| p.1).fold(x0.min(0.0), f64::min);
+        let hi = pts.iter().map(|p| p.1).fold(x0.max(0.0), f64::max);
+        let pad = (hi - lo).max(0.5) * 0.08;
+        let mut c = ChartBuilder::on(&root)
+            .caption(
+                format!(
+                    "step response from {:+.1} cm at t = {:.2} s (+ = left of lane centre)",
+                    x0, m.t0_s
+                ),
+                ("sans-serif", 18),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(ta..tb, (lo - pad)..(hi + pad))
+            .map_err(err)?;
+        c.configure_mesh()
+            .x_desc("time (s)")
+            .y_desc("cross-track error (cm)")
+            .draw()
+            .map_err(err)?;
+        let grey = RGBColor(120, 120, 120);
+        for lvl in [0.9, 0.1] {
+            c.draw_series(DashedLineSeries::new([(ta, lvl * x0), (tb, lvl * x0)], 6, 4, grey.stroke_width(1)))
+                .map_err(err)?;
+        }
+        let band = m.band_m * 100.0;
+        let green = RGBColor(0, 150, 0);
+        c.draw_series(DashedLineSeries::new([(ta, band), (tb, band)], 3, 3, green.stroke_width(1)))
+            .map_err(err)?
+            .label(format!("settling band ±{:.1} mm", m.band_m * 1000.0))
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], green));
+        c.draw_series(DashedLineSeries::new([(ta, -band), (tb, -band)], 3, 3, green.stroke_width(1)))
+            .map_err(err)?;
+        c.draw_series(LineSeries::new(pts, BLUE.stroke_width(2)))
+            .map_err(err)?
+            .label("cross-track error (truth)")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLUE.stroke_width(2)));
+        let (ylo, yhi) = (lo - pad, hi + pad);
+        let vline = |c: &mut ChartContext<'_, BitMapBackend<'_>, Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>>,
+                     at: f64,
+                     col: RGBColor,
+                     label: String|
+         -> Result<(), PlotError> {
+            c.draw_series(LineSeries::new([(at, ylo), (at, yhi)], col.stroke_width(2)))
+                .map_err(err)?
+                .label(label)
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col.stroke_width(2)));
+            Ok(())
+        };
+        if let (Some(a), Some(b), Some(r)) = (m.rise_start_s, m.rise_end_s, m.rise_time_s) {
+            let orange = RGBColor(230, 130, 0);
+            vline(&mut c, m.t0_s + a, orange, format!("rise 10→90 %: {r:.2} s"))?;
+            c.draw_series(LineSeries::new([(m.t0_s + b, ylo), (m.t0_s + b, yhi)], orange.stroke_width(2)))
+                .map_err(err)?;
+        }
+        if let Some(s) = m.settling_time_s {
+            vline(&mut c, m.t0_s + s, green, format!("settled (±{:.1} mm) after {s:.2} s", m.band_m * 1000.0))?;
+        }
+        if let Some(p) = m.peak_s {
+            let i = t.iter().position(|&ti| ti >= m.t0_s + p - 1e-9);
+            if let Some(i) = i {
+                c.draw_series(std::iter::once(Circle::new((t[i], xte[i] * 100.0), 6, RED.filled())))
+                    .map_err(err)?
+                    .label(format!("overshoot {:.1} %", m.overshoot_pct))
+                    .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
+            }
+        }
+        c.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 15))
+            .draw()
+            .map_err(err)?;
+        root.present().map_err(err)?;
+    }
+    RgbImage::from_raw(w, h, buf).ok_or_else(|| PlotError("buffer size".into()))
+}
+
+/// One run's data for [`fields_plot`]: a label and, per field, its points (x, y); a NaN y
+/// breaks the line (e.g. frames where the lane was lost).
+#[derive(Debug, Clone, Default)]
+pub struct Trace {
+    /// Legend text.
+    pub label: String,
+    /// Points per field, in the order of the fields.
+    pub panels: Vec<Vec<(f64, f64)>>,
+}
+
+/// Distinct colours for runs on one chart.
+pub const RUN_COLOURS: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
+];
+
+/// Height of one panel of [`fields_plot`], pixels.
+pub const PANEL_H: u32 = 260;
+
+/// Several runs' telemetry fields against `x_name`: one panel per field (stacked), one colour
+/// per run, a legend in the first panel. 1000 × (40 + 260·fields) pixels.
+pub fn fields_plot(x_name: &str, fields: &[String], traces: &[Trace]) -> Result<RgbImage, PlotError> {
+    if fields.is_empty() {
+        return Err(PlotError("no field to plot".into()));
+    }
+    let (w, h) = (1000u32, 40 + PANEL_H * fields.len() as u32);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let (title, body) = root.split_vertically(40);
+        let names: Vec<&str> = traces.iter().map(|t| t.label.as_str()).collect();
+        title
+            .titled(&format!("{} against {x_name}: {}", fields.join(", "), names.join(" vs ")), ("sans-serif", 18))
+            .map_err(err)?;
+        let panels = body.split_evenly((fields.len(), 1));
+        let finite = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
+        let all = || traces.iter().flat_map(|t| t.panels.iter().flatten());
+        let xa = all().filter(finite).map(|p| p.0).fold(f64::INFINITY, f64::min);
+        let xb = all().filter(finite).map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
+        let (xa, xb) = if xb > xa { (xa, xb) } else if xa.is_finite() { (xa - 1.0, xa + 1.0) } else { (0.0, 1.0) };
+        for (k, (field, area)) in fields.iter().zip(panels.iter()).enumerate() {
+            let pts = || traces.iter().filter_map(|t| t.panels.get(k)).flatten().filter(finite);
+            let ya = pts().map(|p| p.1).fold(f64::INFINITY, f64::min);
+            let yb = pts().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+            let (ya, yb) = if yb > ya {
+                let pad = (yb - ya) * 0.05;
+                (ya - pad, yb + pad)
+            } else if ya.is_finite() {
+                (ya - 1.0, ya + 1.0)
+            } else {
+                (-1.0, 1.0)
+            };
+            let mut c = ChartBuilder::on(area)
+                .caption(field, ("sans-serif", 16))
+                .margin(8)
+                .x_label_area_size(35)
+                .y_label_area_size(70)
+                .build_cartesian_2d(xa..xb, ya..yb)
+                .map_err(err)?;
+            c.configure_mesh().x_desc(x_name).y_desc(field.as_str()).draw().map_err(err)?;
+            for (i, t) in traces.iter().enumerate() {
+                let col = RUN_COLOURS[i % RUN_COLOURS.len()];
+                let Some(p) = t.panels.get(k) else { continue };
+                // Split at NaNs so a gap stays a gap.
+                let mut first = true;
+                for seg in p.split(|q| !q.1.is_finite() || !q.0.is_finite()) {
+                    if seg.is_empty() {
+                        continue;
+                    }
+                    let s = c
+                        .draw_series(LineSeries::new(seg.iter().copied(), col.stroke_width(2)))
+                        .map_err(err)?;
+                    if k == 0 && first {
+                        s.label(t.label.clone())
+                            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col.stroke_width(2)));
+                        first = false;
+                    }
+                }
+            }
+            if k == 0 {
+                c.configure_series_labels()
+                    .position(SeriesLabelPosition::UpperRight)
+                    .background_style(WHITE.mix(0.85))
+                    .border_style(BLACK)
+                    .draw()
+                    .map_err(err)?;
+            }
+        }
         root.present().map_err(err)?;
     }
     RgbImage::from_raw(w, h, buf).ok_or_else(|| PlotError("buffer size".into()))

@@ -1,0 +1,320 @@
+//! Gain sweeps over one or two configuration keys (`rccar sim --sweep KEY=LO:HI:N`, given
+//! once for a line, twice for a grid): parsing an axis, the grid of runs, the chatter
+//! measure of a run's steering, and the CSV table. The runs themselves are
+//! [`super::run::Simulation`]s, driven in parallel by `src/cli/sim.rs`.
+//!
+//! Units: whatever the swept key's unit is ([`key_unit`]); metres and seconds for the scores.
+
+use super::run::{EndReason, Summary};
+
+/// A `--sweep` that cannot be understood.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SweepError {
+    /// Not of the form `KEY=LO:HI:N`.
+    #[error("--sweep `{0}`: expected KEY=LO:HI:N, e.g. steering.kp=0.2:2.0:10")]
+    Form(String),
+    /// LO or HI is not a finite number.
+    #[error("--sweep `{arg}`: {what} `{text}` is not a finite number")]
+    Number {
+        /// The whole argument.
+        arg: String,
+        /// "LO" or "HI".
+        what: &'static str,
+        /// What was typed.
+        text: String,
+    },
+    /// N is not a count in 1..=1000.
+    #[error("--sweep `{arg}`: N must be 1..=1000 (got `{text}`)")]
+    Count {
+        /// The whole argument.
+        arg: String,
+        /// What was typed.
+        text: String,
+    },
+    /// More than two axes, or the same key twice.
+    #[error("--sweep: {0}")]
+    Axes(String),
+    /// The grid would be too large.
+    #[error("--sweep: {0} runs; a sweep may have at most 1000")]
+    TooMany(usize),
+}
+
+/// One swept key and its values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Axis {
+    /// Dotted config key, e.g. `steering.kp`.
+    pub key: String,
+    /// The values, LO to HI evenly spaced (N of them; N = 1 gives LO).
+    pub values: Vec<f64>,
+}
+
+/// Parses `KEY=LO:HI:N`.
+pub fn parse_axis(s: &str) -> Result<Axis, SweepError> {
+    let form = || SweepError::Form(s.to_string());
+    let (key, range) = s.split_once('=').ok_or_else(form)?;
+    let key = key.trim();
+    if key.is_empty() {
+        return Err(form());
+    }
+    let parts: Vec<&str> = range.split(':').collect();
+    let [lo, hi, n] = parts[..] else {
+        return Err(form());
+    };
+    let num = |text: &str, what| {
+        text.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| SweepError::Number {
+                arg: s.to_string(),
+                what,
+                text: text.to_string(),
+            })
+    };
+    let (lo, hi) = (num(lo, "LO")?, num(hi, "HI")?);
+    let n: usize = n
+        .trim()
+        .parse()
+        .ok()
+        .filter(|n| (1..=1000).contains(n))
+        .ok_or_else(|| SweepError::Count {
+            arg: s.to_string(),
+            text: n.to_string(),
+        })?;
+    let values = (0..n)
+        .map(|i| if n == 1 { lo } else { lo + (hi - lo) * i as f64 / (n - 1) as f64 })
+        .collect();
+    Ok(Axis {
+        key: key.to_string(),
+        values,
+    })
+}
+
+/// Parses one or two `--sweep` arguments and checks the grid's size (at most 1000 runs).
+pub fn parse_axes(args: &[String]) -> Result<Vec<Axis>, SweepError> {
+    if args.is_empty() || args.len() > 2 {
+        return Err(SweepError::Axes(format!(
+            "give it once (a line) or twice (a grid), not {} times",
+            args.len()
+        )));
+    }
+    let axes: Vec<Axis> = args.iter().map(|a| parse_axis(a)).collect::<Result<_, _>>()?;
+    if axes.len() == 2 && axes[0].key == axes[1].key {
+        return Err(SweepError::Axes(format!("`{}` is swept twice", axes[0].key)));
+    }
+    let runs: usize = axes.iter().map(|a| a.values.len()).product();
+    if runs > 1000 {
+        return Err(SweepError::TooMany(runs));
+    }
+    Ok(axes)
+}
+
+/// The runs of a sweep: every combination of the axes' values, the last axis varying fastest
+/// (row-major: for a grid, all of the second key's values for the first key's first value,
+/// and so on).
+pub fn grid(axes: &[Axis]) -> Vec<Vec<f64>> {
+    let mut out = vec![Vec::new()];
+    for a in axes {
+        out = out
+            .iter()
+            .flat_map(|p| {
+                a.values.iter().map(move |&v| {
+                    let mut q = p.clone();
+                    q.push(v);
+                    q
+                })
+            })
+            .collect();
+    }
+    out
+}
+
+/// The unit of a config key for axis labels: from its name's suffix (`_m`, `_s`, `_deg`, …)
+/// or, for the steering gains, from `config/car.toml`'s comments. Empty when unitless or
+/// unknown.
+pub fn key_unit(key: &str) -> &'static str {
+    let last = key.rsplit('.').next().unwrap_or(key);
+    match key {
+        "steering.kp" => return "steer per unit error",
+        "steering.ki" => return "steer per error·s",
+        "steering.kd" => return "steer per error/s",
+        "steering.slew_rate" => return "1/s",
+        "steering.derivative_tau" => return "s",
+        "steering.max_steer" | "steering.integral_limit" => return "steer",
+        "throttle.base" | "throttle.min" => return "throttle 0..1",
+        _ => {}
+    }
+    for (suffix, unit) in [
+        ("_mps", "m/s"),
+        ("_dps", "deg/s"),
+        ("_deg", "deg"),
+        ("_px", "px"),
+        ("_ms", "ms"),
+        ("_m", "m"),
+        ("_s", "s"),
+    ] {
+        if last.ends_with(suffix) {
+            return unit;
+        }
+    }
+    ""
+}
+
+/// An axis label: `steering.kd (steer per error/s)`, or the key alone.
+pub fn axis_label(key: &str) -> String {
+    match key_unit(key) {
+        "" => key.to_string(),
+        u => format!("{key} ({u})"),
+    }
+}
+
+/// Running chatter measure of a steering command: RMS of its frame-to-frame change
+/// (steer units per frame). Frame-rate chatter raises it; a smooth command that follows the
+/// road keeps it small.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Chatter {
+    last: Option<f64>,
+    sq: f64,
+    n: u64,
+}
+
+impl Chatter {
+    /// Adds the next frame's steering command.
+    pub fn push(&mut self, steer: f64) {
+        if let Some(l) = self.last {
+            let d = steer - l;
+            self.sq += d * d;
+            self.n += 1;
+        }
+        self.last = Some(steer);
+    }
+
+    /// RMS of the first difference so far (0 with fewer than two frames).
+    pub fn rms(&self) -> f64 {
+        if self.n == 0 {
+            0.0
+        } else {
+            (self.sq / self.n as f64).sqrt()
+        }
+    }
+}
+
+/// One finished run of a sweep.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepRun {
+    /// The swept keys' values, in axis order.
+    pub values: Vec<f64>,
+    /// The run's score.
+    pub summary: Summary,
+    /// RMS of the steering command's frame-to-frame change ([`Chatter`]).
+    pub steer_diff_rms: f64,
+}
+
+impl SweepRun {
+    /// The run left its lane (a departure) or ended off the road or stalled.
+    pub fn left_lane(&self) -> bool {
+        self.summary.lane_departures > 0 || matches!(self.summary.end, EndReason::LeftTheRoad | EndReason::Stalled)
+    }
+
+    /// Mean lap time, seconds (`None` without a completed lap).
+    pub fn lap_time_s(&self) -> Option<f64> {
+        let l = &self.summary.lap_times_s;
+        (!l.is_empty()).then(|| l.iter().sum::<f64>() / l.len() as f64)
+    }
+}
+
+/// The sweep's table: a header naming the swept keys, then one row per run.
+pub fn csv(keys: &[&str], runs: &[SweepRun]) -> String {
+    let mut s = keys.join(",");
+    s += ",laps,lap_time_s,xte_rms_m,xte_max_m,departures,reversals_per_s,steer_diff_rms,lost_frames,end\n";
+    for r in runs {
+        let m = &r.summary;
+        let vals: Vec<String> = r.values.iter().map(|v| format!("{v}")).collect();
+        s += &format!(
+            "{},{},{},{},{},{},{},{},{},{}\n",
+            vals.join(","),
+            m.laps,
+            r.lap_time_s().map_or(String::new(), |t| format!("{t}")),
+            m.xte_rms_m,
+            m.xte_max_m,
+            m.lane_departures,
+            m.steer_reversals_per_s,
+            r.steer_diff_rms,
+            m.lane_lost_frames,
+            serde_json::to_value(m.end).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default()
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_values_are_evenly_spaced() {
+        let a = parse_axis("steering.kp=0.2:2.0:10").unwrap();
+        assert_eq!(a.key, "steering.kp");
+        assert_eq!(a.values.len(), 10);
+        assert!((a.values[0] - 0.2).abs() < 1e-12 && (a.values[9] - 2.0).abs() < 1e-12);
+        assert!((a.values[1] - 0.4).abs() < 1e-12);
+        assert_eq!(parse_axis(" steering.kd = 0.5:1:1").unwrap().values, vec![0.5]);
+        // Descending ranges are allowed.
+        assert_eq!(parse_axis("a=1:0:3").unwrap().values, vec![1.0, 0.5, 0.0]);
+    }
+
+    #[test]
+    fn bad_axes_name_what_is_wrong() {
+        assert_eq!(parse_axis("steering.kp"), Err(SweepError::Form("steering.kp".into())));
+        assert_eq!(parse_axis("k=1:2"), Err(SweepError::Form("k=1:2".into())));
+        assert_eq!(parse_axis("=1:2:3"), Err(SweepError::Form("=1:2:3".into())));
+        let e = parse_axis("k=x:2:3").unwrap_err().to_string();
+        assert!(e.contains("LO `x`"), "{e}");
+        let e = parse_axis("k=1:inf:3").unwrap_err().to_string();
+        assert!(e.contains("HI `inf`"), "{e}");
+        assert!(matches!(parse_axis("k=1:2:0"), Err(SweepError::Count { .. })));
+        assert!(matches!(parse_axis("k=1:2:1001"), Err(SweepError::Count { .. })));
+        assert!(matches!(parse_axis("k=1:2:-1"), Err(SweepError::Count { .. })));
+    }
+
+    #[test]
+    fn a_grid_is_every_pair_last_axis_fastest() {
+        let axes = parse_axes(&["a=1:2:2".into(), "b=10:30:3".into()]).unwrap();
+        let g = grid(&axes);
+        assert_eq!(g.len(), 6);
+        assert_eq!(g[0], vec![1.0, 10.0]);
+        assert_eq!(g[1], vec![1.0, 20.0]);
+        assert_eq!(g[3], vec![2.0, 10.0]);
+        assert_eq!(g[5], vec![2.0, 30.0]);
+        assert_eq!(grid(&axes[..1]), vec![vec![1.0], vec![2.0]]);
+        assert!(matches!(parse_axes(&["a=1:2:2".into(), "a=1:2:2".into()]), Err(SweepError::Axes(_))));
+        assert!(matches!(parse_axes(&["a=1:2:100".into(), "b=1:2:11".into()]), Err(SweepError::TooMany(1100))));
+        assert!(matches!(parse_axes(&[]), Err(SweepError::Axes(_))));
+        let three: Vec<String> = vec!["a=1:2:2".into(), "b=1:2:2".into(), "c=1:2:2".into()];
+        assert!(matches!(parse_axes(&three), Err(SweepError::Axes(_))));
+    }
+
+    #[test]
+    fn units_from_names() {
+        assert_eq!(axis_label("steering.kd"), "steering.kd (steer per error/s)");
+        assert_eq!(axis_label("vehicle.servo_delay_s"), "vehicle.servo_delay_s (s)");
+        assert_eq!(axis_label("vehicle.max_speed_mps"), "vehicle.max_speed_mps (m/s)");
+        assert_eq!(axis_label("vehicle.wheelbase_m"), "vehicle.wheelbase_m (m)");
+        assert_eq!(axis_label("lane.min_peak"), "lane.min_peak");
+    }
+
+    #[test]
+    fn chatter_is_the_rms_of_the_first_difference() {
+        let mut c = Chatter::default();
+        assert_eq!(c.rms(), 0.0);
+        for s in [0.0, 0.1, 0.0, 0.1, 0.0] {
+            c.push(s);
+        }
+        assert!((c.rms() - 0.1).abs() < 1e-12);
+        let mut c = Chatter::default();
+        for i in 0..10 {
+            c.push(0.01 * i as f64);
+        }
+        assert!((c.rms() - 0.01).abs() < 1e-12);
+    }
+}
