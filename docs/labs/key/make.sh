@@ -42,6 +42,21 @@ for kp in 0.5 2 3.5; do
 done
 fig 01 "lost_frames_kp_0.5" "$(csv_at l01/sweep.csv 0.5 lost_frames)" 5 frames "$C"
 
+# ---- lab 2: derivative chatter with and without the low-pass, 30 s (the first curve) -----
+for tau in 0 0.2; do
+  C="$SIM --laps 0 --seconds 30 --set steering.kd=0.1 --set steering.derivative_tau=$tau"
+  $C -o l02_$tau >/dev/null
+  fig 02 "reversals_per_s_kd0.1_tau$tau" "$(jq '.steer_reversals_per_s' l02_$tau/summary.json)" 0.05 1/s "$C"
+  fig 02 "xte_rms_kd0.1_tau$tau" "$(jq '.xte_rms_m' l02_$tau/summary.json)" 0.001 m "$C"
+done
+
+# ---- lab 5: step response from a 5 cm start offset ---------------------------------------
+C="$SIM --laps 0 --seconds 10 --start-offset 0.05"
+$C -o l05 >/dev/null
+fig 05 offset_rise_time_s "$(jq '.step.rise_time_s' l05/summary.json)" 0.1 s "$C"
+fig 05 offset_overshoot_pct "$(jq '.step.overshoot_pct' l05/summary.json)" 1 % "$C"
+fig 05 offset_settling_time_s "$(jq '.step.settling_time_s' l05/summary.json)" 0.2 s "$C"
+
 # ---- lab 6: camera model ------------------------------------------------------------------
 C="rccar config roi --no-local --near 0.3 --far 0.8 --half-width 0.25"
 fig 06 roi_near03_bottom_left_x "$($C | grep -o '\[-\?[0-9.]*, [0-9.]*\]\]' | grep -o '^\[-\?[0-9.]*' | tr -d '[')" 0.01 px "$C"
