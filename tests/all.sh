@@ -21,6 +21,7 @@ DEB_PACKAGES=(
   opencv-data                                  # stock Haar/LBP cascades for the detect parity stage
   chromium chromium-driver                     # the dashboard's headless-browser stage
   socat                                        # a silent pty pair for rccar drive's bad-port test
+  jq                                           # the labs' key (docs/labs/key/make.sh)
   opencv-doc                                   # OpenCV's stereo chessboard pairs (calib parity stage)
 )
 # The Pi cross-build stage (tests/cross/run.sh) and its packages (skip with RCCAR_CROSS=0). Cold
@@ -91,6 +92,7 @@ stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib 
 # dashboard), so the library is compiled once more, not once per feature.
 FEAT=serial,camera,gpio,dashboard
 stage link-hil cargo test --release --features $FEAT --test link_hil
+stage labs-link cargo test --release --features $FEAT --test labs lab11
 # the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr
 # (one test at a time: each needs a core for the emulator on the wall clock; ~5 min)
 stage drive-fil cargo test --release --features $FEAT --test drive_fil --test drive_cli -- --test-threads 1
