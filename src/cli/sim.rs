@@ -32,7 +32,8 @@ pub struct SimArgs {
     /// Laps to drive (default: `sim.laps`).
     #[arg(long)]
     pub laps: Option<u32>,
-    /// Stop after this much simulated time, seconds (default: `sim.max_seconds`).
+    /// Stop after this much simulated time, seconds (default: `sim.max_seconds`). Without
+    /// `--laps` this is a timed run (no lap count to reach; exit 0 unless the car left the lane).
     #[arg(long)]
     pub seconds: Option<f64>,
     /// Seed of the camera noise (default: `sim.seed`).
@@ -80,6 +81,10 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     }
     if let Some(s) = a.seconds {
         sets.push(format!("sim.max_seconds={s}"));
+        if a.laps.is_none() {
+            // `--seconds` alone is a timed run: drive that long, no lap count to reach
+            sets.push("sim.laps=0".into());
+        }
     }
     if let Some(s) = a.seed {
         sets.push(format!("sim.seed={s}"));
