@@ -21,7 +21,59 @@
 //! image (x_r = x_l − d); with the right one as reference, further right. Units: pixels.
 
 use super::NoRange;
-use image::GrayImage;
+use image::{GrayImage, RgbImage};
+
+/// The chroma of each pixel, max(R, G, B) − min(R, G, B): grey and white (a floor, its lines)
+/// become 0, a coloured object stays bright. Matching a plain coloured object on chroma
+/// instead of grey leaves only its silhouette to correlate, so the texture of the floor
+/// around it in the box cannot win (docs/stereo.md, the obstacle with a short base).
+pub fn chroma_from_rgb(rgb: &RgbImage, out: &mut GrayImage) {
+    if out.dimensions() != rgb.dimensions() {
+        *out = GrayImage::new(rgb.width(), rgb.height());
+    }
+    for (o, p) in out.pixels_mut().zip(rgb.pixels()) {
+        let [r, g, b] = p.0;
+        o.0[0] = r.max(g).max(b) - r.min(g).min(b);
+    }
+}
+
+/// Matches `bbox` on grey, checked against a match on chroma ([`chroma_from_rgb`]) for a
+/// plain coloured object: when the two disparities differ by more than `gap` = max(2 px,
+/// `max_gap` × the chroma disparity) the grey peak belongs to something else in the box (the
+/// floor's lines behind an obstacle), and the grey match is repeated within ±gap of the
+/// chroma disparity (the chroma match itself if that finds nothing). Without a chroma match (a grey object: `Flat`) the grey
+/// match stands. Returns the match and whether chroma overruled grey.
+#[allow(clippy::too_many_arguments)]
+pub fn match_box_chroma_checked(
+    m: &mut Matcher,
+    gray: (&GrayImage, &GrayImage),
+    chroma: (&GrayImage, &GrayImage),
+    bbox: [i64; 4],
+    opts: &MatchOptions,
+    max_gap: f64,
+) -> (Result<StereoMatch, NoRange>, bool) {
+    let g = m.match_box(gray.0, gray.1, bbox, opts);
+    let Ok(c) = m.match_box(chroma.0, chroma.1, bbox, opts) else {
+        return (g, false);
+    };
+    let max_gap_px = (max_gap * c.disparity).max(2.0);
+    match g {
+        Ok(g) if (g.disparity - c.disparity).abs() <= max_gap_px => (Ok(g), false),
+        _ => {
+            let near = MatchOptions {
+                min_disparity: ((c.disparity - max_gap_px).round().max(0.0)) as u32,
+                max_disparity: (c.disparity + max_gap_px).round() as u32,
+                near_peak_ratio: 1.0,
+                ..*opts
+            };
+            match m.match_box(gray.0, gray.1, bbox, &near) {
+                // A grey peak well inside the window: the object's own edges.
+                Ok(g2) if (g2.disparity - c.disparity).abs() < max_gap_px / 2.0 => (Ok(g2), true),
+                _ => (Ok(c), true),
+            }
+        }
+    }
+}
 
 /// How to search.
 #[derive(Debug, Clone, Copy, PartialEq)]
