@@ -12,7 +12,7 @@
 //! Obstacles (plain coloured boxes) are matched on grey checked against chroma, as the
 //! pipeline does (src/stereo/ranging.rs; `RCCAR_STEREO_NO_CHROMA=1` turns the check off).
 //! Known shortfall, printed but not asserted: the obstacle (a plain blue box) with the
-//! 0.06 m base (max 8.5 % with the chroma check, 62 % without: the floor's lines inside the
+//! 0.06 m base (asserted: median ≤ 2 %, max ≤ 10 %; measured 8.5 % with the chroma check, 62 % without: the floor's lines inside the
 //! detector box out-correlate the box's two vertical edges; see docs/stereo.md). `RCCAR_STEREO_DUMP=dir` writes the pairs and the correlation curves.
 //!
 //!     cargo test --release --test stereo_sim -- --nocapture
@@ -249,6 +249,14 @@ fn stereo_ranging_on_detector_boxes_in_the_simulator() {
                         100.0 * st.0,
                         100.0 * st.1
                     );
+                    // With the chroma check it is within 10 % (62 % without).
+                    if std::env::var("RCCAR_STEREO_NO_CHROMA").is_err() && !(st.0 <= 0.02 && st.1 <= 0.10) {
+                        failures.push(format!(
+                            "{kind} base {base} {name} (chroma check): median {:.2} %, max {:.2} %",
+                            100.0 * st.0,
+                            100.0 * st.1
+                        ));
+                    }
                     continue;
                 }
                 if !(st.0 <= 0.02 && st.1 <= 0.05) {
