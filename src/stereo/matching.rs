@@ -303,6 +303,54 @@ pub fn match_box(
 mod tests {
     use super::*;
 
+    /// A plain blue box (disparity 20 px) in front of a floor of irregular white stripes
+    /// (disparity 5 px) that fill most of the box: chroma sees only the box.
+    #[test]
+    fn chroma_check_finds_a_plain_box_in_front_of_stripes() {
+        let stripes = |x: i64| (x * 7919 % 23) < 9;
+        let pair = |shift_box: i64, shift_floor: i64| {
+            RgbImage::from_fn(220, 60, |x, y| {
+                let (x, y) = (x as i64, y as i64);
+                if (100 - shift_box..108 - shift_box).contains(&x) && (15..45).contains(&y) {
+                    image::Rgb([40, 60, 200])
+                } else if stripes(x + shift_floor) {
+                    image::Rgb([235, 235, 230])
+                } else {
+                    image::Rgb([110, 104, 96])
+                }
+            })
+        };
+        let (l, r) = (pair(0, 0), pair(20, 5));
+        let (mut gl, mut gr, mut cl, mut cr) = (
+            GrayImage::new(0, 0),
+            GrayImage::new(0, 0),
+            GrayImage::new(0, 0),
+            GrayImage::new(0, 0),
+        );
+        crate::detect::gray_from_rgb(&l, &mut gl);
+        crate::detect::gray_from_rgb(&r, &mut gr);
+        chroma_from_rgb(&l, &mut cl);
+        chroma_from_rgb(&r, &mut cr);
+        let opts = MatchOptions {
+            max_disparity: 60,
+            near_peak_ratio: 1.0,
+            ..MatchOptions::default()
+        };
+        let mut m = Matcher::new();
+        let bx = [84, 10, 40, 40];
+        let (got, _) = match_box_chroma_checked(&mut m, (&gl, &gr), (&cl, &cr), bx, &opts, 0.1);
+        let got = got.unwrap();
+        assert!((got.disparity - 20.0).abs() < 0.1, "{got:?}");
+        // Grey alone is pulled off the box by the stripes (18.0 px).
+        let grey = m.match_box(&gl, &gr, bx, &opts).unwrap();
+        assert!((grey.disparity - 20.0).abs() > 1.5, "{grey:?}");
+        // A grey object has no chroma: grey alone decides.
+        let g = image::imageops::grayscale(&l);
+        let grey_l = image::DynamicImage::ImageLuma8(g).to_rgb8();
+        chroma_from_rgb(&grey_l, &mut cl);
+        assert!(cl.pixels().all(|p| p.0[0] == 0));
+    }
+
     /// Aperiodic value noise (hashed lattice every 3 px, bilinear), shifted by `shift` px.
     fn textured(w: u32, h: u32, shift: f64) -> GrayImage {
         let hash = |i: i64, j: i64| -> f64 {
