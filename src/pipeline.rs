@@ -530,7 +530,7 @@ impl Pipeline {
                             ];
                             let light = d.light.as_ref().map(|l| light_color(l, frame, r));
                             let range = match stereo {
-                                Some(ref mut st) => st.range(r),
+                                Some(ref mut st) => st.range(class, r),
                                 None => None,
                             }
                             .or_else(|| self.ranging.range_in_image(frame, class, bbox));

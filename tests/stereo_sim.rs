@@ -9,10 +9,11 @@
 //!
 //! Asserted (targets of issue 12, on detector boxes up to 1.5 m): (b) and (c) median
 //! relative error ≤ 2 %, max ≤ 5 %; (b) = (c); the object found at ≥ 75 % of the distances.
+//! Obstacles (plain coloured boxes) are matched on grey checked against chroma, as the
+//! pipeline does (src/stereo/ranging.rs; `RCCAR_STEREO_NO_CHROMA=1` turns the check off).
 //! Known shortfall, printed but not asserted: the obstacle (a plain blue box) with the
-//! 0.06 m base, where the floor's lines inside the detector box out-correlate the box's two
-//! vertical edges at some distances (a wrong peak at the floor's disparity; see
-//! docs/stereo.md). `RCCAR_STEREO_DUMP=dir` writes the pairs and the correlation curves.
+//! 0.06 m base (asserted: median ≤ 2 %, max ≤ 10 %; measured 8.5 % with the chroma check, 62 % without: the floor's lines inside the
+//! detector box out-correlate the box's two vertical edges; see docs/stereo.md). `RCCAR_STEREO_DUMP=dir` writes the pairs and the correlation curves.
 //!
 //!     cargo test --release --test stereo_sim -- --nocapture
 
@@ -23,7 +24,7 @@ use rccar::sim::render::RenderOptions;
 use rccar::sim::scene::Scene;
 use rccar::sim::stereo::StereoRig;
 use rccar::sim::track::Track;
-use rccar::stereo::matching::Matcher;
+use rccar::stereo::matching::{chroma_from_rgb, match_box_chroma_checked, Matcher};
 use rccar::stereo::{MatchOptions, StereoGeometry};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -115,12 +116,28 @@ fn measure(s: &mut Setup, base: f64, d: f64, matcher: &mut Matcher) -> Option<Ro
         near_peak_ratio: cfg.stereo.near_peak_ratio,
         ..MatchOptions::default()
     };
-    let est = match matcher.match_box(
-        &gl,
-        &gr,
-        [rect.x as i64, rect.y as i64, rect.width as i64, rect.height as i64],
-        &opts,
-    ) {
+    let bx = [rect.x as i64, rect.y as i64, rect.width as i64, rect.height as i64];
+    // Obstacles (plain coloured boxes): grey checked against chroma (src/stereo/matching.rs).
+    let grey = if s.class == ObjectClass::Obstacle && std::env::var("RCCAR_STEREO_NO_CHROMA").is_err() {
+        let (mut cl, mut cr) = (image::GrayImage::new(0, 0), image::GrayImage::new(0, 0));
+        chroma_from_rgb(&l, &mut cl);
+        chroma_from_rgb(&r, &mut cr);
+        let (m, overruled) = match_box_chroma_checked(
+            matcher,
+            (&gl, &gr),
+            (&cl, &cr),
+            bx,
+            &opts,
+            rccar::stereo::ranging::CHROMA_GAP,
+        );
+        if overruled {
+            println!("  obstacle base {base} d {d:.1}: chroma overruled the grey peak");
+        }
+        m
+    } else {
+        matcher.match_box(&gl, &gr, bx, &opts)
+    };
+    let est = match grey {
         Ok(m) => {
             if let Ok(dir) = std::env::var("RCCAR_STEREO_DUMP") {
                 l.save(format!("{dir}/l_{base}_{d}.png")).unwrap();
@@ -232,6 +249,14 @@ fn stereo_ranging_on_detector_boxes_in_the_simulator() {
                         100.0 * st.0,
                         100.0 * st.1
                     );
+                    // With the chroma check it is within 10 % (62 % without).
+                    if std::env::var("RCCAR_STEREO_NO_CHROMA").is_err() && !(st.0 <= 0.02 && st.1 <= 0.10) {
+                        failures.push(format!(
+                            "{kind} base {base} {name} (chroma check): median {:.2} %, max {:.2} %",
+                            100.0 * st.0,
+                            100.0 * st.1
+                        ));
+                    }
                     continue;
                 }
                 if !(st.0 <= 0.02 && st.1 <= 0.05) {

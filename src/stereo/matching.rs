@@ -21,7 +21,59 @@
 //! image (x_r = x_l − d); with the right one as reference, further right. Units: pixels.
 
 use super::NoRange;
-use image::GrayImage;
+use image::{GrayImage, RgbImage};
+
+/// The chroma of each pixel, max(R, G, B) − min(R, G, B): grey and white (a floor, its lines)
+/// become 0, a coloured object stays bright. Matching a plain coloured object on chroma
+/// instead of grey leaves only its silhouette to correlate, so the texture of the floor
+/// around it in the box cannot win (docs/stereo.md, the obstacle with a short base).
+pub fn chroma_from_rgb(rgb: &RgbImage, out: &mut GrayImage) {
+    if out.dimensions() != rgb.dimensions() {
+        *out = GrayImage::new(rgb.width(), rgb.height());
+    }
+    for (o, p) in out.pixels_mut().zip(rgb.pixels()) {
+        let [r, g, b] = p.0;
+        o.0[0] = r.max(g).max(b) - r.min(g).min(b);
+    }
+}
+
+/// Matches `bbox` on grey, checked against a match on chroma ([`chroma_from_rgb`]) for a
+/// plain coloured object: when the two disparities differ by more than `gap` = max(2 px,
+/// `max_gap` × the chroma disparity) the grey peak belongs to something else in the box (the
+/// floor's lines behind an obstacle), and the grey match is repeated within ±gap of the
+/// chroma disparity (the chroma match itself if that finds nothing). Without a chroma match (a grey object: `Flat`) the grey
+/// match stands. Returns the match and whether chroma overruled grey.
+#[allow(clippy::too_many_arguments)]
+pub fn match_box_chroma_checked(
+    m: &mut Matcher,
+    gray: (&GrayImage, &GrayImage),
+    chroma: (&GrayImage, &GrayImage),
+    bbox: [i64; 4],
+    opts: &MatchOptions,
+    max_gap: f64,
+) -> (Result<StereoMatch, NoRange>, bool) {
+    let g = m.match_box(gray.0, gray.1, bbox, opts);
+    let Ok(c) = m.match_box(chroma.0, chroma.1, bbox, opts) else {
+        return (g, false);
+    };
+    let max_gap_px = (max_gap * c.disparity).max(2.0);
+    match g {
+        Ok(g) if (g.disparity - c.disparity).abs() <= max_gap_px => (Ok(g), false),
+        _ => {
+            let near = MatchOptions {
+                min_disparity: ((c.disparity - max_gap_px).round().max(0.0)) as u32,
+                max_disparity: (c.disparity + max_gap_px).round() as u32,
+                near_peak_ratio: 1.0,
+                ..*opts
+            };
+            match m.match_box(gray.0, gray.1, bbox, &near) {
+                // A grey peak well inside the window: the object's own edges.
+                Ok(g2) if (g2.disparity - c.disparity).abs() < max_gap_px / 2.0 => (Ok(g2), true),
+                _ => (Ok(c), true),
+            }
+        }
+    }
+}
 
 /// How to search.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -250,6 +302,54 @@ pub fn match_box(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A plain blue box (disparity 20 px) in front of a floor of irregular white stripes
+    /// (disparity 5 px) that fill most of the box: chroma sees only the box.
+    #[test]
+    fn chroma_check_finds_a_plain_box_in_front_of_stripes() {
+        let stripes = |x: i64| (x * 7919 % 23) < 9;
+        let pair = |shift_box: i64, shift_floor: i64| {
+            RgbImage::from_fn(220, 60, |x, y| {
+                let (x, y) = (x as i64, y as i64);
+                if (100 - shift_box..108 - shift_box).contains(&x) && (15..45).contains(&y) {
+                    image::Rgb([40, 60, 200])
+                } else if stripes(x + shift_floor) {
+                    image::Rgb([235, 235, 230])
+                } else {
+                    image::Rgb([110, 104, 96])
+                }
+            })
+        };
+        let (l, r) = (pair(0, 0), pair(20, 5));
+        let (mut gl, mut gr, mut cl, mut cr) = (
+            GrayImage::new(0, 0),
+            GrayImage::new(0, 0),
+            GrayImage::new(0, 0),
+            GrayImage::new(0, 0),
+        );
+        crate::detect::gray_from_rgb(&l, &mut gl);
+        crate::detect::gray_from_rgb(&r, &mut gr);
+        chroma_from_rgb(&l, &mut cl);
+        chroma_from_rgb(&r, &mut cr);
+        let opts = MatchOptions {
+            max_disparity: 60,
+            near_peak_ratio: 1.0,
+            ..MatchOptions::default()
+        };
+        let mut m = Matcher::new();
+        let bx = [84, 10, 40, 40];
+        let (got, _) = match_box_chroma_checked(&mut m, (&gl, &gr), (&cl, &cr), bx, &opts, 0.1);
+        let got = got.unwrap();
+        assert!((got.disparity - 20.0).abs() < 0.1, "{got:?}");
+        // Grey alone is pulled off the box by the stripes (18.0 px).
+        let grey = m.match_box(&gl, &gr, bx, &opts).unwrap();
+        assert!((grey.disparity - 20.0).abs() > 1.5, "{grey:?}");
+        // A grey object has no chroma: grey alone decides.
+        let g = image::imageops::grayscale(&l);
+        let grey_l = image::DynamicImage::ImageLuma8(g).to_rgb8();
+        chroma_from_rgb(&grey_l, &mut cl);
+        assert!(cl.pixels().all(|p| p.0[0] == 0));
+    }
 
     /// Aperiodic value noise (hashed lattice every 3 px, bilinear), shifted by `shift` px.
     fn textured(w: u32, h: u32, shift: f64) -> GrayImage {

@@ -9,14 +9,20 @@
 //! ```
 //!
 //! so the object tracker (src/ranging/track.rs) weighs stereo and odometry as it weighs the
-//! monocular ranges. A box without a match gives `None` (the caller decides what to fall back
-//! on). Units: metres, pixels.
+//! monocular ranges. Obstacles (plain coloured boxes) are matched on grey checked against
+//! chroma (`matching::match_box_chroma_checked`), so the floor's lines inside their box do not
+//! win. A box without a match gives `None` (the caller decides what to fall back on). Units:
+//! metres, pixels.
 
 use super::{MatchOptions, StereoGeometry};
 use crate::config::Config;
 use crate::detect::{gray_from_rgb, Rect};
-use crate::ranging::BoxRange;
+use crate::ranging::{BoxRange, ObjectClass};
 use image::{GrayImage, RgbImage};
+
+/// Largest disagreement of the grey and the chroma disparity of an obstacle, relative, before
+/// chroma overrules grey (measured in tests/stereo_sim.rs).
+pub const CHROMA_GAP: f64 = 0.1;
 
 /// Stereo ranging of detector boxes, with its scratch buffers.
 #[derive(Debug, Clone)]
@@ -32,6 +38,8 @@ pub struct StereoRanging {
     matcher: super::matching::Matcher,
     gray_ref: GrayImage,
     gray_other: GrayImage,
+    chroma_ref: GrayImage,
+    chroma_other: GrayImage,
     /// Boxes matched and boxes without a match since the start.
     pub counts: (u64, u64),
 }
@@ -60,6 +68,8 @@ impl StereoRanging {
             matcher: super::matching::Matcher::new(),
             gray_ref: GrayImage::new(0, 0),
             gray_other: GrayImage::new(0, 0),
+            chroma_ref: GrayImage::new(0, 0),
+            chroma_other: GrayImage::new(0, 0),
             counts: (0, 0),
         }
     }
@@ -68,17 +78,28 @@ impl StereoRanging {
     pub fn set_pair(&mut self, reference: &RgbImage, other: &RgbImage) {
         gray_from_rgb(reference, &mut self.gray_ref);
         gray_from_rgb(other, &mut self.gray_other);
+        super::matching::chroma_from_rgb(reference, &mut self.chroma_ref);
+        super::matching::chroma_from_rgb(other, &mut self.chroma_other);
     }
 
-    /// The range of the box `rect` of the reference image of the last pair; `None` when it
-    /// has no match (see [`super::NoRange`]).
-    pub fn range(&mut self, rect: Rect) -> Option<BoxRange> {
-        let m = self.matcher.match_box(
-            &self.gray_ref,
-            &self.gray_other,
-            [rect.x as i64, rect.y as i64, rect.width as i64, rect.height as i64],
-            &self.options,
-        );
+    /// The range of the box `rect` of an object of `class` in the reference image of the
+    /// last pair; `None` when it has no match (see [`super::NoRange`]).
+    pub fn range(&mut self, class: ObjectClass, rect: Rect) -> Option<BoxRange> {
+        let bx = [rect.x as i64, rect.y as i64, rect.width as i64, rect.height as i64];
+        let m = if class == ObjectClass::Obstacle {
+            super::matching::match_box_chroma_checked(
+                &mut self.matcher,
+                (&self.gray_ref, &self.gray_other),
+                (&self.chroma_ref, &self.chroma_other),
+                bx,
+                &self.options,
+                CHROMA_GAP,
+            )
+            .0
+        } else {
+            self.matcher
+                .match_box(&self.gray_ref, &self.gray_other, bx, &self.options)
+        };
         let Ok(m) = m else {
             self.counts.1 += 1;
             return None;
