@@ -5,7 +5,7 @@
 # stop sign pasted in; the test frames come from the other half of the photos and other seeds.
 # Also trains a baseline with the trainer of another build (BASELINE=path/to/rccar-train, e.g.
 # main before issue 16) on the same positives and window, its defaults otherwise.
-# Usage: bash training/photo_check.sh [WORKDIR]   (default out/photo_check; ~30-60 min on 2 cores)
+# Usage: bash training/photo_check.sh [WORKDIR]   (default out/photo_check; 10-25 min with THREADS=1 on 2 shared cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release -p rccar-train

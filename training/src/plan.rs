@@ -4,11 +4,14 @@
 //! * Window: the `# rccar-train distort window WxH` line `distort` writes, else from the
 //!   positives' boxes: aspect = the median box width / height; the shorter side = the 5th
 //!   percentile of the boxes' shorter sides (the smallest objects you labelled are the farthest
-//!   ones that matter: a box smaller than the window cannot be used, and the window is the
-//!   smallest object the cascade can find), clamped to 12–20 px (below 12 the features see
-//!   little; the Haar pool grows with the fourth power of the side, so 24 px trains about
-//!   twice as slowly as 20 px, for no gain at the car's 320 × 240 where a 10 cm sign is
-//!   18 px wide at 1.5 m).
+//!   ones that matter) divided by 1.1² = 1.21 — two steps of the detector's scale factor, so
+//!   that even those smallest objects are hit at about three pyramid scales and get the
+//!   `minNeighbors` + 1 = 4 raw hits the detector's grouping needs (an object only as big as
+//!   the window is hit at one scale and a few offsets, and is lost at minNeighbors 3: on the
+//!   photo-like check a 17 × 18 window from the 5th percentile lost most signs under 22 px,
+//!   a 14 × 15 one found them) — clamped to 12–20 px (below 12 the features see little; the
+//!   Haar pool grows with the fourth power of the side, so 24 px trains about twice as slowly
+//!   as 20 px, for no gain at the car's 320 × 240 where a 10 cm sign is 18 px wide at 1.5 m).
 //! * Positives per stage: each stage loses up to `1 − min_hit_rate` of the positives it
 //!   keeps, so `num_stages` stages need `num_pos · (1 + (num_stages − 1)(1 − min_hit_rate))`
 //!   (the rule in OpenCV's traincascade documentation); `num_pos` defaults to the largest that
@@ -20,6 +23,16 @@ use crate::samples::InfoLine;
 
 /// Smallest and largest side of an automatically chosen window, pixels.
 pub const AUTO_SIDE: (u32, u32) = (12, 20);
+
+/// The window's shorter side is the 5th-percentile box side divided by this: two steps of the
+/// detector's scale factor 1.1 (see the module notes).
+pub const SMALLEST_MARGIN: f64 = 1.21;
+
+/// `train`'s default per-stage hit rate. OpenCV's default is 0.995; over the 18-20 stages a
+/// few hundred backgrounds need, 0.995 keeps 0.995^20 = 90% of the training positives and
+/// fewer of unseen ones (on the photo-like check: recall 0.81 at minNeighbors 3 with no false
+/// positive left), 0.998 keeps 96% and lets more raw hits through on each object.
+pub const DEFAULT_MIN_HIT_RATE: f64 = 0.998;
 
 /// Fewer positives than this: the advice is to make more with `distort`.
 pub const FEW_POSITIVES: usize = 500;
@@ -59,7 +72,7 @@ pub fn choose_window(lines: &[InfoLine]) -> Option<WindowChoice> {
     let mut short: Vec<f64> = boxes.iter().map(|(w, h)| w.min(*h)).collect();
     short.sort_by(|a, b| a.total_cmp(b));
     let p5 = short[(short.len() as f64 * 0.05) as usize];
-    let side = (p5.floor() as u32).clamp(AUTO_SIDE.0, AUTO_SIDE.1);
+    let side = ((p5 / SMALLEST_MARGIN).floor() as u32).clamp(AUTO_SIDE.0, AUTO_SIDE.1);
     let size = if aspect >= 1.0 {
         (((side as f64 * aspect).round() as u32).min(64), side)
     } else {
@@ -68,13 +81,14 @@ pub fn choose_window(lines: &[InfoLine]) -> Option<WindowChoice> {
     Some(WindowChoice {
         size,
         why: format!(
-            "window {}x{} from {} boxes: median aspect {:.2}, 5% of boxes are under {:.0} px on their shorter side \
-             (sides kept within {}-{} px)",
+            "window {}x{} from {} boxes: median aspect {:.2}, 5% of boxes are under {:.0} px on their shorter side, \
+             the window is {:.2}x smaller so they are found at several scales (sides kept within {}-{} px)",
             size.0,
             size.1,
             boxes.len(),
             aspect,
             p5,
+            SMALLEST_MARGIN,
             AUTO_SIDE.0,
             AUTO_SIDE.1
         ),
@@ -137,14 +151,18 @@ mod tests {
 
     #[test]
     fn window_follows_the_boxes_aspect_and_small_end() {
-        // Square boxes from 20 to 119 px: the 5th percentile is 25 → clamped to 20.
+        // Square boxes from 20 to 119 px: the 5th percentile is 25 → 25 / 1.21 = 20.7 → 20.
         let sq: Vec<(i32, i32)> = (20..120).map(|s| (s, s)).collect();
         assert_eq!(choose_window(&lines(&sq)).expect("boxes").size, (20, 20));
-        // Tall boxes (aspect 0.4), 15-59 px wide: the 5th percentile (index 2) is 17 → 17 × 42.
+        // From 30 px: the 5th percentile is 35 → clamped to 20.
+        let big: Vec<(i32, i32)> = (30..130).map(|s| (s, s)).collect();
+        assert_eq!(choose_window(&lines(&big)).expect("boxes").size, (20, 20));
+        // Tall boxes (aspect 0.4), 15-59 px wide: the 5th percentile (index 2) is 17 → 17 / 1.21
+        // = 14.05 → 14 × 35.
         let tall: Vec<(i32, i32)> = (15..60).map(|s| (s, (s as f64 / 0.4).round() as i32)).collect();
         let c = choose_window(&lines(&tall)).expect("boxes");
-        assert_eq!(c.size.0, 17, "{}", c.why);
-        assert!((42..=43).contains(&c.size.1), "{}", c.why);
+        assert_eq!(c.size.0, 14, "{}", c.why);
+        assert!((35..=36).contains(&c.size.1), "{}", c.why);
         // Tiny boxes: never below 12.
         assert_eq!(choose_window(&lines(&[(8, 8); 10])).expect("boxes").size, (12, 12));
         assert!(choose_window(&[]).is_none());
