@@ -86,6 +86,17 @@ impl ConfigArgs {
     }
 }
 
+/// `drive`, `replay` and `sim` have one frame source: with `ranging.method = "stereo"` they say
+/// so once, on stderr, rather than range by mono silently.
+pub fn warn_single_camera(cfg: &Config) {
+    if cfg.ranging.method == "stereo" {
+        eprintln!(
+            "ranging: method = \"stereo\" but this command has one camera; ranges are monocular \
+             (stereo ranging: `rccar stereo`, or Pipeline::step_stereo; docs/stereo.md)"
+        );
+    }
+}
+
 /// Loads the `[detect]` cascades that exist and says once, on stderr, which are missing (the
 /// pipeline then runs without them: lane keeping only when none exists). The paths in `cfg`
 /// are absolute after [`ConfigArgs::load`].

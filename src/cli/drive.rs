@@ -129,6 +129,7 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     let mut tel = JsonlWriter::new(tel_file, tel_path.display().to_string());
 
     let mut pipeline = Pipeline::new(&cfg)?;
+    super::common::warn_single_camera(&cfg);
     pipeline.set_detector(super::common::load_detector(&cfg)?);
 
     // ---- the frame source -----------------------------------------------------------------

@@ -82,6 +82,7 @@ impl Observer for Summary {
 pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
     let mut pipeline = Pipeline::new(&cfg)?;
+    super::common::warn_single_camera(&cfg);
     pipeline.set_detector(super::common::load_detector(&cfg)?);
     let (w, h) = pipeline.frame_size();
     // Frames smaller than the ROI's extent are refused instead of being blown up.

@@ -121,6 +121,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
         camera.set_truth_boxes(true);
     } else {
+        super::common::warn_single_camera(&cfg);
         pipeline.set_detector(super::common::load_detector(&cfg)?);
     }
     // Without recording nobody looks at the frames: render only the rows the pipeline reads
