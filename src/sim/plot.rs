@@ -436,8 +436,9 @@ pub fn step_plot(t: &[f64], xte: &[f64], m: &StepMetrics) -> Result<RgbImage, Pl
                     .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
             }
         }
+        // The legend where the response is not: away from the centre it settles at.
         c.configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(if x0 > 0.0 { SeriesLabelPosition::UpperRight } else { SeriesLabelPosition::LowerRight })
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
             .label_font(("sans-serif", 15))
