@@ -18,51 +18,7 @@ use std::time::Instant;
 /// A straight with one object of `kind` on the driven lane, 3 m ahead of the start (the
 /// track of tests/ranging_sim.rs).
 fn track(kind: &str) -> Track {
-    let text = format!(
-        r#"
-name = "band"
-[start]
-x = 0.0
-y = 0.0
-heading_deg = 0.0
-[road]
-lanes = 2
-lane_width_m = 0.30
-line_width_m = 0.02
-line_color = [235, 235, 228]
-centre_line = "dashed"
-centre_line_color = [235, 235, 228]
-dash_m = 0.12
-gap_m = 0.05
-[floor]
-color = [112, 104, 96]
-texture = 0.18
-texture_scale_m = 0.15
-seed = 7
-margin_m = 1.0
-wall_color = [190, 186, 176]
-[[segments]]
-type = "straight"
-length_m = 6.0
-[[segments]]
-type = "arc"
-radius_m = 3.0
-angle_deg = 180
-[[segments]]
-type = "straight"
-length_m = 6.0
-[[segments]]
-type = "arc"
-radius_m = 3.0
-angle_deg = 180
-[[objects]]
-type = "{kind}"
-x = 3.0
-y = -0.15
-yaw_deg = 180
-"#
-    );
-    Track::from_toml_str(&text, "band track").unwrap()
+    rccar::sim::scenario_lab::straight_with_object(kind).unwrap()
 }
 
 fn iou(a: Rect, b: [f64; 4]) -> f64 {
