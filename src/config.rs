@@ -1228,6 +1228,21 @@ fn edit_distance(a: &str, b: &str) -> usize {
 mod tests {
     use super::*;
 
+    /// Outside any project (and without RCCAR_CONFIG) the search names the folder it started
+    /// from and says how to point at a file; the CLI may then fall back to its source tree.
+    #[test]
+    fn no_config_anywhere_above_is_a_named_error() {
+        let t = tempfile::tempdir().unwrap();
+        let e = find_config(t.path(), None).unwrap_err();
+        let m = e.to_string();
+        assert!(m.starts_with("no config/car.toml in ") && m.contains("--config FILE or RCCAR_CONFIG=FILE"), "{m}");
+        assert!(matches!(e, ConfigError::NotFound { .. }));
+        std::fs::create_dir_all(t.path().join("config/sub")).unwrap();
+        std::fs::write(t.path().join("config/car.toml"), "").unwrap();
+        assert_eq!(find_config(&t.path().join("config/sub"), None).unwrap(), t.path().join("config/car.toml"));
+        assert_eq!(find_config(t.path(), Some(std::ffi::OsStr::new("x.toml"))).unwrap(), t.path().join("x.toml"));
+    }
+
     #[test]
     fn defaults_are_valid() {
         Config::default().validate().unwrap();

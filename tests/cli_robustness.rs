@@ -246,15 +246,19 @@ fn calibration_keeps_comments_makes_a_backup_and_dry_run_shows_the_diff() {
 
 /// `cd /tmp && rccar sim`: no project here; the message says how to point at one, once.
 #[test]
-fn outside_the_project_the_error_says_how_to_point_at_a_config() {
+fn outside_the_project_it_uses_the_source_tree_config_and_says_so() {
     let t = tempfile::tempdir().unwrap();
-    let o = rccar(t.path(), &["sim"]);
-    assert_eq!(o.code, Some(2));
+    // No config/car.toml in the temporary folder or above it: the binary falls back to the
+    // config of the source tree it was built from (this checkout), and names the file.
+    let o = rccar(t.path(), &["config", "check"]);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    let ours = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/car.toml");
     assert!(
-        o.stderr.contains("no config/car.toml in") && o.stderr.contains("--config FILE or RCCAR_CONFIG=FILE"),
+        o.stderr.contains(&format!("using {} (the source tree rccar was built from", ours.display())),
         "{}",
         o.stderr
     );
+    assert_eq!(o.stderr.matches("no config/car.toml here or above").count(), 1, "said once: {}", o.stderr);
     let o = rccar(t.path(), &["sim", "--config", "nope/car.toml"]);
     assert_eq!(o.code, Some(2));
     assert_eq!(o.stderr.matches("No such file or directory").count(), 1, "{}", o.stderr);

@@ -3,7 +3,8 @@
 //!
 //! The base file is `--config FILE` when given, else `$RCCAR_CONFIG`, else `config/car.toml`
 //! in the working directory or the nearest folder above it (so `rccar` works from any
-//! subfolder of the project). Overrides: `--local FILE` (must exist when named), else
+//! subfolder of the project), else — outside any project — the `config/car.toml` of the source
+//! tree this binary was built from, when it still exists (said on stderr). Overrides: `--local FILE` (must exist when named), else
 //! `local.toml` beside the base file when it exists (`--no-local`: none); then
 //! `--set key=value`. Relative paths inside a file resolve against that file's folder (see
 //! `rccar::config::LoadedConfig`).
@@ -17,7 +18,8 @@ use std::path::{Path, PathBuf};
 #[derive(Args, Debug, Clone, Default)]
 pub struct ConfigArgs {
     /// The car's configuration file [default: $RCCAR_CONFIG, else config/car.toml in this
-    /// folder or the nearest folder above it].
+    /// folder or the nearest folder above it, else the one of the source tree rccar was
+    /// built from].
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Personal overrides layered on top (git-ignored); an error if named and missing
@@ -37,10 +39,22 @@ impl ConfigArgs {
     pub fn base_file(&self) -> Result<PathBuf> {
         match &self.config {
             Some(p) => Ok(p.clone()),
-            None => Ok(rccar::config::find_config(
-                Path::new("."),
-                std::env::var_os("RCCAR_CONFIG").as_deref(),
-            )?),
+            None => match rccar::config::find_config(Path::new("."), std::env::var_os("RCCAR_CONFIG").as_deref()) {
+                Ok(p) => Ok(p),
+                Err(e) => match built_from_config() {
+                    Some(p) => {
+                        static SAID: std::sync::Once = std::sync::Once::new();
+                        SAID.call_once(|| {
+                            eprintln!(
+                                "rccar: no config/car.toml here or above; using {} (the source tree rccar was built from; --config FILE to choose)",
+                                p.display()
+                            )
+                        });
+                        Ok(p)
+                    }
+                    None => Err(e.into()),
+                },
+            },
         }
     }
 
@@ -115,4 +129,12 @@ pub fn load_detector(cfg: &Config) -> Result<Option<rccar::detect::DetectStage>>
         );
     }
     Ok(stage)
+}
+
+/// `config/car.toml` of the source tree this binary was compiled from, if it is still there:
+/// a student who built rccar with cargo can run it from any folder. A binary copied to the
+/// car has no such tree and gets the usual "no config/car.toml" error.
+fn built_from_config() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config").join("car.toml");
+    p.is_file().then_some(p)
 }
