@@ -124,7 +124,8 @@ pub fn project_point(k: &Intrinsics, d: &Distortion, pose: &Pose, p: [f64; 3]) -
     project_with(k, d, &rodrigues(pose.rvec), &pose.t, p)
 }
 
-fn project_with(k: &Intrinsics, d: &Distortion, r: &Matrix3<f64>, t: &[f64; 3], p: [f64; 3]) -> (f64, f64) {
+/// [`project_point`] with the rotation as a matrix (R·p + t, then the lens, then `k`); pixels.
+pub(crate) fn project_with(k: &Intrinsics, d: &Distortion, r: &Matrix3<f64>, t: &[f64; 3], p: [f64; 3]) -> (f64, f64) {
     let x = r[(0, 0)] * p[0] + r[(0, 1)] * p[1] + r[(0, 2)] * p[2] + t[0];
     let y = r[(1, 0)] * p[0] + r[(1, 1)] * p[1] + r[(1, 2)] * p[2] + t[1];
     let z = r[(2, 0)] * p[0] + r[(2, 1)] * p[1] + r[(2, 2)] * p[2] + t[2];

@@ -36,9 +36,7 @@ pub struct StereoFit {
 }
 
 fn project(k: &Intrinsics, d: &Distortion, r: &Matrix3<f64>, t: &Vector3<f64>, p: &[f64; 3]) -> (f64, f64) {
-    let x = r * Vector3::new(p[0], p[1], p[2]) + t;
-    let (xd, yd) = d.distort(x[0] / x[2], x[1] / x[2]);
-    (k.fx * xd + k.cx, k.fy * yd + k.cy)
+    super::intrinsics::project_with(k, d, r, &[t[0], t[1], t[2]], *p)
 }
 
 fn start_pose(
