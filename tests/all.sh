@@ -51,14 +51,15 @@ fi
 export RCCAR_PYTHON=$ROOT/.venv/bin/python
 
 # ---- 3. the suites ------------------------------------------------------------------
-PASSED=0; FAILED=0; FAILED_STAGES=()
+PASSED=0; FAILED=0; FAILED_STAGES=(); TIMES=(); SUITE_START=$SECONDS
 # stage NAME COMMAND...: runs it, shows its output, adds up its "N passed / N failed".
 stage() {
   local name=$1; shift
   echo; echo "== $name: $*"
-  local log=$LOG_DIR/$name.log
+  local log=$LOG_DIR/$name.log t0=$SECONDS
   "$@" 2>&1 | tee "$log"
   local rc=${PIPESTATUS[0]}
+  TIMES+=("$(printf '%5d s  %s' $((SECONDS - t0)) "$name")")
   # cargo: "test result: ok. 12 passed; 0 failed"; others: "N passed, N failed"
   local p f
   if grep -aq '^test result:' "$log"; then
@@ -88,18 +89,25 @@ stage firmware make -C firmware all sim
 stage protocol-c make -C firmware test
 stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
 stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
-# Everything behind a cargo feature is tested in ONE feature set (the car's, plus the
-# dashboard), so the library is compiled once more, not once per feature.
-FEAT=serial,camera,gpio,dashboard
+# Everything behind a cargo feature is tested in ONE feature set (the car's, the dashboard and
+# libjpeg-turbo decoding), so the library is compiled once more, not once per feature.
+FEAT=serial,camera,gpio,dashboard,jpeg-turbo
 stage link-hil cargo test --release --features $FEAT --test link_hil
 stage labs-link cargo test --release --features $FEAT --test labs lab11
-# the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr
-# (one test at a time: each needs a core for the emulator on the wall clock; ~5 min)
-stage drive-fil cargo test --release --features $FEAT --test drive_fil --test drive_cli -- --test-threads 1
+# the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr,
+# on the wall clock. The two whole laps (closed loop; 1e-3 bit errors) run side by side, one
+# emulator per core (~2.5 min); the timed faults (kill -9, Ctrl-C, stall, vanished pty) and
+# drive_cli one at a time, alone on the machine (~2 min).
+stage drive-fil-laps cargo test --release --features $FEAT --test drive_fil -- --test-threads 2 \
+  firmware_in_the_loop_drives_a_lap bit_errors_at_1e_3_for_a_lap
+stage drive-fil cargo test --release --features $FEAT --test drive_fil --test drive_cli -- --test-threads 1 \
+  --skip firmware_in_the_loop_drives_a_lap --skip bit_errors_at_1e_3_for_a_lap
 stage camera-gpio cargo test --release --features $FEAT --lib -- camera_source capture gpio
 stage dashboard-security cargo test --release --features $FEAT --test dashboard_security -- --test-threads 1
 # the browser test runs target/release/rccar, built here with the dashboard
 stage dashboard-browser bash -c "cargo build --release --features $FEAT && \"\$RCCAR_PYTHON\" tests/dashboard/browser_test.py"
+# rccar with jpeg-turbo (libjpeg-turbo's C code via mozjpeg; needs gcc), in the same feature set.
+stage jpeg-parity env RCCAR_JPEG_FEATURES=$FEAT "$RCCAR_PYTHON" tests/parity/jpeg_parity.py
 # The Pi cross-build check: aarch64 build (Debian's rustc-web), replay and a 20 s sim under
 # qemu-aarch64, decisions compared with the native run (see the top for the switches).
 if [ "${RCCAR_CROSS:-1}" = 1 ]; then
@@ -107,10 +115,9 @@ if [ "${RCCAR_CROSS:-1}" = 1 ]; then
 else
   echo; echo "== cross: skipped (RCCAR_CROSS=0)"
 fi
-# Last: builds rccar with --features jpeg-turbo (libjpeg-turbo's C code via mozjpeg; needs gcc).
-stage jpeg-parity "$RCCAR_PYTHON" tests/parity/jpeg_parity.py
 
 echo
+echo "wall time: set-up $SUITE_START s (packages, .venv), stages $((SECONDS - SUITE_START)) s:"; printf '  %s\n' "${TIMES[@]}"
 if [ ${#FAILED_STAGES[@]} -gt 0 ]; then echo "failed stages: ${FAILED_STAGES[*]} (logs in target/test-logs/)"; fi
 echo "rccar: $PASSED passed, $FAILED failed"
 [ "$FAILED" -eq 0 ] && [ ${#FAILED_STAGES[@]} -eq 0 ]
