@@ -16,7 +16,7 @@
 //! 4. Levenberg–Marquardt over fx, fy, cx, cy, k1, k2, p1, p2, k3 and every pose, minimising
 //!    the reprojection error (pixels). RMS = √(Σ|e|² / points), as OpenCV reports it.
 
-use super::lm::{minimize, LmOptions};
+use super::lm::{minimize, view_blocks, LmOptions};
 use super::CalibError;
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -344,14 +344,7 @@ pub fn calibrate_camera(
             }
         }
     };
-    let dep = |j: usize| {
-        if j < 9 {
-            0..m
-        } else {
-            let vi = (j - 9) / 6;
-            2 * np * vi..2 * np * (vi + 1)
-        }
-    };
+    let dep = view_blocks(9, 6, 2 * np, m);
     let res = minimize(
         &mut p,
         m,

@@ -39,6 +39,20 @@ pub struct LmResult {
     pub iterations: usize,
 }
 
+/// The sparsity of a calibration problem, as [`minimize`]'s `dependents`: the first `global`
+/// parameters (lens, or the pair's R and T) act on all `m` residuals; after them each view has
+/// `per_view` parameters (its pose) acting only on its own `rows` residuals.
+pub fn view_blocks(global: usize, per_view: usize, rows: usize, m: usize) -> impl Fn(usize) -> Range<usize> {
+    move |j| {
+        if j < global {
+            0..m
+        } else {
+            let v = (j - global) / per_view;
+            rows * v..rows * (v + 1)
+        }
+    }
+}
+
 /// Minimises Σ r² where `residuals(p, out)` fills `out` (length `m`) for parameters `p`.
 /// `dependents(j)` gives the residual range parameter j influences (the whole range if unsure).
 pub fn minimize(

@@ -16,7 +16,7 @@
 use super::intrinsics::{
     homography, pose_from_homography, refine_pose, rodrigues, rodrigues_inv, Distortion, Intrinsics, Pose,
 };
-use super::lm::{minimize, LmOptions};
+use super::lm::{minimize, view_blocks, LmOptions};
 use super::CalibError;
 use image::GrayImage;
 use nalgebra::{Matrix3, Vector3};
@@ -136,14 +136,7 @@ pub fn stereo_calibrate(
             }
         }
     };
-    let dep = |j: usize| {
-        if j < 6 {
-            0..m
-        } else {
-            let vi = (j - 6) / 6;
-            4 * np * vi..4 * np * (vi + 1)
-        }
-    };
+    let dep = view_blocks(6, 6, 4 * np, m);
     let res = minimize(
         &mut p,
         m,
