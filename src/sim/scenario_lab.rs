@@ -15,6 +15,24 @@ use crate::config::Config;
 use crate::ranging::Pair;
 use crate::timing::NoTimer;
 
+/// The loop both lab roads share: a 6 m straight, a half circle of 3 m radius, the straight
+/// back and the half circle home (TOML `[[segments]]`).
+const SEGMENTS: &str = r#"[[segments]]
+type = "straight"
+length_m = 6.0
+[[segments]]
+type = "arc"
+radius_m = 3.0
+angle_deg = 180
+[[segments]]
+type = "straight"
+length_m = 6.0
+[[segments]]
+type = "arc"
+radius_m = 3.0
+angle_deg = 180
+"#;
+
 /// Marker size on the floor: length along the road, width, height, metres.
 const MARKER: [f64; 3] = [0.04, 0.10, 0.01];
 
@@ -30,21 +48,7 @@ heading_deg = 0.0
 [road]
 lanes = 2
 lane_width_m = 0.30
-[[segments]]
-type = "straight"
-length_m = 6.0
-[[segments]]
-type = "arc"
-radius_m = 3.0
-angle_deg = 180
-[[segments]]
-type = "straight"
-length_m = 6.0
-[[segments]]
-type = "arc"
-radius_m = 3.0
-angle_deg = 180
-[[objects]]
+{SEGMENTS}[[objects]]
 type = "obstacle"
 x = 3.0
 y = -0.15
@@ -128,21 +132,7 @@ texture_scale_m = 0.15
 seed = 7
 margin_m = 1.0
 wall_color = [190, 186, 176]
-[[segments]]
-type = "straight"
-length_m = 6.0
-[[segments]]
-type = "arc"
-radius_m = 3.0
-angle_deg = 180
-[[segments]]
-type = "straight"
-length_m = 6.0
-[[segments]]
-type = "arc"
-radius_m = 3.0
-angle_deg = 180
-[[objects]]
+{SEGMENTS}[[objects]]
 type = "{kind}"
 x = 3.0
 y = -0.15
