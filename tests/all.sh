@@ -92,6 +92,19 @@ stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib 
 # Everything behind a cargo feature is tested in ONE feature set (the car's, the dashboard and
 # libjpeg-turbo decoding), so the library is compiled once more, not once per feature.
 FEAT=serial,camera,gpio,dashboard,jpeg-turbo
+# Build every feature-set test binary, the binary and the JPEG example first: the stages below
+# then only run, and the machine is quiet for the wall-clock ones.
+stage feature-build bash -c "cargo test --release --features $FEAT --no-run --lib --test link_hil --test labs \
+  --test drive_fil --test drive_cli --test dashboard_security && cargo build --release --features $FEAT --bins --example decode"
+# The Pi cross-build (its own target dir and compiler) compiles in the background at nice 19
+# while the wall-clock stages below leave cores idle; the cross stage at the end waits for it.
+CROSS_BG=
+if [ "${RCCAR_CROSS:-1}" = 1 ]; then
+  RCCAR_CROSS_BUILD_ONLY=1 RCCAR_CROSS_CAMERA="${RCCAR_CROSS_CAMERA:-0}" setsid nice -n 19 bash tests/cross/run.sh \
+    > "$LOG_DIR/cross-build.log" 2>&1 &
+  CROSS_BG=$!
+  trap 'kill -- -$CROSS_BG 2>/dev/null' EXIT   # an interrupted suite leaves no compiler behind
+fi
 stage link-hil cargo test --release --features $FEAT --test link_hil
 stage labs-link cargo test --release --features $FEAT --test labs lab11
 # the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr,
@@ -111,6 +124,8 @@ stage jpeg-parity env RCCAR_JPEG_FEATURES=$FEAT "$RCCAR_PYTHON" tests/parity/jpe
 # The Pi cross-build check: aarch64 build (Debian's rustc-web), replay and a 20 s sim under
 # qemu-aarch64, decisions compared with the native run (see the top for the switches).
 if [ "${RCCAR_CROSS:-1}" = 1 ]; then
+  t0=$SECONDS; [ -n "$CROSS_BG" ] && wait "$CROSS_BG"
+  TIMES+=("$(printf '%5d s  %s' $((SECONDS - t0)) "cross (waiting for the background build, log: $LOG_DIR/cross-build.log)")")
   stage cross env RCCAR_CROSS_CAMERA="${RCCAR_CROSS_CAMERA:-0}" bash tests/cross/run.sh
 else
   echo; echo "== cross: skipped (RCCAR_CROSS=0)"

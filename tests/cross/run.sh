@@ -8,6 +8,9 @@
 #   bash tests/cross/run.sh                     the check (tests/all.sh runs it)
 #   RCCAR_CROSS_SIM_SECONDS=60 bash ...         a longer simulated drive (default 20 s)
 #   RCCAR_CROSS_CAMERA=0 bash ...               skip the library build with `--features camera`
+#   RCCAR_CROSS_BUILD_ONLY=1 bash ...           only the aarch64 build (tests/all.sh runs it in the
+#                                               background at nice 19 while the FIL laps run on the
+#                                               wall clock, then this whole check on a warm build)
 #
 # Packages (tests/all.sh installs them; arm64 must be a foreign architecture first):
 #   dpkg --add-architecture arm64 && apt-get update
@@ -86,6 +89,7 @@ else
   fail "cross build ($FEATURES) after $(( $(date +%s) - t0 )) s"
   finish
 fi
+[ "${RCCAR_CROSS_BUILD_ONLY:-0}" = 1 ] && finish
 
 # ---- the native reference -------------------------------------------------------------
 echo "== native build: cargo build --release -p rccar --bin rccar"
