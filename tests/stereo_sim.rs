@@ -127,7 +127,10 @@ fn measure(s: &mut Setup, base: f64, d: f64, matcher: &mut Matcher) -> Option<Ro
     } else {
         match_for_class(matcher, &geo, &planes, s.class, bx, &opts).map(|(m, face)| {
             if let (Some(f), true) = (face, std::env::var("RCCAR_STEREO_DUMP").is_ok()) {
-                println!("  face base {base} d {d:.1}: {:.3} m from {}/{} rows", f.forward_m, f.rows, f.of);
+                println!(
+                    "  face base {base} d {d:.1}: {:.3} m from {}/{} rows",
+                    f.forward_m, f.rows, f.of
+                );
             }
             m
         })

@@ -184,8 +184,16 @@ impl StereoGeometry {
         let (i, n) = best;
         (n >= 3).then(|| {
             let w = &f[i..i + n];
-            let forward_m = if n % 2 == 1 { w[n / 2] } else { (w[n / 2 - 1] + w[n / 2]) / 2.0 };
-            FaceFit { forward_m, rows: n, of: f.len() }
+            let forward_m = if n % 2 == 1 {
+                w[n / 2]
+            } else {
+                (w[n / 2 - 1] + w[n / 2]) / 2.0
+            };
+            FaceFit {
+                forward_m,
+                rows: n,
+                of: f.len(),
+            }
         })
     }
 
@@ -273,7 +281,10 @@ mod tests {
         }
         let d_first = rows[0].disparity;
         let d_last = rows[72].disparity;
-        assert!(d_first / d_last > 1.08, "the face's disparity changes along it: {d_first} {d_last}");
+        assert!(
+            d_first / d_last > 1.08,
+            "the face's disparity changes along it: {d_first} {d_last}"
+        );
         let fit = g.vertical_face(&rows, 0.03).unwrap();
         assert!((fit.forward_m - 0.30).abs() < 0.002, "{fit:?}");
         assert!(fit.rows >= 73 && fit.of == rows.len(), "{fit:?}");

@@ -242,7 +242,10 @@ impl Matcher {
         self.colsq.resize(iw * planes, 0.0);
         for (p, o) in other.iter().take(planes).enumerate() {
             let o = o.as_raw();
-            let (cs, cq) = (&mut self.colsum[p * iw..(p + 1) * iw], &mut self.colsq[p * iw..(p + 1) * iw]);
+            let (cs, cq) = (
+                &mut self.colsum[p * iw..(p + 1) * iw],
+                &mut self.colsq[p * iw..(p + 1) * iw],
+            );
             for y in by..by + bh {
                 for ((s, q), &v) in cs.iter_mut().zip(cq.iter_mut()).zip(&o[y * iw..(y + 1) * iw]) {
                     let v = v as f64;
@@ -252,10 +255,17 @@ impl Matcher {
             }
         }
         // Candidate window starts: x_other = bx ∓ d.
-        let (dmin, dmax) = (opts.min_disparity as i64, opts.max_disparity.max(opts.min_disparity) as i64);
+        let (dmin, dmax) = (
+            opts.min_disparity as i64,
+            opts.max_disparity.max(opts.min_disparity) as i64,
+        );
         let nd = (dmax - dmin + 1) as usize;
         let x0_of = |d: i64| -> Option<usize> {
-            let x0 = if opts.reference_left { bx as i64 - d } else { bx as i64 + d };
+            let x0 = if opts.reference_left {
+                bx as i64 - d
+            } else {
+                bx as i64 + d
+            };
             (x0 >= 0 && x0 as usize + bw <= iw).then_some(x0 as usize)
         };
         self.scores.clear();
@@ -525,7 +535,9 @@ mod tests {
                 let c = if (8..32).contains(&y) { c } else { 0.0 };
                 let floor = [112.0, 104.0, 96.0];
                 let blue = [28.0, 42.0, 75.0];
-                image::Rgb(std::array::from_fn(|k| (c * blue[k] + (1.0 - c) * floor[k]).round() as u8))
+                image::Rgb(std::array::from_fn(|k| {
+                    (c * blue[k] + (1.0 - c) * floor[k]).round() as u8
+                }))
             })
         };
         let (l, r) = (img(100.25), img(100.25 - 11.5));
@@ -537,7 +549,11 @@ mod tests {
         let mut m = Matcher::new();
         let got = m.match_planes(&[&ol[0], &ol[1]], &[&or[0], &or[1]], bx, &opts).unwrap();
         assert!((got.disparity - 11.5).abs() < 0.1, "{got:?}");
-        assert!(m.rows().iter().all(|r| (r.disparity - 11.5).abs() < 0.1), "{:?}", m.rows());
+        assert!(
+            m.rows().iter().all(|r| (r.disparity - 11.5).abs() < 0.1),
+            "{:?}",
+            m.rows()
+        );
         let chroma = |rgb: &RgbImage| {
             GrayImage::from_fn(rgb.width(), rgb.height(), |x, y| {
                 let p = rgb.get_pixel(x, y).0;

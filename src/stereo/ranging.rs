@@ -157,7 +157,15 @@ impl StereoRanging {
     /// last pair; `None` when it has no match (see [`super::NoRange`]).
     pub fn range(&mut self, class: ObjectClass, rect: Rect) -> Option<BoxRange> {
         let bx = [rect.x as i64, rect.y as i64, rect.width as i64, rect.height as i64];
-        let m = match_for_class(&mut self.matcher, &self.geometry, &self.planes, class, bx, &self.options).map(|(m, _)| m);
+        let m = match_for_class(
+            &mut self.matcher,
+            &self.geometry,
+            &self.planes,
+            class,
+            bx,
+            &self.options,
+        )
+        .map(|(m, _)| m);
         let Ok(m) = m else {
             self.counts.1 += 1;
             return None;
