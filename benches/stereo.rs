@@ -168,7 +168,65 @@ fn main() {
         cv["score"].as_f64().unwrap_or(f64::NAN)
     );
     assert!(sink > 0.0);
+    bench_obstacle(runs);
     bench_tracking(&python, runs / 20);
+}
+
+/// The obstacle path (`stereo::ranging::match_for_class`): the blue box of
+/// tests/stereo_sim.rs 1 m ahead (base 0.06 m), its true box grown by 8 px each way as the
+/// detector's are; two opponent planes, the whole box, every row on its own, the vertical
+/// face, the three ranges. The pair's conversion (grey + opponent planes, once per frame, not
+/// per box) is timed apart.
+fn bench_obstacle(runs: usize) {
+    use rccar::ranging::ObjectClass;
+    use rccar::stereo::ranging::{match_for_class, PairPlanes};
+    let cfg = Config::default();
+    let track = rccar::sim::scenario_lab::straight_with_object("obstacle").expect("road");
+    let scene = Arc::new(Scene::new(&track));
+    let mut rig = StereoRig::new(&cfg, scene.clone(), 0.06, RenderOptions::from_config(&cfg.sim));
+    let pose = rccar::sim::scenario_lab::pose_before_object(&cfg, &scene.track, 1.0).expect("pose");
+    let (l, r) = rig.render(&pose, 0.0, 1000);
+    let b = rig.truth(&pose, true)[0].bbox.bbox;
+    let bx = [
+        b[0].round() as i64 - 8,
+        b[1].round() as i64 - 8,
+        (b[2] - b[0]).round() as i64 + 16,
+        (b[3] - b[1]).round() as i64 + 16,
+    ];
+    let opts = MatchOptions {
+        max_disparity: cfg.stereo.max_disparity_px,
+        min_score: cfg.stereo.min_ncc,
+        near_peak_ratio: cfg.stereo.near_peak_ratio,
+        ..MatchOptions::default()
+    };
+    let geo = StereoGeometry::ideal(&rig.left.mount().camera, 0.06);
+    let mut planes = PairPlanes::default();
+    let mut m = Matcher::new();
+    let (mut per_box, mut per_pair) = (vec![], vec![]);
+    let mut last = None;
+    for _ in 0..runs {
+        let t0 = Instant::now();
+        planes.set(&l, &r);
+        per_pair.push(t0.elapsed().as_secs_f64() * 1e3);
+        let t0 = Instant::now();
+        let (mm, face) = match_for_class(&mut m, &geo, &planes, ObjectClass::Obstacle, bx, &opts).expect("match");
+        let v = bx[1] as f64 + (bx[3] as f64 - 1.0) / 2.0;
+        let rg = geo.range(&mm, v, true).expect("range");
+        per_box.push(t0.elapsed().as_secs_f64() * 1e3);
+        last = Some((rg.forward_m[2], face));
+    }
+    let (bm, bmin) = stats(&mut per_box);
+    let (pm, pmin) = stats(&mut per_pair);
+    println!();
+    println!(
+        "obstacle box {}x{} px 1 m ahead (base 0.06 m), opponent planes + rows + vertical face + 3 ranges, {runs} runs; ms",
+        bx[2], bx[3]
+    );
+    println!("  per box:  median {bm:.4}, min {bmin:.4}");
+    println!("  per pair (grey + opponent planes of both images): median {pm:.4}, min {pmin:.4}");
+    if let Some((f, face)) = last {
+        println!("  forward {:.3} m (truth 1.000), face {face:?}", f.unwrap_or(f64::NAN));
+    }
 }
 
 const PY_TRACK: &str = r#"

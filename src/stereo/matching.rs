@@ -1,6 +1,8 @@
 //! Finding the reference camera's box in the other image (Zaarane et al. 2020, Sec. 3.2 and
 //! Fig. 6): the box is a template slid along the same rows of the other rectified image;
-//! the score is the mean-subtracted normalised cross-correlation (OpenCV's TM_CCOEFF_NORMED)
+//! the score is the mean-subtracted normalised cross-correlation (OpenCV's TM_CCOEFF_NORMED;
+//! with several planes, as OpenCV does for a colour image: each plane's own mean, the sums
+//! taken over all planes)
 //!
 //! ```text
 //! R(d) = Σ T'(x, y)·I'(x ∓ d, y) / √(Σ T'² · Σ I'²),   T' = T − mean T, I' = I − mean I (window)
@@ -8,6 +10,8 @@
 //!
 //! 1. Column sums of I and I² over the box's rows give every window's mean and energy by a
 //!    sliding sum; Σ T'·I needs one pass per candidate disparity (Σ T' = 0, so I' = I there).
+//!    That pass is kept row by row, so each row of the box can also be matched on its own
+//!    ([`Matcher::rows`]) for the price of the row's window sums.
 //! 2. The best disparity must score ≥ `min_score` (else the object is not in the other view:
 //!    "no range").
 //!    Occlusion prior: an object hides what is behind it, so of the local maxima scoring at
@@ -15,7 +19,16 @@
 //!    taken. A flat-coloured object over a textured floor otherwise locks onto the floor
 //!    behind it (its lines fill the box); 1.0 turns the prior off.
 //! 3. Sub-pixel: a parabola through the peak and its two neighbours,
-//!    δ = (R₋ − R₊) / (2(R₋ − 2R₀ + R₊)), |δ| ≤ 0.5.
+//!    δ = (R₋ − R₊) / (2(R₋ − 2R₀ + R₊)), |δ| ≤ 0.5. (An equiangular "V" fit was measured
+//!    too, tests/stereo_sim.rs: no better for the signs, worse for the traffic light.)
+//!
+//! Plain coloured objects (obstacles) are matched on two linear colour-opponent planes
+//! ([`opponent_from_rgb`]): grey and white (the floor, its lines) are nearly 0 there, so only
+//! the object's silhouette correlates, and because the planes are linear in R, G, B a pixel
+//! half covered by the object's edge keeps half its value, so the edge keeps its sub-pixel
+//! position. (The chroma max − min used before is not linear: a pixel half blue, half
+//! brown-grey has R ≈ B and reads as floor, every edge snapped to a whole pixel and the
+//! disparity of a 0.06 m base came out 0.5 px short; docs/stereo.md.)
 //!
 //! With the left image as reference, the object sits d pixels further left in the right
 //! image (x_r = x_l − d); with the right one as reference, further right. Units: pixels.
@@ -23,55 +36,23 @@
 use super::NoRange;
 use image::{GrayImage, RgbImage};
 
-/// The chroma of each pixel, max(R, G, B) − min(R, G, B): grey and white (a floor, its lines)
-/// become 0, a coloured object stays bright. Matching a plain coloured object on chroma
-/// instead of grey leaves only its silhouette to correlate, so the texture of the floor
-/// around it in the box cannot win (docs/stereo.md, the obstacle with a short base).
-pub fn chroma_from_rgb(rgb: &RgbImage, out: &mut GrayImage) {
-    if out.dimensions() != rgb.dimensions() {
-        *out = GrayImage::new(rgb.width(), rgb.height());
-    }
-    for (o, p) in out.pixels_mut().zip(rgb.pixels()) {
-        let [r, g, b] = p.0;
-        o.0[0] = r.max(g).max(b) - r.min(g).min(b);
-    }
-}
-
-/// Matches `bbox` on grey, checked against a match on chroma ([`chroma_from_rgb`]) for a
-/// plain coloured object: when the two disparities differ by more than `gap` = max(2 px,
-/// `max_gap` × the chroma disparity) the grey peak belongs to something else in the box (the
-/// floor's lines behind an obstacle), and the grey match is repeated within ±gap of the
-/// chroma disparity (the chroma match itself if that finds nothing). Without a chroma match (a grey object: `Flat`) the grey
-/// match stands. Returns the match and whether chroma overruled grey.
-#[allow(clippy::too_many_arguments)]
-pub fn match_box_chroma_checked(
-    m: &mut Matcher,
-    gray: (&GrayImage, &GrayImage),
-    chroma: (&GrayImage, &GrayImage),
-    bbox: [i64; 4],
-    opts: &MatchOptions,
-    max_gap: f64,
-) -> (Result<StereoMatch, NoRange>, bool) {
-    let g = m.match_box(gray.0, gray.1, bbox, opts);
-    let Ok(c) = m.match_box(chroma.0, chroma.1, bbox, opts) else {
-        return (g, false);
-    };
-    let max_gap_px = (max_gap * c.disparity).max(2.0);
-    match g {
-        Ok(g) if (g.disparity - c.disparity).abs() <= max_gap_px => (Ok(g), false),
-        _ => {
-            let near = MatchOptions {
-                min_disparity: ((c.disparity - max_gap_px).round().max(0.0)) as u32,
-                max_disparity: (c.disparity + max_gap_px).round() as u32,
-                near_peak_ratio: 1.0,
-                ..*opts
-            };
-            match m.match_box(gray.0, gray.1, bbox, &near) {
-                // A grey peak well inside the window: the object's own edges.
-                Ok(g2) if (g2.disparity - c.disparity).abs() < max_gap_px / 2.0 => (Ok(g2), true),
-                _ => (Ok(c), true),
-            }
+/// Two colour-opponent planes of an RGB image, each linear in R, G, B:
+/// `out[0]` = 128 + (R − G)/2 and `out[1]` = 128 + (R + G − 2B)/4 (rounded). Grey and white
+/// (R = G = B) give 128 in both, so a grey floor and its white lines vanish and a coloured
+/// object stays; a pixel that is a mix of object and floor gets the mix of their values, so
+/// edges keep their sub-pixel position (which max − min, the "chroma", does not).
+pub fn opponent_from_rgb(rgb: &RgbImage, out: &mut [GrayImage; 2]) {
+    for o in out.iter_mut() {
+        if o.dimensions() != rgb.dimensions() {
+            *o = GrayImage::new(rgb.width(), rgb.height());
         }
+    }
+    let [a, b] = out;
+    for ((pa, pb), p) in a.pixels_mut().zip(b.pixels_mut()).zip(rgb.pixels()) {
+        let [r, g, bl] = p.0.map(|v| v as i32);
+        // Both in 0..=255 by construction; +1 / +2 before the shift round half up.
+        pa.0[0] = ((256 + r - g + 1) >> 1) as u8;
+        pb.0[0] = ((512 + r + g - 2 * bl + 2) >> 2).min(255) as u8;
     }
 }
 
@@ -116,6 +97,18 @@ pub struct StereoMatch {
     pub x_other: f64,
 }
 
+/// One row of the box matched on its own ([`Matcher::match_planes`]): its best disparity
+/// (sub-pixel) and score, kept when the score reaches `min_score` and the disparity is > 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RowMatch {
+    /// Image row, pixels.
+    pub row: u32,
+    /// Disparity, pixels (sub-pixel), > 0.
+    pub disparity: f64,
+    /// The correlation at the integer peak.
+    pub score: f64,
+}
+
 /// Scratch buffers reused between calls (a matcher per camera pair).
 #[derive(Debug, Default, Clone)]
 pub struct Matcher {
@@ -123,6 +116,27 @@ pub struct Matcher {
     colsum: Vec<f64>,
     colsq: Vec<f64>,
     scores: Vec<f64>,
+    /// Σ over planes and the row's columns of T'·I, per box row and disparity index.
+    row_cross: Vec<f32>,
+    row_scores: Vec<f64>,
+    prefix: Vec<f64>,
+    prefix_sq: Vec<f64>,
+    rows: Vec<RowMatch>,
+}
+
+/// The sub-pixel offset of the parabola through `s[i − 1]`, `s[i]`, `s[i + 1]` (0 at an end
+/// or without a proper maximum), |δ| ≤ 0.5.
+fn parabola(s: &[f64], i: usize) -> f64 {
+    if i == 0 || i + 1 >= s.len() {
+        return 0.0;
+    }
+    let (a, b, c) = (s[i - 1], s[i], s[i + 1]);
+    let den = a - 2.0 * b + c;
+    if a.is_finite() && c.is_finite() && den < 0.0 {
+        (0.5 * (a - c) / den).clamp(-0.5, 0.5)
+    } else {
+        0.0
+    }
 }
 
 impl Matcher {
@@ -132,9 +146,15 @@ impl Matcher {
     }
 
     /// The NCC scores of every disparity in `min..=max` (index 0 = `min`), as
-    /// [`match_box`] computes them; `None` entries where the window leaves the image.
+    /// [`match_box`] computes them; NaN where the window leaves the image.
     pub fn scores(&self) -> &[f64] {
         &self.scores
+    }
+
+    /// The rows of the box matched on their own by the last [`Matcher::match_planes`] (empty
+    /// after [`Matcher::match_box`] or when it found no match).
+    pub fn rows(&self) -> &[RowMatch] {
+        &self.rows
     }
 
     /// Finds the box `[x, y, w, h]` (pixels, top-left and size) of `reference` in `other`.
@@ -145,15 +165,48 @@ impl Matcher {
         bbox: [i64; 4],
         opts: &MatchOptions,
     ) -> Result<StereoMatch, NoRange> {
-        let (w, h) = reference.dimensions();
-        if other.dimensions() != (w, h) {
-            return Err(NoRange::SizeMismatch {
-                left_w: w,
-                left_h: h,
-                right_w: other.width(),
-                right_h: other.height(),
-            });
+        self.match_core(&[reference], &[other], bbox, opts, false)
+    }
+
+    /// [`Matcher::match_box`] over several planes at once (e.g. [`opponent_from_rgb`]'s two;
+    /// `reference` and `other` hold the same number), then each row of the box on its own
+    /// ([`Matcher::rows`]): a tilted camera sees a vertical face with a disparity that changes
+    /// from row to row, and the top of a box farther back; the rows tell them apart
+    /// ([`super::StereoGeometry::vertical_face`]).
+    pub fn match_planes(
+        &mut self,
+        reference: &[&GrayImage],
+        other: &[&GrayImage],
+        bbox: [i64; 4],
+        opts: &MatchOptions,
+    ) -> Result<StereoMatch, NoRange> {
+        self.match_core(reference, other, bbox, opts, true)
+    }
+
+    fn match_core(
+        &mut self,
+        reference: &[&GrayImage],
+        other: &[&GrayImage],
+        bbox: [i64; 4],
+        opts: &MatchOptions,
+        want_rows: bool,
+    ) -> Result<StereoMatch, NoRange> {
+        self.rows.clear();
+        let Some(first) = reference.first() else {
+            return Err(NoRange::Flat);
+        };
+        let (w, h) = first.dimensions();
+        for img in reference.iter().chain(other.iter()) {
+            if img.dimensions() != (w, h) {
+                return Err(NoRange::SizeMismatch {
+                    left_w: w,
+                    left_h: h,
+                    right_w: img.width(),
+                    right_h: img.height(),
+                });
+            }
         }
+        let planes = reference.len().min(other.len());
         let [bx, by, bw, bh] = bbox;
         if bw < 3 || bh < 3 || bx < 0 || by < 0 || bx + bw > w as i64 || by + bh > h as i64 {
             return Err(NoRange::BadBox(bbox));
@@ -161,68 +214,92 @@ impl Matcher {
         let (bx, by, bw, bh) = (bx as usize, by as usize, bw as usize, bh as usize);
         let iw = w as usize;
         let n = (bw * bh) as f64;
-        // The template, mean-subtracted.
-        let r = reference.as_raw();
+        // The template, each plane less its own mean.
         self.tmpl.clear();
-        let mut tsum = 0f64;
-        for y in by..by + bh {
-            for x in bx..bx + bw {
-                let v = r[y * iw + x] as f32;
-                tsum += v as f64;
-                self.tmpl.push(v);
+        let mut tnorm = 0f64;
+        for r in reference.iter().take(planes).map(|p| p.as_raw()) {
+            let start = self.tmpl.len();
+            let mut tsum = 0f64;
+            for y in by..by + bh {
+                for &v in &r[y * iw + bx..y * iw + bx + bw] {
+                    tsum += v as f64;
+                    self.tmpl.push(v as f32);
+                }
+            }
+            let tmean = (tsum / n) as f32;
+            for v in self.tmpl[start..].iter_mut() {
+                *v -= tmean;
+                tnorm += (*v as f64) * (*v as f64);
             }
         }
-        let tmean = (tsum / n) as f32;
-        let mut tnorm = 0f64;
-        for v in self.tmpl.iter_mut() {
-            *v -= tmean;
-            tnorm += (*v as f64) * (*v as f64);
-        }
-        if tnorm < 1e-6 * n {
+        if tnorm < 1e-6 * n * planes as f64 {
             return Err(NoRange::Flat);
         }
-        // 1. Column sums of the other image over the box's rows.
-        let o = other.as_raw();
+        // 1. Column sums of each plane of the other image over the box's rows.
         self.colsum.clear();
-        self.colsum.resize(iw, 0.0);
+        self.colsum.resize(iw * planes, 0.0);
         self.colsq.clear();
-        self.colsq.resize(iw, 0.0);
-        for y in by..by + bh {
-            let row = &o[y * iw..(y + 1) * iw];
-            for (x, &v) in row.iter().enumerate() {
-                let v = v as f64;
-                self.colsum[x] += v;
-                self.colsq[x] += v * v;
+        self.colsq.resize(iw * planes, 0.0);
+        for (p, o) in other.iter().take(planes).enumerate() {
+            let o = o.as_raw();
+            let (cs, cq) = (
+                &mut self.colsum[p * iw..(p + 1) * iw],
+                &mut self.colsq[p * iw..(p + 1) * iw],
+            );
+            for y in by..by + bh {
+                for ((s, q), &v) in cs.iter_mut().zip(cq.iter_mut()).zip(&o[y * iw..(y + 1) * iw]) {
+                    let v = v as f64;
+                    *s += v;
+                    *q += v * v;
+                }
             }
         }
         // Candidate window starts: x_other = bx ∓ d.
-        let (dmin, dmax) = (opts.min_disparity as i64, opts.max_disparity as i64);
-        self.scores.clear();
-        let mut best: Option<(usize, f64)> = None;
-        for d in dmin..=dmax {
+        let (dmin, dmax) = (
+            opts.min_disparity as i64,
+            opts.max_disparity.max(opts.min_disparity) as i64,
+        );
+        let nd = (dmax - dmin + 1) as usize;
+        let x0_of = |d: i64| -> Option<usize> {
             let x0 = if opts.reference_left {
                 bx as i64 - d
             } else {
                 bx as i64 + d
             };
-            if x0 < 0 || x0 as usize + bw > iw {
+            (x0 >= 0 && x0 as usize + bw <= iw).then_some(x0 as usize)
+        };
+        self.scores.clear();
+        if want_rows {
+            self.row_cross.clear();
+            self.row_cross.resize(bh * nd, 0.0);
+        }
+        let mut best: Option<(usize, f64)> = None;
+        for (k, d) in (dmin..=dmax).enumerate() {
+            let Some(x0) = x0_of(d) else {
                 self.scores.push(f64::NAN);
                 continue;
+            };
+            let mut var = 0f64;
+            for p in 0..planes {
+                let (mut s, mut s2) = (0f64, 0f64);
+                for x in x0..x0 + bw {
+                    s += self.colsum[p * iw + x];
+                    s2 += self.colsq[p * iw + x];
+                }
+                var += s2 - s * s / n;
             }
-            let x0 = x0 as usize;
-            let (mut s, mut s2) = (0f64, 0f64);
-            for x in x0..x0 + bw {
-                s += self.colsum[x];
-                s2 += self.colsq[x];
-            }
-            let var = s2 - s * s / n;
             let mut cross = 0f32;
             for (ty, y) in (by..by + bh).enumerate() {
-                let row = &o[y * iw + x0..y * iw + x0 + bw];
-                let t = &self.tmpl[ty * bw..(ty + 1) * bw];
                 let mut acc = 0f32;
-                for (a, b) in row.iter().zip(t) {
-                    acc += *a as f32 * b;
+                for (p, o) in other.iter().take(planes).enumerate() {
+                    let row = &o.as_raw()[y * iw + x0..y * iw + x0 + bw];
+                    let t = &self.tmpl[(p * bh + ty) * bw..(p * bh + ty + 1) * bw];
+                    for (a, b) in row.iter().zip(t) {
+                        acc += *a as f32 * b;
+                    }
+                }
+                if want_rows {
+                    self.row_cross[ty * nd + k] = acc;
                 }
                 cross += acc;
             }
@@ -262,15 +339,7 @@ impl Matcher {
             });
         }
         // 3. Parabolic sub-pixel peak.
-        let mut delta = 0.0;
-        if i > 0 && i + 1 < self.scores.len() {
-            let (a, b, c) = (self.scores[i - 1], self.scores[i], self.scores[i + 1]);
-            let den = a - 2.0 * b + c;
-            if a.is_finite() && c.is_finite() && den < 0.0 {
-                delta = (0.5 * (a - c) / den).clamp(-0.5, 0.5);
-            }
-        }
-        let disparity = (dmin + i as i64) as f64 + delta;
+        let disparity = (dmin + i as i64) as f64 + parabola(&self.scores, i);
         if disparity <= 0.0 {
             return Err(NoRange::NonPositiveDisparity(disparity));
         }
@@ -280,12 +349,101 @@ impl Matcher {
         } else {
             x_ref + disparity
         };
+        if want_rows {
+            self.match_rows(reference, other, (bx, by, bw, bh), (dmin, nd), opts, &x0_of);
+        }
         Ok(StereoMatch {
             disparity,
             score,
             x_ref,
             x_other,
         })
+    }
+
+    /// Each row of the box on its own: the template row less its own means, the window's
+    /// sums from running sums along the other image's row. With T'' = T − mean of the box
+    /// (what `row_cross` holds) and t_r, t the row's and the box's means of a plane,
+    /// Σ (T − t_r)(I − Ī) = Σ T''·I − (t_r − t)·Σ I.
+    #[allow(clippy::too_many_arguments)]
+    fn match_rows(
+        &mut self,
+        reference: &[&GrayImage],
+        other: &[&GrayImage],
+        (_, by, bw, bh): (usize, usize, usize, usize),
+        (dmin, nd): (i64, usize),
+        opts: &MatchOptions,
+        x0_of: &dyn Fn(i64) -> Option<usize>,
+    ) {
+        let planes = reference.len().min(other.len());
+        let iw = reference[0].width() as usize;
+        let bwf = bw as f64;
+        // Per plane: the row's template mean less the box's, and the row's own energy.
+        let mut offs = [0f64; 4];
+        for ty in 0..bh {
+            let y = by + ty;
+            let mut vt = 0f64;
+            let mut ok = planes <= offs.len();
+            for p in 0..planes.min(offs.len()) {
+                let t = &self.tmpl[(p * bh + ty) * bw..(p * bh + ty + 1) * bw];
+                let m: f64 = t.iter().map(|&v| v as f64).sum::<f64>() / bwf;
+                offs[p] = m;
+                vt += t.iter().map(|&v| (v as f64 - m).powi(2)).sum::<f64>();
+            }
+            ok &= vt > 1e-6 * bwf * planes as f64;
+            if !ok {
+                continue; // a flat row: nothing to match
+            }
+            // Running sums of each plane along the other image's row.
+            self.prefix.clear();
+            self.prefix_sq.clear();
+            for o in other.iter().take(planes) {
+                let row = &o.as_raw()[y * iw..(y + 1) * iw];
+                let (mut s, mut q) = (0f64, 0f64);
+                self.prefix.push(0.0);
+                self.prefix_sq.push(0.0);
+                for &v in row {
+                    let v = v as f64;
+                    s += v;
+                    q += v * v;
+                    self.prefix.push(s);
+                    self.prefix_sq.push(q);
+                }
+            }
+            self.row_scores.clear();
+            let mut best: Option<(usize, f64)> = None;
+            for k in 0..nd {
+                let Some(x0) = x0_of(dmin + k as i64) else {
+                    self.row_scores.push(f64::NAN);
+                    continue;
+                };
+                let mut cov = self.row_cross[ty * nd + k] as f64;
+                let mut vi = 0f64;
+                for (p, off) in offs.iter().enumerate().take(planes) {
+                    let base = p * (iw + 1);
+                    let s = self.prefix[base + x0 + bw] - self.prefix[base + x0];
+                    let q = self.prefix_sq[base + x0 + bw] - self.prefix_sq[base + x0];
+                    cov -= off * s;
+                    vi += q - s * s / bwf;
+                }
+                let score = if vi > 1e-9 { cov / (vt * vi).sqrt() } else { 0.0 };
+                if best.map_or(true, |b| score > b.1) {
+                    best = Some((k, score));
+                }
+                self.row_scores.push(score);
+            }
+            let Some((i, score)) = best else { continue };
+            if score < opts.min_score {
+                continue;
+            }
+            let disparity = (dmin + i as i64) as f64 + parabola(&self.row_scores, i);
+            if disparity > 0.0 {
+                self.rows.push(RowMatch {
+                    row: y as u32,
+                    disparity,
+                    score,
+                });
+            }
+        }
     }
 }
 
@@ -304,9 +462,9 @@ mod tests {
     use super::*;
 
     /// A plain blue box (disparity 20 px) in front of a floor of irregular white stripes
-    /// (disparity 5 px) that fill most of the box: chroma sees only the box.
+    /// (disparity 5 px) that fill most of the box: the opponent planes see only the box.
     #[test]
-    fn chroma_check_finds_a_plain_box_in_front_of_stripes() {
+    fn opponent_planes_find_a_plain_box_in_front_of_stripes() {
         let stripes = |x: i64| (x * 7919 % 23) < 9;
         let pair = |shift_box: i64, shift_floor: i64| {
             RgbImage::from_fn(220, 60, |x, y| {
@@ -321,16 +479,12 @@ mod tests {
             })
         };
         let (l, r) = (pair(0, 0), pair(20, 5));
-        let (mut gl, mut gr, mut cl, mut cr) = (
-            GrayImage::new(0, 0),
-            GrayImage::new(0, 0),
-            GrayImage::new(0, 0),
-            GrayImage::new(0, 0),
-        );
+        let (mut gl, mut gr) = (GrayImage::new(0, 0), GrayImage::new(0, 0));
         crate::detect::gray_from_rgb(&l, &mut gl);
         crate::detect::gray_from_rgb(&r, &mut gr);
-        chroma_from_rgb(&l, &mut cl);
-        chroma_from_rgb(&r, &mut cr);
+        let (mut ol, mut or) = (planes(), planes());
+        opponent_from_rgb(&l, &mut ol);
+        opponent_from_rgb(&r, &mut or);
         let opts = MatchOptions {
             max_disparity: 60,
             near_peak_ratio: 1.0,
@@ -338,17 +492,76 @@ mod tests {
         };
         let mut m = Matcher::new();
         let bx = [84, 10, 40, 40];
-        let (got, _) = match_box_chroma_checked(&mut m, (&gl, &gr), (&cl, &cr), bx, &opts, 0.1);
-        let got = got.unwrap();
+        let got = m.match_planes(&[&ol[0], &ol[1]], &[&or[0], &or[1]], bx, &opts).unwrap();
         assert!((got.disparity - 20.0).abs() < 0.1, "{got:?}");
+        // Row by row: the box's 30 rows find the box; the floor-only rows above and below
+        // (this floor is not quite grey and has no noise) find the floor's 5 px.
+        assert_eq!(m.rows().len(), 40, "{:?}", m.rows());
+        for r in m.rows() {
+            let want = if (15..45).contains(&r.row) { 20.0 } else { 5.0 };
+            assert!((r.disparity - want).abs() < 0.1, "{r:?}");
+        }
         // Grey alone is pulled off the box by the stripes (18.0 px).
         let grey = m.match_box(&gl, &gr, bx, &opts).unwrap();
         assert!((grey.disparity - 20.0).abs() > 1.5, "{grey:?}");
-        // A grey object has no chroma: grey alone decides.
+        assert!(m.rows().is_empty());
+        // A grey object has no colour: both planes are flat.
         let g = image::imageops::grayscale(&l);
         let grey_l = image::DynamicImage::ImageLuma8(g).to_rgb8();
-        chroma_from_rgb(&grey_l, &mut cl);
-        assert!(cl.pixels().all(|p| p.0[0] == 0));
+        opponent_from_rgb(&grey_l, &mut ol);
+        assert!(ol.iter().all(|p| p.pixels().all(|v| v.0[0] == 128)));
+        assert_eq!(
+            m.match_planes(&[&ol[0], &ol[1]], &[&ol[0], &ol[1]], bx, &opts),
+            Err(NoRange::Flat)
+        );
+    }
+
+    fn planes() -> [GrayImage; 2] {
+        [GrayImage::new(0, 0), GrayImage::new(0, 0)]
+    }
+
+    /// A blue box over a brown-grey floor whose edges fall inside pixels (each pixel the
+    /// coverage-weighted mix, as the simulator's 2×2 samples and a real lens give), 11.5 px
+    /// of disparity: the linear opponent planes keep the half-covered pixels and find 11.5;
+    /// max − min of R, G, B (the "chroma" matched before) reads a half blue, half floor
+    /// pixel as floor (R ≈ B), snaps both edges to whole pixels and is 0.5 px off.
+    #[test]
+    fn opponent_planes_keep_subpixel_edges_where_max_minus_min_does_not() {
+        let img = |left_edge: f64| {
+            RgbImage::from_fn(200, 40, |x, y| {
+                let x = x as f64;
+                // Coverage of [x − 0.5, x + 0.5] by [left_edge, left_edge + 23.2).
+                let c = ((x + 0.5).min(left_edge + 23.2) - (x - 0.5).max(left_edge)).clamp(0.0, 1.0);
+                let c = if (8..32).contains(&y) { c } else { 0.0 };
+                let floor = [112.0, 104.0, 96.0];
+                let blue = [28.0, 42.0, 75.0];
+                image::Rgb(std::array::from_fn(|k| {
+                    (c * blue[k] + (1.0 - c) * floor[k]).round() as u8
+                }))
+            })
+        };
+        let (l, r) = (img(100.25), img(100.25 - 11.5));
+        let (mut ol, mut or) = (planes(), planes());
+        opponent_from_rgb(&l, &mut ol);
+        opponent_from_rgb(&r, &mut or);
+        let opts = MatchOptions::default();
+        let bx = [90, 4, 44, 32];
+        let mut m = Matcher::new();
+        let got = m.match_planes(&[&ol[0], &ol[1]], &[&or[0], &or[1]], bx, &opts).unwrap();
+        assert!((got.disparity - 11.5).abs() < 0.1, "{got:?}");
+        assert!(
+            m.rows().iter().all(|r| (r.disparity - 11.5).abs() < 0.1),
+            "{:?}",
+            m.rows()
+        );
+        let chroma = |rgb: &RgbImage| {
+            GrayImage::from_fn(rgb.width(), rgb.height(), |x, y| {
+                let p = rgb.get_pixel(x, y).0;
+                image::Luma([p.iter().max().unwrap() - p.iter().min().unwrap()])
+            })
+        };
+        let old = m.match_box(&chroma(&l), &chroma(&r), bx, &opts).unwrap();
+        assert!((old.disparity - 11.5).abs() > 0.3, "{old:?}");
     }
 
     /// Aperiodic value noise (hashed lattice every 3 px, bilinear), shifted by `shift` px.
@@ -386,6 +599,24 @@ mod tests {
         };
         let m = match_box(&r, &l, [150, 100, 40, 30], &opts).unwrap();
         assert!((m.disparity - 17.4).abs() < 0.1, "{m:?}");
+    }
+
+    /// Every row of a textured box matched on its own finds the box's shift; the rows agree
+    /// with the whole box and the planes API on one plane agrees with `match_box`.
+    #[test]
+    fn rows_match_on_their_own() {
+        let l = textured(320, 240, 0.0);
+        let r = textured(320, 240, 17.4);
+        let o = MatchOptions::default();
+        let mut m = Matcher::new();
+        let whole = m.match_box(&l, &r, [150, 100, 40, 30], &o).unwrap();
+        let planes = m.match_planes(&[&l], &[&r], [150, 100, 40, 30], &o).unwrap();
+        assert!((whole.disparity - planes.disparity).abs() < 1e-9);
+        assert!(m.rows().len() >= 25, "{}", m.rows().len());
+        for row in m.rows() {
+            assert!((100..130).contains(&row.row));
+            assert!((row.disparity - 17.4).abs() < 0.25, "{row:?}");
+        }
     }
 
     #[test]

@@ -9,20 +9,100 @@
 //! ```
 //!
 //! so the object tracker (src/ranging/track.rs) weighs stereo and odometry as it weighs the
-//! monocular ranges. Obstacles (plain coloured boxes) are matched on grey checked against
-//! chroma (`matching::match_box_chroma_checked`), so the floor's lines inside their box do not
-//! win. A box without a match gives `None` (the caller decides what to fall back on). Units:
-//! metres, pixels.
+//! monocular ranges. Obstacles (plain coloured boxes) are matched on the two linear
+//! colour-opponent planes (`matching::opponent_from_rgb`), where the grey floor and its lines
+//! inside their box vanish, and then row by row: the distance is the vertical face's, the one
+//! most rows agree on (`StereoGeometry::vertical_face`), not that of the box's mean
+//! disparity, which the box's top (farther back) pulls long ([`match_for_class`]). A grey
+//! obstacle (no colour) is matched on grey. A box without a match gives `None` (the caller
+//! decides what to fall back on). Units: metres, pixels.
 
-use super::{MatchOptions, StereoGeometry};
+use super::matching::{opponent_from_rgb, Matcher, StereoMatch};
+use super::{MatchOptions, NoRange, StereoGeometry};
 use crate::config::Config;
 use crate::detect::{gray_from_rgb, Rect};
 use crate::ranging::{BoxRange, ObjectClass};
 use image::{GrayImage, RgbImage};
 
-/// Largest disagreement of the grey and the chroma disparity of an obstacle, relative, before
-/// chroma overrules grey (measured in tests/stereo_sim.rs).
-pub const CHROMA_GAP: f64 = 0.1;
+/// Relative spread of the rows' forward distances taken as one vertical face
+/// ([`StereoGeometry::vertical_face`]); measured in tests/stereo_sim.rs (2 %…5 % give the
+/// same table within 0.2 %).
+pub const FACE_TOL: f64 = 0.03;
+
+/// The images of one pair as the matcher needs them: grey, and for obstacles the two
+/// colour-opponent planes.
+#[derive(Debug, Clone)]
+pub struct PairPlanes {
+    /// Grey reference and other image.
+    pub gray: [GrayImage; 2],
+    /// Opponent planes of the reference and of the other image.
+    pub opponent: [[GrayImage; 2]; 2],
+}
+
+impl Default for PairPlanes {
+    fn default() -> Self {
+        let e = || GrayImage::new(0, 0);
+        Self {
+            gray: [e(), e()],
+            opponent: [[e(), e()], [e(), e()]],
+        }
+    }
+}
+
+impl PairPlanes {
+    /// Converts a pair (reference first).
+    pub fn set(&mut self, reference: &RgbImage, other: &RgbImage) {
+        gray_from_rgb(reference, &mut self.gray[0]);
+        gray_from_rgb(other, &mut self.gray[1]);
+        opponent_from_rgb(reference, &mut self.opponent[0]);
+        opponent_from_rgb(other, &mut self.opponent[1]);
+    }
+}
+
+/// Matches the box `bbox` ([x, y, w, h]) of an object of `class`, the way the pipeline does.
+/// Signs and lights: grey, the whole box. Obstacles: the opponent planes, the whole box (the
+/// occlusion prior, threshold and "no range" rules as for grey), then the rows on their own;
+/// when at least 3 rows agree on a vertical face its forward distance replaces the box's,
+/// given back as the disparity that distance has at the box's centre row, so that all three
+/// methods of [`StereoGeometry::range`] (called with that row) use it. A grey obstacle
+/// (`Flat` opponent planes) falls back to grey. Returns the match and the face, if one was
+/// found.
+pub fn match_for_class(
+    m: &mut Matcher,
+    geometry: &StereoGeometry,
+    planes: &PairPlanes,
+    class: ObjectClass,
+    bbox: [i64; 4],
+    opts: &MatchOptions,
+) -> Result<(StereoMatch, Option<super::geometry::FaceFit>), NoRange> {
+    let grey = |m: &mut Matcher| m.match_box(&planes.gray[0], &planes.gray[1], bbox, opts);
+    if class != ObjectClass::Obstacle {
+        return grey(m).map(|g| (g, None));
+    }
+    let [r, o] = &planes.opponent;
+    let whole = match m.match_planes(&[&r[0], &r[1]], &[&o[0], &o[1]], bbox, opts) {
+        Err(NoRange::Flat) => return grey(m).map(|g| (g, None)),
+        other => other?,
+    };
+    let Some(face) = geometry.vertical_face(m.rows(), FACE_TOL) else {
+        return Ok((whole, None));
+    };
+    let v = bbox[1] as f64 + (bbox[3] as f64 - 1.0) / 2.0;
+    let disparity = geometry.disparity_of_forward(face.forward_m, v);
+    let x_other = if opts.reference_left {
+        whole.x_ref - disparity
+    } else {
+        whole.x_ref + disparity
+    };
+    Ok((
+        StereoMatch {
+            disparity,
+            x_other,
+            ..whole
+        },
+        Some(face),
+    ))
+}
 
 /// Stereo ranging of detector boxes, with its scratch buffers.
 #[derive(Debug, Clone)]
@@ -35,11 +115,8 @@ pub struct StereoRanging {
     pub disparity_sigma_px: f64,
     /// Lateral position of the reference lens from the car's centre line, metres (left +).
     pub reference_lateral_m: f64,
-    matcher: super::matching::Matcher,
-    gray_ref: GrayImage,
-    gray_other: GrayImage,
-    chroma_ref: GrayImage,
-    chroma_other: GrayImage,
+    matcher: Matcher,
+    planes: PairPlanes,
     /// Boxes matched and boxes without a match since the start.
     pub counts: (u64, u64),
 }
@@ -65,41 +142,30 @@ impl StereoRanging {
             disparity_sigma_px: 0.25,
             reference_lateral_m: if left { 1.0 } else { -1.0 } * geometry.base_m / 2.0,
             geometry,
-            matcher: super::matching::Matcher::new(),
-            gray_ref: GrayImage::new(0, 0),
-            gray_other: GrayImage::new(0, 0),
-            chroma_ref: GrayImage::new(0, 0),
-            chroma_other: GrayImage::new(0, 0),
+            matcher: Matcher::new(),
+            planes: PairPlanes::default(),
             counts: (0, 0),
         }
     }
 
     /// Converts a new pair to grey (once per frame, before [`StereoRanging::range`]).
     pub fn set_pair(&mut self, reference: &RgbImage, other: &RgbImage) {
-        gray_from_rgb(reference, &mut self.gray_ref);
-        gray_from_rgb(other, &mut self.gray_other);
-        super::matching::chroma_from_rgb(reference, &mut self.chroma_ref);
-        super::matching::chroma_from_rgb(other, &mut self.chroma_other);
+        self.planes.set(reference, other);
     }
 
     /// The range of the box `rect` of an object of `class` in the reference image of the
     /// last pair; `None` when it has no match (see [`super::NoRange`]).
     pub fn range(&mut self, class: ObjectClass, rect: Rect) -> Option<BoxRange> {
         let bx = [rect.x as i64, rect.y as i64, rect.width as i64, rect.height as i64];
-        let m = if class == ObjectClass::Obstacle {
-            super::matching::match_box_chroma_checked(
-                &mut self.matcher,
-                (&self.gray_ref, &self.gray_other),
-                (&self.chroma_ref, &self.chroma_other),
-                bx,
-                &self.options,
-                CHROMA_GAP,
-            )
-            .0
-        } else {
-            self.matcher
-                .match_box(&self.gray_ref, &self.gray_other, bx, &self.options)
-        };
+        let m = match_for_class(
+            &mut self.matcher,
+            &self.geometry,
+            &self.planes,
+            class,
+            bx,
+            &self.options,
+        )
+        .map(|(m, _)| m);
         let Ok(m) = m else {
             self.counts.1 += 1;
             return None;
