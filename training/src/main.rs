@@ -52,8 +52,9 @@ struct DistortArgs {
     /// is better (docs/training.md, "Which backgrounds").
     #[arg(long = "bg", required = true)]
     bg: Vec<PathBuf>,
-    /// Samples to write. Train with --num-pos up to about count / 1.1 (each stage drops a few).
-    #[arg(long, default_value_t = 1500)]
+    /// Samples to write. Train with --num-pos up to about count / 1.04 (each stage drops a few;
+    /// `train` works it out).
+    #[arg(long, default_value_t = rccar_train::plan::DEFAULT_DISTORT_COUNT)]
     count: usize,
     /// Seed.
     #[arg(long, default_value_t = 1)]
@@ -564,7 +565,7 @@ struct TrainArgs {
     #[arg(long)]
     num_pos: Option<usize>,
     /// Negatives per stage (windows the cascade so far wrongly accepts).
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = rccar_train::plan::DEFAULT_NUM_NEG)]
     num_neg: usize,
     /// Per-stage hit rate (0.998; OpenCV's 0.995 lost 19% of the unseen signs over 20 stages on the
     /// photo-like check, docs/training.md).
