@@ -600,8 +600,10 @@ struct TrainArgs {
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     mirror_negatives: bool,
     /// Also draw negatives from the backgrounds turned upside down (and their mirror images):
-    /// twice as many windows again, so a few hundred backgrounds last 20 stages.
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    /// twice as many windows again, so a few hundred backgrounds last 20 stages. Off by
+    /// default: on the photo-like check's validation photos it left more false positives after
+    /// 20 stages (docs/training.md).
+    #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
     upside_down_negatives: bool,
     /// Held-out frames (info.dat with boxes and/or bg.txt without), never trained on: after
     /// every stage the cascade is run over them and training stops once the false positives

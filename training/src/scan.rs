@@ -239,7 +239,8 @@ impl NegativePool {
 
     /// [`NegativePool::new`], also with every background (and its mirror image) upside down
     /// when `upside_down` is on: twice the windows. Turned over, a photo's textures are still
-    /// not the object, and a few hundred frames then last a cascade of 20 stages.
+    /// not the object, and a few hundred frames then last a cascade of 20 stages (`train`'s
+    /// `--upside-down-negatives`, off by default: see docs/training.md).
     pub fn with_flips(
         bgs: &[Background],
         w: usize,

@@ -98,7 +98,8 @@ fn photo_workflow_end_to_end_on_small_data() {
     eprintln!("{so}\nsmall workflow: recall {recall:.3}, {fp:.3} FP/frame in {:.0} s", t0.elapsed().as_secs_f64());
     assert_eq!(rep["frames"].as_u64(), Some(140));
     // Small data, 10 stages: the mechanics, not the quality (80 backgrounds cannot teach
-    // 0.01 FP/frame; photo_check.sh measures that). Measured: recall ≥ 0.9, about 5 FP/frame.
+    // 0.01 FP/frame; photo_check.sh measures that). Measured: recall 0.875, 7.6 FP/frame (the
+    // run is seeded and the same on any thread count); its training takes about 20 s of CPU.
     assert!(recall >= 0.75, "recall {recall}");
     assert!(fp <= 10.0, "FP per frame {fp}");
 }
