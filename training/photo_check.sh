@@ -7,7 +7,7 @@
 # seeds: looked at once, at the end).
 # Also trains a baseline with the trainer of another build (BASELINE=path/to/rccar-train, e.g.
 # main before issue 16) on the same positives and window, its defaults otherwise.
-# Usage: bash training/photo_check.sh [WORKDIR]   (default out/photo_check; 10-25 min with THREADS=1 on 2 shared cores)
+# Usage: bash training/photo_check.sh [WORKDIR]   (default out/photo_check; about 8 min of CPU for the training with THREADS=1, 30 min wall under a load of 3-10)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release -p rccar-train
