@@ -2,8 +2,13 @@
 //! `opencv_createsamples -img template.png -bg bg.txt` did (cvhaartraining's
 //! `icvPlaceDistortedSample`): per sample a random perspective (corners moved by up to
 //! `max_skew` of the size), in-plane rotation (±`max_angle`), scale, brightness and contrast,
-//! Gaussian blur and noise, then the template is composited over a random crop of a background
-//! (its alpha channel, if any, is the mask) and the crop is saved with an info.dat box.
+//! then the template is composited over a random crop of a background (its alpha channel, if
+//! any, is the mask) and the crop goes through a camera: exposure gamma (`g ↦ 255·(g/255)^γ`,
+//! γ log-uniform in [1/`max_gamma`, `max_gamma`]), Gaussian blur (σ ≤ `max_blur` px), noise
+//! (σ ≤ `max_noise` grey levels) and, on half of the samples, JPEG at quality
+//! `min_jpeg_quality`–95 (what a Pi camera frame and a phone photo go through); the crop is
+//! saved with an info.dat box. OpenCV's createsamples has no gamma or JPEG; they are here
+//! because the objects a car must find far away are a few pixels of a compressed frame.
 //!
 //! The homography maps each output pixel back into the template (inverse warping, bilinear);
 //! it is solved from the four corner pairs by Gaussian elimination (8 × 8). Seeded. Units:
@@ -37,6 +42,10 @@ pub struct DistortOptions {
     pub max_blur: f64,
     /// Largest noise standard deviation, grey levels.
     pub max_noise: f64,
+    /// Largest exposure gamma (≥ 1); γ is drawn log-uniformly in [1/max, max]. 1 = off.
+    pub max_gamma: f64,
+    /// Lowest JPEG quality (1–100) for the half of the samples that are JPEG-compressed; 100 = off.
+    pub min_jpeg_quality: u8,
 }
 
 impl Default for DistortOptions {
@@ -50,8 +59,10 @@ impl Default for DistortOptions {
             scale: (1.0, 3.0),
             max_brightness: 40.0,
             contrast: (0.6, 1.3),
-            max_blur: 1.0,
-            max_noise: 6.0,
+            max_blur: 1.5,
+            max_noise: 8.0,
+            max_gamma: 1.35,
+            min_jpeg_quality: 50,
         }
     }
 }
@@ -190,6 +201,17 @@ pub fn paste(
     true
 }
 
+/// `img` compressed as JPEG at quality `q` and decoded again (in memory).
+pub fn jpeg_roundtrip(img: &GrayImage, q: u8) -> Result<GrayImage, String> {
+    let mut buf = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, q)
+        .encode_image(img)
+        .map_err(|e| format!("jpeg: {e}"))?;
+    Ok(image::load_from_memory_with_format(&buf, image::ImageFormat::Jpeg)
+        .map_err(|e| format!("jpeg: {e}"))?
+        .to_luma8())
+}
+
 /// Writes `o.count` distorted samples of `templates` over `backgrounds` into `dir` with an
 /// `info.dat`; returns its path. Backgrounds must be at least as big as the largest object.
 pub fn generate(
@@ -254,16 +276,29 @@ pub fn generate(
         if !paste(&mut crop, cw, ch, t, dst, contrast, bright) {
             continue;
         }
-        // 4. Blur and noise.
+        // 4. Camera: gamma, blur, noise, JPEG.
+        let lg = o.max_gamma.max(1.0).ln();
+        let gamma = u(&mut rng, -lg, lg).exp();
+        if (gamma - 1.0).abs() > 1e-3 {
+            for v in crop.iter_mut() {
+                *v = (255.0 * (*v as f64 / 255.0).clamp(0.0, 1.0).powf(gamma)) as f32;
+            }
+        }
         let sigma = u(&mut rng, 0.0, o.max_blur);
         if sigma > 0.2 {
             blur(&mut crop, cw as usize, ch as usize, sigma);
         }
         let noise = u(&mut rng, 0.0, o.max_noise);
-        let img = GrayImage::from_fn(cw, ch, |x, y| {
+        let mut img = GrayImage::from_fn(cw, ch, |x, y| {
             let v = crop[(y * cw + x) as usize] as f64 + noise * gauss(&mut rng);
             image::Luma([v.round().clamp(0.0, 255.0) as u8])
         });
+        let jpeg = rng.next_f64() < 0.5;
+        let q_lo = o.min_jpeg_quality.clamp(1, 100) as u64;
+        let q = (q_lo + rng.next_u64() % (96u64.saturating_sub(q_lo)).max(1)).min(100) as u8;
+        if jpeg && q_lo < 100 {
+            img = jpeg_roundtrip(&img, q)?;
+        }
         let name = format!("{n:06}.png");
         img.save(dir.join(&name))
             .map_err(|e| format!("{}: {e}", dir.join(&name).display()))?;

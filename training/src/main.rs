@@ -52,8 +52,9 @@ struct DistortArgs {
     /// is better (docs/training.md, "Which backgrounds").
     #[arg(long = "bg", required = true)]
     bg: Vec<PathBuf>,
-    /// Samples to write. Train with --num-pos up to about count / 1.1 (each stage drops a few).
-    #[arg(long, default_value_t = 1500)]
+    /// Samples to write. Train with --num-pos up to about count / 1.04 (each stage drops a few;
+    /// `train` works it out).
+    #[arg(long, default_value_t = rccar_train::plan::DEFAULT_DISTORT_COUNT)]
     count: usize,
     /// Seed.
     #[arg(long, default_value_t = 1)]
@@ -78,6 +79,18 @@ struct DistortArgs {
     /// Largest object, multiple of the window.
     #[arg(long, default_value_t = 3.0)]
     max_scale: f64,
+    /// Largest Gaussian blur sigma, pixels (0 = none).
+    #[arg(long, default_value_t = 1.5)]
+    max_blur: f64,
+    /// Largest camera noise standard deviation, grey levels.
+    #[arg(long, default_value_t = 8.0)]
+    max_noise: f64,
+    /// Largest exposure gamma: each sample gets γ in [1/G, G] (1 = none).
+    #[arg(long, default_value_t = 1.35)]
+    max_gamma: f64,
+    /// Lowest JPEG quality of the half of the samples that are JPEG-compressed (100 = none).
+    #[arg(long, default_value_t = 50)]
+    min_jpeg_quality: u8,
 }
 
 /// Expands files, folders and simple globs (`*`, `?` in the file name) to image files.
@@ -191,6 +204,18 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
     if bgs.is_empty() {
         bail!("no readable background image in {:?}", a.bg);
     }
+    if !(a.max_blur >= 0.0 && a.max_blur <= 10.0) {
+        bail!("--max-blur {}: expected 0-10 pixels", a.max_blur);
+    }
+    if !(a.max_noise >= 0.0 && a.max_noise <= 64.0) {
+        bail!("--max-noise {}: expected 0-64 grey levels", a.max_noise);
+    }
+    if !(a.max_gamma >= 1.0 && a.max_gamma <= 4.0) {
+        bail!("--max-gamma {}: expected 1-4", a.max_gamma);
+    }
+    if !(1..=100).contains(&a.min_jpeg_quality) {
+        bail!("--min-jpeg-quality {}: expected 1-100", a.min_jpeg_quality);
+    }
     let o = rccar_train::distort::DistortOptions {
         count: a.count,
         seed: a.seed,
@@ -198,6 +223,10 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
         max_angle: a.max_angle_deg.to_radians(),
         max_skew: a.max_skew,
         scale: (a.min_scale, a.max_scale),
+        max_blur: a.max_blur,
+        max_noise: a.max_noise,
+        max_gamma: a.max_gamma,
+        min_jpeg_quality: a.min_jpeg_quality,
         ..Default::default()
     };
     let imgs: Vec<image::GrayImage> = bgs.into_iter().map(|b| b.img).collect();
@@ -273,8 +302,9 @@ struct PhotosetArgs {
     /// scikit-image data).
     #[arg(long = "photos", num_args = 1..)]
     photos: Vec<PathBuf>,
-    /// Which half of the sorted photo list (0 or 1; `all` uses every photo): train on one
-    /// half, test on the other.
+    /// Which photos of the sorted list: `0` or `1` (every other photo: train on one half, test
+    /// on the other), `0-train` / `0-val` (half 0 split 4:1, so validation frames come from
+    /// photos the training never saw), or `all`.
     #[arg(long, default_value = "all")]
     half: String,
     /// Frames with a stop sign.
@@ -301,11 +331,8 @@ fn run_photoset(a: PhotosetArgs) -> anyhow::Result<ExitCode> {
     use rccar_train::photogen;
     let dirs = if a.photos.is_empty() { photogen::system_photo_dirs() } else { a.photos.clone() };
     let all = photogen::list_photos(&dirs);
-    let photos = match a.half.as_str() {
-        "all" => all,
-        "0" => photogen::half(&all, 0),
-        "1" => photogen::half(&all, 1),
-        h => bail!("--half `{h}`: expected 0, 1 or all"),
+    let Some(photos) = photogen::part(&all, &a.half) else {
+        bail!("--half `{}`: expected 0, 1, 0-train, 0-val or all", a.half)
     };
     if photos.is_empty() {
         bail!("no .jpg/.png photos in {dirs:?} (install Debian's opencv-doc, or give --photos DIR)");
@@ -538,7 +565,7 @@ struct TrainArgs {
     #[arg(long)]
     num_pos: Option<usize>,
     /// Negatives per stage (windows the cascade so far wrongly accepts).
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = rccar_train::plan::DEFAULT_NUM_NEG)]
     num_neg: usize,
     /// Per-stage hit rate (0.998; OpenCV's 0.995 lost 19% of the unseen signs over 20 stages on the
     /// photo-like check, docs/training.md).
@@ -572,6 +599,12 @@ struct TrainArgs {
     /// Also draw negatives from mirror images of the backgrounds (twice as many windows).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     mirror_negatives: bool,
+    /// Also draw negatives from the backgrounds turned upside down (and their mirror images):
+    /// twice as many windows again, so a few hundred backgrounds last 20 stages. Off by
+    /// default: on the photo-like check's validation photos it left more false positives after
+    /// 20 stages (docs/training.md).
+    #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
+    upside_down_negatives: bool,
     /// Held-out frames (info.dat with boxes and/or bg.txt without), never trained on: after
     /// every stage the cascade is run over them and training stops once the false positives
     /// per frame reach --target-fp-per-frame.
@@ -765,6 +798,7 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
         seed: a.seed,
         scale_factor: a.scale_factor,
         mirror_negatives: a.mirror_negatives,
+        upside_down_negatives: a.upside_down_negatives,
     };
     let mut bars = Bars {
         bar: None,

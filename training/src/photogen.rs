@@ -119,6 +119,23 @@ pub fn half(photos: &[PathBuf], part: usize) -> Vec<PathBuf> {
     photos.iter().skip(part % 2).step_by(2).cloned().collect()
 }
 
+/// The photos of a named part: `all`; `0` or `1` (the halves of [`half`]); `0-train` and
+/// `0-val`, half 0 split again — every fifth photo of it (`0-val`) is kept for validation and
+/// the other four fifths (`0-train`) are for training, so a validation set made from `0-val`
+/// shows the trainer photos it never saw, and the test half `1` stays untouched. `None` for
+/// another name.
+pub fn part(photos: &[PathBuf], name: &str) -> Option<Vec<PathBuf>> {
+    let h0 = || half(photos, 0).into_iter().enumerate();
+    Some(match name {
+        "all" => photos.to_vec(),
+        "0" => half(photos, 0),
+        "1" => half(photos, 1),
+        "0-train" => h0().filter(|(i, _)| i % 5 != 4).map(|(_, p)| p).collect(),
+        "0-val" => h0().filter(|(i, _)| i % 5 == 4).map(|(_, p)| p).collect(),
+        _ => return None,
+    })
+}
+
 /// What to make.
 #[derive(Debug, Clone)]
 pub struct PhotoSetOptions {
@@ -284,6 +301,22 @@ pub fn generate(photos: &[PathBuf], template: &RgbaImage, o: &PhotoSetOptions, d
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn photo_parts_are_disjoint_and_cover_the_halves() {
+        let photos: Vec<PathBuf> = (0..23).map(|i| PathBuf::from(format!("p{i:02}.jpg"))).collect();
+        let get = |n: &str| part(&photos, n).expect("known part");
+        let (tr, va, te) = (get("0-train"), get("0-val"), get("1"));
+        assert_eq!((tr.len(), va.len(), te.len()), (10, 2, 11));
+        for p in &va {
+            assert!(!tr.contains(p) && !te.contains(p), "{p:?}");
+        }
+        let mut h0 = [tr, va].concat();
+        h0.sort();
+        assert_eq!(h0, get("0"));
+        assert_eq!(get("all").len(), 23);
+        assert!(part(&photos, "2").is_none());
+    }
 
     #[test]
     fn template_is_the_red_octagon_with_transparent_corners() {

@@ -7,7 +7,8 @@
 //!
 //! [`NegativePool`]: the pool is every `w` × `h` window at every pixel offset of every pyramid
 //! level (scales `1, s, s², …` with `s` = the scale step) of every background, and of its
-//! mirror image when `mirror` is on. A *tile* is one (background, level, mirror) triple. Each
+//! mirror image when `mirror` is on, and upside down (both again) when `upside_down` is on. A
+//! *tile* is one (background, level, flip) triple. Each
 //! stage visits the tiles in a new seeded order and each tile's windows in a seeded
 //! pseudo-random permutation (`i ↦ (a·i + b) mod n`, `gcd(a, n) = 1`); a tile gives at most
 //! its share of the stage's negatives per pass (`⌈2·num_neg·n_tile / n_pool⌉`, at least 1),
@@ -172,12 +173,13 @@ pub fn scan(
     res
 }
 
-/// One (background, pyramid level, mirror) part of the negative pool.
+/// One (background, pyramid level, flip) part of the negative pool.
 #[derive(Debug, Clone, Copy)]
 struct Tile {
     bg: u32,
     scale: f32,
     mirror: bool,
+    upside_down: bool,
     lw: u32,
     lh: u32,
     /// Window positions: `(lw − w + 1)·(lh − h + 1)`.
@@ -232,6 +234,21 @@ const BATCH: usize = 16;
 impl NegativePool {
     /// The pool of `w` × `h` windows over `bgs` with scale step `scale_step` (> 1).
     pub fn new(bgs: &[Background], w: usize, h: usize, scale_step: f64, mirror: bool) -> NegativePool {
+        NegativePool::with_flips(bgs, w, h, scale_step, mirror, false)
+    }
+
+    /// [`NegativePool::new`], also with every background (and its mirror image) upside down
+    /// when `upside_down` is on: twice the windows. Turned over, a photo's textures are still
+    /// not the object, and a few hundred frames then last a cascade of 20 stages (`train`'s
+    /// `--upside-down-negatives`, off by default: see docs/training.md).
+    pub fn with_flips(
+        bgs: &[Background],
+        w: usize,
+        h: usize,
+        scale_step: f64,
+        mirror: bool,
+        upside_down: bool,
+    ) -> NegativePool {
         let mut tiles = Vec::new();
         let mut total = 0;
         for (bi, bg) in bgs.iter().enumerate() {
@@ -243,14 +260,15 @@ impl NegativePool {
                     continue;
                 }
                 let n = (lw as u64 - w as u64 + 1) * (lh as u64 - h as u64 + 1);
-                for m in [false, true] {
-                    if m && !mirror {
+                for (m, u) in [(false, false), (true, false), (false, true), (true, true)] {
+                    if (m && !mirror) || (u && !upside_down) {
                         continue;
                     }
                     tiles.push(Tile {
                         bg: bi as u32,
                         scale: sc,
                         mirror: m,
+                        upside_down: u,
                         lw,
                         lh,
                         n,
@@ -361,6 +379,12 @@ impl NegativePool {
                 row.reverse();
             }
         }
+        if t.upside_down {
+            for y in 0..lh / 2 {
+                let (top, bottom) = level.split_at_mut((lh - 1 - y) * lw);
+                top[y * lw..(y + 1) * lw].swap_with_slice(&mut bottom[..lw]);
+            }
+        }
         let stride = lw + 1;
         let rows = lh + 1;
         let tilted = cascade.is_some_and(|c| c.has_tilted);
@@ -410,11 +434,12 @@ impl NegativePool {
             if !pass {
                 continue;
             }
-            // A false alarm unless it is one of the objects (boxes in the unmirrored frame).
+            // A false alarm unless it is one of the objects (boxes in the unflipped frame).
             let x0 = if t.mirror { lw - cw - x } else { x };
+            let y0 = if t.upside_down { lh - ch - y } else { y };
             let r = Rect::new(
                 (x0 as f32 * t.scale).round_ties_even() as i32,
-                (y as f32 * t.scale).round_ties_even() as i32,
+                (y0 as f32 * t.scale).round_ties_even() as i32,
                 ww,
                 wh,
             );
@@ -506,6 +531,30 @@ mod tests {
         assert!(!some.exhausted);
         // Same seed, same draw.
         assert_eq!(pool2.mine(&bgs, None, 40, 1).windows, some.windows);
+        // Mirrored and upside down: four times, every window once, the upside-down ones are
+        // the original's rows reversed.
+        let pool4 = NegativePool::with_flips(&bgs, 16, 16, 2.0, true, true);
+        assert_eq!(pool4.windows(), 300);
+        let all4 = pool4.mine(&bgs, None, 1000, 2);
+        assert!(all4.exhausted);
+        let mut u4 = all4.windows.clone();
+        u4.sort();
+        u4.dedup();
+        assert_eq!(u4.len(), 300, "each window once (noise: no two alike)");
+        let flipped: Vec<u8> = all.windows[0].chunks(16).rev().flatten().copied().collect();
+        assert!(all4.windows.contains(&flipped), "upside-down copy of a window is in the pool");
+        // An object box in the unflipped frame keeps its upside-down windows out too.
+        let boxed = [Background {
+            avoid: vec![Rect::new(0, 0, 16, 16)],
+            ..bgs[0].clone()
+        }];
+        let up = NegativePool::with_flips(&boxed, 16, 16, 2.0, false, true).mine(&boxed, None, 1000, 3);
+        let px = |x: u32, y: u32| boxed[0].img.get_pixel(x, y)[0];
+        let corner: Vec<u8> = (0..16).flat_map(|y| (0..16).map(move |x| px(x, y))).collect();
+        let corner_up: Vec<u8> = corner.chunks(16).rev().flatten().copied().collect();
+        assert!(!up.windows.contains(&corner) && !up.windows.contains(&corner_up));
+        // (16 − x)(16 − y) ≥ 119 (IoU ≥ 0.3) for 9 + 9 + 8 + 7 + 7 = 40 of the 75 offsets.
+        assert_eq!(up.windows.len(), 2 * (75 - 40), "windows with IoU >= 0.3 with the box are out");
         // The pool is several times the detector's 2-pixel grid.
         let big = Background {
             name: "n".into(),

@@ -74,6 +74,10 @@ pub struct TrainOptions {
     /// Also draw negatives from the backgrounds' mirror images (twice the pool).
     #[serde(default)]
     pub mirror_negatives: bool,
+    /// Also draw negatives from the backgrounds turned upside down (and their mirror images):
+    /// twice the pool again.
+    #[serde(default)]
+    pub upside_down_negatives: bool,
 }
 
 /// One finished stage's record in `stages.json`.
@@ -410,13 +414,25 @@ pub fn train_with_holdout(
     }
     let budget = budget_total - data;
     // 2b. The negative pool: every window of every background at every scale.
-    let pool = scan::NegativePool::new(backgrounds, w, h, opts.scale_factor, opts.mirror_negatives);
+    let pool = scan::NegativePool::with_flips(
+        backgrounds,
+        w,
+        h,
+        opts.scale_factor,
+        opts.mirror_negatives,
+        opts.upside_down_negatives,
+    );
     progress.note(&format!(
         "negative pool: {} windows of {w}x{h} in {} backgrounds (every offset and scale{}); \
          feature values get {} MiB of --mem-mb {}",
         pool.windows(),
         backgrounds.len(),
-        if opts.mirror_negatives { ", mirrored too" } else { "" },
+        match (opts.mirror_negatives, opts.upside_down_negatives) {
+            (true, true) => ", mirrored and upside down too",
+            (true, false) => ", mirrored too",
+            (false, true) => ", upside down too",
+            (false, false) => "",
+        },
         budget >> 20,
         opts.mem_mb
     ));

@@ -36,8 +36,9 @@ fn photo_workflow_end_to_end_on_small_data() {
     let tmp = tempfile::tempdir().expect("tmp");
     let d = tmp.path();
     let t0 = std::time::Instant::now();
-    // 1. Frames: training half of the photos (signs and no signs), a validation set from the
-    // same half (another seed), a test set from the other half.
+    // 1. Frames: four fifths of the training half of the photos (signs and no signs), a
+    // validation set from the last fifth (photos the training never sees, another seed), a
+    // test set from the other half.
     let set = |half: &str, seed: &str, with: &str, without: &str, out: &str| {
         run(
             d,
@@ -47,8 +48,8 @@ fn photo_workflow_end_to_end_on_small_data() {
             ],
         )
     };
-    set("0", "1", "30", "80", "train");
-    set("0", "2", "12", "100", "val");
+    set("0-train", "1", "30", "80", "train");
+    set("0-val", "2", "12", "100", "val");
     set("1", "3", "40", "100", "test");
     // 2. Boxes → info.dat, previews.
     let (so, _) = run(
@@ -97,7 +98,8 @@ fn photo_workflow_end_to_end_on_small_data() {
     eprintln!("{so}\nsmall workflow: recall {recall:.3}, {fp:.3} FP/frame in {:.0} s", t0.elapsed().as_secs_f64());
     assert_eq!(rep["frames"].as_u64(), Some(140));
     // Small data, 10 stages: the mechanics, not the quality (80 backgrounds cannot teach
-    // 0.01 FP/frame; photo_check.sh measures that). Measured: recall ≥ 0.9, about 5 FP/frame.
+    // 0.01 FP/frame; photo_check.sh measures that). Measured: recall 0.875, 7.6 FP/frame (the
+    // run is seeded and the same on any thread count); its training takes about 20 s of CPU.
     assert!(recall >= 0.75, "recall {recall}");
     assert!(fp <= 10.0, "FP per frame {fp}");
 }

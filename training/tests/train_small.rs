@@ -56,6 +56,7 @@ fn opts(stages: u32) -> TrainOptions {
         seed: 3,
         scale_factor: 1.2,
         mirror_negatives: false,
+        upside_down_negatives: false,
     }
 }
 
