@@ -146,7 +146,10 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
                 left.files().len(),
                 cfg.stereo.reference
             );
-            Box::new(rccar::drive::stereo::StereoFrames::from_config(left, right, &cfg))
+            Box::new(
+                rccar::drive::stereo::StereoFrames::from_config(left, right, &cfg)
+                    .with_labels(a.dir.display().to_string(), rdir.display().to_string()),
+            )
         }
     };
     let annotate_dir = a.out.join("annotated");

@@ -55,6 +55,12 @@ impl<L: FrameSource, R: FrameSource> StereoFrames<L, R> {
         Self::new(left, right, cfg.stereo.max_skew_ms / 1e3, cfg.stereo.reference != "right")
     }
 
+    /// Names the two sides in the errors of bad frames (e.g. the two folders of a replay).
+    pub fn with_labels(mut self, left: impl Into<String>, right: impl Into<String>) -> Self {
+        self.pair = self.pair.with_labels(left, right);
+        self
+    }
+
     /// Frames dropped so far because they had no partner within the skew.
     pub fn pairs_dropped(&self) -> u64 {
         self.pair.dropped()
