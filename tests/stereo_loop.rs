@@ -223,15 +223,32 @@ fn stereo_in_the_drive_loop_sim_and_replay() {
     assert!(out.contains(&format!("{}/frame_000005.png", rcut.display())), "{out}");
     assert!(out.contains("replayed 19 frames"), "{out}");
     // --right with mono ranging
-    let (code, _, err) = replay(&l20, &subset(&right, "r20", 20), "mono");
+    let r20 = subset(&right, "r20", 20);
+    let (code, _, err) = replay(&l20, &r20, "mono");
     println!("--right with mono: exit {code}: {}", err.trim());
     assert_ne!(code, 0);
     assert!(err.contains("--right") && err.contains("ranging.method"), "{err}");
+    // 5. `rccar drive` with a pair: the two recorded folders as left and right cameras, and
+    //    the simulator as the camera (it renders its pair itself).
+    for cam in [vec!["--camera", &s(&l20), "--camera-right", &s(&r20)], vec!["--camera", "sim"]] {
+        let dout = tmp("drive");
+        let mut args = vec!["drive", "--dry-run", "--arm", "--seconds", "2", "--set", "ranging.method=stereo", "-o"];
+        let d = s(&dout);
+        args.push(&d);
+        args.extend(cam.iter().copied());
+        let (code, out, err) = rccar(&args);
+        assert!(code == 0 || code == 130, "{cam:?}: {out}{err}");
+        let recs = records(&dout.join("telemetry.jsonl"));
+        let pairs = recs.iter().filter(|r| r["stereo"].is_object()).count();
+        println!("drive {cam:?}: {} frames, {pairs} of them pairs", recs.len());
+        assert!(!recs.is_empty() && pairs == recs.len(), "{cam:?}: {pairs} of {}", recs.len());
+        let _ = std::fs::remove_dir_all(dout);
+    }
     // --record-right without a pair
     let (code, _, err) = rccar(&["sim", "--seconds", "1", "--record", &s(&tmp("x")), "--record-right", &s(&tmp("y"))]);
     assert_ne!(code, 0);
     assert!(err.contains("--record-right") && err.contains("ranging.method"), "{err}");
-    for d in [left, right, sim_out, mono_out, rep_out, l20, r19, rbig, rcut] {
+    for d in [left, right, sim_out, mono_out, rep_out, l20, r19, r20, rbig, rcut] {
         let _ = std::fs::remove_dir_all(d);
     }
 }
