@@ -39,6 +39,22 @@ pub struct Frame {
     pub truth: Option<serde_json::Value>,
     /// Boxes to use instead of the detector's (the simulator's ground-truth switch).
     pub given: Option<Vec<GivenBox>>,
+    /// The second camera's view of the same moment (a stereo pair, `ranging.method =
+    /// "stereo"`; src/drive/stereo.rs); `None` for a single camera.
+    pub other: Option<OtherView>,
+}
+
+/// The other camera's image of a stereo frame (the reference camera's is [`Frame::image`]).
+#[derive(Debug, Clone)]
+pub struct OtherView {
+    /// The other camera's image, the size of the reference image.
+    pub image: RgbImage,
+    /// Its file name or label.
+    pub name: String,
+    /// Other camera's time minus the reference camera's, seconds.
+    pub skew_s: f64,
+    /// Frames dropped so far because they had no partner within `stereo.max_skew_ms`.
+    pub pairs_dropped: u64,
 }
 
 impl Frame {
@@ -52,6 +68,7 @@ impl Frame {
             captured_s: None,
             truth: None,
             given: None,
+            other: None,
         }
     }
 }
@@ -217,6 +234,11 @@ impl ReplayDir {
         self.ignored.retain(|n| n != crate::record::TELEMETRY_FILE);
         self.times = Some(times);
         self
+    }
+
+    /// The frame files, in the order they are replayed.
+    pub fn files(&self) -> &[PathBuf] {
+        &self.files
     }
 
     /// Files in the folder that are not frames (named in the summary, never silently dropped).

@@ -82,6 +82,25 @@ pub struct FrameRecord {
     /// stall, the emergency brake. Explains a run afterwards.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub events: Vec<String>,
+    /// A stereo pair's frame (`ranging.method = "stereo"` with two cameras): the other
+    /// camera's frame, the skew and how many boxes were ranged by stereo.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stereo: Option<StereoRecord>,
+}
+
+/// The stereo part of a frame's record (src/drive/stereo.rs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StereoRecord {
+    /// The other camera's frame (file name or label).
+    pub other: String,
+    /// Other camera's time minus the reference camera's, milliseconds.
+    pub skew_ms: f64,
+    /// Detector boxes of this frame ranged by stereo (found in the other image).
+    pub ranged: u64,
+    /// Detector boxes of this frame without a stereo match (ranged by the single camera).
+    pub unmatched: u64,
+    /// Frames dropped so far because they had no partner within `stereo.max_skew_ms`.
+    pub pairs_dropped: u64,
 }
 
 impl FrameRecord {
@@ -122,6 +141,7 @@ impl FrameRecord {
             dropped: None,
             ultrasonic_m: None,
             events: Vec::new(),
+            stereo: None,
         }
     }
 

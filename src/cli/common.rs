@@ -100,13 +100,15 @@ impl ConfigArgs {
     }
 }
 
-/// `drive`, `replay` and `sim` have one frame source: with `ranging.method = "stereo"` they say
-/// so once, on stderr, rather than range by mono silently.
+/// `drive` and `replay` without a second camera (`--camera-right`, `--right`) and `sim
+/// --truth-boxes` have one frame source: with `ranging.method = "stereo"` they say so once,
+/// on stderr, rather than range by mono silently.
 pub fn warn_single_camera(cfg: &Config) {
     if cfg.ranging.method == "stereo" {
         eprintln!(
-            "ranging: method = \"stereo\" but this command has one camera; ranges are monocular \
-             (stereo ranging: `rccar stereo`, or Pipeline::step_stereo; docs/stereo.md)"
+            "ranging: method = \"stereo\" but this run has one camera; ranges are monocular \
+             (a pair: `rccar drive --camera-right`, `rccar replay DIR --right DIR2`, `rccar sim` \
+             without --truth-boxes; docs/stereo.md)"
         );
     }
 }

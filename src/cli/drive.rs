@@ -39,6 +39,11 @@ pub struct DriveArgs {
     /// (the simulator's camera), or a folder of PNG/JPEG frames played at the configured fps.
     #[arg(long, default_value = "v4l:0")]
     pub camera: String,
+    /// The right camera of a stereo pair (`--camera` is then the left one): `v4l:INDEX` or a
+    /// folder of frames; needs `ranging.method = "stereo"`. Frames are paired by time
+    /// (`stereo.max_skew_ms`); `--camera sim` renders its pair itself.
+    #[arg(long, value_name = "SPEC")]
+    pub camera_right: Option<String>,
     /// Serial port of the Arduino (e.g. /dev/ttyACM0) or the firmware emulator's pty.
     #[arg(long)]
     pub port: Option<String>,
@@ -129,7 +134,24 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     let mut tel = JsonlWriter::new(tel_file, tel_path.display().to_string());
 
     let mut pipeline = Pipeline::new(&cfg)?;
-    super::common::warn_single_camera(&cfg);
+    let stereo = cfg.ranging.method == "stereo";
+    if let Some(r) = &a.camera_right {
+        if !stereo {
+            bail!(
+                "--camera-right {r}: ranging.method is {:?}, so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
+                cfg.ranging.method
+            );
+        }
+        if a.camera == "sim" {
+            bail!("--camera-right {r}: --camera sim renders its own pair with ranging.method = \"stereo\"; leave --camera-right out");
+        }
+    }
+    let pair = stereo && (a.camera_right.is_some() || a.camera == "sim");
+    if pair {
+        rccar::drive::stereo::install(&mut pipeline, &cfg);
+    } else {
+        super::common::warn_single_camera(&cfg);
+    }
     pipeline.set_detector(super::common::load_detector(&cfg)?);
 
     // ---- the frame source -----------------------------------------------------------------
@@ -154,22 +176,27 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
                 Some(s) => Some(parse_stall(s)?),
                 None => None,
             };
-            Box::new(PacedSimCamera::new(w, actuators.clone(), clock.clone(), &cfg, stall))
-        }
-        spec if spec.starts_with("v4l:") => open_camera(spec, &cfg, clock.clone())?,
-        dir => {
-            let p = PathBuf::from(dir);
-            if !p.is_dir() {
-                bail!("--camera {dir}: not `sim`, `v4l:INDEX` or a folder of frames");
+            let mut cam = PacedSimCamera::new(w.clone(), actuators.clone(), clock.clone(), &cfg, stall);
+            if pair {
+                let scene = lock(&w).scene().clone();
+                cam.other = Some((
+                    rccar::sim::stereo::other_camera(&cfg, scene, rccar::sim::render::RenderOptions::from_config(&cfg.sim)),
+                    image::RgbImage::new(cfg.camera.width, cfg.camera.height),
+                ));
+                cam.truth_rows = None;
             }
-            let (w, h) = pipeline.frame_size();
-            Box::new(Paced {
-                inner: ReplayDir::open(&p, cfg.camera.fps, w, h, (1, 1))?,
-                clock: clock.clone(),
-                t0: None,
-            })
+            Box::new(cam)
         }
+        spec => open_source(spec, &cfg, &pipeline, &clock)?,
     };
+    if let Some(r) = &a.camera_right {
+        let right = open_source(r, &cfg, &pipeline, &clock)?;
+        source = Box::new(rccar::drive::stereo::StereoFrames::from_config(source, right, &cfg));
+        println!(
+            "drive: stereo pair, left {} and right {r}, reference {}, frames paired within {} ms",
+            a.camera, cfg.stereo.reference, cfg.stereo.max_skew_ms
+        );
+    }
 
     // ---- the sink -------------------------------------------------------------------------
     let mut sink: Box<dyn ArmableSink> = match &a.port {
@@ -569,6 +596,23 @@ fn open_camera(spec: &str, _cfg: &Config, _clock: Arc<WallClock>) -> Result<Box<
     bail!("--camera {spec}: this rccar was built without the camera: cargo build --release --features camera (needs Debian libclang-dev)")
 }
 
+/// A camera (`v4l:INDEX`) or a folder of frames played at the configured fps.
+fn open_source(spec: &str, cfg: &Config, pipeline: &Pipeline, clock: &Arc<WallClock>) -> Result<Box<dyn FrameSource>> {
+    if spec.starts_with("v4l:") {
+        return open_camera(spec, cfg, clock.clone());
+    }
+    let p = PathBuf::from(spec);
+    if !p.is_dir() {
+        bail!("--camera {spec}: not `sim`, `v4l:INDEX` or a folder of frames");
+    }
+    let (w, h) = pipeline.frame_size();
+    Ok(Box::new(Paced {
+        inner: ReplayDir::open(&p, cfg.camera.fps, w, h, (1, 1))?,
+        clock: clock.clone(),
+        t0: None,
+    }))
+}
+
 /// A folder of frames played at their own times on the wall clock.
 struct Paced<S: FrameSource> {
     inner: S,
@@ -610,6 +654,8 @@ struct PacedSimCamera {
     stall: Option<(f64, f64)>,
     stalled_reported: u64,
     truth_rows: Option<std::ops::Range<usize>>,
+    /// A stereo pair's other camera and its image (`ranging.method = "stereo"`).
+    other: Option<(rccar::sim::render::Renderer, image::RgbImage)>,
 }
 
 impl PacedSimCamera {
@@ -635,6 +681,7 @@ impl PacedSimCamera {
             stall,
             stalled_reported: 0,
             truth_rows: rows,
+            other: None,
         }
     }
 
@@ -687,8 +734,20 @@ impl FrameSource for PacedSimCamera {
         let t = now - self.t0;
         let mut w = lock(&self.world);
         let truth = w.render(self.tick, t, &mut self.image, self.truth_rows.clone());
+        let other = self.other.as_mut().map(|(r, img)| {
+            let pose = w.vehicle().pose;
+            let rows = [0..img.height() as usize];
+            rccar::sim::stereo::render_spans(r, &pose, t, self.tick, img, &rows, w.config().sim.blur_px);
+            img.clone()
+        });
         drop(w);
         let mut f = Frame::new(self.tick, t, format!("frame_{:06}.png", self.tick), self.image.clone());
+        f.other = other.map(|image| rccar::source::OtherView {
+            image,
+            name: f.name.clone(),
+            skew_s: 0.0,
+            pairs_dropped: 0,
+        });
         f.captured_s = Some(now);
         f.truth = serde_json::to_value(&truth).ok();
         Some(Ok(f))

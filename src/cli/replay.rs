@@ -2,7 +2,7 @@
 
 use super::common::ConfigArgs;
 use super::timer::WallTimer;
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use rccar::annotate::annotate;
@@ -13,7 +13,7 @@ use rccar::sink::NullSink;
 use rccar::source::{FrameError, FrameSource, ReplayDir};
 use rccar::telemetry::JsonlWriter;
 use rccar::timing::{NoTimer, StageTimer};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// Flags of `rccar replay`.
@@ -21,6 +21,11 @@ use std::process::ExitCode;
 pub struct ReplayArgs {
     /// Folder of PNG/JPEG frames, replayed in name order.
     pub dir: PathBuf,
+    /// A stereo pair: DIR holds the left camera's frames and DIR2 the right camera's, with the
+    /// same file names (as `rccar sim --record DIR --record-right DIR2` writes them); needs
+    /// `ranging.method = "stereo"`. Frames are paired by time (`stereo.max_skew_ms`).
+    #[arg(long, value_name = "DIR2")]
+    pub right: Option<PathBuf>,
     /// Output folder for telemetry.jsonl and annotated frames.
     #[arg(long, short, default_value = "out/replay")]
     pub out: PathBuf,
@@ -45,6 +50,8 @@ struct Summary {
     bar: ProgressBar,
     annotate_dir: Option<PathBuf>,
     warp_src: [[f64; 2]; 4],
+    /// Stereo pairs, boxes ranged by stereo, without a match, largest |skew| ms, pairs dropped.
+    stereo: (u64, u64, u64, f64, u64),
 }
 
 impl Observer for Summary {
@@ -71,6 +78,16 @@ impl Observer for Summary {
         Ok(Flow::Continue)
     }
 
+    fn decorate(&mut self, record: &mut rccar::telemetry::FrameRecord) {
+        if let Some(st) = &record.stereo {
+            self.stereo.0 += 1;
+            self.stereo.1 += st.ranged;
+            self.stereo.2 += st.unmatched;
+            self.stereo.3 = self.stereo.3.max(st.skew_ms.abs());
+            self.stereo.4 = st.pairs_dropped;
+        }
+    }
+
     fn on_skip(&mut self, e: &FrameError) {
         self.bar.inc(1);
         self.bar.println(format!("skipped {e}"));
@@ -82,7 +99,18 @@ impl Observer for Summary {
 pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
     let mut pipeline = Pipeline::new(&cfg)?;
-    super::common::warn_single_camera(&cfg);
+    if let Some(r) = &a.right {
+        if cfg.ranging.method != "stereo" {
+            bail!(
+                "--right {}: ranging.method is {:?}, so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
+                r.display(),
+                cfg.ranging.method
+            );
+        }
+        rccar::drive::stereo::install(&mut pipeline, &cfg);
+    } else {
+        super::common::warn_single_camera(&cfg);
+    }
     pipeline.set_detector(super::common::load_detector(&cfg)?);
     let (w, h) = pipeline.frame_size();
     // Frames smaller than the ROI's extent are refused instead of being blown up.
@@ -91,16 +119,39 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         let max_y = cfg.warp.src.iter().map(|p| p[1]).fold(0.0f64, f64::max);
         ((max_x.ceil() as u32).min(w), (max_y.ceil() as u32).min(h))
     };
-    let mut source = ReplayDir::open(&a.dir, cfg.camera.fps, w, h, min_size)?;
-    // A recording of `rccar drive --record`: replay with the time steps the car saw.
-    if a.dir.join(rccar::record::TELEMETRY_FILE).is_file() {
-        if let Ok(t) = rccar::record::recorded_times(&a.dir) {
-            if !t.times.is_empty() {
-                println!("replay: a recording; frame times from its telemetry ({} frames)", t.times.len());
-                source = source.with_recorded_times(t.times);
+    let open = |dir: &PathBuf| -> Result<ReplayDir> {
+        let mut source = ReplayDir::open(dir, cfg.camera.fps, w, h, min_size)?;
+        // A recording of `rccar drive --record`: replay with the time steps the car saw.
+        if dir.join(rccar::record::TELEMETRY_FILE).is_file() {
+            if let Ok(t) = rccar::record::recorded_times(dir) {
+                if !t.times.is_empty() {
+                    println!("replay: a recording; frame times from its telemetry ({} frames)", t.times.len());
+                    source = source.with_recorded_times(t.times);
+                }
             }
         }
-    }
+        Ok(source)
+    };
+    let left = open(&a.dir)?;
+    let ignored: Vec<String> = left.ignored().to_vec();
+    let mut source: Box<dyn FrameSource> = match &a.right {
+        None => Box::new(left),
+        Some(rdir) => {
+            let right = open(rdir)?;
+            check_pair(&a.dir, left.files(), rdir, right.files())?;
+            println!(
+                "replay: stereo pair, left {} and right {} ({} frames each), reference {}",
+                a.dir.display(),
+                rdir.display(),
+                left.files().len(),
+                cfg.stereo.reference
+            );
+            Box::new(
+                rccar::drive::stereo::StereoFrames::from_config(left, right, &cfg)
+                    .with_labels(a.dir.display().to_string(), rdir.display().to_string()),
+            )
+        }
+    };
     let annotate_dir = a.out.join("annotated");
     let annotate_frames = cfg.replay.annotate && !a.no_annotate;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
@@ -127,6 +178,7 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         bar,
         annotate_dir: annotate_frames.then(|| annotate_dir.clone()),
         warp_src: cfg.warp.src,
+        stereo: (0, 0, 0, 0.0, 0),
     };
     let stop = super::signals::install();
     let mut wall = WallTimer::new();
@@ -138,7 +190,7 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         let mut obs: [&mut dyn Observer; 2] = [&mut tel, &mut s];
         // Replay moves nothing: its sink forgets the commands (they are in the telemetry).
         Driver::new(cfg.camera.fps).run(Parts {
-            source: &mut source,
+            source: &mut *source,
             pipeline: &mut pipeline,
             sink: &mut NullSink,
             stop: &stop,
@@ -174,11 +226,17 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
             t[t.len() - 1]
         );
     }
+    if a.right.is_some() {
+        let (pairs, ranged, unmatched, skew, dropped) = s.stereo;
+        println!(
+            "  stereo: {pairs} pairs (largest skew {skew:.1} ms, {dropped} frame(s) dropped without a partner); detector boxes ranged by stereo {ranged}, without a match {unmatched}"
+        );
+    }
     println!("  skipped {} frame(s)", s.skipped.len());
     for k in &s.skipped {
         println!("    {k}");
     }
-    for i in source.ignored() {
+    for i in &ignored {
         println!("  ignored (not .png/.jpg/.jpeg): {i}");
     }
     println!("  telemetry: {}", tel_path.display());
@@ -198,4 +256,54 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// The two folders of a stereo replay must hold the same frames (file names, in order) of the
+/// same size: otherwise frames would pair with the wrong partner. The error names the file.
+fn check_pair(ldir: &Path, left: &[PathBuf], rdir: &Path, right: &[PathBuf]) -> Result<()> {
+    let rel = |dir: &Path, p: &PathBuf| p.strip_prefix(dir).unwrap_or(p).to_path_buf();
+    for (l, r) in left.iter().zip(right) {
+        if rel(ldir, l) != rel(rdir, r) {
+            bail!(
+                "--right: {} has no partner: the right folder's frame at that place is {} (the folders must hold the same frame names; {} and {} frames)",
+                l.display(),
+                r.display(),
+                left.len(),
+                right.len()
+            );
+        }
+    }
+    if left.len() != right.len() {
+        let (longer, n) = if left.len() > right.len() { (left, right.len()) } else { (right, left.len()) };
+        bail!(
+            "--right: {} has no partner in the other folder ({} has {} frames, {} has {}); the folders must hold the same frames",
+            longer[n].display(),
+            ldir.display(),
+            left.len(),
+            rdir.display(),
+            right.len()
+        );
+    }
+    let dims = |p: &PathBuf| {
+        image::ImageReader::open(p)
+            .ok()
+            .and_then(|r| r.with_guessed_format().ok())
+            .and_then(|r| r.into_dimensions().ok())
+    };
+    for (l, r) in left.iter().zip(right) {
+        if let (Some(a), Some(b)) = (dims(l), dims(r)) {
+            if a != b {
+                bail!(
+                    "--right: {} is {}x{} but {} is {}x{}: the two cameras' frames must have one size",
+                    l.display(),
+                    a.0,
+                    a.1,
+                    r.display(),
+                    b.0,
+                    b.1
+                );
+            }
+        }
+    }
+    Ok(())
 }

@@ -42,6 +42,10 @@ pub struct SimArgs {
     /// Write every camera frame as PNG into this folder (for `rccar replay DIR`).
     #[arg(long)]
     pub record: Option<PathBuf>,
+    /// With `ranging.method = "stereo"`: write the right camera's frames as PNG into this
+    /// folder (`--record` then holds the left camera's), for `rccar replay DIR --right DIR2`.
+    #[arg(long, value_name = "DIR2")]
+    pub record_right: Option<PathBuf>,
     /// Output folder for telemetry.jsonl, summary.json and the plots.
     #[arg(long, short, default_value = "out/sim")]
     pub out: PathBuf,
@@ -117,21 +121,47 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut vehicle = dash.sink(SimVehicle::new(world.clone()));
     let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
     let mut pipeline = Pipeline::new(&cfg)?;
+    // ranging.method = "stereo": a camera pair (src/sim/stereo.rs `other_camera`).
+    let stereo = cfg.ranging.method == "stereo" && !a.truth_boxes;
+    if a.record_right.is_some() && !stereo {
+        bail!(
+            "--record-right: there is one camera; it needs ranging.method = \"stereo\" (--set ranging.method=stereo) and no --truth-boxes"
+        );
+    }
+    if stereo && a.record.is_some() && a.record_right.is_none() {
+        bail!("--record with ranging.method = \"stereo\": give --record-right DIR2 for the right camera's frames");
+    }
     if a.truth_boxes {
         println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
         camera.set_truth_boxes(true);
-    } else {
         super::common::warn_single_camera(&cfg);
+    } else {
         pipeline.set_detector(super::common::load_detector(&cfg)?);
+    }
+    if stereo {
+        let scene = lock(&world).scene().clone();
+        camera.set_other(Some(rccar::sim::stereo::other_camera(
+            &cfg,
+            scene,
+            rccar::sim::render::RenderOptions::from_config(&cfg.sim),
+        )));
+        rccar::drive::stereo::install(&mut pipeline, &cfg);
+        println!(
+            "sim: stereo pair, reference camera {} with the other {} m to its {} (ranging.method = \"stereo\")",
+            cfg.stereo.reference,
+            cfg.stereo.base_m,
+            if cfg.stereo.reference == "right" { "left" } else { "right" }
+        );
     }
     // Without recording nobody looks at the frames: render only the rows the pipeline reads
     // on each frame (the lane's; the detectors' too on detection frames): the same decisions.
-    if a.record.is_some() || dash.enabled() {
+    // A stereo pair is rendered whole (matching reads beyond the detector's rows).
+    if a.record.is_some() || dash.enabled() || stereo {
         camera.set_rows(None);
     } else {
         camera.set_row_plan(Some(pipeline.row_plan()));
     }
-    if let Some(dir) = &a.record {
+    for dir in a.record.iter().chain(&a.record_right) {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     }
     let tel_path = a.out.join("telemetry.jsonl");
@@ -153,6 +183,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut report = Report {
         world: world.clone(),
         record: a.record.clone(),
+        record_right: a.record_right.clone(),
+        reference_left: cfg.stereo.reference != "right",
+        stereo: StereoTally::default(),
         series: plot::Series::default(),
         kick: step.filter(|s| s.kick).map(|s| (s.t, s.dy)),
         kicked_at: None,
@@ -184,6 +217,13 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let scene = lock(&world).scene().clone();
     let wall_s = started.elapsed().as_secs_f64();
     print_summary(&summary);
+    if stereo {
+        let t = &report.stereo;
+        println!(
+            "  stereo: {} pairs, detector boxes ranged by stereo {}, without a match {}",
+            t.pairs, t.ranged, t.unmatched
+        );
+    }
     println!(
         "  {:.1} s simulated in {:.1} s wall: {:.1}x real time",
         summary.seconds,
@@ -229,13 +269,22 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     } else {
         println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
     }
-    if let Some(dir) = &a.record {
-        println!(
+    match (&a.record, &a.record_right) {
+        (Some(dir), Some(right)) => println!(
+            "  frames:    {}/ and {}/ ({} PNG each; replay with `rccar replay {} --right {} --set ranging.method=stereo`)",
+            dir.display(),
+            right.display(),
+            summary.frames,
+            dir.display(),
+            right.display()
+        ),
+        (Some(dir), None) => println!(
             "  frames:    {}/ ({} PNG; replay with `rccar replay {}`)",
             dir.display(),
             summary.frames,
             dir.display()
-        );
+        ),
+        _ => {}
     }
     if let Some(why) = interrupted {
         println!(
@@ -253,7 +302,13 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
 /// plots' series, the recorded frames.
 struct Report {
     world: SharedWorld,
+    /// The (left) camera's frames.
     record: Option<PathBuf>,
+    /// A stereo pair's right camera's frames.
+    record_right: Option<PathBuf>,
+    /// `stereo.reference = "left"`.
+    reference_left: bool,
+    stereo: StereoTally,
     series: plot::Series,
     /// `--kick T:DY`: (T seconds, DY metres), done once.
     kick: Option<(f64, f64)>,
@@ -261,14 +316,33 @@ struct Report {
     kicked_at: Option<f64>,
 }
 
+/// Stereo frames and boxes of a run.
+#[derive(Debug, Default)]
+struct StereoTally {
+    pairs: u64,
+    ranged: u64,
+    unmatched: u64,
+}
+
 impl Observer for Report {
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
-        if let Some(dir) = &self.record {
-            let p = dir.join(&ctx.frame.name);
-            ctx.frame
-                .image
-                .save(&p)
-                .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
+        // With a pair, the reference camera's image goes to its side's folder.
+        let other = ctx.frame.other.as_ref().map(|o| &o.image);
+        let (left, right) = match other {
+            Some(o) if !self.reference_left => (o, Some(&ctx.frame.image)),
+            o => (&ctx.frame.image, o),
+        };
+        for (dir, img) in [(&self.record, Some(left)), (&self.record_right, right)] {
+            if let (Some(dir), Some(img)) = (dir, img) {
+                let p = dir.join(&ctx.frame.name);
+                img.save(&p)
+                    .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
+            }
+        }
+        if let Some(s) = &ctx.record.stereo {
+            self.stereo.pairs += 1;
+            self.stereo.ranged += s.ranged;
+            self.stereo.unmatched += s.unmatched;
         }
         if let Some(tr) = &ctx.record.transition {
             println!(

@@ -27,6 +27,7 @@
 
 pub mod gate;
 pub mod slot;
+pub mod stereo;
 pub mod stop;
 
 pub use gate::{ArmState, Gate};
@@ -322,7 +323,12 @@ impl Driver {
         let dt = self.last_time_s.map_or(1.0 / self.fps, |t| frame.time_s - t);
         self.last_time_s = Some(frame.time_s);
         // 5. Pipeline → command → sink.
-        let out = pipeline.step_with(&frame.image, dt, timer, frame.given.as_deref());
+        // A stereo pair (src/drive/stereo.rs) is ranged by stereo; given boxes win.
+        let counts_before = pipeline.stereo().map(|s| s.counts);
+        let out = match (&frame.other, &frame.given) {
+            (Some(o), None) => pipeline.step_stereo(&frame.image, &o.image, dt, timer),
+            _ => pipeline.step_with(&frame.image, dt, timer, frame.given.as_deref()),
+        };
         sink.send(out.command, frame.time_s)?;
         let sent = clock.now_s();
         // 6. The one telemetry record.
@@ -344,6 +350,9 @@ impl Driver {
         )
         .with_pipeline(&out, pipeline);
         record.truth = frame.truth.clone();
+        if let Some(o) = &frame.other {
+            record.stereo = Some(stereo::record(o, counts_before, pipeline.stereo().map(|s| s.counts)));
+        }
         if clock.is_real() {
             record.latency_ms = Some(latency_ms);
             record.period_ms = period_ms;

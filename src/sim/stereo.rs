@@ -125,3 +125,54 @@ pub fn sign_face_box(r: &Renderer, pose: &Pose, ob: &super::track::Object) -> Op
     let clipped = bb[0] < -0.5 || bb[1] < -0.5 || bb[2] > w + 0.5 || bb[3] > h + 0.5;
     Some((bb, clipped))
 }
+
+/// The drive loop's second camera in the simulator (`rccar sim` with `ranging.method =
+/// "stereo"`, src/drive/stereo.rs): the car's own camera of `[camera]` is the reference (on
+/// the centre line, where the lane keeping and the truth model expect it) and this one is
+/// mounted `stereo.base_m` beside it, to its right when `stereo.reference = "left"` (to its
+/// left otherwise), with the reference's height, tilt and `vehicle.camera_x_m`, so the pair
+/// is ideal and rectified; its noise is seeded apart from the reference's.
+pub fn other_camera(cfg: &Config, scene: Arc<Scene>, opts: RenderOptions) -> Renderer {
+    let mut cam = PinholeCamera::from_config(&cfg.camera);
+    let base = cfg.stereo.base_m;
+    cam.lateral_m = if cfg.stereo.reference != "right" { -base } else { base };
+    let mut o = opts;
+    o.seed = o.seed.wrapping_add(0x5EED);
+    Renderer::new(
+        scene,
+        CameraMount {
+            camera: cam,
+            x_m: cfg.vehicle.camera_x_m,
+        },
+        o,
+    )
+}
+
+/// Renders the rows `spans` (sorted, disjoint) of `r`'s view from `pose` into `img`, each
+/// widened by the blur's reach (`3·blur_px`; with blur, one range from the first span to the
+/// last), as `World::render_spans` does for the reference camera.
+pub fn render_spans(
+    r: &mut Renderer,
+    pose: &Pose,
+    t_s: f64,
+    frame: u64,
+    img: &mut RgbImage,
+    spans: &[std::ops::Range<usize>],
+    blur_px: f64,
+) {
+    let reach = if blur_px > 0.0 { (3.0 * blur_px).ceil() as usize + 1 } else { 0 };
+    let mut merged: Vec<std::ops::Range<usize>> = Vec::with_capacity(spans.len());
+    for s in spans.iter().filter(|s| !s.is_empty()) {
+        let s = s.start.saturating_sub(reach)..s.end + reach;
+        match merged.last_mut() {
+            Some(m) if s.start <= m.end => m.end = m.end.max(s.end),
+            _ => merged.push(s),
+        }
+    }
+    if reach > 0 && merged.len() > 1 {
+        merged = vec![merged[0].start..merged[merged.len() - 1].end];
+    }
+    for m in merged {
+        r.render_rows(pose, t_s, frame, img, m);
+    }
+}

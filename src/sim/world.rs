@@ -493,6 +493,8 @@ pub struct SimCamera {
     plan: Option<(RowPlan, u64)>,
     truth_boxes: bool,
     end_with_world: bool,
+    /// A stereo pair's other camera and its image (src/sim/stereo.rs `other_camera`).
+    other: Option<(Renderer, RgbImage)>,
 }
 
 impl SimCamera {
@@ -511,7 +513,18 @@ impl SimCamera {
             plan: None,
             truth_boxes: false,
             end_with_world: true,
+            other: None,
         }
+    }
+
+    /// A second camera (`sim::stereo::other_camera`): each frame then carries its view of
+    /// the same moment in [`Frame::other`] (rendered over the same rows as the reference),
+    /// for stereo ranging in the drive loop. `None`: one camera (the default).
+    pub fn set_other(&mut self, other: Option<Renderer>) {
+        self.other = other.map(|r| {
+            let (w, h) = (self.image.width(), self.image.height());
+            (r, RgbImage::new(w, h))
+        });
     }
 
     /// `false`: keep rendering after the world's run has ended (a caller stepping frame by
@@ -564,6 +577,18 @@ impl FrameSource for SimCamera {
             None => w.render(self.frame, t, &mut self.image, self.rows.clone()),
         };
         let given = self.truth_boxes.then(|| w.given_boxes(&truth, t));
+        let other = match &mut self.other {
+            Some((r, img)) => {
+                let spans = match &self.plan {
+                    Some((plan, base)) => plan.rows(self.frame - base).to_vec(),
+                    None => vec![self.rows.clone().unwrap_or(0..img.height() as usize)],
+                };
+                let pose = w.vehicle.pose;
+                super::stereo::render_spans(r, &pose, t, self.frame, img, &spans, w.cfg.sim.blur_px);
+                Some(img.clone())
+            }
+            None => None,
+        };
         drop(w);
         let mut f = Frame::new(
             self.frame,
@@ -573,6 +598,12 @@ impl FrameSource for SimCamera {
         );
         f.truth = serde_json::to_value(&truth).ok();
         f.given = given;
+        f.other = other.map(|image| crate::source::OtherView {
+            image,
+            name: f.name.clone(),
+            skew_s: 0.0,
+            pairs_dropped: 0,
+        });
         self.frame += 1;
         Some(Ok(f))
     }

@@ -6,7 +6,8 @@
 //! Pairing: take the next frame of each side; while they are more than `max_skew_s` apart,
 //! drop the older one (counted in [`StereoSource::dropped`]) and take that side's next frame.
 //! A frame one side cannot deliver is passed on as that frame's error, so the caller can name
-//! it, count it and go on. Units: seconds.
+//! it, count it and go on; its name is prefixed by the side's label (`left/`, `right/` or the
+//! folder given to [`StereoSource::with_labels`]). Units: seconds.
 
 use crate::source::{Frame, FrameError, FrameSource};
 
@@ -28,6 +29,7 @@ pub struct StereoSource<L, R> {
     right: R,
     max_skew_s: f64,
     dropped: u64,
+    labels: [String; 2],
 }
 
 impl<L: FrameSource, R: FrameSource> StereoSource<L, R> {
@@ -38,7 +40,20 @@ impl<L: FrameSource, R: FrameSource> StereoSource<L, R> {
             right,
             max_skew_s,
             dropped: 0,
+            labels: ["left".into(), "right".into()],
         }
+    }
+
+    /// Names the two sides in the errors passed on (`LABEL/frame name`; default `left` and
+    /// `right`), e.g. the two folders of a replay, so a bad frame is named with its camera.
+    pub fn with_labels(mut self, left: impl Into<String>, right: impl Into<String>) -> Self {
+        self.labels = [left.into(), right.into()];
+        self
+    }
+
+    fn named(&self, side: usize, mut e: FrameError) -> FrameError {
+        e.name = format!("{}/{}", self.labels[side], e.name);
+        e
     }
 
     /// Frames dropped so far because they had no partner within the skew.
@@ -50,11 +65,11 @@ impl<L: FrameSource, R: FrameSource> StereoSource<L, R> {
     pub fn next_pair(&mut self) -> Option<Result<StereoFrame, FrameError>> {
         let mut l = match self.left.next_frame()? {
             Ok(f) => f,
-            Err(e) => return Some(Err(e)),
+            Err(e) => return Some(Err(self.named(0, e))),
         };
         let mut r = match self.right.next_frame()? {
             Ok(f) => f,
-            Err(e) => return Some(Err(e)),
+            Err(e) => return Some(Err(self.named(1, e))),
         };
         loop {
             let skew = r.time_s - l.time_s;
@@ -69,12 +84,12 @@ impl<L: FrameSource, R: FrameSource> StereoSource<L, R> {
             if skew > 0.0 {
                 l = match self.left.next_frame()? {
                     Ok(f) => f,
-                    Err(e) => return Some(Err(e)),
+                    Err(e) => return Some(Err(self.named(0, e))),
                 };
             } else {
                 r = match self.right.next_frame()? {
                     Ok(f) => f,
-                    Err(e) => return Some(Err(e)),
+                    Err(e) => return Some(Err(self.named(1, e))),
                 };
             }
         }
