@@ -168,7 +168,9 @@ fn main() {
         cv["score"].as_f64().unwrap_or(f64::NAN)
     );
     assert!(sink > 0.0);
-    bench_obstacle(runs);
+    for dist in [0.3, 1.0, 2.0] {
+        bench_obstacle(&python, runs, dist);
+    }
     bench_tracking(&python, runs / 20);
 }
 
@@ -177,21 +179,22 @@ fn main() {
 /// detector's are; two opponent planes, the whole box, every row on its own, the vertical
 /// face, the three ranges. The pair's conversion (grey + opponent planes, once per frame, not
 /// per box) is timed apart.
-fn bench_obstacle(runs: usize) {
+fn bench_obstacle(python: &str, runs: usize, dist: f64) {
     use rccar::ranging::ObjectClass;
     use rccar::stereo::ranging::{match_for_class, PairPlanes};
     let cfg = Config::default();
     let track = rccar::sim::scenario_lab::straight_with_object("obstacle").expect("road");
     let scene = Arc::new(Scene::new(&track));
     let mut rig = StereoRig::new(&cfg, scene.clone(), 0.06, RenderOptions::from_config(&cfg.sim));
-    let pose = rccar::sim::scenario_lab::pose_before_object(&cfg, &scene.track, 1.0).expect("pose");
+    let pose = rccar::sim::scenario_lab::pose_before_object(&cfg, &scene.track, dist).expect("pose");
     let (l, r) = rig.render(&pose, 0.0, 1000);
     let b = rig.truth(&pose, true)[0].bbox.bbox;
+    let (x0, y0) = ((b[0].round() as i64 - 8).max(0), (b[1].round() as i64 - 8).max(0));
     let bx = [
-        b[0].round() as i64 - 8,
-        b[1].round() as i64 - 8,
-        (b[2] - b[0]).round() as i64 + 16,
-        (b[3] - b[1]).round() as i64 + 16,
+        x0,
+        y0,
+        ((b[2].round() as i64 + 8).min(l.width() as i64) - x0),
+        ((b[3].round() as i64 + 8).min(l.height() as i64) - y0),
     ];
     let opts = MatchOptions {
         max_disparity: cfg.stereo.max_disparity_px,
@@ -217,15 +220,45 @@ fn bench_obstacle(runs: usize) {
     }
     let (bm, bmin) = stats(&mut per_box);
     let (pm, pmin) = stats(&mut per_pair);
+    // OpenCV on the same search strip (grey: one plane where ours correlates two).
+    let (mut gl, mut gr) = (image::GrayImage::new(0, 0), image::GrayImage::new(0, 0));
+    gray_from_rgb(&l, &mut gl);
+    gray_from_rgb(&r, &mut gr);
+    let dir = std::env::temp_dir().join(format!("rccar_bench_obstacle_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let (pl, pr) = (dir.join("left.png"), dir.join("right.png"));
+    gl.save(&pl).expect("write left");
+    gr.save(&pr).expect("write right");
+    let mut helper = Command::new(python)
+        .args(["-c", PY, pl.to_str().unwrap(), pr.to_str().unwrap()])
+        .args(bx.iter().map(|v| v.to_string()))
+        .arg(cfg.stereo.max_disparity_px.to_string())
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("running the OpenCV helper");
+    let mut to_cv = helper.stdin.take().unwrap();
+    let mut from_cv = BufReader::new(helper.stdout.take().unwrap());
+    let mut line = String::new();
+    from_cv.read_line(&mut line).expect("helper output");
+    writeln!(to_cv, "{runs}").unwrap();
+    line.clear();
+    from_cv.read_line(&mut line).expect("helper output");
+    let mut theirs: Vec<f64> = serde_json::from_str(&line).expect("helper JSON");
+    drop(to_cv);
+    let _ = helper.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+    let (cm, cmin) = stats(&mut theirs);
     println!();
     println!(
-        "obstacle box {}x{} px 1 m ahead (base 0.06 m), opponent planes + rows + vertical face + 3 ranges, {runs} runs; ms",
+        "obstacle box {}x{} px {dist} m ahead (base 0.06 m), opponent planes + rows + vertical face + 3 ranges, {runs} runs; ms",
         bx[2], bx[3]
     );
     println!("  per box:  median {bm:.4}, min {bmin:.4}");
+    println!("  cv2.matchTemplate(TM_CCOEFF_NORMED) + minMaxLoc, same strip (grey): median {cm:.4}, min {cmin:.4}");
     println!("  per pair (grey + opponent planes of both images): median {pm:.4}, min {pmin:.4}");
     if let Some((f, face)) = last {
-        println!("  forward {:.3} m (truth 1.000), face {face:?}", f.unwrap_or(f64::NAN));
+        println!("  forward {:.3} m (truth {dist:.3}), face {face:?}", f.unwrap_or(f64::NAN));
     }
 }
 
