@@ -118,7 +118,9 @@ stage drive-fil cargo test --release --features $FEAT --test drive_fil --test dr
 stage camera-gpio cargo test --release --features $FEAT --lib -- camera_source capture gpio
 stage dashboard-security cargo test --release --features $FEAT --test dashboard_security -- --test-threads 1
 # the browser test runs target/release/rccar, built here with the dashboard
-stage dashboard-browser bash -c "cargo build --release --features $FEAT && \"\$RCCAR_PYTHON\" tests/dashboard/browser_test.py"
+# (the same target selection as feature-build: a build without a dev target resolves the
+# dependencies' features differently and compiles the library again)
+stage dashboard-browser bash -c "cargo build --release --features $FEAT --bins --example decode && \"\$RCCAR_PYTHON\" tests/dashboard/browser_test.py"
 # rccar with jpeg-turbo (libjpeg-turbo's C code via mozjpeg; needs gcc), in the same feature set.
 stage jpeg-parity env RCCAR_JPEG_FEATURES=$FEAT "$RCCAR_PYTHON" tests/parity/jpeg_parity.py
 # The Pi cross-build check: aarch64 build (Debian's rustc-web), replay and a 20 s sim under

@@ -92,8 +92,10 @@ fi
 [ "${RCCAR_CROSS_BUILD_ONLY:-0}" = 1 ] && finish
 
 # ---- the native reference -------------------------------------------------------------
-echo "== native build: cargo build --release -p rccar --bin rccar"
-if cargo build --release -p rccar --bin rccar 2>&1 | grep -vE '^\s+(Compiling|Downloaded|Downloading) '; [ "${PIPESTATUS[0]}" -eq 0 ]; then
+# The build of tests/all.sh's first stage, so nothing is compiled again there (`-p rccar --bin
+# rccar` alone resolves the dependencies' features differently and recompiles the library).
+echo "== native build: cargo build --release --workspace --all-targets"
+if cargo build --release --workspace --all-targets 2>&1 | grep -vE '^\s+(Compiling|Downloaded|Downloading) '; [ "${PIPESTATUS[0]}" -eq 0 ]; then
   NATIVE=$ROOT/target/release/rccar
 else
   fail "native build"
