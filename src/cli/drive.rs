@@ -149,6 +149,9 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     let pair = stereo && (a.camera_right.is_some() || a.camera == "sim");
     if pair {
         rccar::drive::stereo::install(&mut pipeline, &cfg);
+        if let Some(note) = rccar::drive::stereo::calibration_note(&cfg) {
+            eprintln!("{note}");
+        }
     } else {
         super::common::warn_single_camera(&cfg);
     }

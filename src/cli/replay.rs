@@ -108,6 +108,9 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
             );
         }
         rccar::drive::stereo::install(&mut pipeline, &cfg);
+        if let Some(note) = rccar::drive::stereo::calibration_note(&cfg) {
+            eprintln!("{note}");
+        }
     } else {
         super::common::warn_single_camera(&cfg);
     }

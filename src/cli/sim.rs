@@ -146,6 +146,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             rccar::sim::render::RenderOptions::from_config(&cfg.sim),
         )));
         rccar::drive::stereo::install(&mut pipeline, &cfg);
+        if let Some(note) = rccar::drive::stereo::calibration_note(&cfg) {
+            eprintln!("{note}");
+        }
         println!(
             "sim: stereo pair, reference camera {} with the other {} m to its {} (ranging.method = \"stereo\")",
             cfg.stereo.reference,

@@ -103,6 +103,19 @@ pub fn install(pipeline: &mut Pipeline, cfg: &Config) {
     }
 }
 
+/// What the loop leaves out of `[stereo]` (said once by the commands, never silent): with
+/// `stereo.calibration` set, the drive loop still takes the pair as ideal and rectified (the
+/// calibration's maps and geometry are applied by `rccar stereo` only).
+pub fn calibration_note(cfg: &Config) -> Option<String> {
+    (cfg.ranging.method == "stereo" && !cfg.stereo.calibration.is_empty()).then(|| {
+        format!(
+            "stereo: the drive loop takes the pair as ideal and rectified; stereo.calibration = {:?} is not applied here \
+             (rccar stereo applies it; docs/stereo.md)",
+            cfg.stereo.calibration
+        )
+    })
+}
+
 /// The telemetry of a stereo frame: `before`/`after` are the pipeline's stereo match counts
 /// (matched, unmatched) around the frame's step.
 pub fn record(o: &OtherView, before: Option<(u64, u64)>, after: Option<(u64, u64)>) -> StereoRecord {
@@ -122,6 +135,20 @@ pub fn record(o: &OtherView, before: Option<(u64, u64)>, after: Option<(u64, u64
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A calibration the loop does not apply is said, never silent; nothing is said for mono
+    /// or without a calibration file.
+    #[test]
+    fn an_unapplied_calibration_is_named() {
+        let mut cfg = crate::config::Config::default();
+        cfg.ranging.method = "stereo".into();
+        assert_eq!(calibration_note(&cfg), None);
+        cfg.stereo.calibration = "/cal/pair.json".into();
+        let note = calibration_note(&cfg).unwrap();
+        assert!(note.contains("\"/cal/pair.json\" is not applied here"), "{note}");
+        cfg.ranging.method = "mono".into();
+        assert_eq!(calibration_note(&cfg), None);
+    }
 
     struct Times(Vec<f64>, usize, u8);
 
