@@ -50,5 +50,5 @@ fn every_test_file_is_compiled() {
             missing.push(name);
         }
     }
-    assert!(missing.is_empty(), "tests/{missing:?} are not compiled: add `mod NAME;` to tests/it.rs");
+    assert!(missing.is_empty(), "not compiled: tests/{}; add `mod NAME;` to tests/it.rs", missing.join(", tests/"));
 }
