@@ -94,8 +94,7 @@ stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib 
 FEAT=serial,camera,gpio,dashboard,jpeg-turbo
 # Build every feature-set test binary, the binary and the JPEG example first: the stages below
 # then only run, and the machine is quiet for the wall-clock ones.
-stage feature-build bash -c "cargo test --release --features $FEAT --no-run --lib --test link_hil --test labs \
-  --test drive_fil --test drive_cli --test dashboard_security && cargo build --release --features $FEAT --bins --example decode"
+stage feature-build bash -c "cargo test --release --features $FEAT --no-run --lib --test car && cargo build --release --features $FEAT --bins --example decode"
 # The Pi cross-build (its own target dir and compiler) compiles in the background at nice 19
 # while the wall-clock stages below leave cores idle; the cross stage at the end waits for it.
 CROSS_BG=
@@ -105,18 +104,18 @@ if [ "${RCCAR_CROSS:-1}" = 1 ]; then
   CROSS_BG=$!
   trap 'kill -- -$CROSS_BG 2>/dev/null' EXIT   # an interrupted suite leaves no compiler behind
 fi
-stage link-hil cargo test --release --features $FEAT --test link_hil
-stage labs-link cargo test --release --features $FEAT --test labs lab11
+stage link-hil cargo test --release --features $FEAT --test car link_hil::
+stage labs-link cargo test --release --features $FEAT --test car labs::lab11
 # the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr,
 # on the wall clock. The two whole laps (closed loop; 1e-3 bit errors) run side by side, one
 # emulator per core (~2.5 min); the timed faults (kill -9, Ctrl-C, stall, vanished pty) and
 # drive_cli one at a time, alone on the machine (~2 min).
-stage drive-fil-laps cargo test --release --features $FEAT --test drive_fil -- --test-threads 2 \
-  firmware_in_the_loop_drives_a_lap bit_errors_at_1e_3_for_a_lap
-stage drive-fil cargo test --release --features $FEAT --test drive_fil --test drive_cli -- --test-threads 1 \
+stage drive-fil-laps cargo test --release --features $FEAT --test car -- --test-threads 2 \
+  drive_fil::firmware_in_the_loop_drives_a_lap drive_fil::bit_errors_at_1e_3_for_a_lap
+stage drive-fil cargo test --release --features $FEAT --test car -- --test-threads 1 drive_fil:: drive_cli:: \
   --skip firmware_in_the_loop_drives_a_lap --skip bit_errors_at_1e_3_for_a_lap
 stage camera-gpio cargo test --release --features $FEAT --lib -- camera_source capture gpio
-stage dashboard-security cargo test --release --features $FEAT --test dashboard_security -- --test-threads 1
+stage dashboard-security cargo test --release --features $FEAT --test car -- --test-threads 1 dashboard_security::
 # the browser test runs target/release/rccar, built here with the dashboard
 # (the same target selection as feature-build: a build without a dev target resolves the
 # dependencies' features differently and compiles the library again)

@@ -3,7 +3,8 @@
 //! the token rules apply as on the car's Wi-Fi address). One case per test; all share one
 //! server (it ends itself after 60 s of simulated time).
 //!
-//! `cargo test --release --features dashboard --test dashboard_security`
+//! `cargo test --release --features dashboard --test car dashboard_security::`
+#![cfg(feature = "dashboard")]
 
 use std::io::{Read, Write};
 use std::net::TcpStream;

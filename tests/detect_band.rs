@@ -4,7 +4,7 @@
 //! without it (both with the `[detect]` regions and size limits), while the band skips most
 //! windows. A box "around the object" overlaps the object's true image box (IoU > 0.2).
 //!
-//! Units: metres, pixels. Run: `cargo test --release --test detect_band -- --nocapture`.
+//! Units: metres, pixels. Run: `cargo test --release --test it detect_band:: -- --nocapture`.
 
 use rccar::config::Config;
 use rccar::detect::{DetectStage, Rect};

@@ -4,7 +4,7 @@
 //! (`--pwm-log`, the harness's report) move the simulated car. Faults are injected into this
 //! same setup: kill -9, Ctrl-C, a stalled camera, a vanished pty, bit errors on the wire.
 //!
-//! Run: `cargo test --release --features serial --test drive_fil -- --nocapture --test-threads 1`
+//! Run: `cargo test --release --features serial --test car drive_fil:: -- --nocapture --test-threads 1`
 //! (the timed faults need the machine to themselves: a late frame would be measured as the
 //! car's latency). The two whole-lap tests, lane keeping only, may run side by side on two
 //! cores (tests/all.sh does): they assert laps, departures and RMS, not timings. `RCCAR_FIL_LAPS=3` drives 3 laps in the closed-loop test;

@@ -35,7 +35,7 @@ fn bin_dir() -> PathBuf {
 }
 
 /// `rccar-train` lives in the workspace member `training/`; `cargo test --workspace` builds
-/// it, a single `cargo test --test labs` may not. Build it once if it is missing.
+/// it, a single `cargo test --test car labs::` may not. Build it once if it is missing.
 fn ensure_trainer() {
     static ONCE: std::sync::OnceLock<()> = std::sync::OnceLock::new();
     ONCE.get_or_init(|| {
@@ -135,7 +135,7 @@ fn run_lab(file: &str) {
     let page = parse(&path);
     assert!(
         !page.needs_serial || cfg!(feature = "serial"),
-        "{file}: needs the `serial` feature (cargo test --release --features serial --test labs)"
+        "{file}: needs the `serial` feature (cargo test --release --features serial --test car labs::)"
     );
     // the firmware lab and the key both build and run the emulator: one at a time
     let _fw = page.needs_serial.then(|| FIRMWARE.lock().unwrap_or_else(|e| e.into_inner()));

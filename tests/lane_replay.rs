@@ -1,7 +1,7 @@
 //! `rccar replay` end to end: the golden telemetry of the shipped sample, and every kind of bad
 //! input the issue lists (each a one-line error naming the culprit, or a counted skip).
 //!
-//! Regenerate the golden file on purpose with `RCCAR_REGENERATE=1 cargo test --test lane_replay`.
+//! Regenerate the golden file on purpose with `RCCAR_REGENERATE=1 cargo test --test it lane_replay::`.
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};

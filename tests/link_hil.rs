@@ -2,7 +2,7 @@
 //! through the real serial transport (`rccar::link::transport::Link`). Pulse widths are those
 //! the harness measured on D9 (servo) and D10 (ESC) from pin edges in simulated time.
 //! Each test starts its own emulator on its own pty path, so they run in parallel.
-//! Run: `cargo test --release --features serial --test link_hil`.
+//! Run: `cargo test --release --features serial --test car link_hil::`.
 #![cfg(feature = "serial")]
 
 #[path = "support/sim.rs"]

@@ -9,7 +9,7 @@
 //! beside it. Then the two recorded folders replay (`rccar replay L --right R`) with the same
 //! decisions, frame for frame; and bad pairs of folders are refused or skipped by name.
 //!
-//!     cargo test --release --test stereo_loop -- --nocapture
+//!     cargo test --release --test it stereo_loop:: -- --nocapture
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -7,7 +7,7 @@
 //! is the reference. Asserted for both: one stop, at rest within `behaviour.stop_window_m` of
 //! the sign (true distance from the lens); for stereo, most sign boxes got a stereo range.
 //!
-//!     cargo test --release --test stereo_pipeline -- --nocapture
+//!     cargo test --release --test it stereo_pipeline:: -- --nocapture
 
 use rccar::config::Config;
 use rccar::control::behaviour::Mode;

@@ -11,7 +11,7 @@
 //! here too, median and minimum over the frames, one thread; benches/stereo.rs has the
 //! careful timing).
 //!
-//!     cargo test --release --test stereo_signs -- --nocapture
+//!     cargo test --release --test it stereo_signs:: -- --nocapture
 
 use rccar::config::Config;
 use rccar::detect::{CascadeSpec, DetectParams, DetectStage, Rect};

@@ -17,7 +17,7 @@
 //! on the opponent planes (the top face's bias; it is then not within the targets at
 //! 0.3–0.5 m). `RCCAR_STEREO_DUMP=dir` writes the pairs and the correlation curves.
 //!
-//!     cargo test --release --test stereo_sim -- --nocapture
+//!     cargo test --release --test it stereo_sim:: -- --nocapture
 
 use rccar::config::Config;
 use rccar::detect::{CascadeSpec, DetectParams, DetectStage};

@@ -13,7 +13,7 @@
 //! on 90 % of the frames that have an estimate. The same run with Abdollahi's HSV + template
 //! detector is printed too.
 //!
-//!     cargo test --release --test stereo_track -- --nocapture
+//!     cargo test --release --test it stereo_track:: -- --nocapture
 
 use image::{GrayImage, RgbImage};
 use rccar::config::Config;
