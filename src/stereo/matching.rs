@@ -325,7 +325,7 @@ impl Matcher {
             } else {
                 0.0
             };
-            if best.map_or(true, |b| score > b.1) {
+            if best.is_none_or(|b| score > b.1) {
                 best = Some((self.scores.len(), score));
             }
             self.scores.push(score);
@@ -466,7 +466,7 @@ impl Matcher {
                     vi += q - s * s / bwf;
                 }
                 let score = if vi > 1e-9 { cov / (vt * vi).sqrt() } else { 0.0 };
-                if best.map_or(true, |b| score > b.1) {
+                if best.is_none_or(|b| score > b.1) {
                     best = Some((k, score));
                 }
                 self.row_scores.push(score);
