@@ -79,6 +79,17 @@ stage() {
   return 0
 }
 
+# The Pi cross-build (its own target dir and compiler) compiles in the background at nice 19
+# from the start: it gets the cores whenever the stages leave them idle (test threads waiting
+# on subprocesses, the wall-clock firmware-in-the-loop laps); the cross stage at the end waits
+# for it. (Started after the feature build, a cold run still waited ~60 s for it.)
+CROSS_BG=
+if [ "${RCCAR_CROSS:-1}" = 1 ]; then
+  RCCAR_CROSS_BUILD_ONLY=1 RCCAR_CROSS_CAMERA="${RCCAR_CROSS_CAMERA:-0}" setsid nice -n 19 bash tests/cross/run.sh \
+    > "$LOG_DIR/cross-build.log" 2>&1 &
+  CROSS_BG=$!
+  trap 'kill -- -$CROSS_BG 2>/dev/null' EXIT   # an interrupted suite leaves no compiler behind
+fi
 stage build cargo build --release --workspace --all-targets
 stage cargo-test cargo test --release --workspace --no-fail-fast
 stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
@@ -95,15 +106,6 @@ FEAT=serial,camera,gpio,dashboard,jpeg-turbo
 # Build every feature-set test binary, the binary and the JPEG example first: the stages below
 # then only run, and the machine is quiet for the wall-clock ones.
 stage feature-build bash -c "cargo test --release --features $FEAT --no-run --lib --test car && cargo build --release --features $FEAT --bins --example decode"
-# The Pi cross-build (its own target dir and compiler) compiles in the background at nice 19
-# while the wall-clock stages below leave cores idle; the cross stage at the end waits for it.
-CROSS_BG=
-if [ "${RCCAR_CROSS:-1}" = 1 ]; then
-  RCCAR_CROSS_BUILD_ONLY=1 RCCAR_CROSS_CAMERA="${RCCAR_CROSS_CAMERA:-0}" setsid nice -n 19 bash tests/cross/run.sh \
-    > "$LOG_DIR/cross-build.log" 2>&1 &
-  CROSS_BG=$!
-  trap 'kill -- -$CROSS_BG 2>/dev/null' EXIT   # an interrupted suite leaves no compiler behind
-fi
 stage link-hil cargo test --release --features $FEAT --test car link_hil::
 stage labs-link cargo test --release --features $FEAT --test car labs::lab11
 # the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr,
