@@ -172,6 +172,125 @@ fn main() {
         bench_obstacle(&python, runs, dist);
     }
     bench_tracking(&python, runs / 20);
+    bench_rectify(&python, &l, &r, runs / 4);
+}
+
+const PY_REMAP: &str = r#"
+import cv2, json, sys, time
+import numpy as np
+cv2.setNumThreads(1)
+c = json.loads(sys.argv[1])
+l = cv2.imread(sys.argv[2]); r = cv2.imread(sys.argv[3])
+maps = []
+for cam in ("left", "right"):
+    k = np.array(c[cam]["k"], dtype=np.float64); d = np.array(c[cam]["d"], dtype=np.float64)
+    rr = np.array(c[cam]["r"], dtype=np.float64)
+    p = np.array([[c["f"], 0, c["c"][0]], [0, c["f"], c["c"][1]], [0, 0, 1]], dtype=np.float64)
+    maps.append(cv2.initUndistortRectifyMap(k, d, rr, p, (l.shape[1], l.shape[0]), cv2.CV_32FC1))
+print("ready", flush=True)
+for line in sys.stdin:
+    ts = []
+    for _ in range(int(line)):
+        t0 = time.perf_counter()
+        cv2.remap(l, maps[0][0], maps[0][1], cv2.INTER_LINEAR)
+        cv2.remap(r, maps[1][0], maps[1][1], cv2.INTER_LINEAR)
+        ts.append((time.perf_counter() - t0) * 1e3)
+    print(json.dumps(ts), flush=True)
+"#;
+
+/// Rectification in the drive loop (`stereo.calibration`, src/stereo/rectify.rs): both colour
+/// images of a 320×240 pair remapped through maps built once, against OpenCV's `cv2.remap`
+/// (INTER_LINEAR, float maps from `initUndistortRectifyMap` of the same calibration) on the
+/// same pair, alternating rounds. The rig: 1° yaw, 0.5° pitch, 0.2° roll, a barrel lens on the
+/// right (as tests/stereo_loop.rs).
+fn bench_rectify(python: &str, l: &image::RgbImage, r: &image::RgbImage, runs: usize) {
+    use rccar::calib::file::{CameraCalibration, StereoCalibration};
+    use rccar::calib::intrinsics::{rodrigues, Distortion, Intrinsics};
+    use rccar::calib::stereo::{stereo_rectify, to_rows};
+    use rccar::stereo::rectify::PairRectifier;
+    let cam = |k1: f64| CameraCalibration {
+        image_size: [l.width(), l.height()],
+        intrinsics: Intrinsics {
+            fx: 265.0,
+            fy: 265.0,
+            cx: 159.5,
+            cy: 119.5,
+        },
+        distortion: Distortion([k1, 0.0, 0.0, 0.0, 0.0]),
+        rms_px: 0.0,
+        per_image_rms_px: vec![],
+        board_not_found: vec![],
+    };
+    let (cl, cr) = (cam(0.0), cam(-0.05));
+    let rot = rodrigues([0.5f64.to_radians(), 1.0f64.to_radians(), 0.2f64.to_radians()]);
+    let t = nalgebra::Vector3::new(-0.06, 0.0, 0.0);
+    let rc = stereo_rectify(&cl.intrinsics, &cl.distortion, &cr.intrinsics, &cr.distortion, &rot, &t, l.width(), l.height());
+    let st = StereoCalibration {
+        left: cl.clone(),
+        right: cr.clone(),
+        r: to_rows(&rot),
+        t: [t[0], t[1], t[2]],
+        baseline_m: 0.06,
+        rms_px: 0.0,
+        per_pair_rms_px: vec![],
+        pairs_not_used: vec![],
+        rectification: rc,
+    };
+    let t0 = Instant::now();
+    let mut rect = PairRectifier::new(&st, true);
+    let build_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let k = |c: &CameraCalibration| {
+        let i = c.intrinsics;
+        serde_json::json!([[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]])
+    };
+    let spec = serde_json::json!({
+        "left": {"k": k(&cl), "d": cl.distortion.0, "r": rc.r1},
+        "right": {"k": k(&cr), "d": cr.distortion.0, "r": rc.r2},
+        "f": rc.f, "c": rc.c,
+    });
+    let dir = std::env::temp_dir().join("rccar_stereo_bench");
+    let (pl, pr) = (dir.join("left_rgb.png"), dir.join("right_rgb.png"));
+    l.save(&pl).expect("write left");
+    r.save(&pr).expect("write right");
+    let mut helper = Command::new(python)
+        .args(["-c", PY_REMAP, &spec.to_string(), pl.to_str().unwrap(), pr.to_str().unwrap()])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("running the OpenCV helper");
+    let mut to_cv = helper.stdin.take().unwrap();
+    let mut from_cv = BufReader::new(helper.stdout.take().unwrap());
+    let mut line = String::new();
+    from_cv.read_line(&mut line).expect("helper output");
+    assert_eq!(line.trim(), "ready", "OpenCV helper: {line}");
+    let (mut ours, mut theirs) = (vec![], vec![]);
+    let round = 10;
+    while ours.len() < runs.max(round) {
+        writeln!(to_cv, "{round}").unwrap();
+        line.clear();
+        from_cv.read_line(&mut line).unwrap();
+        theirs.extend(serde_json::from_str::<Vec<f64>>(&line).unwrap());
+        for _ in 0..round {
+            let t0 = Instant::now();
+            rect.rectify(l, r);
+            ours.push(t0.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    drop(to_cv);
+    let _ = helper.wait();
+    let (om, omin) = stats(&mut ours);
+    let (cm, cmin) = stats(&mut theirs);
+    println!();
+    println!(
+        "rectifying a {}x{} colour pair (stereo.calibration), {} runs each, alternating rounds; ms",
+        l.width(),
+        l.height(),
+        ours.len()
+    );
+    println!("  maps built once at start-up: {build_ms:.1}");
+    println!("  rccar PairRectifier::rectify (2 remaps): median {om:.4}, min {omin:.4}");
+    println!("  cv2.remap x 2 (INTER_LINEAR, float maps):  median {cm:.4}, min {cmin:.4}");
+    println!("  ratio of minima (ours / OpenCV): {:.2}", omin / cmin);
 }
 
 /// The obstacle path (`stereo::ranging::match_for_class`): the blue box of

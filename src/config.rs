@@ -468,6 +468,11 @@ pub struct SimConfig {
     pub light_variation: f64,
     /// Period of the brightness change, seconds.
     pub light_period_s: f64,
+    /// How a stereo pair's second camera is turned from ideal: yaw, pitch, roll, degrees
+    /// (`ranging.method = "stereo"`; src/sim/stereo.rs `LensWarp`).
+    pub stereo_error_deg: [f64; 3],
+    /// Radial distortion k₁ of the stereo pair's second camera (0 = none).
+    pub stereo_error_k1: f64,
 }
 
 impl Default for SimConfig {
@@ -483,6 +488,8 @@ impl Default for SimConfig {
             exposure: 1.0,
             light_variation: 0.0,
             light_period_s: 10.0,
+            stereo_error_deg: [0.0; 3],
+            stereo_error_k1: 0.0,
         }
     }
 }
@@ -621,6 +628,10 @@ impl Config {
         c.range("sim.exposure", m.exposure, 0.1, 4.0);
         c.range("sim.light_variation", m.light_variation, 0.0, 0.9);
         c.range("sim.light_period_s", m.light_period_s, 0.1, 3600.0);
+        for (i, v) in m.stereo_error_deg.iter().enumerate() {
+            c.range(&format!("sim.stereo_error_deg[{i}]"), *v, -5.0, 5.0);
+        }
+        c.range("sim.stereo_error_k1", m.stereo_error_k1, -0.5, 0.5);
 
         let d = &self.detect;
         c.range("detect.scale_factor", d.scale_factor, 1.01, 2.0);

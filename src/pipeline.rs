@@ -46,6 +46,17 @@ pub enum PipelineError {
     /// A cascade file exists but cannot be read or parsed.
     #[error("detect: {0}")]
     Cascade(#[from] CascadeError),
+    /// `stereo.calibration` names a file that cannot be read, is not a stereo calibration, or
+    /// was made for another image size.
+    #[error("stereo.calibration: {0}")]
+    StereoCalibration(crate::calib::file::FileError),
+}
+
+// By hand, not `#[from]`: a `source` would print the file's error a second time.
+impl From<crate::calib::file::FileError> for PipelineError {
+    fn from(e: crate::calib::file::FileError) -> Self {
+        PipelineError::StereoCalibration(e)
+    }
 }
 
 /// What one frame produced.
@@ -305,6 +316,22 @@ pub struct Pipeline {
     stereo: Option<crate::stereo::ranging::StereoRanging>,
 }
 
+/// The stereo ranging of `cfg` (`ranging.method = "stereo"`): a calibrated pair when
+/// `stereo.calibration` names a file (read here, once; its image size must be the camera's),
+/// else an ideal pair of `[camera]` with `stereo.base_m`.
+fn stereo_ranging(cfg: &Config) -> Result<Option<crate::stereo::ranging::StereoRanging>, PipelineError> {
+    use crate::stereo::ranging::StereoRanging;
+    if cfg.ranging.method != "stereo" {
+        return Ok(None);
+    }
+    if cfg.stereo.calibration.is_empty() {
+        return Ok(Some(StereoRanging::from_config(cfg)));
+    }
+    let path = std::path::Path::new(&cfg.stereo.calibration);
+    let st = crate::calib::file::CalibrationFile::load_stereo(path, cfg.camera.width, cfg.camera.height)?;
+    Ok(Some(StereoRanging::with_calibration(cfg, &st)))
+}
+
 impl Pipeline {
     /// Builds the pipeline for `cfg` (precomputes the warp map), without a detector: see
     /// [`Pipeline::set_detector`] and [`load_detector`].
@@ -332,7 +359,7 @@ impl Pipeline {
             measurements: Vec::with_capacity(16),
             every_n: cfg.detect.every_n_frames.max(1) as u64,
             frame_index: 0,
-            stereo: (cfg.ranging.method == "stereo").then(|| crate::stereo::ranging::StereoRanging::from_config(cfg)),
+            stereo: stereo_ranging(cfg)?,
         })
     }
 
@@ -359,6 +386,11 @@ impl Pipeline {
     /// The stereo ranging, if installed (its match counts).
     pub fn stereo(&self) -> Option<&crate::stereo::ranging::StereoRanging> {
         self.stereo.as_ref()
+    }
+
+    /// The stereo ranging, if installed, to adjust (e.g. where its reference lens sits).
+    pub fn stereo_mut(&mut self) -> Option<&mut crate::stereo::ranging::StereoRanging> {
+        self.stereo.as_mut()
     }
 
     /// Like [`Pipeline::step`] for a stereo pair: lane and detection on `reference` (the

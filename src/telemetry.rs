@@ -101,6 +101,8 @@ pub struct StereoRecord {
     pub unmatched: u64,
     /// Frames dropped so far because they had no partner within `stereo.max_skew_ms`.
     pub pairs_dropped: u64,
+    /// Whether the pair was rectified with `stereo.calibration` (false: taken as ideal).
+    pub rectified: bool,
 }
 
 impl FrameRecord {

@@ -78,12 +78,12 @@ pub enum CalibrationFile {
 #[derive(Debug, thiserror::Error)]
 pub enum FileError {
     /// The file could not be read.
-    #[error("{path}: {source}")]
+    #[error("{path}: {err}")]
     Io {
         /// The file.
         path: String,
-        /// Why.
-        source: std::io::Error,
+        /// Why (in the message, not a `source`: the error is said once).
+        err: std::io::Error,
     },
     /// The file is not a calibration results file.
     #[error("{path}: not a calibration file: {msg}")]
@@ -123,10 +123,7 @@ impl CalibrationFile {
     /// Reads a results file.
     pub fn load(path: &Path) -> Result<CalibrationFile, FileError> {
         let p = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| FileError::Io {
-            path: p.clone(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(path).map_err(|err| FileError::Io { path: p.clone(), err })?;
         serde_json::from_str(&text).map_err(|e| FileError::Parse {
             path: p,
             msg: e.to_string(),

@@ -18,7 +18,7 @@ use super::intrinsics::{
 };
 use super::lm::{minimize, view_blocks, LmOptions};
 use super::CalibError;
-use image::GrayImage;
+use image::{GrayImage, RgbImage};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -176,7 +176,8 @@ pub struct Rectification {
     pub tx: f64,
 }
 
-fn to_rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+/// Matrix to rows (the file's row-major form).
+pub fn to_rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
     [
         [m[(0, 0)], m[(0, 1)], m[(0, 2)]],
         [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
@@ -296,25 +297,170 @@ impl RectifyMaps {
         if dst.dimensions() != (self.width, self.height) {
             *dst = GrayImage::new(self.width, self.height);
         }
-        let (sw, sh) = (src.width() as i64, src.height() as i64);
-        let s = src.as_raw();
-        let px = |x: i64, y: i64| -> f32 {
+        self.remap::<1>(src.as_raw(), src.width(), src.height(), dst);
+    }
+
+    /// Bilinear remap of a colour image, each channel as [`RectifyMaps::remap_gray`] does it.
+    pub fn remap_rgb(&self, src: &RgbImage, dst: &mut RgbImage) {
+        if dst.dimensions() != (self.width, self.height) {
+            *dst = RgbImage::new(self.width, self.height);
+        }
+        self.remap::<3>(src.as_raw(), src.width(), src.height(), dst);
+    }
+
+    /// The remap of interleaved `C`-channel pixels: each output pixel is the bilinear blend
+    /// of the four source pixels around (map_x, map_y), a source pixel outside the image 0.
+    fn remap<const C: usize>(&self, s: &[u8], sw: u32, sh: u32, out: &mut [u8]) {
+        let (sw, sh) = (sw as i64, sh as i64);
+        let px = |x: i64, y: i64, ch: usize| -> f32 {
             if x < 0 || y < 0 || x >= sw || y >= sh {
                 0.0
             } else {
-                s[(y * sw + x) as usize] as f32
+                s[(y * sw + x) as usize * C + ch] as f32
             }
         };
-        for (i, o) in dst.iter_mut().enumerate() {
+        for (i, o) in out.chunks_exact_mut(C).enumerate() {
             let (x, y) = (self.map_x[i], self.map_y[i]);
             let (x0, y0) = (x.floor(), y.floor());
             let (ax, ay) = (x - x0, y - y0);
             let (x0, y0) = (x0 as i64, y0 as i64);
-            let a = px(x0, y0) * (1.0 - ax) + px(x0 + 1, y0) * ax;
-            let b = px(x0, y0 + 1) * (1.0 - ax) + px(x0 + 1, y0 + 1) * ax;
-            *o = (a * (1.0 - ay) + b * ay).round().clamp(0.0, 255.0) as u8;
+            for (ch, o) in o.iter_mut().enumerate() {
+                let a = px(x0, y0, ch) * (1.0 - ax) + px(x0 + 1, y0, ch) * ax;
+                let b = px(x0, y0 + 1, ch) * (1.0 - ax) + px(x0 + 1, y0 + 1, ch) * ax;
+                *o = (a * (1.0 - ay) + b * ay).round().clamp(0.0, 255.0) as u8;
+            }
         }
     }
+}
+
+/// [`RectifyMaps`] in fixed point, for remapping every frame: OpenCV's `remap` recipe
+/// (INTER_LINEAR): each map position rounded to 1/32 pixel (`INTER_BITS` = 5), the four
+/// bilinear weights of that fraction in 15-bit integers summing to exactly 32768, the output
+/// (Σ w·p + 2¹⁴) >> 15. One source offset and one fraction per output pixel are stored, so
+/// the loop is four loads and multiply-adds per channel; pixels whose 2×2 neighbourhood
+/// leaves the source image take the slow path with 0 outside (a constant border).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FixedMaps {
+    width: u32,
+    height: u32,
+    src_w: u32,
+    src_h: u32,
+    /// Byte offset in the source (3 bytes a pixel) of each output pixel's top-left
+    /// neighbour; `u32::MAX` for a pixel on the border path.
+    off: Vec<u32>,
+    /// Fraction index fy·32 + fx of each output pixel.
+    frac: Vec<u16>,
+    /// Border pixels: (output index, source x, source y of the top-left neighbour).
+    border: Vec<(u32, i32, i32)>,
+    /// The four weights of each of the 32×32 fractions.
+    wtab: Vec<[i32; 4]>,
+}
+
+impl FixedMaps {
+    /// Fixed-point maps of `m` for colour source images of `src_w`×`src_h`.
+    pub fn new(m: &RectifyMaps, src_w: u32, src_h: u32) -> Self {
+        const TAB: i32 = 32;
+        let n = m.map_x.len();
+        let (mut off, mut frac, mut border) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::new());
+        for (i, (&x, &y)) in m.map_x.iter().zip(&m.map_y).enumerate() {
+            // Far outside (or NaN): a pixel that reads only the border.
+            let (ix, iy) = if x.is_finite() && y.is_finite() && x.abs() < 1e6 && y.abs() < 1e6 {
+                ((x * TAB as f32).round() as i32, (y * TAB as f32).round() as i32)
+            } else {
+                (-2 * TAB, -2 * TAB)
+            };
+            let (xi, yi) = (ix >> 5, iy >> 5);
+            frac.push((((iy & (TAB - 1)) * TAB) + (ix & (TAB - 1))) as u16);
+            if xi >= 0 && yi >= 0 && xi + 1 < src_w as i32 && yi + 1 < src_h as i32 {
+                off.push(3 * (yi as u32 * src_w + xi as u32));
+            } else {
+                off.push(u32::MAX);
+                border.push((i as u32, xi, yi));
+            }
+        }
+        let mut wtab = Vec::with_capacity((TAB * TAB) as usize);
+        for fy in 0..TAB {
+            for fx in 0..TAB {
+                let (ax, ay) = (fx as f64 / TAB as f64, fy as f64 / TAB as f64);
+                let w = [(1.0 - ax) * (1.0 - ay), ax * (1.0 - ay), (1.0 - ax) * ay, ax * ay];
+                let mut q = w.map(|v| (v * 32768.0).round() as i32);
+                // Make them sum to exactly 32768 (as OpenCV does): fix the largest.
+                let sum: i32 = q.iter().sum();
+                let big = (0..4).max_by(|&a, &b| w[a].total_cmp(&w[b])).unwrap_or(0);
+                q[big] += 32768 - sum;
+                wtab.push(q);
+            }
+        }
+        FixedMaps {
+            width: m.width,
+            height: m.height,
+            src_w,
+            src_h,
+            off,
+            frac,
+            border,
+            wtab,
+        }
+    }
+
+    /// Remaps a colour image into `dst`; `false` (and `dst` untouched) when the image is not
+    /// of the size the maps were made for.
+    pub fn remap_rgb(&self, src: &RgbImage, dst: &mut RgbImage) -> bool {
+        if src.dimensions() != (self.src_w, self.src_h) {
+            return false;
+        }
+        if dst.dimensions() != (self.width, self.height) {
+            *dst = RgbImage::new(self.width, self.height);
+        }
+        let s = src.as_raw();
+        let row = 3 * self.src_w as usize;
+        let blend = |v: i32| ((v + (1 << 14)) >> 15).clamp(0, 255) as u8;
+        for (o, (&off, &fr)) in dst.chunks_exact_mut(3).zip(self.off.iter().zip(&self.frac)) {
+            if off == u32::MAX {
+                continue;
+            }
+            let w = &self.wtab[fr as usize];
+            let p = &s[off as usize..off as usize + row + 6];
+            let (a, b) = (&p[..6], &p[row..row + 6]);
+            for c in 0..3 {
+                o[c] = blend(a[c] as i32 * w[0] + a[3 + c] as i32 * w[1] + b[c] as i32 * w[2] + b[3 + c] as i32 * w[3]);
+            }
+        }
+        let (sw, sh) = (self.src_w as i32, self.src_h as i32);
+        let px = |x: i32, y: i32, c: usize| -> i32 {
+            if x < 0 || y < 0 || x >= sw || y >= sh {
+                0
+            } else {
+                s[3 * (y as usize * sw as usize + x as usize) + c] as i32
+            }
+        };
+        let out: &mut [u8] = dst;
+        for &(i, x, y) in &self.border {
+            let w = &self.wtab[self.frac[i as usize] as usize];
+            for c in 0..3 {
+                let v = px(x, y, c) * w[0] + px(x + 1, y, c) * w[1] + px(x, y + 1, c) * w[2] + px(x + 1, y + 1, c) * w[3];
+                out[3 * i as usize + c] = blend(v);
+            }
+        }
+        true
+    }
+}
+
+/// Where the raw pixel (u, v) of a camera (`k`, `d`) lands in its rectified image (rotation
+/// `r` into the rectified frame, focal length `f`, principal point `c`): the inverse of the
+/// per-pixel map of [`RectifyMaps::new`] (undistort → R → project). `None` behind the camera.
+pub fn rectified_point(
+    k: &Intrinsics,
+    d: &Distortion,
+    r: &[[f64; 3]; 3],
+    f: f64,
+    c: [f64; 2],
+    u: f64,
+    v: f64,
+) -> Option<(f64, f64)> {
+    let (x, y) = d.undistort((u - k.cx) / k.fx, (v - k.cy) / k.fy);
+    let q = from_rows(r) * Vector3::new(x, y, 1.0);
+    (q[2] > 1e-9).then(|| (f * q[0] / q[2] + c[0], f * q[1] / q[2] + c[1]))
 }
 
 #[cfg(test)]

@@ -148,9 +148,9 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     }
     let pair = stereo && (a.camera_right.is_some() || a.camera == "sim");
     if pair {
-        rccar::drive::stereo::install(&mut pipeline, &cfg);
-        if let Some(note) = rccar::drive::stereo::calibration_note(&cfg) {
-            eprintln!("{note}");
+        rccar::drive::stereo::install(&mut pipeline);
+        if let Some(line) = rccar::drive::stereo::calibration_line(&pipeline, &cfg) {
+            println!("{line}");
         }
     } else {
         super::common::warn_single_camera(&cfg);
@@ -658,7 +658,7 @@ struct PacedSimCamera {
     stalled_reported: u64,
     truth_rows: Option<std::ops::Range<usize>>,
     /// A stereo pair's other camera and its image (`ranging.method = "stereo"`).
-    other: Option<(rccar::sim::render::Renderer, image::RgbImage)>,
+    other: Option<(rccar::sim::stereo::OtherCamera, image::RgbImage)>,
 }
 
 impl PacedSimCamera {

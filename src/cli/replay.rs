@@ -107,9 +107,9 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
                 cfg.ranging.method
             );
         }
-        rccar::drive::stereo::install(&mut pipeline, &cfg);
-        if let Some(note) = rccar::drive::stereo::calibration_note(&cfg) {
-            eprintln!("{note}");
+        rccar::drive::stereo::install(&mut pipeline);
+        if let Some(line) = rccar::drive::stereo::calibration_line(&pipeline, &cfg) {
+            println!("{line}");
         }
     } else {
         super::common::warn_single_camera(&cfg);

@@ -145,9 +145,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             scene,
             rccar::sim::render::RenderOptions::from_config(&cfg.sim),
         )));
-        rccar::drive::stereo::install(&mut pipeline, &cfg);
-        if let Some(note) = rccar::drive::stereo::calibration_note(&cfg) {
-            eprintln!("{note}");
+        rccar::drive::stereo::install(&mut pipeline);
+        if let Some(line) = rccar::drive::stereo::calibration_line(&pipeline, &cfg) {
+            println!("{line}");
         }
         println!(
             "sim: stereo pair, reference camera {} with the other {} m to its {} (ranging.method = \"stereo\")",

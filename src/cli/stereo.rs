@@ -85,7 +85,7 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
         mr.remap_gray(&gr, &mut b2);
         gl = a2;
         gr = b2;
-        StereoGeometry::from_calibration(&st, cfg.camera.tilt_deg.to_radians())
+        StereoGeometry::from_calibration(&st, cfg.camera.tilt_deg.to_radians(), reference_left)
     };
     let (gref, gother) = if reference_left { (&gl, &gr) } else { (&gr, &gl) };
     // 2. The boxes: given, or detected in the (rectified) reference image.

@@ -351,7 +351,8 @@ impl Driver {
         .with_pipeline(&out, pipeline);
         record.truth = frame.truth.clone();
         if let Some(o) = &frame.other {
-            record.stereo = Some(stereo::record(o, counts_before, pipeline.stereo().map(|s| s.counts)));
+            let rectified = pipeline.stereo().is_some_and(|s| s.rectified());
+            record.stereo = Some(stereo::record(o, counts_before, pipeline.stereo().map(|s| s.counts), rectified));
         }
         if clock.is_real() {
             record.latency_ms = Some(latency_ms);

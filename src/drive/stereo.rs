@@ -93,32 +93,36 @@ impl<L: FrameSource, R: FrameSource> FrameSource for StereoFrames<L, R> {
     }
 }
 
-/// Installs stereo ranging for the drive loop's pair (the reference lens on the car's centre
-/// line, see the module notes) when `ranging.method = "stereo"`.
-pub fn install(pipeline: &mut Pipeline, cfg: &Config) {
-    if cfg.ranging.method == "stereo" {
-        let mut s = crate::stereo::ranging::StereoRanging::from_config(cfg);
+/// Sets the pipeline's stereo ranging (`ranging.method = "stereo"`: built by
+/// [`Pipeline::new`], ideal or from `stereo.calibration`) up for the drive loop's pair: the
+/// reference lens is on the car's centre line (see the module notes).
+pub fn install(pipeline: &mut Pipeline) {
+    if let Some(s) = pipeline.stereo_mut() {
         s.reference_lateral_m = 0.0;
-        pipeline.set_stereo(Some(s));
     }
 }
 
-/// What the loop leaves out of `[stereo]` (said once by the commands, never silent): with
-/// `stereo.calibration` set, the drive loop still takes the pair as ideal and rectified (the
-/// calibration's maps and geometry are applied by `rccar stereo` only).
-pub fn calibration_note(cfg: &Config) -> Option<String> {
-    (cfg.ranging.method == "stereo" && !cfg.stereo.calibration.is_empty()).then(|| {
+/// The line the commands print about the pair: how it is rectified (`stereo.calibration`,
+/// applied to every pair) or that it is taken as ideal; `None` without stereo ranging.
+pub fn calibration_line(pipeline: &Pipeline, cfg: &Config) -> Option<String> {
+    let s = pipeline.stereo()?;
+    let g = &s.geometry;
+    Some(if s.rectified() {
         format!(
-            "stereo: the drive loop takes the pair as ideal and rectified; stereo.calibration = {:?} is not applied here \
-             (rccar stereo applies it; docs/stereo.md)",
-            cfg.stereo.calibration
+            "stereo: every pair rectified with {} (base {:.4} m, rectified focal length {:.1} px)",
+            cfg.stereo.calibration, g.base_m, g.f
+        )
+    } else {
+        format!(
+            "stereo: the pair is taken as ideal and rectified (no stereo.calibration; base {} m)",
+            g.base_m
         )
     })
 }
 
 /// The telemetry of a stereo frame: `before`/`after` are the pipeline's stereo match counts
-/// (matched, unmatched) around the frame's step.
-pub fn record(o: &OtherView, before: Option<(u64, u64)>, after: Option<(u64, u64)>) -> StereoRecord {
+/// (matched, unmatched) around the frame's step; `rectified` whether a calibration is applied.
+pub fn record(o: &OtherView, before: Option<(u64, u64)>, after: Option<(u64, u64)>, rectified: bool) -> StereoRecord {
     let (ranged, unmatched) = match (before, after) {
         (Some(b), Some(a)) => (a.0.saturating_sub(b.0), a.1.saturating_sub(b.1)),
         _ => (0, 0),
@@ -129,6 +133,7 @@ pub fn record(o: &OtherView, before: Option<(u64, u64)>, after: Option<(u64, u64
         ranged,
         unmatched,
         pairs_dropped: o.pairs_dropped,
+        rectified,
     }
 }
 
@@ -136,18 +141,17 @@ pub fn record(o: &OtherView, before: Option<(u64, u64)>, after: Option<(u64, u64
 mod tests {
     use super::*;
 
-    /// A calibration the loop does not apply is said, never silent; nothing is said for mono
-    /// or without a calibration file.
+    /// The pair's line says whether a calibration is applied; nothing without stereo.
     #[test]
-    fn an_unapplied_calibration_is_named() {
+    fn the_pair_is_described() {
         let mut cfg = crate::config::Config::default();
+        assert_eq!(calibration_line(&Pipeline::new(&cfg).unwrap(), &cfg), None);
         cfg.ranging.method = "stereo".into();
-        assert_eq!(calibration_note(&cfg), None);
-        cfg.stereo.calibration = "/cal/pair.json".into();
-        let note = calibration_note(&cfg).unwrap();
-        assert!(note.contains("\"/cal/pair.json\" is not applied here"), "{note}");
-        cfg.ranging.method = "mono".into();
-        assert_eq!(calibration_note(&cfg), None);
+        let line = calibration_line(&Pipeline::new(&cfg).unwrap(), &cfg).unwrap();
+        assert!(line.contains("taken as ideal"), "{line}");
+        cfg.stereo.calibration = "/nowhere/pair.json".into();
+        let e = Pipeline::new(&cfg).err().unwrap().to_string();
+        assert!(e.starts_with("stereo.calibration: /nowhere/pair.json"), "{e}");
     }
 
     struct Times(Vec<f64>, usize, u8);

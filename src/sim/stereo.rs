@@ -130,29 +130,133 @@ pub fn sign_face_box(r: &Renderer, pose: &Pose, ob: &super::track::Object) -> Op
 /// "stereo"`, src/drive/stereo.rs): the car's own camera of `[camera]` is the reference (on
 /// the centre line, where the lane keeping and the truth model expect it) and this one is
 /// mounted `stereo.base_m` beside it, to its right when `stereo.reference = "left"` (to its
-/// left otherwise), with the reference's height, tilt and `vehicle.camera_x_m`, so the pair
-/// is ideal and rectified; its noise is seeded apart from the reference's.
-pub fn other_camera(cfg: &Config, scene: Arc<Scene>, opts: RenderOptions) -> Renderer {
+/// left otherwise), with the reference's height, tilt and `vehicle.camera_x_m`; its noise is
+/// seeded apart from the reference's. The pair is ideal and rectified unless
+/// `sim.stereo_error_deg` / `sim.stereo_error_k1` turn and bend this camera ([`LensWarp`]),
+/// as two real webcams are.
+pub fn other_camera(cfg: &Config, scene: Arc<Scene>, opts: RenderOptions) -> OtherCamera {
     let mut cam = PinholeCamera::from_config(&cfg.camera);
     let base = cfg.stereo.base_m;
     cam.lateral_m = if cfg.stereo.reference != "right" { -base } else { base };
     let mut o = opts;
     o.seed = o.seed.wrapping_add(0x5EED);
-    Renderer::new(
-        scene,
-        CameraMount {
-            camera: cam,
-            x_m: cfg.vehicle.camera_x_m,
-        },
-        o,
-    )
+    let lens = LensWarp::from_config(cfg).map(|l| (l, RgbImage::new(0, 0)));
+    OtherCamera {
+        renderer: Renderer::new(
+            scene,
+            CameraMount {
+                camera: cam,
+                x_m: cfg.vehicle.camera_x_m,
+            },
+            o,
+        ),
+        lens,
+    }
+}
+
+/// A stereo pair's second camera: the renderer of an ideal camera, and the error of the real
+/// one ([`LensWarp`]) applied to its image, if any.
+#[derive(Debug, Clone)]
+pub struct OtherCamera {
+    /// The ideal camera's renderer.
+    pub renderer: Renderer,
+    /// The camera's error and the ideal image it is applied to.
+    lens: Option<(LensWarp, RgbImage)>,
+}
+
+/// How a simulated camera differs from the ideal one it is rendered as: turned by yaw, pitch
+/// and roll (`sim.stereo_error_deg`) about its own centre and with a radial lens distortion
+/// k₁ (`sim.stereo_error_k1`, OpenCV's model: x_d = x·(1 + k₁r²)). A camera turned about its
+/// centre sees the same rays, so its image is exactly the ideal image resampled: for each of
+/// its pixels, undistort → turn the ray back (Rᵀ) → project into the ideal camera → bilinear
+/// sample (black outside the ideal view). The map is built once. Units: pixels, radians.
+#[derive(Debug, Clone)]
+pub struct LensWarp {
+    maps: crate::calib::stereo::RectifyMaps,
+    fixed: crate::calib::stereo::FixedMaps,
+}
+
+impl LensWarp {
+    /// The warp of `cfg`'s other camera, `None` when it is ideal (all errors zero).
+    pub fn from_config(cfg: &Config) -> Option<LensWarp> {
+        let [yaw, pitch, roll] = cfg.sim.stereo_error_deg;
+        let k1 = cfg.sim.stereo_error_k1;
+        if [yaw, pitch, roll, k1].iter().all(|&v| v == 0.0) {
+            return None;
+        }
+        Some(Self::new(&PinholeCamera::from_config(&cfg.camera), [yaw, pitch, roll], k1))
+    }
+
+    /// The warp of `cam` turned by `[yaw, pitch, roll]` degrees (about the camera's y, x and
+    /// z axes: x right, y down, z forward; R = R_z(roll)·R_y(yaw)·R_x(pitch), X_real = R·X_ideal)
+    /// with radial distortion `k1`.
+    pub fn new(cam: &PinholeCamera, deg: [f64; 3], k1: f64) -> LensWarp {
+        use crate::calib::intrinsics::{Distortion, Intrinsics};
+        let [yaw, pitch, roll] = deg.map(f64::to_radians);
+        let (rx, ry, rz) = (
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::x_axis(), pitch),
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::y_axis(), yaw),
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::z_axis(), roll),
+        );
+        let r = (rz * ry * rx).into_inner();
+        // RectifyMaps: output pixel → ray (f, c) → Rᵀ → distortion → K. Here the output is
+        // the real camera and the source the ideal one: a real pixel's ray is undistort(pixel),
+        // so the "rectified" side is the real camera's distorted plane and the source has no
+        // distortion; built directly below.
+        let k = Intrinsics {
+            fx: cam.f_px,
+            fy: cam.f_px,
+            cx: cam.u0,
+            cy: cam.v0,
+        };
+        let d = Distortion([k1, 0.0, 0.0, 0.0, 0.0]);
+        let (w, h) = (cam.width, cam.height);
+        let n = (w * h) as usize;
+        let (mut map_x, mut map_y) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        let rt = r.transpose();
+        for v in 0..h {
+            for u in 0..w {
+                let (x, y) = d.undistort((u as f64 - k.cx) / k.fx, (v as f64 - k.cy) / k.fy);
+                let q = rt * nalgebra::Vector3::new(x, y, 1.0);
+                let (sx, sy) = if q[2] > 1e-9 {
+                    (k.fx * q[0] / q[2] + k.cx, k.fy * q[1] / q[2] + k.cy)
+                } else {
+                    (-10.0, -10.0)
+                };
+                map_x.push(sx as f32);
+                map_y.push(sy as f32);
+            }
+        }
+        let maps = crate::calib::stereo::RectifyMaps {
+            width: w,
+            height: h,
+            map_x,
+            map_y,
+        };
+        LensWarp {
+            fixed: crate::calib::stereo::FixedMaps::new(&maps, w, h),
+            maps,
+        }
+    }
+
+    /// The real camera's colour image from the ideal one.
+    pub fn apply_rgb(&self, ideal: &RgbImage, out: &mut RgbImage) {
+        if !self.fixed.remap_rgb(ideal, out) {
+            self.maps.remap_rgb(ideal, out);
+        }
+    }
+
+    /// The real camera's grey image from the ideal one (e.g. a rendered checkerboard).
+    pub fn apply_gray(&self, ideal: &image::GrayImage, out: &mut image::GrayImage) {
+        self.maps.remap_gray(ideal, out);
+    }
 }
 
 /// Renders the rows `spans` (sorted, disjoint) of `r`'s view from `pose` into `img`, each
 /// widened by the blur's reach (`3·blur_px`; with blur, one range from the first span to the
 /// last), as `World::render_spans` does for the reference camera.
 pub fn render_spans(
-    r: &mut Renderer,
+    r: &mut OtherCamera,
     pose: &Pose,
     t_s: f64,
     frame: u64,
@@ -172,7 +276,20 @@ pub fn render_spans(
     if reach > 0 && merged.len() > 1 {
         merged = vec![merged[0].start..merged[merged.len() - 1].end];
     }
-    for m in merged {
-        r.render_rows(pose, t_s, frame, img, m);
+    match &mut r.lens {
+        // A turned camera's rows come from other rows of the ideal view: all of it.
+        Some((lens, ideal)) => {
+            let h = img.height() as usize;
+            if ideal.dimensions() != img.dimensions() {
+                *ideal = RgbImage::new(img.width(), img.height());
+            }
+            r.renderer.render_rows(pose, t_s, frame, ideal, 0..h);
+            lens.apply_rgb(ideal, img);
+        }
+        None => {
+            for m in merged {
+                r.renderer.render_rows(pose, t_s, frame, img, m);
+            }
+        }
     }
 }

@@ -494,7 +494,7 @@ pub struct SimCamera {
     truth_boxes: bool,
     end_with_world: bool,
     /// A stereo pair's other camera and its image (src/sim/stereo.rs `other_camera`).
-    other: Option<(Renderer, RgbImage)>,
+    other: Option<(super::stereo::OtherCamera, RgbImage)>,
 }
 
 impl SimCamera {
@@ -520,7 +520,7 @@ impl SimCamera {
     /// A second camera (`sim::stereo::other_camera`): each frame then carries its view of
     /// the same moment in [`Frame::other`] (rendered over the same rows as the reference),
     /// for stereo ranging in the drive loop. `None`: one camera (the default).
-    pub fn set_other(&mut self, other: Option<Renderer>) {
+    pub fn set_other(&mut self, other: Option<super::stereo::OtherCamera>) {
         self.other = other.map(|r| {
             let (w, h) = (self.image.width(), self.image.height());
             (r, RgbImage::new(w, h))

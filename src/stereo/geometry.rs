@@ -24,6 +24,11 @@
 //! pixel (u, v) is Z·(cos α_t − ((v − c_y)/f)·sin α_t) and its lateral offset −Z·(u − c_x)/f
 //! (left positive), as monocular ranging reports them. Units: metres, pixels, radians.
 //!
+//! A calibrated pair is rectified first (src/stereo/rectify.rs): the rectified reference
+//! camera is the real one turned by Bouguet's rotation R₁ (a degree or two), so a point
+//! found at rectified (u, v) and depth Z is turned back by R₁ᵀ into the reference camera
+//! before the tilt is applied ([`StereoGeometry::rect_to_cam`]; the identity for an ideal pair).
+//!
 //! A vertical face (an obstacle's near side) at forward distance F therefore has, at row v,
 //! the disparity d(v) = b·f·(cos α_t − ((v − c_y)/f)·sin α_t)/F: it changes along the face
 //! (by 10 % over a 0.10 m box at 0.3 m), while every row gives back the same F. The top of
@@ -51,7 +56,13 @@ pub struct StereoGeometry {
     pub hfov_rad: f64,
     /// Downward tilt of both optical axes, radians.
     pub tilt_rad: f64,
+    /// Rotation from the rectified reference camera back to the real one (R₁ᵀ, or R₂ᵀ when the
+    /// right camera is the reference), row-major; the identity for an ideal pair.
+    pub rect_to_cam: [[f64; 3]; 3],
 }
+
+/// The 3×3 identity, row-major.
+pub const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// The vertical face found among a box's rows ([`StereoGeometry::vertical_face`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -93,13 +104,16 @@ impl StereoGeometry {
             base_m,
             hfov_rad: 2.0 * (cam.width as f64 / (2.0 * cam.f_px)).atan(),
             tilt_rad: cam.tilt_rad,
+            rect_to_cam: IDENTITY,
         }
     }
 
-    /// From a stereo calibration (rectified camera and |T|); the tilt comes from `[camera]`.
-    pub fn from_calibration(st: &StereoCalibration, tilt_rad: f64) -> Self {
+    /// From a stereo calibration (rectified camera, |T| and the reference camera's
+    /// rectifying rotation); the tilt comes from `[camera]`.
+    pub fn from_calibration(st: &StereoCalibration, tilt_rad: f64, reference_left: bool) -> Self {
         let r = &st.rectification;
         let w = st.left.image_size[0];
+        let rr = if reference_left { &r.r1 } else { &r.r2 };
         Self {
             width: w,
             f: r.f,
@@ -108,6 +122,7 @@ impl StereoGeometry {
             base_m: r.tx.abs(),
             hfov_rad: 2.0 * (w as f64 / (2.0 * r.f)).atan(),
             tilt_rad,
+            rect_to_cam: std::array::from_fn(|i| std::array::from_fn(|j| rr[j][i])),
         }
     }
 
@@ -141,8 +156,19 @@ impl StereoGeometry {
     /// Forward distance on the floor and lateral offset (left positive) of the point at depth
     /// `z` seen at pixel (u, v) of the reference camera; metres.
     pub fn forward_of_depth(&self, z: f64, u: f64, v: f64) -> (f64, f64) {
+        let (fw, lat) = self.per_depth(u, v);
+        (z * fw, z * lat)
+    }
+
+    /// Forward distance and lateral offset per metre of depth of the rectified pixel (u, v):
+    /// its ray (x, y, 1) turned into the reference camera ([`StereoGeometry::rect_to_cam`]),
+    /// then z·cos α_t − y·sin α_t forward and −x lateral.
+    fn per_depth(&self, u: f64, v: f64) -> (f64, f64) {
+        let p = [(u - self.cx) / self.f, (v - self.cy) / self.f, 1.0];
+        let m = &self.rect_to_cam;
+        let q: [f64; 3] = std::array::from_fn(|i| m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2]);
         let (s, c) = self.tilt_rad.sin_cos();
-        (z * (c - (v - self.cy) / self.f * s), -z * (u - self.cx) / self.f)
+        (q[2] * c - q[1] * s, -q[0])
     }
 
     /// Forward distance on the floor of a point at row `v` with disparity `d` (by (c));
@@ -154,8 +180,7 @@ impl StereoGeometry {
     /// The disparity at row `v` of a point at forward distance `forward_m` (the inverse of
     /// [`StereoGeometry::forward_of_disparity`]), pixels.
     pub fn disparity_of_forward(&self, forward_m: f64, v: f64) -> f64 {
-        let (s, c) = self.tilt_rad.sin_cos();
-        self.base_m * self.f * (c - (v - self.cy) / self.f * s) / forward_m
+        self.base_m * self.f * self.per_depth(self.cx, v).0 / forward_m
     }
 
     /// The vertical face among the rows of a box matched on their own: each row's forward

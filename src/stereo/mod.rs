@@ -21,6 +21,7 @@ pub mod hsv_sign;
 pub mod matching;
 pub mod meanshift;
 pub mod ranging;
+pub mod rectify;
 pub mod source;
 pub mod speed;
 

@@ -15,7 +15,9 @@
 //! most rows agree on (`StereoGeometry::vertical_face`), not that of the box's mean
 //! disparity, which the box's top (farther back) pulls long ([`match_for_class`]). A grey
 //! obstacle (no colour) is matched on grey. A box without a match gives `None` (the caller
-//! decides what to fall back on). Units: metres, pixels.
+//! decides what to fall back on). With a calibration file (`stereo.calibration`) the pair is
+//! rectified first and the box carried into the rectified image ([`super::rectify`]).
+//! Units: metres, pixels.
 
 use super::matching::{opponent_from_rgb, Matcher, StereoMatch};
 use super::{MatchOptions, NoRange, StereoGeometry};
@@ -117,6 +119,10 @@ pub struct StereoRanging {
     pub reference_lateral_m: f64,
     matcher: Matcher,
     planes: PairPlanes,
+    /// Rectification of a calibrated pair (`None`: the pair is taken as ideal).
+    rectifier: Option<super::rectify::PairRectifier>,
+    /// Whether the last pair could be rectified (its images are of the calibrated size).
+    pair_ok: bool,
     /// Boxes matched and boxes without a match since the start.
     pub counts: (u64, u64),
 }
@@ -144,19 +150,55 @@ impl StereoRanging {
             geometry,
             matcher: Matcher::new(),
             planes: PairPlanes::default(),
+            rectifier: None,
+            pair_ok: true,
             counts: (0, 0),
         }
     }
 
-    /// Converts a new pair to grey (once per frame, before [`StereoRanging::range`]).
+    /// For a calibrated pair: the geometry of the rectified camera and the rectification of
+    /// every pair ([`super::rectify::PairRectifier`]), from the file `rccar calibrate stereo`
+    /// wrote (loaded by the caller, e.g. [`crate::pipeline::Pipeline::new`]).
+    pub fn with_calibration(cfg: &Config, st: &crate::calib::file::StereoCalibration) -> Self {
+        let left = cfg.stereo.reference != "right";
+        let geometry = StereoGeometry::from_calibration(st, cfg.camera.tilt_deg.to_radians(), left);
+        let mut s = Self::with_geometry(cfg, geometry);
+        s.rectifier = Some(super::rectify::PairRectifier::new(st, left));
+        s
+    }
+
+    /// Whether pairs are rectified (a calibration is applied) or taken as ideal.
+    pub fn rectified(&self) -> bool {
+        self.rectifier.is_some()
+    }
+
+    /// Converts a new pair to grey (once per frame, before [`StereoRanging::range`]),
+    /// rectifying it first when a calibration is applied.
     pub fn set_pair(&mut self, reference: &RgbImage, other: &RgbImage) {
-        self.planes.set(reference, other);
+        match &mut self.rectifier {
+            Some(r) => {
+                self.pair_ok = r.rectify(reference, other);
+                if self.pair_ok {
+                    let (a, b) = r.images();
+                    self.planes.set(a, b);
+                }
+            }
+            None => self.planes.set(reference, other),
+        }
     }
 
     /// The range of the box `rect` of an object of `class` in the reference image of the
     /// last pair; `None` when it has no match (see [`super::NoRange`]).
     pub fn range(&mut self, class: ObjectClass, rect: Rect) -> Option<BoxRange> {
-        let bx = [rect.x as i64, rect.y as i64, rect.width as i64, rect.height as i64];
+        let bx = match &self.rectifier {
+            None => Some([rect.x as i64, rect.y as i64, rect.width as i64, rect.height as i64]),
+            Some(r) if self.pair_ok => r.map_box(rect),
+            Some(_) => None,
+        };
+        let Some(bx) = bx else {
+            self.counts.1 += 1;
+            return None;
+        };
         let m = match_for_class(
             &mut self.matcher,
             &self.geometry,
@@ -170,7 +212,7 @@ impl StereoRanging {
             self.counts.1 += 1;
             return None;
         };
-        let v = rect.y as f64 + (rect.height as f64 - 1.0) / 2.0;
+        let v = bx[1] as f64 + (bx[3] as f64 - 1.0) / 2.0;
         let Some(r) = self.geometry.range(&m, v, self.options.reference_left) else {
             self.counts.1 += 1;
             return None;
