@@ -12,9 +12,11 @@
 //!    minima (ours / OpenCV; below 1 means faster). Also checks the boxes are the same.
 
 use rccar::detect::{Cascade, DetectParams, Detector};
-use std::io::{BufRead, BufReader, Write};
-use std::process::{Command, Stdio};
 use std::time::Instant;
+
+#[path = "support/opencv.rs"]
+mod opencv;
+use opencv::{python, OpenCv};
 
 const CASCADE: &str = "/usr/share/opencv4/haarcascades/haarcascade_frontalface_default.xml";
 
@@ -55,23 +57,14 @@ fn main() {
         .and_then(|i| args.get(i + 1))
         .and_then(|v| v.parse().ok())
         .unwrap_or(15);
-    let python = std::env::var("RCCAR_PYTHON").unwrap_or_else(|_| "python3".into());
+    let python = python();
     let dir = std::env::temp_dir().join("rccar_detect_bench");
     std::fs::create_dir_all(&dir).expect("temp dir");
     // 1. The OpenCV helper stays up; we alternate rounds of it and of ours, so that both see
     //    the same machine load (the cores are shared).
-    let mut helper = Command::new(&python)
-        .args(["-c", PY, dir.to_str().unwrap(), CASCADE])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("running the OpenCV helper");
-    let mut to_cv = helper.stdin.take().unwrap();
-    let mut from_cv = BufReader::new(helper.stdout.take().unwrap());
-    let mut line = String::new();
-    from_cv.read_line(&mut line).expect("helper output");
+    let (mut helper, first) = OpenCv::start(&python, PY, &[dir.to_str().unwrap(), CASCADE]);
     let cv: serde_json::Value =
-        serde_json::from_str(&line).expect("helper JSON (is cv2 4.x with scikit-image installed?)");
+        serde_json::from_str(&first).expect("helper JSON (is cv2 4.x with scikit-image installed?)");
     let cascade = Cascade::from_file(CASCADE).expect("cascade");
     let mut det = Detector::new(cascade);
     let threads = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
@@ -98,10 +91,7 @@ fn main() {
         }
         // 2. Rounds of 3: OpenCV, ours on one thread, ours on all cores.
         for _ in 0..runs.div_ceil(3) {
-            writeln!(to_cv, "{key} 3").unwrap();
-            line.clear();
-            from_cv.read_line(&mut line).unwrap();
-            theirs.extend(serde_json::from_str::<Vec<f64>>(&line).unwrap());
+            theirs.extend(helper.times(&format!("{key} 3")));
             for (parallel, out) in [(false, &mut ours), (true, &mut par)] {
                 let params = DetectParams {
                     parallel,
@@ -141,6 +131,5 @@ fn main() {
             }
         );
     }
-    drop(to_cv);
-    let _ = helper.wait();
+    drop(helper);
 }

@@ -20,6 +20,9 @@
 //! camshiftdemo recipe `cvtColor(HSV)` + `inRange` + `calcBackProject` + `meanShift` on the
 //! whole frame, started from the same box. Also Abdollahi's HSV + template detector per frame.
 
+#[path = "support/opencv.rs"]
+mod opencv;
+
 use rccar::config::Config;
 use rccar::detect::gray_from_rgb;
 use rccar::sim::render::RenderOptions;
@@ -29,9 +32,8 @@ use rccar::sim::track::Track;
 use rccar::sim::vehicle::Pose;
 use rccar::stereo::matching::Matcher;
 use rccar::stereo::{MatchOptions, StereoGeometry};
-use std::io::{BufRead, BufReader, Write};
-use std::process::{Command, Stdio};
 use std::sync::Arc;
+use opencv::{python, OpenCv};
 use std::time::Instant;
 
 const PY: &str = r#"
@@ -114,29 +116,17 @@ fn main() {
     let mut m = Matcher::new();
     let first = m.match_box(&gl, &gr, bx, &opts).expect("match");
     // 2. The helper.
-    let python = std::env::var("RCCAR_PYTHON").unwrap_or_else(|_| "python3".into());
-    let mut helper = Command::new(&python)
-        .args(["-c", PY, pl.to_str().unwrap(), pr.to_str().unwrap()])
-        .args(bx.iter().map(|v| v.to_string()))
-        .arg(dmax.to_string())
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("running the OpenCV helper");
-    let mut to_cv = helper.stdin.take().unwrap();
-    let mut from_cv = BufReader::new(helper.stdout.take().unwrap());
-    let mut line = String::new();
-    from_cv.read_line(&mut line).expect("helper output");
-    let cv: serde_json::Value = serde_json::from_str(&line).expect("helper JSON (is cv2 4.x installed?)");
+    let python = python();
+    let mut args = vec![pl.to_str().unwrap().to_string(), pr.to_str().unwrap().to_string()];
+    args.extend(bx.iter().map(|v| v.to_string()));
+    args.push(dmax.to_string());
+    let (mut helper, cv_first) = OpenCv::start(&python, PY, &args);
+    let cv: serde_json::Value = serde_json::from_str(&cv_first).expect("helper JSON (is cv2 4.x installed?)");
     let (mut ours, mut theirs) = (vec![], vec![]);
     let round = 20;
     let mut sink = 0.0;
     while ours.len() < runs {
-        writeln!(to_cv, "{round}").unwrap();
-        line.clear();
-        from_cv.read_line(&mut line).unwrap();
-        let t: Vec<f64> = serde_json::from_str(&line).unwrap();
-        theirs.extend(t);
+        theirs.extend(helper.times(&round.to_string()));
         for _ in 0..round {
             let t0 = Instant::now();
             let mm = m.match_box(&gl, &gr, bx, &opts).expect("match");
@@ -146,8 +136,7 @@ fn main() {
             sink += rg.depth_bfd;
         }
     }
-    drop(to_cv);
-    let _ = helper.wait();
+    drop(helper);
     let (om, omin) = stats(&mut ours);
     let (cm, cmin) = stats(&mut theirs);
     println!(
@@ -252,32 +241,20 @@ fn bench_rectify(python: &str, l: &image::RgbImage, r: &image::RgbImage, runs: u
     let (pl, pr) = (dir.join("left_rgb.png"), dir.join("right_rgb.png"));
     l.save(&pl).expect("write left");
     r.save(&pr).expect("write right");
-    let mut helper = Command::new(python)
-        .args(["-c", PY_REMAP, &spec.to_string(), pl.to_str().unwrap(), pr.to_str().unwrap()])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("running the OpenCV helper");
-    let mut to_cv = helper.stdin.take().unwrap();
-    let mut from_cv = BufReader::new(helper.stdout.take().unwrap());
-    let mut line = String::new();
-    from_cv.read_line(&mut line).expect("helper output");
-    assert_eq!(line.trim(), "ready", "OpenCV helper: {line}");
+    let args = [spec.to_string(), pl.to_str().unwrap().to_string(), pr.to_str().unwrap().to_string()];
+    let (mut helper, first) = OpenCv::start(python, PY_REMAP, &args);
+    assert_eq!(first, "ready", "OpenCV helper: {first}");
     let (mut ours, mut theirs) = (vec![], vec![]);
     let round = 10;
     while ours.len() < runs.max(round) {
-        writeln!(to_cv, "{round}").unwrap();
-        line.clear();
-        from_cv.read_line(&mut line).unwrap();
-        theirs.extend(serde_json::from_str::<Vec<f64>>(&line).unwrap());
+        theirs.extend(helper.times(&round.to_string()));
         for _ in 0..round {
             let t0 = Instant::now();
             rect.rectify(l, r);
             ours.push(t0.elapsed().as_secs_f64() * 1e3);
         }
     }
-    drop(to_cv);
-    let _ = helper.wait();
+    drop(helper);
     let (om, omin) = stats(&mut ours);
     let (cm, cmin) = stats(&mut theirs);
     println!();
@@ -348,24 +325,12 @@ fn bench_obstacle(python: &str, runs: usize, dist: f64) {
     let (pl, pr) = (dir.join("left.png"), dir.join("right.png"));
     gl.save(&pl).expect("write left");
     gr.save(&pr).expect("write right");
-    let mut helper = Command::new(python)
-        .args(["-c", PY, pl.to_str().unwrap(), pr.to_str().unwrap()])
-        .args(bx.iter().map(|v| v.to_string()))
-        .arg(cfg.stereo.max_disparity_px.to_string())
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("running the OpenCV helper");
-    let mut to_cv = helper.stdin.take().unwrap();
-    let mut from_cv = BufReader::new(helper.stdout.take().unwrap());
-    let mut line = String::new();
-    from_cv.read_line(&mut line).expect("helper output");
-    writeln!(to_cv, "{runs}").unwrap();
-    line.clear();
-    from_cv.read_line(&mut line).expect("helper output");
-    let mut theirs: Vec<f64> = serde_json::from_str(&line).expect("helper JSON");
-    drop(to_cv);
-    let _ = helper.wait();
+    let mut args = vec![pl.to_str().unwrap().to_string(), pr.to_str().unwrap().to_string()];
+    args.extend(bx.iter().map(|v| v.to_string()));
+    args.push(cfg.stereo.max_disparity_px.to_string());
+    let (mut helper, _) = OpenCv::start(python, PY, &args);
+    let mut theirs = helper.times(&runs.to_string());
+    drop(helper);
     let _ = std::fs::remove_dir_all(&dir);
     let (cm, cmin) = stats(&mut theirs);
     println!();
@@ -392,6 +357,7 @@ mask = cv2.inRange(hsv, (0, 60, 32), (180, 255, 255))
 hist = cv2.calcHist([hsv[y:y+h, x:x+w]], [0], mask[y:y+h, x:x+w], [16], [0, 180])
 cv2.normalize(hist, hist, 0, 255, cv2.NORM_MINMAX)
 crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 10, 1)
+print("ready", flush=True)
 for line in sys.stdin:
     n = int(line)
     ts = []
@@ -455,27 +421,14 @@ fn bench_tracking(python: &str, rounds: usize) {
     }])
     .expect("stop-sign cascade");
     let mut hsv = HsvSignDetector::new(HsvSignOptions::default(), &stop_sign_picture(&cfg)).expect("templates");
-    let mut helper = Command::new(python)
-        .args(["-c", PY_TRACK, dir.to_str().unwrap()])
-        .args(
-            [first.x, first.y, first.width, first.height]
-                .iter()
-                .map(|v| v.to_string()),
-        )
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("running the OpenCV helper");
-    let mut to_cv = helper.stdin.take().unwrap();
-    let mut from_cv = BufReader::new(helper.stdout.take().unwrap());
+    let mut args = vec![dir.to_str().unwrap().to_string()];
+    args.extend([first.x, first.y, first.width, first.height].iter().map(|v| v.to_string()));
+    let (mut helper, ready) = OpenCv::start(python, PY_TRACK, &args);
+    assert_eq!(ready, "ready", "OpenCV helper: {ready}");
     let (mut det, mut ms_local, mut ms_full, mut cv, mut hsv_ms) = (vec![], vec![], vec![], vec![], vec![]);
-    let mut line = String::new();
     let (mut ours_last, mut cv_last) = (first, serde_json::Value::Null);
     for _ in 0..rounds.max(1) {
-        writeln!(to_cv, "1").unwrap();
-        line.clear();
-        from_cv.read_line(&mut line).unwrap();
-        let v: serde_json::Value = serde_json::from_str(&line).expect("helper JSON (is cv2 4.x installed?)");
+        let v: serde_json::Value = serde_json::from_str(&helper.ask("1")).expect("helper JSON (is cv2 4.x installed?)");
         cv.extend(v["ms"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()));
         cv_last = v["last"].clone();
         for (search, out) in [(1.0, &mut ms_local), (1e4, &mut ms_full)] {
@@ -502,8 +455,7 @@ fn bench_tracking(python: &str, rounds: usize) {
             assert!(n < 100);
         }
     }
-    drop(to_cv);
-    let _ = helper.wait();
+    drop(helper);
     let (dm, dmin) = stats(&mut det);
     let (lm, lmin) = stats(&mut ms_local);
     let (fm, fmin) = stats(&mut ms_full);
