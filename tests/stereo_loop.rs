@@ -244,6 +244,35 @@ fn stereo_in_the_drive_loop_sim_and_replay() {
         assert!(!recs.is_empty() && pairs == recs.len(), "{cam:?}: {pairs} of {}", recs.len());
         let _ = std::fs::remove_dir_all(dout);
     }
+    // `rccar drive --record DIR --record-right DIR2` keeps both cameras (JPEG, the same names
+    // and telemetry); `rccar replay DIR --right DIR2` replays them as a pair.
+    let (dl, dr, dout, rout) = (tmp("drive-L"), tmp("drive-R"), tmp("drive-out"), tmp("drive-rep"));
+    let (code, out, err) = rccar(&[
+        "drive", "--dry-run", "--arm", "--seconds", "2", "--set", "ranging.method=stereo", "--camera", "sim",
+        "--record", &s(&dl), "--record-right", &s(&dr), "-o", &s(&dout),
+    ]);
+    assert!(code == 0 || code == 130, "{out}{err}");
+    assert!(out.contains("recording, other camera"), "{out}");
+    let drove = records(&dout.join("telemetry.jsonl")).len();
+    let (code, out, err) = rccar(&[
+        "replay", &s(&dl), "--right", &s(&dr), "--set", "ranging.method=stereo", "--no-annotate", "--no-timing",
+        "-o", &s(&rout),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let rep = records(&rout.join("telemetry.jsonl"));
+    let pairs = rep.iter().filter(|r| r["stereo"].is_object()).count();
+    println!("drive --record --record-right: {drove} frames driven, {} replayed, {pairs} of them pairs", rep.len());
+    assert!(drove > 10 && rep.len() == drove && pairs == drove, "{drove} driven, {} replayed, {pairs} pairs", rep.len());
+    // --record-right without a pair (drive)
+    let (code, _, err) = rccar(&[
+        "drive", "--dry-run", "--arm", "--seconds", "1", "--camera", "sim", "--record", &s(&tmp("x")),
+        "--record-right", &s(&tmp("y")), "-o", &s(&tmp("z")),
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("--record-right") && err.contains("ranging.method"), "{err}");
+    for d in [dl, dr, dout, rout] {
+        let _ = std::fs::remove_dir_all(d);
+    }
     // --record-right without a pair
     let (code, _, err) = rccar(&["sim", "--seconds", "1", "--record", &s(&tmp("x")), "--record-right", &s(&tmp("y"))]);
     assert_ne!(code, 0);

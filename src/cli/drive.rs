@@ -69,6 +69,11 @@ pub struct DriveArgs {
     /// a disk budget; `rccar replay DIR` replays it with the same time steps.
     #[arg(long, value_name = "DIR")]
     pub record: Option<PathBuf>,
+    /// With a camera pair (`ranging.method = "stereo"`): keep the other camera's frames in
+    /// this second folder, under the same names and with the same telemetry, so that
+    /// `rccar replay DIR --right DIR2` replays the pair.
+    #[arg(long, value_name = "DIR2", requires = "record")]
+    pub record_right: Option<PathBuf>,
     /// Disk budget of the recording, megabytes (default `record.max_mb`); the oldest frames go
     /// first, the telemetry is always kept.
     #[arg(long, value_name = "MB")]
@@ -118,6 +123,13 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         Some(dir) => Some(RecordObs {
             rec: rccar::record::Recorder::create(dir, cfg.record.options())
                 .with_context(|| format!("--record {}", dir.display()))?,
+            right: match &a.record_right {
+                Some(d2) => Some(
+                    rccar::record::Recorder::create(d2, cfg.record.options())
+                        .with_context(|| format!("--record-right {}", d2.display()))?,
+                ),
+                None => None,
+            },
             warned: false,
         }),
         None => None,
@@ -147,6 +159,12 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         }
     }
     let pair = stereo && (a.camera_right.is_some() || a.camera == "sim");
+    if let (Some(d2), false) = (&a.record_right, pair) {
+        bail!(
+            "--record-right {}: there is one camera; it needs ranging.method = \"stereo\" and a pair (--camera-right, or --camera sim)",
+            d2.display()
+        );
+    }
     if pair {
         rccar::drive::stereo::install(&mut pipeline);
         if let Some(line) = rccar::drive::stereo::calibration_line(&pipeline, &cfg) {
@@ -281,6 +299,18 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         match r.rec.finish() {
             Ok(st) => println!("  recording: {}/ ({st:?}); replay with `rccar replay {}`", dir.display(), dir.display()),
             Err(e) => eprintln!("  recording: {}: {e}", dir.display()),
+        }
+        if let Some(rr) = r.right {
+            let d2 = rr.dir().to_path_buf();
+            match rr.finish() {
+                Ok(st) => println!(
+                    "  recording, other camera: {}/ ({st:?}); replay the pair with `rccar replay {} --right {} --set ranging.method=stereo`",
+                    d2.display(),
+                    dir.display(),
+                    d2.display()
+                ),
+                Err(e) => eprintln!("  recording: {}: {e}", d2.display()),
+            }
         }
     }
     let tel_lines = tel.lines();
@@ -930,14 +960,22 @@ impl Observer for Status {
 /// and reported once, never the end of the run.
 struct RecordObs {
     rec: rccar::record::Recorder,
+    /// The other camera of a pair (`--record-right`): its frames under the reference frame's
+    /// index (the same names) and the same telemetry lines.
+    right: Option<rccar::record::Recorder>,
     warned: bool,
 }
 
 impl Observer for RecordObs {
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        let line = ctx.record.to_json_line();
         let a = self.rec.write_frame(ctx.frame.index, &ctx.frame.image);
-        let b = self.rec.write_telemetry_line(&ctx.record.to_json_line());
-        if let Err(e) = a.and(b) {
+        let b = self.rec.write_telemetry_line(&line);
+        let c = match (&mut self.right, &ctx.frame.other) {
+            (Some(r), Some(o)) => r.write_frame(ctx.frame.index, &o.image).and(r.write_telemetry_line(&line)),
+            _ => Ok(()),
+        };
+        if let Err(e) = a.and(b).and(c) {
             if !self.warned {
                 eprintln!("recording: {e} (counted; the run goes on)");
                 self.warned = true;
