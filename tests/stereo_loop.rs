@@ -110,6 +110,35 @@ fn median(v: &[f64]) -> f64 {
     s[s.len() / 2]
 }
 
+impl Stop {
+    /// One line: the range at the stop decision against the truth, where the car came to
+    /// rest, and the single-box errors.
+    fn print(&self, name: &str) {
+        let pct = |v: f64| if v.is_nan() { "none".to_string() } else { format!("{:.2} %", 100.0 * v) };
+        println!(
+            "{name:>12}: stop decided at range {:.3} m, truth {:.3} m ({:+.1} %); at rest {} m from the sign; single-box ranges 0.3-1.5 m: {} boxes, median error {}, max {}",
+            self.decided.0,
+            self.decided.1,
+            100.0 * (self.decided.0 - self.decided.1) / self.decided.1,
+            self.rest_m.map_or("never".into(), |d| format!("{d:.3}")),
+            self.errors.len(),
+            pct(if self.errors.is_empty() { f64::NAN } else { median(&self.errors) }),
+            pct(self.errors.iter().cloned().fold(f64::NAN, f64::max)),
+        );
+    }
+
+    /// The stereo targets: the range at the stop decision within 3 % of the truth, ≥ 20
+    /// single boxes within 2 % median and 5 % max.
+    fn assert_accurate(&self, name: &str) {
+        let (d, t) = self.decided;
+        assert!((d - t).abs() <= 0.03 * t, "{name}: range at the stop decision {d} m, truth {t} m");
+        assert!(self.errors.len() >= 20, "{name}: {} boxes", self.errors.len());
+        assert!(median(&self.errors) <= 0.02, "{name}: median {}", median(&self.errors));
+        let max = self.errors.iter().cloned().fold(0.0, f64::max);
+        assert!(max <= 0.05, "{name}: max {max}");
+    }
+}
+
 #[test]
 fn stereo_in_the_drive_loop_sim_and_replay() {
     let (left, right, sim_out, mono_out, rep_out) = (tmp("L"), tmp("R"), tmp("sim"), tmp("mono"), tmp("rep"));
@@ -139,28 +168,12 @@ fn stereo_in_the_drive_loop_sim_and_replay() {
         cfg["behaviour"]["stop_window_m"][1].as_f64().unwrap(),
     ];
     println!("stereo loop: {pairs} pairs, boxes ranged by stereo {ranged}, without a match {unmatched}");
-    for (name, r) in [("stereo", &st), ("mono", &mono)] {
-        println!(
-            "{name:>6}: stop decided at range {:.3} m, truth {:.3} m ({:+.1} %); at rest {} m from the sign (window {window:?}); single-box ranges 0.3-1.5 m: {} boxes, median error {:.2} %, max {:.2} %",
-            r.decided.0,
-            r.decided.1,
-            100.0 * (r.decided.0 - r.decided.1) / r.decided.1,
-            r.rest_m.map_or("never".into(), |d| format!("{d:.3}")),
-            r.errors.len(),
-            100.0 * median(&r.errors),
-            100.0 * r.errors.iter().cloned().fold(0.0, f64::max)
-        );
-    }
+    st.print("stereo");
+    mono.print("mono");
+    println!("(stop window {window:?} m)");
     assert_eq!(pairs, 300, "every frame is a pair");
     assert!(ranged >= 30 && unmatched * 10 <= ranged, "ranged {ranged}, unmatched {unmatched}");
-    assert!(
-        (st.decided.0 - st.decided.1).abs() <= 0.03 * st.decided.1,
-        "stereo range at the stop decision {:?}",
-        st.decided
-    );
-    assert!(st.errors.len() >= 20, "{}", st.errors.len());
-    assert!(median(&st.errors) <= 0.02, "median {}", median(&st.errors));
-    assert!(st.errors.iter().all(|&e| e <= 0.05), "max {:?}", st.errors.iter().cloned().fold(0.0, f64::max));
+    st.assert_accurate("stereo");
     let rest = st.rest_m.expect("the car never stopped");
     assert!(rest >= window[0] && rest <= window[1], "at rest {rest} m, window {window:?}");
 
@@ -361,27 +374,9 @@ fn a_calibrated_pair_is_rectified_in_the_drive_loop() {
     let (_, without, _) = run(&without_out, false);
     assert!(out_with.contains("every pair rectified with"), "{out_with}");
     assert!(recs.iter().filter(|r| r["stereo"].is_object()).all(|r| r["stereo"]["rectified"] == true));
-    for (name, r) in [("calibrated", &with), ("uncalibrated", &without)] {
-        let pct = |v: f64| if v.is_nan() { "none".to_string() } else { format!("{:.2} %", 100.0 * v) };
-        println!(
-            "{name:>12}: stop decided at range {:.3} m, truth {:.3} m ({:+.1} %); at rest {} m from the sign; single-box ranges 0.3-1.5 m: {} boxes, median error {}, max {}",
-            r.decided.0,
-            r.decided.1,
-            100.0 * (r.decided.0 - r.decided.1) / r.decided.1,
-            r.rest_m.map_or("never".into(), |d| format!("{d:.3}")),
-            r.errors.len(),
-            pct(if r.errors.is_empty() { f64::NAN } else { median(&r.errors) }),
-            pct(r.errors.iter().cloned().fold(f64::NAN, f64::max)),
-        );
-    }
-    assert!(
-        (with.decided.0 - with.decided.1).abs() <= 0.03 * with.decided.1,
-        "calibrated: stereo range at the stop decision {:?}",
-        with.decided
-    );
-    assert!(with.errors.len() >= 20, "{}", with.errors.len());
-    assert!(median(&with.errors) <= 0.02, "median {}", median(&with.errors));
-    assert!(with.errors.iter().all(|&e| e <= 0.05), "max {:?}", with.errors.iter().cloned().fold(0.0, f64::max));
+    with.print("calibrated");
+    without.print("uncalibrated");
+    with.assert_accurate("calibrated");
     // Without it the same pair is ranged far off (1° of yaw is ~4.6 px of disparity).
     assert!(
         without.errors.is_empty() || median(&without.errors) > 0.10,
