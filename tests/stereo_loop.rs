@@ -257,6 +257,16 @@ fn stereo_in_the_drive_loop_sim_and_replay() {
         assert!(!recs.is_empty() && pairs == recs.len(), "{cam:?}: {pairs} of {}", recs.len());
         let _ = std::fs::remove_dir_all(dout);
     }
+    // `rccar drive` with two folders that do not pair up: refused before the loop starts,
+    // naming the frame, as `rccar replay --right` does.
+    let (code, out, err) = rccar(&[
+        "drive", "--dry-run", "--arm", "--seconds", "2", "--set", "ranging.method=stereo", "-o", &s(&tmp("drive-bad")),
+        "--camera", &s(&l20), "--camera-right", &s(&r19),
+    ]);
+    println!("drive with a missing right frame: exit {code}: {}", err.trim());
+    assert_ne!(code, 0, "{out}");
+    assert!(err.contains("--camera-right") && err.contains("frame_000007.png") && err.contains("no partner"), "{err}");
+    assert!(!out.contains("drive: camera"), "the loop must not start: {out}");
     // `rccar drive --record DIR --record-right DIR2` keeps both cameras (JPEG, the same names
     // and telemetry); `rccar replay DIR --right DIR2` replays them as a pair.
     let (dl, dr, dout, rout) = (tmp("drive-L"), tmp("drive-R"), tmp("drive-out"), tmp("drive-rep"));

@@ -211,6 +211,14 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         spec => open_source(spec, &cfg, &pipeline, &clock)?,
     };
     if let Some(r) = &a.camera_right {
+        let (ldir, rdir) = (PathBuf::from(&a.camera), PathBuf::from(r));
+        if ldir.is_dir() && rdir.is_dir() {
+            // Two folders are paired by their frame times; check first that frame i of one is
+            // frame i of the other, as `rccar replay --right` does.
+            let (w, h) = pipeline.frame_size();
+            let list = |d: &PathBuf| ReplayDir::open(d, cfg.camera.fps, w, h, (1, 1)).map(|s| s.files().to_vec());
+            super::common::check_pair("--camera-right", &ldir, &list(&ldir)?, &rdir, &list(&rdir)?)?;
+        }
         let right = open_source(r, &cfg, &pipeline, &clock)?;
         source = Box::new(rccar::drive::stereo::StereoFrames::from_config(source, right, &cfg));
         println!(

@@ -13,7 +13,7 @@ use rccar::sink::NullSink;
 use rccar::source::{FrameError, FrameSource, ReplayDir};
 use rccar::telemetry::JsonlWriter;
 use rccar::timing::{NoTimer, StageTimer};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 /// Flags of `rccar replay`.
@@ -141,7 +141,7 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         None => Box::new(left),
         Some(rdir) => {
             let right = open(rdir)?;
-            check_pair(&a.dir, left.files(), rdir, right.files())?;
+            super::common::check_pair("--right", &a.dir, left.files(), rdir, right.files())?;
             println!(
                 "replay: stereo pair, left {} and right {} ({} frames each), reference {}",
                 a.dir.display(),
@@ -259,54 +259,4 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
-}
-
-/// The two folders of a stereo replay must hold the same frames (file names, in order) of the
-/// same size: otherwise frames would pair with the wrong partner. The error names the file.
-fn check_pair(ldir: &Path, left: &[PathBuf], rdir: &Path, right: &[PathBuf]) -> Result<()> {
-    let rel = |dir: &Path, p: &PathBuf| p.strip_prefix(dir).unwrap_or(p).to_path_buf();
-    for (l, r) in left.iter().zip(right) {
-        if rel(ldir, l) != rel(rdir, r) {
-            bail!(
-                "--right: {} has no partner: the right folder's frame at that place is {} (the folders must hold the same frame names; {} and {} frames)",
-                l.display(),
-                r.display(),
-                left.len(),
-                right.len()
-            );
-        }
-    }
-    if left.len() != right.len() {
-        let (longer, n) = if left.len() > right.len() { (left, right.len()) } else { (right, left.len()) };
-        bail!(
-            "--right: {} has no partner in the other folder ({} has {} frames, {} has {}); the folders must hold the same frames",
-            longer[n].display(),
-            ldir.display(),
-            left.len(),
-            rdir.display(),
-            right.len()
-        );
-    }
-    let dims = |p: &PathBuf| {
-        image::ImageReader::open(p)
-            .ok()
-            .and_then(|r| r.with_guessed_format().ok())
-            .and_then(|r| r.into_dimensions().ok())
-    };
-    for (l, r) in left.iter().zip(right) {
-        if let (Some(a), Some(b)) = (dims(l), dims(r)) {
-            if a != b {
-                bail!(
-                    "--right: {} is {}x{} but {} is {}x{}: the two cameras' frames must have one size",
-                    l.display(),
-                    a.0,
-                    a.1,
-                    r.display(),
-                    b.0,
-                    b.1
-                );
-            }
-        }
-    }
-    Ok(())
 }
