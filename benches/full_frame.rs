@@ -7,7 +7,7 @@
 //! `--parallel` spreads our pyramid levels over rayon's threads (`RAYON_NUM_THREADS=2` for two);
 //! OpenCV stays on one thread, so that ratio is against the same one-thread reference.
 //! Besides wall time, both sides report this thread's CPU time per frame (ours from
-//! `/proc/thread-self/schedstat`, OpenCV's from `time.thread_time`), which other jobs on a busy
+//! `clock_gettime(CLOCK_THREAD_CPUTIME_ID)`, OpenCV's from `time.thread_time`), which other jobs on a busy
 //! machine do not inflate; the one-thread ratio is quoted on both.
 //!
 //! 1. Frames: 24 simulator frames of config/tracks/scenarios.toml, taken on the approaches to
@@ -72,15 +72,12 @@ for _ in range(a["reps"]):
 print(json.dumps({"opencv": cv2.__version__, "lane": lane_t, "total": total_t, "cpu": cpu_t}))
 "#;
 
-/// This thread's CPU time, seconds (Linux `/proc/thread-self/schedstat`; `None` elsewhere).
+#[path = "support/cpu.rs"]
+mod cpu;
+
+/// This thread's CPU time, seconds ([`cpu::thread_cpu_ns`]).
 fn cpu_s() -> Option<f64> {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()?
-        .split_whitespace()
-        .next()?
-        .parse::<u64>()
-        .ok()
-        .map(|ns| ns as f64 * 1e-9)
+    cpu::thread_cpu_ns().map(|ns| ns as f64 * 1e-9)
 }
 
 fn median_min(v: &mut [f64]) -> (f64, f64) {

@@ -13,16 +13,9 @@ use rccar::timing::NoTimer;
 use std::path::Path;
 use std::time::Instant;
 
-/// This thread's CPU time, nanoseconds (Linux `/proc/thread-self/schedstat`), so a loaded
-/// machine (other jobs on the same cores) does not inflate the numbers; `None` elsewhere.
-fn cpu_ns() -> Option<u64> {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()?
-        .split_whitespace()
-        .next()?
-        .parse()
-        .ok()
-}
+#[path = "support/cpu.rs"]
+mod cpu;
+use cpu::thread_cpu_ns as cpu_ns;
 
 /// Median and min of `reps` wall-clock timings of `f`, and the mean CPU time, microseconds.
 fn time<F: FnMut()>(reps: usize, mut f: F) -> (f64, f64, Option<f64>) {
