@@ -149,7 +149,7 @@ mod tests {
         // position is then up to 4 levels, in OpenCV as here).
         let inside = |i: usize| (1.0..318.0).contains(&m.map_x[i]) && (1.0..238.0).contains(&m.map_y[i]);
         let (mut worst, mut n) = (0, 0);
-        for (i, (p, q)) in a.pixels().zip(b.pixels()).enumerate().filter(|(i, _)| inside(*i)) {
+        for (_, (p, q)) in a.pixels().zip(b.pixels()).enumerate().filter(|(i, _)| inside(*i)) {
             n += 1;
             for c in 0..3 {
                 worst = worst.max((p[c] as i32 - q[c] as i32).abs());
