@@ -540,15 +540,23 @@ impl Pipeline {
             }
             None if detect_now => {
                 if let Some(det) = &mut self.detect {
-                    // Stereo ranging needs the other image at the pipeline's size too.
-                    let mut stereo = match (&mut self.stereo, other) {
-                        (Some(st), Some(o)) if o.dimensions() == frame.dimensions() => {
-                            st.set_pair(frame, o);
-                            Some(st)
-                        }
-                        _ => None,
-                    };
                     if let Ok(found) = det.run_rgb(frame) {
+                        // Stereo ranging needs the other image at the pipeline's size too;
+                        // only the rows of this frame's boxes are rectified and converted.
+                        let mut stereo = match (&mut self.stereo, other) {
+                            (Some(st), Some(o)) if o.dimensions() == frame.dimensions() => {
+                                let boxes: Vec<Rect> = found
+                                    .iter()
+                                    .filter(|d| ObjectClass::from_label(&d.label).is_some())
+                                    .map(|d| d.rect)
+                                    .collect();
+                                if !boxes.is_empty() {
+                                    st.set_pair_for(frame, o, &boxes);
+                                }
+                                Some(st)
+                            }
+                            _ => None,
+                        };
                         for d in &found {
                             let Some(class) = ObjectClass::from_label(&d.label) else {
                                 continue;

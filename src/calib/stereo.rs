@@ -406,16 +406,30 @@ impl FixedMaps {
     /// Remaps a colour image into `dst`; `false` (and `dst` untouched) when the image is not
     /// of the size the maps were made for.
     pub fn remap_rgb(&self, src: &RgbImage, dst: &mut RgbImage) -> bool {
+        self.remap_rgb_rows(src, dst, 0..self.height)
+    }
+
+    /// [`FixedMaps::remap_rgb`] for the output rows `rows` only (clipped to the image); the
+    /// other rows of `dst` keep what they held. The drive loop rectifies only the rows its
+    /// boxes are matched on (a sign's box is a tenth of the frame's rows).
+    pub fn remap_rgb_rows(&self, src: &RgbImage, dst: &mut RgbImage, rows: std::ops::Range<u32>) -> bool {
         if src.dimensions() != (self.src_w, self.src_h) {
             return false;
         }
         if dst.dimensions() != (self.width, self.height) {
             *dst = RgbImage::new(self.width, self.height);
         }
+        let width = self.width as usize;
+        let (r0, r1) = (rows.start.min(self.height) as usize, rows.end.min(self.height) as usize);
+        if r0 >= r1 {
+            return true;
+        }
+        let (i0, i1) = (r0 * width, r1 * width);
         let s = src.as_raw();
         let row = 3 * self.src_w as usize;
         let blend = |v: i32| ((v + (1 << 14)) >> 15).clamp(0, 255) as u8;
-        for (o, (&off, &fr)) in dst.chunks_exact_mut(3).zip(self.off.iter().zip(&self.frac)) {
+        let out: &mut [u8] = &mut (**dst)[3 * i0..3 * i1];
+        for (o, (&off, &fr)) in out.chunks_exact_mut(3).zip(self.off[i0..i1].iter().zip(&self.frac[i0..i1])) {
             if off == u32::MAX {
                 continue;
             }
@@ -435,7 +449,12 @@ impl FixedMaps {
             }
         };
         let out: &mut [u8] = dst;
-        for &(i, x, y) in &self.border {
+        // `border` is in output order: the entries of these rows are one run of it.
+        let (b0, b1) = (
+            self.border.partition_point(|b| (b.0 as usize) < i0),
+            self.border.partition_point(|b| (b.0 as usize) < i1),
+        );
+        for &(i, x, y) in &self.border[b0..b1] {
             let w = &self.wtab[self.frac[i as usize] as usize];
             for c in 0..3 {
                 let v = px(x, y, c) * w[0] + px(x + 1, y, c) * w[1] + px(x, y + 1, c) * w[2] + px(x + 1, y + 1, c) * w[3];

@@ -50,17 +50,30 @@ pub const MAX_COLS: usize = 64;
 /// object stays; a pixel that is a mix of object and floor gets the mix of their values, so
 /// edges keep their sub-pixel position (which max − min, the "chroma", does not).
 pub fn opponent_from_rgb(rgb: &RgbImage, out: &mut [GrayImage; 2]) {
+    opponent_from_rgb_rows(rgb, out, 0..rgb.height());
+}
+
+/// [`opponent_from_rgb`] for the rows `rows` only (clipped to the image); the other rows of
+/// `out` keep what they held (planes of another size are made anew, all zero).
+pub fn opponent_from_rgb_rows(rgb: &RgbImage, out: &mut [GrayImage; 2], rows: std::ops::Range<u32>) {
     for o in out.iter_mut() {
         if o.dimensions() != rgb.dimensions() {
             *o = GrayImage::new(rgb.width(), rgb.height());
         }
     }
+    let w = rgb.width() as usize;
+    let (r0, r1) = (rows.start.min(rgb.height()) as usize, rows.end.min(rgb.height()) as usize);
+    if r0 >= r1 {
+        return;
+    }
     let [a, b] = out;
-    for ((pa, pb), p) in a.pixels_mut().zip(b.pixels_mut()).zip(rgb.pixels()) {
-        let [r, g, bl] = p.0.map(|v| v as i32);
+    let (a, b): (&mut [u8], &mut [u8]) = (&mut (**a)[r0 * w..r1 * w], &mut (**b)[r0 * w..r1 * w]);
+    let src = &rgb.as_raw()[3 * r0 * w..3 * r1 * w];
+    for ((pa, pb), p) in a.iter_mut().zip(b.iter_mut()).zip(src.chunks_exact(3)) {
+        let [r, g, bl] = [p[0], p[1], p[2]].map(|v| v as i32);
         // Both in 0..=255 by construction; +1 / +2 before the shift round half up.
-        pa.0[0] = ((256 + r - g + 1) >> 1) as u8;
-        pb.0[0] = ((512 + r + g - 2 * bl + 2) >> 2).min(255) as u8;
+        *pa = ((256 + r - g + 1) >> 1) as u8;
+        *pb = ((512 + r + g - 2 * bl + 2) >> 2).min(255) as u8;
     }
 }
 

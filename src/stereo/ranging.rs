@@ -19,12 +19,14 @@
 //! rectified first and the box carried into the rectified image ([`super::rectify`]).
 //! Units: metres, pixels.
 
-use super::matching::{opponent_from_rgb, Matcher, StereoMatch};
+use super::matching::{opponent_from_rgb_rows, Matcher, StereoMatch};
 use super::{MatchOptions, NoRange, StereoGeometry};
 use crate::config::Config;
-use crate::detect::{gray_from_rgb, Rect};
+use crate::detect::Rect;
+use crate::lane::warp::rgb_to_gray_rows;
 use crate::ranging::{BoxRange, ObjectClass};
 use image::{GrayImage, RgbImage};
+use std::ops::Range;
 
 /// Relative spread of the rows' forward distances taken as one vertical face
 /// ([`StereoGeometry::vertical_face`]); measured in tests/stereo_sim.rs (2 %…5 % give the
@@ -54,10 +56,20 @@ impl Default for PairPlanes {
 impl PairPlanes {
     /// Converts a pair (reference first).
     pub fn set(&mut self, reference: &RgbImage, other: &RgbImage) {
-        gray_from_rgb(reference, &mut self.gray[0]);
-        gray_from_rgb(other, &mut self.gray[1]);
-        opponent_from_rgb(reference, &mut self.opponent[0]);
-        opponent_from_rgb(other, &mut self.opponent[1]);
+        self.set_rows(reference, other, 0..reference.height().max(other.height()));
+    }
+
+    /// Converts the rows `rows` of a pair only (the rows a box is matched on: the matcher
+    /// reads nothing outside a box's rows); the other rows keep what they held.
+    pub fn set_rows(&mut self, reference: &RgbImage, other: &RgbImage, rows: Range<u32>) {
+        for (img, gray) in [reference, other].into_iter().zip(&mut self.gray) {
+            if gray.dimensions() != img.dimensions() {
+                *gray = GrayImage::new(img.width(), img.height());
+            }
+            rgb_to_gray_rows(img, gray, rows.clone());
+        }
+        opponent_from_rgb_rows(reference, &mut self.opponent[0], rows.clone());
+        opponent_from_rgb_rows(other, &mut self.opponent[1], rows);
     }
 }
 
@@ -175,15 +187,41 @@ impl StereoRanging {
     /// Converts a new pair to grey (once per frame, before [`StereoRanging::range`]),
     /// rectifying it first when a calibration is applied.
     pub fn set_pair(&mut self, reference: &RgbImage, other: &RgbImage) {
+        self.set_pair_rows(reference, other, 0..reference.height().max(other.height()));
+    }
+
+    /// [`StereoRanging::set_pair`] for the boxes `boxes` of the reference image only: the
+    /// rows they are matched on (in the rectified image when a calibration is applied) are
+    /// rectified and converted, the rest of the pair is not touched. [`StereoRanging::range`]
+    /// then gives for these boxes exactly what it gives after `set_pair`; a frame without a
+    /// box costs nothing. Call it once per pair with every box that will be ranged.
+    pub fn set_pair_for(&mut self, reference: &RgbImage, other: &RgbImage, boxes: &[Rect]) {
+        let (mut lo, mut hi) = (i64::MAX, i64::MIN);
+        for &rect in boxes {
+            let bx = match &self.rectifier {
+                None => Some([0, rect.y as i64, 0, rect.height as i64]),
+                Some(r) => r.map_box(rect),
+            };
+            if let Some([_, y, _, h]) = bx {
+                (lo, hi) = (lo.min(y), hi.max(y + h));
+            }
+        }
+        let clip = |v: i64| v.clamp(0, u32::MAX as i64) as u32;
+        let rows = if lo < hi { clip(lo)..clip(hi) } else { 0..0 };
+        self.set_pair_rows(reference, other, rows);
+    }
+
+    /// Rectifies (when calibrated) and converts the rows `rows` of the pair.
+    fn set_pair_rows(&mut self, reference: &RgbImage, other: &RgbImage, rows: Range<u32>) {
         match &mut self.rectifier {
             Some(r) => {
-                self.pair_ok = r.rectify(reference, other);
+                self.pair_ok = r.rectify_rows(reference, other, rows.clone());
                 if self.pair_ok {
                     let (a, b) = r.images();
-                    self.planes.set(a, b);
+                    self.planes.set_rows(a, b, rows);
                 }
             }
-            None => self.planes.set(reference, other),
+            None => self.planes.set_rows(reference, other, rows),
         }
     }
 

@@ -11,9 +11,10 @@
 //!
 //! The drive loop keeps lane keeping and detection on the raw reference image (their ROI,
 //! warp and regions are set up for it). Only stereo ranging works in rectified coordinates:
-//! - both images of a pair are remapped once per frame through maps built once
-//!   ([`RectifyMaps`] → [`FixedMaps`], OpenCV's `initUndistortRectifyMap` + `remap`,
-//!   bilinear in fixed point as OpenCV does it);
+//! - both images of a pair are remapped through maps built once ([`RectifyMaps`] →
+//!   [`FixedMaps`], OpenCV's `initUndistortRectifyMap` + `remap`, bilinear in fixed point as
+//!   OpenCV does it), on a frame with boxes and only in the rectified rows the boxes cover
+//!   ([`PairRectifier::rectify_rows`], called by `StereoRanging::set_pair_for`);
 //! - a detector box of the raw reference image is carried into the rectified one by the
 //!   inverse map of points on its outline (undistort → R → project; [`rectified_point`]) and
 //!   the box that bounds them;
@@ -69,8 +70,14 @@ impl PairRectifier {
     /// Rectifies a pair (reference first); the result is [`PairRectifier::images`]. `false`
     /// when an image is not of the calibrated size (the pair then has no stereo range).
     pub fn rectify(&mut self, reference: &RgbImage, other: &RgbImage) -> bool {
+        self.rectify_rows(reference, other, 0..u32::MAX)
+    }
+
+    /// [`PairRectifier::rectify`] for the rectified rows `rows` only (clipped to the image);
+    /// the other rows of [`PairRectifier::images`] keep what they held.
+    pub fn rectify_rows(&mut self, reference: &RgbImage, other: &RgbImage, rows: std::ops::Range<u32>) -> bool {
         let [a, b] = &mut self.images;
-        self.maps[0].remap_rgb(reference, a) && self.maps[1].remap_rgb(other, b)
+        self.maps[0].remap_rgb_rows(reference, a, rows.clone()) && self.maps[1].remap_rgb_rows(other, b, rows)
     }
 
     /// The rectified reference and other image of the last pair.
@@ -158,6 +165,95 @@ mod tests {
         assert!(n > 60_000 && worst <= 1, "max difference {worst} over {n} pixels");
         // Another size is refused, not read out of bounds.
         assert!(!FixedMaps::new(&m, 320, 240).remap_rgb(&RgbImage::new(160, 120), &mut b));
+    }
+
+    /// Remapping a band of rows gives those rows' bytes of the whole remap, border path
+    /// included, and leaves the other rows alone.
+    #[test]
+    fn a_band_of_rows_is_remapped_as_in_the_whole_image() {
+        let r = cam(270.0, -0.08);
+        let rot = rodrigues([0.5f64.to_radians(), 1.0f64.to_radians(), 0.2f64.to_radians()]);
+        let m = RectifyMaps::new(&r.intrinsics, &r.distortion, &crate::calib::stereo::to_rows(&rot), 268.0, [158.0, 119.0], 320, 240);
+        let fixed = FixedMaps::new(&m, 320, 240);
+        let img = RgbImage::from_fn(320, 240, |x, y| image::Rgb([(x * 7 + y) as u8, (y * 5) as u8, (x ^ y) as u8]));
+        let mut whole = RgbImage::new(0, 0);
+        assert!(fixed.remap_rgb(&img, &mut whole));
+        for rows in [0..1, 0..17, 100..140, 230..240, 239..400, 50..50] {
+            let mut band = RgbImage::from_pixel(320, 240, image::Rgb([1, 2, 3]));
+            assert!(fixed.remap_rgb_rows(&img, &mut band, rows.clone()));
+            for (y, (a, b)) in whole.rows().zip(band.rows()).enumerate() {
+                let (a, b): (Vec<_>, Vec<_>) = (a.collect(), b.collect());
+                if rows.contains(&(y as u32)) {
+                    assert_eq!(a, b, "row {y} of {rows:?}");
+                } else {
+                    assert!(b.iter().all(|p| p.0 == [1, 2, 3]), "row {y} outside {rows:?} was written");
+                }
+            }
+        }
+    }
+
+    /// The drive loop's shortcut: ranging boxes after converting only their rows
+    /// (`set_pair_for`) gives what converting the whole pair gives, calibrated or ideal.
+    #[test]
+    fn ranging_after_the_boxes_rows_only_equals_the_whole_pair() {
+        use crate::ranging::ObjectClass;
+        use crate::stereo::ranging::StereoRanging;
+        let (l, r) = (cam(265.0, 0.0), cam(270.0, -0.08));
+        let rot = rodrigues([0.2f64.to_radians(), 0.5f64.to_radians(), 0.1f64.to_radians()]);
+        let t = nalgebra::Vector3::new(-0.06, 0.0, 0.0);
+        let rc = stereo_rectify(&l.intrinsics, &l.distortion, &r.intrinsics, &r.distortion, &rot, &t, 320, 240);
+        let st = StereoCalibration {
+            left: l,
+            right: r,
+            r: crate::calib::stereo::to_rows(&rot),
+            t: [t[0], t[1], t[2]],
+            baseline_m: t.norm(),
+            rms_px: 0.1,
+            per_pair_rms_px: vec![],
+            pairs_not_used: vec![],
+            rectification: rc,
+        };
+        // Grey floor with a coloured, textured block; the right camera sees it 14 px left.
+        let scene = |shift: i64| {
+            RgbImage::from_fn(320, 240, move |x, y| {
+                let (x, y) = (x as i64 + shift, y as i64);
+                if (120..200).contains(&x) && (90..160).contains(&y) {
+                    let v = (128.0 + 90.0 * ((x as f64) * 0.31).sin() * ((y as f64) * 0.23).cos()) as u8;
+                    image::Rgb([v, 40, 255 - v])
+                } else {
+                    let g = (100 + (x * 13 + y * 7) % 60) as u8;
+                    image::Rgb([g, g, g])
+                }
+            })
+        };
+        let (left, right) = (scene(0), scene(14));
+        let boxes = [
+            (ObjectClass::StopSign, Rect { x: 125, y: 95, width: 40, height: 40 }),
+            (ObjectClass::Obstacle, Rect { x: 118, y: 88, width: 84, height: 74 }),
+            (ObjectClass::TrafficLight, Rect { x: 140, y: 30, width: 20, height: 30 }),
+        ];
+        let rects: Vec<Rect> = boxes.iter().map(|b| b.1).collect();
+        let cfg = crate::config::Config::default();
+        let mut ranged = 0;
+        for calibrated in [false, true] {
+            let new = || match calibrated {
+                true => StereoRanging::with_calibration(&cfg, &st),
+                false => StereoRanging::from_config(&cfg),
+            };
+            let (mut whole, mut rows) = (new(), new());
+            whole.set_pair(&left, &right);
+            rows.set_pair_for(&left, &right, &rects);
+            for &(class, rect) in &boxes {
+                let a = whole.range(class, rect);
+                assert_eq!(a, rows.range(class, rect), "{class:?} calibrated {calibrated}, all boxes");
+                // Each box on its own (a fresh ranging: nothing left from another pair).
+                let mut alone = new();
+                alone.set_pair_for(&left, &right, &[rect]);
+                assert_eq!(a, alone.range(class, rect), "{class:?} calibrated {calibrated}, alone");
+                ranged += a.is_some() as usize;
+            }
+        }
+        assert!(ranged >= 4, "only {ranged} of 6 boxes ranged: the test would compare too little");
     }
 
     /// A pair with 1° of yaw, 0.5° of pitch and a barrel lens on the right: a point seen by
