@@ -77,7 +77,8 @@ fn main() {
     let spans = pipeline_det.rows_needed(0);
     let lane_spans = {
         let r = pipeline_det.lane().warp_map().src_rows();
-        vec![r.start as usize..r.end as usize]
+        let r = r.start as usize..r.end as usize;
+        vec![r]
     };
     let mut img2 = img.clone();
     let render_needed = time(300, || {

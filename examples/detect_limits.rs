@@ -29,7 +29,8 @@ fn main() {
     let mut sim = Simulation::new(&cfg, &track).unwrap();
     let len = track.length;
     // per class: (min x0, min y0, max x1, max y1) of matched boxes, ratios, count; truth extent
-    let mut stats: std::collections::BTreeMap<String, (Vec<[f64; 4]>, Vec<(f64, f64)>, Vec<[f64; 4]>)> =
+    type ClassStats = (Vec<[f64; 4]>, Vec<(f64, f64)>, Vec<[f64; 4]>);
+    let mut stats: std::collections::BTreeMap<String, ClassStats> =
         Default::default();
     let mut s = 0.0;
     while s < len {

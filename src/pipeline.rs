@@ -280,7 +280,7 @@ pub struct RowPlan {
 impl RowPlan {
     /// The rows read on the `k`-th step after the plan was made (k = 0: the next one).
     pub fn rows(&self, k: u64) -> &[std::ops::Range<usize>] {
-        if (self.next_index + k) % self.every_n.max(1) == 0 {
+        if (self.next_index + k).is_multiple_of(self.every_n.max(1)) {
             &self.detect
         } else {
             &self.lane
@@ -410,7 +410,7 @@ impl Pipeline {
     /// Whether detection runs on the pipeline's step `frame_index` (counted from 0): every
     /// `detect.every_n_frames`-th step while a detector is installed.
     pub fn detects_on(&self, frame_index: u64) -> bool {
-        self.detect.is_some() && frame_index % self.every_n == 0
+        self.detect.is_some() && frame_index.is_multiple_of(self.every_n)
     }
 
     /// The rows the pipeline will read on its next step (see [`Pipeline::rows_needed`]).
@@ -425,7 +425,8 @@ impl Pipeline {
     /// the same as for the whole frame.
     pub fn rows_needed(&self, frame_index: u64) -> Vec<std::ops::Range<usize>> {
         let lane = self.lane.warp_map().src_rows();
-        let mut spans = vec![lane.start as usize..lane.end as usize];
+        let lane = lane.start as usize..lane.end as usize;
+        let mut spans = vec![lane];
         if self.detects_on(frame_index) {
             spans.extend(self.detect_rows.iter().cloned());
             // The light reading looks inside boxes, which lie inside the regions; the colour
@@ -464,7 +465,8 @@ impl Pipeline {
     /// [`Pipeline::rows_needed`] of the `k`-th step from now.
     pub fn row_plan(&self) -> RowPlan {
         let lane = self.lane.warp_map().src_rows();
-        let lane = vec![lane.start as usize..lane.end as usize];
+        let lane = lane.start as usize..lane.end as usize;
+        let lane = vec![lane];
         let detect = match &self.detect {
             // Frame index 0 always detects.
             Some(_) => self.rows_needed(0),
@@ -527,7 +529,7 @@ impl Pipeline {
         // 1. Lane.
         let lane = self.lane.measure(frame, timer, &mut stage_us);
         // 2. Detections (on every n-th frame; given boxes on every frame), ranged.
-        let detect_now = given.is_some() || self.frame_index % self.every_n == 0;
+        let detect_now = given.is_some() || self.frame_index.is_multiple_of(self.every_n);
         self.frame_index += 1;
         self.objects.clear();
         self.measurements.clear();
@@ -656,7 +658,7 @@ impl Pipeline {
             match ob.class {
                 ObjectClass::StopSign => o.stop_sign = nearer(o.stop_sign, r),
                 ObjectClass::TrafficLight => {
-                    if o.light.map_or(true, |(c, _)| c.distance_m > d) {
+                    if o.light.is_none_or(|(c, _)| c.distance_m > d) {
                         o.light = Some((r, ob.light.unwrap_or(LightColor::Unknown)));
                     }
                 }

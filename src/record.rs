@@ -311,7 +311,7 @@ impl Recorder {
         if self
             .current
             .as_ref()
-            .map_or(true, |s| s.frames_tried >= self.opts.segment_frames)
+            .is_none_or(|s| s.frames_tried >= self.opts.segment_frames)
         {
             if let Some(full) = self.current.take() {
                 self.closed.push_back(full);
@@ -499,7 +499,7 @@ mod tests {
         RgbImage::from_fn(320, 240, |x, y| {
             seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
             let n = (seed >> 59) as u8; // 0..31 of noise
-            let stripe = if ((x + k as u32 * 3) / 20) % 2 == 0 { 200 } else { 60 };
+            let stripe = if ((x + k as u32 * 3) / 20).is_multiple_of(2) { 200 } else { 60 };
             let v = stripe - 16 + n;
             image::Rgb([v, (y % 256) as u8, v / 2])
         })

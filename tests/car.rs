@@ -4,6 +4,11 @@
 //! files whose tests need a feature say so in their first lines (`#![cfg(feature = ..)]`);
 //! without the features this binary still runs what needs none (drive_cli, labs).
 
+/// The firmware in simavr on a pty (tests/support/sim.rs), for drive_fil and link_hil.
+#[cfg(feature = "serial")]
+#[path = "support/sim.rs"]
+mod sim;
+
 mod dashboard_security;
 mod drive_cli;
 mod drive_fil;

@@ -11,8 +11,7 @@
 //! `RCCAR_FIL_DETECT=1` turns detection on.
 #![cfg(feature = "serial")]
 
-#[path = "support/sim.rs"]
-mod sim;
+use super::sim;
 
 use rccar::config::Config;
 use rccar::control::Command;
@@ -220,7 +219,7 @@ fn kill_9_mid_lap_the_firmware_failsafe_holds_the_car() {
     .with_speed(truth["speed_mps"].as_f64().unwrap());
     let v0 = v.speed;
     // ESC widths after the last DRIVE: neutral from `neutral.1` on; before it the last width.
-    let before = esc(&sim).into_iter().filter(|&(_, t)| t <= last_drive).last().map_or(1500.0, |p| p.0);
+    let before = esc(&sim).into_iter().rfind(|&(_, t)| t <= last_drive).map_or(1500.0, |p| p.0);
     let rate = cfg.camera.fps * cfg.sim.substeps as f64;
     let steps_before = ((neutral.1 - last_drive) / 1e6 * rate).round() as usize;
     for i in 0..(steps_before + (2.0 * rate) as usize) {

@@ -90,7 +90,7 @@ fn edit_toml(text: &str, r: &mut Rng) -> String {
     let mut lines: Vec<String> = text.lines().map(String::from).collect();
     let n = lines.len();
     match r.below(7) {
-        0 | 1 | 2 => {
+        0..=2 => {
             // Replace the value of a `key = value` line (the most useful edit).
             let keyed: Vec<usize> = (0..n)
                 .filter(|&i| lines[i].contains(" = ") && !lines[i].starts_with('#'))

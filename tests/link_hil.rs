@@ -5,8 +5,7 @@
 //! Run: `cargo test --release --features serial --test car link_hil::`.
 #![cfg(feature = "serial")]
 
-#[path = "support/sim.rs"]
-mod sim;
+use super::sim;
 
 use rccar::link::protocol::{self, LinkConfig, State};
 use rccar::link::transport::{Link, LinkOptions};

@@ -131,7 +131,7 @@ fn hsv_template_detector_against_the_cascade_on_the_same_frames() {
     };
     let ropts = RenderOptions::from_config(&cfg.sim);
     let mut renderers = [
-        Renderer::new(Arc::new(Scene::new(&lt)), mount.clone(), ropts.clone()),
+        Renderer::new(Arc::new(Scene::new(&lt)), mount, ropts.clone()),
         Renderer::new(Arc::new(Scene::new(&st)), mount, ropts),
     ];
 

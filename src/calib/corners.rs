@@ -381,7 +381,7 @@ fn neighbour(c: &[Cand], from: usize, dir: f64, used: &[bool]) -> Option<usize> 
         if da > 20f64.to_radians() {
             continue;
         }
-        if best.map_or(true, |b| d < b.1) {
+        if best.is_none_or(|b| d < b.1) {
             best = Some((i, d));
         }
     }
@@ -404,7 +404,7 @@ fn nearest(c: &[Cand], p: [f64; 2], tol: f64, used: &[bool], dirs: [f64; 2]) -> 
             .dirs
             .iter()
             .all(|&a| dirs.iter().any(|&b| angle_diff_mod_pi(a, b) < 30f64.to_radians()));
-        if ok && best.map_or(true, |b| d < b.1) {
+        if ok && best.is_none_or(|b| d < b.1) {
             best = Some((i, d));
         }
     }

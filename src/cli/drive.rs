@@ -777,8 +777,8 @@ impl FrameSource for PacedSimCamera {
         let truth = w.render(self.tick, t, &mut self.image, self.truth_rows.clone());
         let other = self.other.as_mut().map(|(r, img)| {
             let pose = w.vehicle().pose;
-            let rows = [0..img.height() as usize];
-            rccar::sim::stereo::render_spans(r, &pose, t, self.tick, img, &rows, w.config().sim.blur_px);
+            let all = 0..img.height() as usize;
+            rccar::sim::stereo::render_spans(r, &pose, t, self.tick, img, &[all], w.config().sim.blur_px);
             img.clone()
         });
         drop(w);

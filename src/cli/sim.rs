@@ -481,7 +481,9 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, font: Option<&'static [u8
     );
     let stop = super::signals::install();
     let next = std::sync::atomic::AtomicUsize::new(0);
-    let results: Vec<std::sync::Mutex<Option<Result<(Summary, f64), String>>>> =
+    // One slot per run: its summary and steering chatter, or why it could not start.
+    type RunResult = Result<(Summary, f64), String>;
+    let results: Vec<std::sync::Mutex<Option<RunResult>>> =
         (0..cfgs.len()).map(|_| std::sync::Mutex::new(None)).collect();
     std::thread::scope(|s| {
         for _ in 0..jobs.min(cfgs.len()) {
@@ -558,7 +560,7 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, font: Option<&'static [u8
         if axes.len() == 1 {
             let rows: Vec<(f64, Summary)> = runs.iter().map(|r| (r.values[0], r.summary.clone())).collect();
             let p = a.out.join("sweep.png");
-            save(&plot::sweep_plot(&keys[0], &rows)?, &p)?;
+            save(&plot::sweep_plot(keys[0], &rows)?, &p)?;
             println!("  plot:  {}", p.display());
         } else {
             let p = a.out.join("sweep_grid.png");

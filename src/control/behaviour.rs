@@ -592,7 +592,7 @@ mod tests {
         let mut left_at = None;
         while r.t < 10.0 {
             k += 1;
-            let seen = k % 4 != 0;
+            let seen = !k.is_multiple_of(4);
             let before = r.b.mode();
             let d = r.frame(|_| Observations {
                 stop_sign: seen.then(|| at(0.7)),

@@ -31,7 +31,7 @@ use crate::sim::world::{lock, SharedWorld};
 use crate::telemetry::FrameRecord;
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TryRecvError, TrySendError};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -395,13 +395,9 @@ impl Observer for DashObserver {
             self.stepping = false;
             self.paused = true;
         }
-        loop {
-            match self.rx.try_recv() {
-                Ok(c) => {
-                    self.apply(c, p);
-                }
-                Err(TryRecvError::Empty) | Err(TryRecvError::Disconnected) => break,
-            }
+        // Every command sent since the last frame (empty or disconnected: none left).
+        while let Ok(c) = self.rx.try_recv() {
+            self.apply(c, p);
         }
         // Paused (simulator only): wait for the operator, a stop request ends the wait.
         self.live.paused.store(self.paused, Ordering::SeqCst);
@@ -444,7 +440,7 @@ impl Observer for DashObserver {
         }
         let due = self
             .last_pub
-            .map_or(true, |t| r.time_s - t >= self.every_s - 1e-6 || r.time_s < t)
+            .is_none_or(|t| r.time_s - t >= self.every_s - 1e-6 || r.time_s < t)
             || self.paused
             || self.stepping;
         if !due {
@@ -464,7 +460,7 @@ impl Observer for DashObserver {
             record: r.clone(),
             image: ctx.frame.image.clone(),
             lane_images: p.lane().images().clone(),
-            lane: ctx.output.lane.clone(),
+            lane: ctx.output.lane,
             command: ctx.output.command,
             homography: *p.lane().warp_map().homography(),
             roi: self.roi,

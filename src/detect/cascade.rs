@@ -484,7 +484,7 @@ fn read_new(ctx: &Ctx, top: Node) -> Result<Cascade, CascadeError> {
             let inodes = ctx.child(w, "internalNodes")?;
             let lv = ctx.child(w, "leafValues")?;
             let vals: Vec<f64> = ctx.numbers(inodes).collect::<Result<_, _>>()?;
-            if vals.is_empty() || vals.len() % node_step != 0 {
+            if vals.is_empty() || !vals.len().is_multiple_of(node_step) {
                 return Err(ctx.err(
                     inodes,
                     format!("{} numbers is not a multiple of {node_step} per node", vals.len()),

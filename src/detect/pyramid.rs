@@ -63,6 +63,8 @@ struct Scratch {
     level: Vec<u8>,
     ii: Integrals,
     resizer: Resizer,
+    /// Hits of this worker's scan jobs (parallel mode).
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
     hits: Vec<Rect>,
     /// Hits per scan job, in the order this worker ran them (parallel mode).
     #[cfg_attr(not(feature = "parallel"), allow(dead_code))]

@@ -396,8 +396,8 @@ impl Driver {
                 }
             }
         };
-        // Neutral now (and exactly once), before the caller flushes files.
-        drop(parts);
+        // Neutral now (and exactly once), before the caller flushes files (`parts` borrowed
+        // the guard; that borrow has ended).
         guard.into_inner();
         Ok(why)
     }
@@ -419,7 +419,7 @@ mod tests {
     }
     impl FrameSource for Scripted {
         fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
-            let it = self.items.get(self.i)?.clone();
+            let it = *self.items.get(self.i)?;
             self.i += 1;
             Some(match it {
                 Some(Ok(index)) => Ok(Frame::new(

@@ -156,7 +156,7 @@ impl GpioLogic {
             long_presses: self.long_presses,
             distance_m: s.and_then(|s| s.distance_m),
             brake: s.is_some_and(|s| s.brake),
-            sensor_ok: s.map_or(true, |s| s.sensor_ok),
+            sensor_ok: s.is_none_or(|s| s.sensor_ok),
             readings: self.readings,
         };
         self.presses = 0;

@@ -191,7 +191,7 @@ impl<T: Copy> Tracker<T> {
                         continue;
                     }
                     let score = self.score(t, m);
-                    if score > 0.0 && best.map_or(true, |b| score > b.0) {
+                    if score > 0.0 && best.is_none_or(|b| score > b.0) {
                         best = Some((score, ti, mi));
                     }
                 }

@@ -274,7 +274,8 @@ pub fn render_spans(
         }
     }
     if reach > 0 && merged.len() > 1 {
-        merged = vec![merged[0].start..merged[merged.len() - 1].end];
+        let all = merged[0].start..merged[merged.len() - 1].end;
+        merged = vec![all];
     }
     match &mut r.lens {
         // A turned camera's rows come from other rows of the ideal view: all of it.

@@ -86,6 +86,8 @@ pub fn homography(src: [[f64; 2]; 4], dst: [[f64; 2]; 4]) -> Option<[f64; 9]> {
         for r in 0..8 {
             if r != c {
                 let f = a[r][c] / a[c][c];
+                // Row r minus f times row c, written as in the textbook (two rows of `a`).
+                #[allow(clippy::needless_range_loop)]
                 for k in c..9 {
                     a[r][k] -= f * a[c][k];
                 }
@@ -335,7 +337,7 @@ mod tests {
             window: (16, 16),
             ..DistortOptions::default()
         };
-        let a = generate(&[t.clone()], &[bg.clone()], &o, &dir.path().join("a")).expect("gen");
+        let a = generate(std::slice::from_ref(&t), std::slice::from_ref(&bg), &o, &dir.path().join("a")).expect("gen");
         let b = generate(&[t], &[bg], &o, &dir.path().join("b")).expect("gen");
         let (ta, tb) = (
             std::fs::read_to_string(&a).expect("a"),

@@ -479,7 +479,7 @@ impl SimGen {
                         // surroundings are the hardest negatives) or at some other object.
                         let track = &placed.scene.track;
                         let r = rng.next_f64();
-                        let near_target = if r >= 0.4 && r < 0.8 {
+                        let near_target = if (0.4..0.8).contains(&r) {
                             self.view_of_target(&placed, o, &mut rng).map(|v| v.0)
                         } else {
                             None

@@ -285,7 +285,9 @@ pub fn train_with_holdout(
             "window {w}x{h}: each side must be 3..=256 px"
         )));
     }
-    if !(p.min_hit_rate > 0.0 && p.min_hit_rate <= 1.0) || !(p.max_false_alarm > 0.0 && p.max_false_alarm < 1.0) {
+    // Written so that NaN fails too.
+    let rates_ok = p.min_hit_rate > 0.0 && p.min_hit_rate <= 1.0 && p.max_false_alarm > 0.0 && p.max_false_alarm < 1.0;
+    if !rates_ok {
         return Err(TrainError::Invalid(format!(
             "min hit rate {} must be in (0, 1] and max false alarm {} in (0, 1)",
             p.min_hit_rate, p.max_false_alarm

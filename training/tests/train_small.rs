@@ -143,7 +143,7 @@ fn bad_input_is_named_skipped_or_refused() {
     .expect("write");
     // 1. Missing/unreadable images, boxes outside, a box smaller than the window, a short line:
     // each named and skipped, the good box kept.
-    let (pos, skipped) = samples::load_positives(&[info.clone()], 16, 16).expect("loads");
+    let (pos, skipped) = samples::load_positives(std::slice::from_ref(&info), 16, 16).expect("loads");
     assert_eq!(pos.len(), 1);
     let text: Vec<String> = skipped.iter().map(|s| s.to_string()).collect();
     assert_eq!(skipped.len(), 5, "{text:#?}");
@@ -211,7 +211,7 @@ fn bad_input_is_named_skipped_or_refused() {
         img: image::GrayImage::from_fn(64, 48, |x, y| image::Luma([((x * 31 + y * 17) % 256) as u8])),
         avoid: vec![],
     };
-    let e = train::train(&opts(2), &pos20, &[bg.clone()], &m5, true, &mut NoProgress).unwrap_err();
+    let e = train::train(&opts(2), &pos20, std::slice::from_ref(&bg), &m5, true, &mut NoProgress).unwrap_err();
     assert!(
         e.to_string().contains("stages.json") && e.to_string().contains("20x16"),
         "{e}"
