@@ -49,6 +49,9 @@ if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
   fi
 fi
 export RCCAR_PYTHON=$ROOT/.venv/bin/python
+# OpenCV's sample photos (opencv-doc, installed above): tests that read them fail, not skip,
+# when this is set and a photo is missing (tests/stereo_photos.rs).
+export RCCAR_OPENCV_DOC=/usr/share/doc/opencv-doc/examples/data
 
 # ---- 3. the suites ------------------------------------------------------------------
 PASSED=0; FAILED=0; FAILED_STAGES=(); TIMES=(); SUITE_START=$SECONDS

@@ -28,6 +28,7 @@ mod sim_replay;
 mod sim_track;
 mod stereo_cli;
 mod stereo_loop;
+mod stereo_photos;
 mod stereo_pipeline;
 mod stereo_signs;
 mod stereo_sim;
