@@ -1538,6 +1538,9 @@ pub struct StereoConfig {
     /// Of the correlation peaks scoring at least this fraction of the best, the nearest is
     /// taken (an object hides what is behind it); 1 = always the best.
     pub near_peak_ratio: f64,
+    /// A box that matches a copy of itself along its own rows as well as it matches the other
+    /// image (wallpaper, tiles) gets no range (`stereo::NoRange::Repeated`).
+    pub reject_repeats: bool,
     /// Largest time between the two cameras' frames paired as one stereo frame, milliseconds.
     pub max_skew_ms: f64,
 }
@@ -1551,6 +1554,7 @@ impl Default for StereoConfig {
             min_ncc: 0.6,
             max_disparity_px: 120,
             near_peak_ratio: 0.9,
+            reject_repeats: true,
             max_skew_ms: 20.0,
         }
     }

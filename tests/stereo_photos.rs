@@ -12,16 +12,17 @@
 //! surface, nearly facing the camera, as a detector box on a sign is. Asserted:
 //! - boxes with a range: ≥ 95 % within 1 px of the truth (the truth is in whole pixels at the
 //!   photo's size) and a median error ≤ 0.5 px (0.25 px at 320 px);
-//! - a wrong range (more than 3 px off, 1 px at 320 px) on ≤ 2 % of the boxes: a box the
+//! - a wrong range (more than 3 px off, 1 px at 320 px) on ≤ 1 % of the boxes: a box the
 //!   matcher cannot place should give "no range", not a number;
 //! - at least 80 % of the boxes get a range (the leaves, pot and cloth are well textured).
 //!
-//! The wrong ones are printed with why (measured: 3 of 208 and 1 of 70): the background cloth
-//! is a periodic wallpaper, and where the leaf hides the true match in the right view
-//! (the score at the truth 0.14 and 0.34) a copy of the pattern one period away passes
-//! `min_ncc`; one box is a tie (0.764 against 0.756 at the truth); one is the occlusion prior
-//! (`near_peak_ratio`) taking a nearer peak of 0.815 over the true 0.897. NCC on one box
-//! cannot tell a repeated pattern from the object; a sign or an obstacle is not periodic.
+//! The wrong ones are printed with why. Without `stereo.reject_repeats` there were 3 of 208
+//! and 1 of 70: the background cloth is a periodic wallpaper, and where the leaf hides the
+//! true match in the right view (the score at the truth 0.14 and 0.34) a copy of the pattern
+//! one period away passed `min_ncc`; one was the occlusion prior (`near_peak_ratio`) taking a
+//! nearer peak of 0.815 over the true 0.897. Those boxes match a copy of themselves along
+//! their own rows as well as the other image, and are now refused (`NoRange::Repeated`);
+//! what remains is one tie (0.764 against 0.756 at the truth) at the photo's size.
 //!
 //!     cargo test --release --test it stereo_photos -- --nocapture
 //!
@@ -31,7 +32,7 @@
 use image::{GrayImage, RgbImage};
 use rccar::config::Config;
 use rccar::stereo::matching::Matcher;
-use rccar::stereo::MatchOptions;
+use rccar::stereo::{MatchOptions, NoRange};
 use std::path::PathBuf;
 
 /// The folder of OpenCV's sample data, and whether it must exist.
@@ -48,6 +49,8 @@ struct Outcome {
     ranged: usize,
     within_1px: usize,
     wrong: usize,
+    /// Boxes refused as a repeated pattern (`NoRange::Repeated`).
+    repeated: usize,
     median_err: f64,
 }
 
@@ -70,7 +73,7 @@ fn run(
 ) -> Outcome {
     let mut m = Matcher::new();
     let (w, h) = left.dimensions();
-    let (mut boxes, mut ranged, mut within, mut wrong, mut errs) = (0, 0, 0, 0, vec![]);
+    let (mut boxes, mut ranged, mut within, mut wrong, mut repeated, mut errs) = (0, 0, 0, 0, 0, vec![]);
     let mut y = 0;
     while y + size <= h {
         let mut x = 0;
@@ -86,7 +89,9 @@ fn run(
                 // The box's match must stay inside the right image.
                 if hi - lo <= max_spread && x as f64 >= hi + 2.0 && d_true <= opts.max_disparity as f64 - 2.0 {
                     boxes += 1;
-                    if let Ok(r) = m.match_box(left, right, [x as i64, y as i64, size as i64, size as i64], opts) {
+                    let found = m.match_box(left, right, [x as i64, y as i64, size as i64, size as i64], opts);
+                    repeated += matches!(found, Err(NoRange::Repeated { .. })) as usize;
+                    if let Ok(r) = found {
                         ranged += 1;
                         let e = (r.disparity - d_true).abs();
                         errs.push(e);
@@ -116,6 +121,7 @@ fn run(
         ranged,
         within_1px: within,
         wrong,
+        repeated,
         median_err,
     }
 }
@@ -158,6 +164,7 @@ fn the_matcher_finds_the_true_disparity_on_middlebury_aloe() {
     let base = MatchOptions {
         min_score: cfg.stereo.min_ncc,
         near_peak_ratio: cfg.stereo.near_peak_ratio,
+        reject_repeats: cfg.stereo.reject_repeats,
         reference_left: true,
         ..MatchOptions::default()
     };
@@ -218,7 +225,7 @@ fn the_matcher_finds_the_true_disparity_on_middlebury_aloe() {
         ("320x277, 24 px boxes", &car, 0.25),
     ] {
         println!(
-            "aloe {name}: {} boxes on one surface, {} ranged ({:.1} %), {:.1} % of them within 1 px, median |error| {:.2} px, wrong {} ({:.1} %), no range {}",
+            "aloe {name}: {} boxes on one surface, {} ranged ({:.1} %), {:.1} % of them within 1 px, median |error| {:.2} px, wrong {} ({:.1} %), no range {} ({} of them a repeated pattern)",
             o.boxes,
             o.ranged,
             100.0 * o.ranged as f64 / o.boxes as f64,
@@ -226,7 +233,8 @@ fn the_matcher_finds_the_true_disparity_on_middlebury_aloe() {
             o.median_err,
             o.wrong,
             100.0 * o.wrong as f64 / o.boxes as f64,
-            o.boxes - o.ranged
+            o.boxes - o.ranged,
+            o.repeated
         );
         assert!(o.boxes >= 40, "{name}: only {} boxes to compare", o.boxes);
         assert!(
@@ -243,7 +251,7 @@ fn the_matcher_finds_the_true_disparity_on_middlebury_aloe() {
         );
         assert!(o.median_err <= med_max, "{name}: median error {:.2} px", o.median_err);
         assert!(
-            o.wrong as f64 <= 0.02 * o.boxes as f64,
+            o.wrong as f64 <= 0.01 * o.boxes as f64,
             "{name}: {} wrong ranges",
             o.wrong
         );

@@ -117,6 +117,7 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
         min_score: cfg.stereo.min_ncc,
         reference_left,
         near_peak_ratio: cfg.stereo.near_peak_ratio,
+        reject_repeats: cfg.stereo.reject_repeats,
     };
     // 3. Match and range each box.
     let mut m = Matcher::new();

@@ -91,7 +91,15 @@ pub struct MatchOptions {
     /// Of the local maxima scoring at least this fraction of the best, take the nearest
     /// (largest disparity); 1.0 = always the best.
     pub near_peak_ratio: f64,
+    /// Refuse a box that is a repeated pattern ([`Matcher::match_box`]): one that matches a
+    /// copy of itself along its own rows (≥ [`MIN_REPEAT_SHIFT`] px away) at least as well as
+    /// it matches the other image ([`NoRange::Repeated`]).
+    pub reject_repeats: bool,
 }
+
+/// The smallest shift along its own rows at which a box's self-correlation peak counts as a
+/// copy of it ([`MatchOptions::reject_repeats`]); nearer shifts are the slope of the peak at 0.
+pub const MIN_REPEAT_SHIFT: usize = 4;
 
 impl Default for MatchOptions {
     fn default() -> Self {
@@ -101,6 +109,7 @@ impl Default for MatchOptions {
             min_score: 0.6,
             reference_left: true,
             near_peak_ratio: 0.9,
+            reject_repeats: true,
         }
     }
 }
@@ -179,6 +188,12 @@ impl Matcher {
     }
 
     /// Finds the box `[x, y, w, h]` (pixels, top-left and size) of `reference` in `other`.
+    ///
+    /// With [`MatchOptions::reject_repeats`], a match is refused when the box also matches
+    /// itself elsewhere along its own rows at least as well ([`NoRange::Repeated`]): a
+    /// wallpaper, tiles or a fence repeat, and where the object's true match is hidden in the
+    /// other view a copy one period away passes the threshold with a confident, wrong
+    /// disparity (measured on Middlebury Aloe, tests/stereo_photos.rs).
     pub fn match_box(
         &mut self,
         reference: &GrayImage,
@@ -186,7 +201,56 @@ impl Matcher {
         bbox: [i64; 4],
         opts: &MatchOptions,
     ) -> Result<StereoMatch, NoRange> {
-        self.match_core(&[reference], &[other], bbox, opts, false)
+        let m = self.match_core(&[reference], &[other], bbox, opts, false)?;
+        if opts.reject_repeats {
+            let copy = self.self_similarity(reference, bbox, opts, m.disparity);
+            if copy >= m.score {
+                return Err(NoRange::Repeated {
+                    copy,
+                    score: m.score,
+                });
+            }
+        }
+        Ok(m)
+    }
+
+    /// The best correlation of the box with a copy of itself along its own rows (local maxima
+    /// at least [`MIN_REPEAT_SHIFT`] px away); −∞ without one. Only the shifts a copy can have
+    /// been confused at are searched: a copy p px along the row on a surface of disparity d_s
+    /// is found at d_s − p, so with the match at `d` and d_s in [0, max] the copy is at
+    /// p ∈ [d − max, d] (reference left; mirrored for the right) — `max_disparity` shifts in
+    /// all, not twice that. [`Matcher::scores`] keeps the scores of the match.
+    fn self_similarity(&mut self, reference: &GrayImage, bbox: [i64; 4], opts: &MatchOptions, d: f64) -> f64 {
+        let scores = std::mem::take(&mut self.scores);
+        let mut best = f64::NEG_INFINITY;
+        let max = opts.max_disparity as f64;
+        // (shift towards the other camera's matches, up to d) and (the other way, up to max − d).
+        let toward = (d.ceil() + 1.0).min(max) as u32;
+        let away = (max - d.floor() + 1.0).max(0.0) as u32;
+        for (reference_left, reach) in [(opts.reference_left, toward), (!opts.reference_left, away)] {
+            if (reach as usize) <= MIN_REPEAT_SHIFT {
+                continue;
+            }
+            let o = MatchOptions {
+                min_disparity: 0,
+                max_disparity: reach,
+                min_score: -1.0,
+                near_peak_ratio: 1.0,
+                reference_left,
+                reject_repeats: false,
+                ..*opts
+            };
+            // Errors (no room on one side) leave no scores to look at.
+            let _ = self.match_core(&[reference], &[reference], bbox, &o, false);
+            let s = &self.scores;
+            for k in MIN_REPEAT_SHIFT..s.len().saturating_sub(1) {
+                if s[k].is_finite() && s[k] >= s[k - 1] && s[k] >= s[k + 1] {
+                    best = best.max(s[k]);
+                }
+            }
+        }
+        self.scores = scores;
+        best
     }
 
     /// [`Matcher::match_box`] over several planes at once (e.g. [`opponent_from_rgb`]'s two;
@@ -672,6 +736,46 @@ mod tests {
             assert!((100..130).contains(&row.row));
             assert!((row.disparity - 17.4).abs() < 0.25, "{row:?}");
         }
+    }
+
+    /// A wallpaper repeating every 40 px behind the box; in the right view the box's true
+    /// place (disparity 12) is hidden by a plain object, so the best matches left are copies
+    /// whole periods away (disparity 52, 92), confident and wrong. `reject_repeats` refuses it; an
+    /// aperiodic texture is still matched.
+    #[test]
+    fn a_repeated_pattern_whose_match_is_hidden_gives_no_range() {
+        let tile = textured(40, 240, 0.0);
+        let wallpaper = |shift: i64| {
+            GrayImage::from_fn(320, 240, |x, y| *tile.get_pixel(((x as i64 + shift).rem_euclid(40)) as u32, y))
+        };
+        let l = wallpaper(0);
+        let mut r = wallpaper(12);
+        for y in 90..140 {
+            for x in 130..175 {
+                r.put_pixel(x, y, image::Luma([70]));
+            }
+        }
+        let bx = [150, 100, 30, 30];
+        let without = MatchOptions {
+            reject_repeats: false,
+            ..MatchOptions::default()
+        };
+        let wrong = match_box(&l, &r, bx, &without).unwrap();
+        // A copy whole periods away (the occlusion prior takes the nearest of the equal ones).
+        let periods = (wrong.disparity - 12.0) / 40.0;
+        assert!(periods.round() >= 1.0 && (periods - periods.round()).abs() < 0.02 && wrong.score > 0.95, "{wrong:?}");
+        let e = match_box(&l, &r, bx, &MatchOptions::default()).unwrap_err();
+        assert!(matches!(e, NoRange::Repeated { copy, .. } if copy > 0.95), "{e}");
+        assert!(e.to_string().contains("repeats along its rows"), "{e}");
+        // The scores of the match are kept for the caller, not those of the self-check.
+        let mut m = Matcher::new();
+        let _ = m.match_box(&l, &r, bx, &MatchOptions::default());
+        let best = m.scores().iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert!((best - wrong.score).abs() < 1e-9, "{best} {}", wrong.score);
+        // Aperiodic texture: the same check lets the true match through.
+        let (l, r) = (textured(320, 240, 0.0), textured(320, 240, 12.0));
+        let ok = match_box(&l, &r, bx, &MatchOptions::default()).unwrap();
+        assert!((ok.disparity - 12.0).abs() < 0.1, "{ok:?}");
     }
 
     #[test]

@@ -64,4 +64,13 @@ pub enum NoRange {
     /// The disparity search range holds no position (box at the image edge).
     #[error("no room to search: the box is at the image edge")]
     NoSearchRoom,
+    /// The box is a repeated pattern: it matches a copy of itself along its own rows as well
+    /// as it matches the other image, so the match may be a copy (`reject_repeats`).
+    #[error("the box repeats along its rows (a copy of it scores {copy:.3}, the match {score:.3}): no unique match")]
+    Repeated {
+        /// Best correlation of the box with a shifted copy of itself.
+        copy: f64,
+        /// Correlation of the match in the other image.
+        score: f64,
+    },
 }

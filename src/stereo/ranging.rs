@@ -154,6 +154,7 @@ impl StereoRanging {
                 max_disparity: cfg.stereo.max_disparity_px,
                 min_score: cfg.stereo.min_ncc,
                 near_peak_ratio: cfg.stereo.near_peak_ratio,
+                reject_repeats: cfg.stereo.reject_repeats,
                 reference_left: left,
                 ..MatchOptions::default()
             },
