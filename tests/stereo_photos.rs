@@ -59,18 +59,32 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
     v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
-/// Matches a grid of `size`×`size` boxes (step `step`) of the grey pair against the truth
-/// `gt` (disparity in pixels of this size, `None` = unknown).
+/// The grid of boxes compared at one size of the pair.
+struct Grid {
+    /// Box side and step between boxes, pixels.
+    size: u32,
+    step: u32,
+    /// Largest spread (90th − 10th percentile) of the truth inside a box, pixels.
+    max_spread: f64,
+    /// An error above this is a wrong range, pixels.
+    wrong_px: f64,
+}
+
+/// Matches the grid's boxes of the grey pair against the truth `gt` (disparity in pixels of
+/// this size, `None` = unknown).
 fn run(
     left: &GrayImage,
     right: &GrayImage,
     gt: &dyn Fn(u32, u32) -> Option<f64>,
-    size: u32,
-    step: u32,
-    max_spread: f64,
-    wrong_px: f64,
+    grid: Grid,
     opts: &MatchOptions,
 ) -> Outcome {
+    let Grid {
+        size,
+        step,
+        max_spread,
+        wrong_px,
+    } = grid;
     let mut m = Matcher::new();
     let (w, h) = left.dimensions();
     let (mut boxes, mut ranged, mut within, mut wrong, mut repeated, mut errs) = (0, 0, 0, 0, 0, vec![]);
@@ -178,10 +192,12 @@ fn the_matcher_finds_the_true_disparity_on_middlebury_aloe() {
         &grey(&l),
         &grey(&r),
         &|u, v| Some(gt.get_pixel(u, v)[0] as f64).filter(|&d| d > 0.0),
-        64,
-        48,
-        2.0,
-        3.0,
+        Grid {
+            size: 64,
+            step: 48,
+            max_spread: 2.0,
+            wrong_px: 3.0,
+        },
         &MatchOptions {
             max_disparity: 230,
             ..base
@@ -211,10 +227,12 @@ fn the_matcher_finds_the_true_disparity_on_middlebury_aloe() {
         &grey(&ls),
         &grey(&rs),
         &gt_small,
-        24,
-        12,
-        0.5,
-        1.0,
+        Grid {
+            size: 24,
+            step: 12,
+            max_spread: 0.5,
+            wrong_px: 1.0,
+        },
         &MatchOptions {
             max_disparity: cfg.stereo.max_disparity_px,
             ..base

@@ -62,7 +62,10 @@ pub fn opponent_from_rgb_rows(rgb: &RgbImage, out: &mut [GrayImage; 2], rows: st
         }
     }
     let w = rgb.width() as usize;
-    let (r0, r1) = (rows.start.min(rgb.height()) as usize, rows.end.min(rgb.height()) as usize);
+    let (r0, r1) = (
+        rows.start.min(rgb.height()) as usize,
+        rows.end.min(rgb.height()) as usize,
+    );
     if r0 >= r1 {
         return;
     }
@@ -205,10 +208,7 @@ impl Matcher {
         if opts.reject_repeats {
             let copy = self.self_similarity(reference, bbox, opts, m.disparity);
             if copy >= m.score {
-                return Err(NoRange::Repeated {
-                    copy,
-                    score: m.score,
-                });
+                return Err(NoRange::Repeated { copy, score: m.score });
             }
         }
         Ok(m)
@@ -238,7 +238,6 @@ impl Matcher {
                 near_peak_ratio: 1.0,
                 reference_left,
                 reject_repeats: false,
-                ..*opts
             };
             // Errors (no room on one side) leave no scores to look at.
             let _ = self.match_core(&[reference], &[reference], bbox, &o, false);
@@ -444,15 +443,7 @@ impl Matcher {
             x_ref + disparity
         };
         if want_rows {
-            self.match_rows(
-                reference,
-                other,
-                (by, bw, bhs, bws),
-                (rs, cs),
-                (dmin, nd),
-                opts,
-                &x0_of,
-            );
+            self.match_rows(reference, other, (by, bw, bhs, bws), (rs, cs), (dmin, nd), opts, &x0_of);
         }
         Ok(StereoMatch {
             disparity,
@@ -746,7 +737,9 @@ mod tests {
     fn a_repeated_pattern_whose_match_is_hidden_gives_no_range() {
         let tile = textured(40, 240, 0.0);
         let wallpaper = |shift: i64| {
-            GrayImage::from_fn(320, 240, |x, y| *tile.get_pixel(((x as i64 + shift).rem_euclid(40)) as u32, y))
+            GrayImage::from_fn(320, 240, |x, y| {
+                *tile.get_pixel(((x as i64 + shift).rem_euclid(40)) as u32, y)
+            })
         };
         let l = wallpaper(0);
         let mut r = wallpaper(12);
@@ -763,7 +756,10 @@ mod tests {
         let wrong = match_box(&l, &r, bx, &without).unwrap();
         // A copy whole periods away (the occlusion prior takes the nearest of the equal ones).
         let periods = (wrong.disparity - 12.0) / 40.0;
-        assert!(periods.round() >= 1.0 && (periods - periods.round()).abs() < 0.02 && wrong.score > 0.95, "{wrong:?}");
+        assert!(
+            periods.round() >= 1.0 && (periods - periods.round()).abs() < 0.02 && wrong.score > 0.95,
+            "{wrong:?}"
+        );
         let e = match_box(&l, &r, bx, &MatchOptions::default()).unwrap_err();
         assert!(matches!(e, NoRange::Repeated { copy, .. } if copy > 0.95), "{e}");
         assert!(e.to_string().contains("repeats along its rows"), "{e}");
