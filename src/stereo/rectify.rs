@@ -213,15 +213,29 @@ mod tests {
             pairs_not_used: vec![],
             rectification: rc,
         };
-        // Grey floor with a coloured, textured block; the right camera sees it 14 px left.
+        // Grey floor with a coloured block, both with aperiodic texture (a periodic one is
+        // refused as a repeated pattern); the right camera sees it 14 px left.
+        let noise = |x: i64, y: i64| {
+            let mut z = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+            z ^= z >> 29;
+            z = z.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            ((z >> 32) % 256) as i64
+        };
+        // Value noise on a 3 px lattice, bilinear (smooth enough for sub-pixel peaks).
+        let smooth = move |x: i64, y: i64| {
+            let (i, j, a, b) = (x.div_euclid(3), y.div_euclid(3), x.rem_euclid(3), y.rem_euclid(3));
+            let top = noise(i, j) * (3 - a) + noise(i + 1, j) * a;
+            let bot = noise(i, j + 1) * (3 - a) + noise(i + 1, j + 1) * a;
+            ((top * (3 - b) + bot * b) / 9) as u8
+        };
         let scene = |shift: i64| {
             RgbImage::from_fn(320, 240, move |x, y| {
                 let (x, y) = (x as i64 + shift, y as i64);
+                let v = smooth(x, y);
                 if (120..200).contains(&x) && (90..160).contains(&y) {
-                    let v = (128.0 + 90.0 * ((x as f64) * 0.31).sin() * ((y as f64) * 0.23).cos()) as u8;
                     image::Rgb([v, 40, 255 - v])
                 } else {
-                    let g = (100 + (x * 13 + y * 7) % 60) as u8;
+                    let g = 100 + v / 4;
                     image::Rgb([g, g, g])
                 }
             })
