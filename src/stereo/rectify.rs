@@ -133,6 +133,25 @@ mod tests {
         }
     }
 
+    /// A calibrated pair of the cameras `l`, `r`: the right camera turned by `angles_deg`
+    /// (Rodrigues vector, degrees) and placed at `t` (metres), rectified.
+    fn rig(l: &CameraCalibration, r: &CameraCalibration, angles_deg: [f64; 3], t: [f64; 3]) -> StereoCalibration {
+        let rot = rodrigues(angles_deg.map(f64::to_radians));
+        let tv = nalgebra::Vector3::from(t);
+        let rc = stereo_rectify(&l.intrinsics, &l.distortion, &r.intrinsics, &r.distortion, &rot, &tv, 320, 240);
+        StereoCalibration {
+            left: l.clone(),
+            right: r.clone(),
+            r: crate::calib::stereo::to_rows(&rot),
+            t,
+            baseline_m: tv.norm(),
+            rms_px: 0.1,
+            per_pair_rms_px: vec![],
+            pairs_not_used: vec![],
+            rectification: rc,
+        }
+    }
+
     /// The fixed-point remap (OpenCV's recipe) agrees with the float one within a grey level
     /// on a smoothly textured image.
     #[test]
@@ -198,21 +217,7 @@ mod tests {
     fn ranging_after_the_boxes_rows_only_equals_the_whole_pair() {
         use crate::ranging::ObjectClass;
         use crate::stereo::ranging::StereoRanging;
-        let (l, r) = (cam(265.0, 0.0), cam(270.0, -0.08));
-        let rot = rodrigues([0.2f64.to_radians(), 0.5f64.to_radians(), 0.1f64.to_radians()]);
-        let t = nalgebra::Vector3::new(-0.06, 0.0, 0.0);
-        let rc = stereo_rectify(&l.intrinsics, &l.distortion, &r.intrinsics, &r.distortion, &rot, &t, 320, 240);
-        let st = StereoCalibration {
-            left: l,
-            right: r,
-            r: crate::calib::stereo::to_rows(&rot),
-            t: [t[0], t[1], t[2]],
-            baseline_m: t.norm(),
-            rms_px: 0.1,
-            per_pair_rms_px: vec![],
-            pairs_not_used: vec![],
-            rectification: rc,
-        };
+        let st = rig(&cam(265.0, 0.0), &cam(270.0, -0.08), [0.2, 0.5, 0.1], [-0.06, 0.0, 0.0]);
         // Grey floor with a coloured block, both with aperiodic texture (a periodic one is
         // refused as a repeated pattern); the right camera sees it 14 px left.
         let noise = |x: i64, y: i64| {
@@ -275,20 +280,12 @@ mod tests {
     #[test]
     fn a_point_lands_on_the_same_row_in_both_rectified_images() {
         let (l, r) = (cam(265.0, 0.0), cam(270.0, -0.08));
-        let rot = rodrigues([0.5f64.to_radians(), 1.0f64.to_radians(), 0.2f64.to_radians()]);
-        let t = nalgebra::Vector3::new(-0.06, 0.001, 0.0005);
-        let rc = stereo_rectify(&l.intrinsics, &l.distortion, &r.intrinsics, &r.distortion, &rot, &t, 320, 240);
-        let st = StereoCalibration {
-            left: l.clone(),
-            right: r.clone(),
-            r: crate::calib::stereo::to_rows(&rot),
-            t: [t[0], t[1], t[2]],
-            baseline_m: t.norm(),
-            rms_px: 0.1,
-            per_pair_rms_px: vec![],
-            pairs_not_used: vec![],
-            rectification: rc,
-        };
+        let st = rig(&l, &r, [0.5, 1.0, 0.2], [-0.06, 0.001, 0.0005]);
+        let (rot, t, rc) = (
+            rodrigues([0.5f64.to_radians(), 1.0f64.to_radians(), 0.2f64.to_radians()]),
+            nalgebra::Vector3::from(st.t),
+            st.rectification,
+        );
         let rect = PairRectifier::new(&st, true);
         for &(x, y, z) in &[(0.1, -0.05, 1.0), (-0.2, 0.1, 0.6), (0.0, 0.0, 1.5)] {
             let pl = nalgebra::Vector3::new(x, y, z);
