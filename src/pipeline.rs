@@ -547,14 +547,8 @@ impl Pipeline {
                         // only the rows of this frame's boxes are rectified and converted.
                         let mut stereo = match (&mut self.stereo, other) {
                             (Some(st), Some(o)) if o.dimensions() == frame.dimensions() => {
-                                let boxes: Vec<Rect> = found
-                                    .iter()
-                                    .filter(|d| ObjectClass::from_label(&d.label).is_some())
-                                    .map(|d| d.rect)
-                                    .collect();
-                                if !boxes.is_empty() {
-                                    st.set_pair_for(frame, o, &boxes);
-                                }
+                                let ranged = found.iter().filter(|d| ObjectClass::from_label(&d.label).is_some());
+                                st.set_pair_for(frame, o, ranged.map(|d| d.rect));
                                 Some(st)
                             }
                             _ => None,

@@ -196,9 +196,9 @@ impl StereoRanging {
     /// rectified and converted, the rest of the pair is not touched. [`StereoRanging::range`]
     /// then gives for these boxes exactly what it gives after `set_pair`; a frame without a
     /// box costs nothing. Call it once per pair with every box that will be ranged.
-    pub fn set_pair_for(&mut self, reference: &RgbImage, other: &RgbImage, boxes: &[Rect]) {
+    pub fn set_pair_for(&mut self, reference: &RgbImage, other: &RgbImage, boxes: impl IntoIterator<Item = Rect>) {
         let (mut lo, mut hi) = (i64::MAX, i64::MIN);
-        for &rect in boxes {
+        for rect in boxes {
             let bx = match &self.rectifier {
                 None => Some([0, rect.y as i64, 0, rect.height as i64]),
                 Some(r) => r.map_box(rect),

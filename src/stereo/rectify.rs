@@ -261,13 +261,13 @@ mod tests {
             };
             let (mut whole, mut rows) = (new(), new());
             whole.set_pair(&left, &right);
-            rows.set_pair_for(&left, &right, &rects);
+            rows.set_pair_for(&left, &right, rects.iter().copied());
             for &(class, rect) in &boxes {
                 let a = whole.range(class, rect);
                 assert_eq!(a, rows.range(class, rect), "{class:?} calibrated {calibrated}, all boxes");
                 // Each box on its own (a fresh ranging: nothing left from another pair).
                 let mut alone = new();
-                alone.set_pair_for(&left, &right, &[rect]);
+                alone.set_pair_for(&left, &right, [rect]);
                 assert_eq!(a, alone.range(class, rect), "{class:?} calibrated {calibrated}, alone");
                 ranged += a.is_some() as usize;
             }
@@ -281,11 +281,7 @@ mod tests {
     fn a_point_lands_on_the_same_row_in_both_rectified_images() {
         let (l, r) = (cam(265.0, 0.0), cam(270.0, -0.08));
         let st = rig(&l, &r, [0.5, 1.0, 0.2], [-0.06, 0.001, 0.0005]);
-        let (rot, t, rc) = (
-            rodrigues([0.5f64.to_radians(), 1.0f64.to_radians(), 0.2f64.to_radians()]),
-            nalgebra::Vector3::from(st.t),
-            st.rectification,
-        );
+        let (rot, t, rc) = (from_rows(&st.r), nalgebra::Vector3::from(st.t), st.rectification);
         let rect = PairRectifier::new(&st, true);
         for &(x, y, z) in &[(0.1, -0.05, 1.0), (-0.2, 0.1, 0.6), (0.0, 0.0, 1.5)] {
             let pl = nalgebra::Vector3::new(x, y, z);
