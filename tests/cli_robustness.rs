@@ -176,7 +176,7 @@ fn calibration_validates_the_merged_config_before_writing() {
     );
     assert_eq!(o.code, Some(2), "{}", o.all());
     assert!(
-        o.stderr.contains("does not validate") && o.stderr.contains("ranging.a_y_scale = 2.7"),
+        o.stderr.contains("does not validate") && o.stderr.contains("ranging.a_y_scale = 2.69"),
         "{}",
         o.stderr
     );

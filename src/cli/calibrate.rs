@@ -8,7 +8,10 @@
 //! It never writes a value it cannot stand behind: degenerate pairs (too few distinct rows,
 //! rows outside the image, heights at or above the camera, NaN/inf anywhere) are refused
 //! before the fit; a fit with an undefined residual or an rms row error above `--max-rms-px`
-//! is refused after it; the merged configuration is validated before anything is written;
+//! is refused after it; so is a fit decided by where it started (the prior on v0 sits at the
+//! image centre, never at the last calibration's v0, and the fit started from the configured
+//! values must land on the same answer); the merged configuration is validated before
+//! anything is written;
 //! `--dry-run` prints the diff of the override file instead of writing it.
 
 use super::common::ConfigArgs;
@@ -67,7 +70,8 @@ pub struct RangingArgs {
     /// Lab: also write the pairs to this CSV (a lab hand-out).
     #[arg(long)]
     pub sim_pairs_out: Option<PathBuf>,
-    /// How far v0 may plausibly move from the image centre, pixels (a prior; 0 = free).
+    /// How far v0 may plausibly move from the image centre, pixels (a prior centred on the
+    /// image's middle row, never on the configured v0_offset_px; 0 = free).
     #[arg(long, default_value_t = 3.0)]
     pub v0_sigma_px: f64,
     #[command(flatten)]
@@ -85,6 +89,13 @@ pub fn run(c: CalibrateCmd) -> Result<ExitCode> {
 
 /// Largest `--from-sim` pair count (the lab renders one frame per pair).
 const MAX_SIM_PAIRS: usize = 10_000;
+/// Two fits of the same pairs, one started from the image centre and one from the configured
+/// values, must agree within this tilt, degrees, ...
+const START_TOL_DEG: f64 = 0.01;
+/// ... this v0, pixels ...
+const START_TOL_PX: f64 = 0.05;
+/// ... and this fraction of a_y; otherwise the start decided the answer and it is refused.
+const START_TOL_AY: f64 = 1e-3;
 
 fn ranging(a: RangingArgs) -> Result<ExitCode> {
     let loaded = a.config.load_full()?;
@@ -144,11 +155,18 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     };
     // 2. Refuse data that cannot determine the unknowns.
     check_pairs(&pairs, &cfg, a.fit_ay).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
-    // 3. Fit from the configured (nominal) camera.
+    // 3. Fit. The prior on v0 sits at the image centre (a property of the image, not of the
+    // last calibration: tilt and v0 trade off, so a prior at an earlier fit's v0 returns that
+    // fit whatever the pairs say). Without --fit-ay, a_y is held at the configured scale.
     let cam = PinholeCamera::from_config(&cfg.camera);
-    let mut start = TiltRanging::from_camera(&cam);
-    start.v0 += cfg.ranging.v0_offset_px;
-    start.a_y *= cfg.ranging.a_y_scale;
+    let centre = cam.v0;
+    let mut from_image = TiltRanging::from_camera(&cam);
+    if !a.fit_ay {
+        from_image.a_y *= cfg.ranging.a_y_scale;
+    }
+    let mut from_config = TiltRanging::from_camera(&cam);
+    from_config.v0 += cfg.ranging.v0_offset_px;
+    from_config.a_y *= cfg.ranging.a_y_scale;
     let opts = FitOptions {
         fit_ay: a.fit_ay,
         v0_sigma_px: if a.v0_sigma_px > 0.0 {
@@ -156,9 +174,10 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         } else {
             f64::INFINITY
         },
+        v0_prior_px: Some(centre),
         ..Default::default()
     };
-    let f = fit(&pairs, start, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
+    let f = fit(&pairs, from_image, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 4. Report.
     println!(
         "{:>8} {:>9} {:>10} {:>10} {:>7}",
@@ -201,6 +220,44 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         if !v.is_finite() {
             bail!("{origin}: the fitted {what} is {v}; nothing written");
         }
+    }
+    if !(0.0..cfg.camera.height as f64).contains(&f.ranging.v0) {
+        bail!(
+            "{origin}: the fitted principal point row v0 = {:.1} px is outside the image (rows 0..{}): the pairs do not pin tilt and v0 apart; measure at more distances spread over the image, or keep v0 near the centre (--v0-sigma-px 3); nothing written",
+            f.ranging.v0,
+            cfg.camera.height - 1
+        );
+    }
+    // 5b. A fit that lands elsewhere when started from the configured values (the last
+    // calibration) is decided by its start, not by the pairs: refused.
+    let g = fit(&pairs, from_config, opts);
+    let disagree = match &g {
+        Ok(g) => {
+            (g.ranging.alpha - f.ranging.alpha).abs().to_degrees() > START_TOL_DEG
+                || (g.ranging.v0 - f.ranging.v0).abs() > START_TOL_PX
+                || (g.ranging.a_y - f.ranging.a_y).abs() > START_TOL_AY * f.ranging.a_y
+        }
+        Err(_) => true,
+    };
+    if disagree {
+        let other = match &g {
+            Ok(g) => format!(
+                "tilt {:.3} deg, v0 {:.2} px, a_y {:.1} px",
+                g.ranging.alpha.to_degrees(),
+                g.ranging.v0,
+                g.ranging.a_y
+            ),
+            Err(e) => format!("no fit ({e})"),
+        };
+        bail!(
+            "{origin}: the fit depends on where it starts: from the image centre it gives tilt {:.3} deg, v0 {:.2} px, a_y {:.1} px; from the configured values (ranging.v0_offset_px = {}, ranging.a_y_scale = {}) {other}; the pairs do not pin the camera down: measure at more distances spread over the image{}; nothing written",
+            f.ranging.alpha.to_degrees(),
+            f.ranging.v0,
+            f.ranging.a_y,
+            cfg.ranging.v0_offset_px,
+            cfg.ranging.a_y_scale,
+            if a.v0_sigma_px > 0.0 { "" } else { ", or keep v0 near the image centre (--v0-sigma-px 3)" }
+        );
     }
     // 6. The new override file, validated merged with the configuration before writing.
     let target = a.write.clone().unwrap_or_else(|| loaded.dir.join("local.toml"));
