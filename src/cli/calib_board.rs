@@ -7,7 +7,7 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rccar::calib::corners::{find_chessboard, rotate_180, BoardSize, CornerOptions};
-use rccar::calib::file::{CalibrationFile, CameraCalibration, StereoCalibration};
+use rccar::calib::file::{CalibrationFile, CameraCalibration, StereoCalibration, MAX_STEREO_RMS_PX};
 use rccar::calib::intrinsics::{board_points, calibrate_camera, CameraFit};
 use rccar::calib::stereo::{stereo_calibrate, stereo_rectify};
 use std::path::{Path, PathBuf};
@@ -57,6 +57,10 @@ pub struct StereoArgs {
     /// Results file to write (`[stereo] calibration` in config/car.toml reads it).
     #[arg(long, short, default_value = "stereo_calib.json")]
     pub out: PathBuf,
+    /// Refuse a stereo fit whose rms reprojection error is above this, pixels (0 < N <= 5;
+    /// a good calibration is below 0.5 px).
+    #[arg(long, default_value_t = 1.0)]
+    pub max_rms_px: f64,
 }
 
 fn load_gray(path: &Path) -> Result<image::GrayImage> {
@@ -187,6 +191,12 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
             a.right.len()
         );
     }
+    if !(a.max_rms_px.is_finite() && a.max_rms_px > 0.0 && a.max_rms_px <= MAX_STEREO_RMS_PX) {
+        bail!(
+            "--max-rms-px {}: must be > 0 and <= {MAX_STEREO_RMS_PX} pixels",
+            a.max_rms_px
+        );
+    }
     let (fl, sl) = find_all(&a.left, &a.board)?;
     let (fr, sr) = find_all(&a.right, &a.board)?;
     if sl != sr {
@@ -271,6 +281,13 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
         pairs_not_used: skipped,
         rectification: rect,
     };
+    // Only a pair that can range is written (the loaders refuse the rest too).
+    stereo.check(a.max_rms_px).map_err(|e| {
+        anyhow::anyhow!(
+            "the stereo calibration is not usable, so {} is not written: {e}",
+            a.out.display()
+        )
+    })?;
     let file = CalibrationFile::Stereo {
         board: a.board.board,
         square_m: a.board.square,

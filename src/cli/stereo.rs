@@ -111,6 +111,13 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
     } else {
         boxes.into_iter().map(|b| ("box".to_string(), b)).collect()
     };
+    if labelled.is_empty() {
+        bail!(
+            "no boxes: the detector found nothing in the {} image {}; give the object's box with --box X,Y,W,H",
+            cfg.stereo.reference,
+            if reference_left { a.left.display() } else { a.right.display() }
+        );
+    }
     let opts = MatchOptions {
         min_disparity: 0,
         max_disparity: cfg.stereo.max_disparity_px,
