@@ -115,10 +115,24 @@ pub struct RangedObject {
     pub predicted: bool,
 }
 
-/// Loads the `[detect]` cascades that exist (paths relative to `base`). Returns the stage
-/// (`None` when no file exists or detection is off) and the files that were missing.
-/// This is the pipeline's only filesystem access; callers report the missing files once.
-pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectStage>, Vec<PathBuf>), CascadeError> {
+/// A `[detect]` cascade that is configured (a non-empty path) but not a file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MissingCascade {
+    /// The config key (`detect.stop_sign`, `detect.traffic_light`, `detect.obstacle`).
+    pub key: &'static str,
+    /// The path that was looked for.
+    pub path: PathBuf,
+}
+
+/// Loads the `[detect]` cascades that exist (paths relative to `base`; an empty path switches
+/// that class off). Returns the stage (`None` when no file exists or detection is off) and the
+/// configured files that were missing, which the binary refuses (a configured model that is
+/// not there is an error, not a silently weaker car). This is the pipeline's only filesystem
+/// access.
+pub fn load_detector(
+    cfg: &DetectConfig,
+    base: &Path,
+) -> Result<(Option<DetectStage>, Vec<MissingCascade>), CascadeError> {
     if !cfg.enabled {
         return Ok((None, Vec::new()));
     }
@@ -130,11 +144,14 @@ pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectSt
     };
     let mut specs = Vec::new();
     let mut missing = Vec::new();
-    for (label, file, light) in [
-        ("stop_sign", &cfg.stop_sign, false),
-        ("traffic_light", &cfg.traffic_light, true),
-        ("obstacle", &cfg.obstacle, false),
+    for (label, key, file, light) in [
+        ("stop_sign", "detect.stop_sign", &cfg.stop_sign, false),
+        ("traffic_light", "detect.traffic_light", &cfg.traffic_light, true),
+        ("obstacle", "detect.obstacle", &cfg.obstacle, false),
     ] {
+        if file.is_empty() {
+            continue;
+        }
         let path = base.join(file);
         if path.is_file() {
             specs.push(CascadeSpec {
@@ -144,7 +161,7 @@ pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectSt
                 params,
             });
         } else {
-            missing.push(path);
+            missing.push(MissingCascade { key, path });
         }
     }
     if specs.is_empty() {

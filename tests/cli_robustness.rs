@@ -815,6 +815,50 @@ fn every_size_a_flag_or_file_controls_is_bounded() {
     );
 }
 
+/// Issue 24: a configured cascade that is missing is an error naming the key, the file and the
+/// fix, for every command that runs the detector; before, `sim` warned and ran on without the
+/// stop-sign detector (exit 0). An empty path switches one class off on purpose, and the
+/// shipped configuration's cascades are there (the default runs).
+#[test]
+fn a_missing_cascade_is_an_error_naming_the_key_and_the_fix() {
+    let p = project();
+    let d = p.path();
+    let set = "detect.stop_sign=/nonexistent.xml";
+    std::fs::create_dir_all(d.join("frames")).unwrap();
+    std::fs::copy(sample_png(0), d.join("frames/a.png")).unwrap();
+    let runs: [&[&str]; 4] = [
+        &["sim", "--seconds", "1", "--no-timing", "-o", "out/sim", "--set", set],
+        &["replay", "frames", "-o", "out/replay", "--no-timing", "--set", set],
+        &["drive", "--camera", "sim", "--dry-run", "--seconds", "1", "-o", "out/drive", "--set", set],
+        &["stereo", "frames/a.png", "frames/a.png", "--set", set],
+    ];
+    for args in runs {
+        let o = rccar(d, args);
+        assert_eq!(o.code, Some(2), "{args:?}: {}", o.all());
+        assert!(
+            o.stderr.contains("detect.stop_sign = \"/nonexistent.xml\": no such cascade file")
+                && o.stderr.contains("detect.stop_sign = \"\" to run without that detector")
+                && o.stderr.contains("detect.enabled = false"),
+            "{args:?}: {}",
+            o.stderr
+        );
+    }
+    // rccar detect names its --cascade file.
+    let o = rccar(d, &["detect", "--cascade", "/nonexistent.xml", "frames/a.png", "--out", "out/det"]);
+    assert_eq!(o.code, Some(2), "{}", o.all());
+    assert!(o.stderr.contains("/nonexistent.xml"), "{}", o.stderr);
+    // The shipped cascades, and one class switched off on purpose: the run goes on.
+    for extra in [None, Some("detect.stop_sign=")] {
+        let mut args = vec!["sim", "--seconds", "1", "--no-timing", "-o", "out/sim2"];
+        if let Some(e) = extra {
+            args.extend(["--set", e]);
+        }
+        let o = rccar(d, &args);
+        assert_eq!(o.code, Some(0), "{extra:?}: {}", o.all());
+        assert!(!o.stderr.contains("missing"), "{extra:?}: {}", o.stderr);
+    }
+}
+
 /// A structurally whole PNG whose header claims `w × h` (one tiny IDAT).
 fn png_claiming(w: u32, h: u32) -> Vec<u8> {
     fn crc(data: &[u8]) -> u32 {

@@ -118,16 +118,17 @@ pub fn warn_single_camera(cfg: &Config) {
 /// are absolute after [`ConfigArgs::load`].
 pub fn load_detector(cfg: &Config) -> Result<Option<rccar::detect::DetectStage>> {
     let (stage, missing) = rccar::pipeline::load_detector(&cfg.detect, Path::new("."))?;
-    if !missing.is_empty() {
-        let names: Vec<String> = missing.iter().map(|p| p.display().to_string()).collect();
-        eprintln!(
-            "detect: missing {}; {}",
-            names.join(", "),
-            if stage.is_some() {
-                "running without them"
-            } else {
-                "running lane-only"
-            }
+    if let Some(m) = missing.first() {
+        let more: Vec<String> = missing[1..]
+            .iter()
+            .map(|m| format!("{} ({})", m.key, m.path.display()))
+            .collect();
+        bail!(
+            "{} = {:?}: no such cascade file{}; give the cascade's path (a relative path is read from the config file's folder), set {} = \"\" to run without that detector, or detect.enabled = false for lane keeping only",
+            m.key,
+            m.path.display().to_string(),
+            if more.is_empty() { String::new() } else { format!(" (also missing: {})", more.join(", ")) },
+            m.key
         );
     }
     Ok(stage)

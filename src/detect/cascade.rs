@@ -31,12 +31,12 @@ pub const MAX_WINDOW: i32 = 4096;
 #[derive(Debug, thiserror::Error)]
 pub enum CascadeError {
     /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read: {err}")]
     Io {
         /// File that failed.
         path: String,
-        /// Underlying error.
-        source: std::io::Error,
+        /// Underlying error (in the message, not a `source`: said once).
+        err: std::io::Error,
     },
     /// Not well-formed XML (truncated, bad characters, ...).
     #[error("{origin}: XML syntax error: {message}")]
@@ -267,9 +267,9 @@ impl Cascade {
     /// Loads a cascade from an XML file (either format).
     pub fn from_file(path: impl AsRef<Path>) -> Result<Cascade, CascadeError> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| CascadeError::Io {
+        let bytes = std::fs::read(path).map_err(|err| CascadeError::Io {
             path: path.display().to_string(),
-            source,
+            err,
         })?;
         let origin = path.display().to_string();
         let text = String::from_utf8(bytes).map_err(|e| CascadeError::Xml {
