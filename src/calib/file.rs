@@ -171,7 +171,9 @@ impl StereoCalibration {
             });
         }
         if self.rectification.f <= 0.0 {
-            return Err(StereoGeometryError::Focal { f: self.rectification.f });
+            return Err(StereoGeometryError::Focal {
+                f: self.rectification.f,
+            });
         }
         Ok(())
     }

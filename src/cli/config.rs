@@ -91,7 +91,9 @@ fn check(args: &ConfigArgs) -> Result<ExitCode> {
             // size, a pair that can range).
             if !l.cfg.stereo.calibration.is_empty() {
                 let path = std::path::Path::new(&l.cfg.stereo.calibration);
-                if let Err(e) = rccar::calib::file::CalibrationFile::load_stereo(path, l.cfg.camera.width, l.cfg.camera.height) {
+                if let Err(e) =
+                    rccar::calib::file::CalibrationFile::load_stereo(path, l.cfg.camera.width, l.cfg.camera.height)
+                {
                     eprintln!("config error:\nstereo.calibration: {e}");
                     return Ok(ExitCode::from(1));
                 }

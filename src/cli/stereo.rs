@@ -115,7 +115,11 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
         bail!(
             "no boxes: the detector found nothing in the {} image {}; give the object's box with --box X,Y,W,H",
             cfg.stereo.reference,
-            if reference_left { a.left.display() } else { a.right.display() }
+            if reference_left {
+                a.left.display()
+            } else {
+                a.right.display()
+            }
         );
     }
     let opts = MatchOptions {
