@@ -859,6 +859,47 @@ fn a_missing_cascade_is_an_error_naming_the_key_and_the_fix() {
     }
 }
 
+/// Issue 24: `rccar plot` bounds its fields (16 panels), files (8, one colour each), points
+/// (10 million over all of them) and line length (1 MiB). Before: 5,600 fields panicked
+/// (exit 101) and 1,500 aborted under a memory cap (a 1000 × 390,040 px image).
+#[test]
+fn plot_bounds_its_fields_files_points_and_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let tel: String = (0..50).map(|i| format!("{{\"time_s\":{i},\"steer\":0.1}}\n")).collect();
+    std::fs::write(d.join("t.jsonl"), &tel).unwrap();
+    let many = vec!["steer"; 5600].join(",");
+    let sixteen = vec!["steer"; 16].join(",");
+    let nine: Vec<&str> = vec!["t.jsonl"; 9];
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["plot", "t.jsonl", "--y", &many], "--y: 5600 fields; at most 16"),
+        (vec!["plot", "t.jsonl", "--y", "steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer"], "--y: 17 fields; at most 16"),
+        ([&["plot"][..], &nine, &["--y", "steer"]].concat(), "9 telemetry files; at most 8"),
+    ];
+    for (args, want) in cases {
+        let o = rccar(d, &args);
+        assert_eq!(o.code, Some(2), "{want}: {}", o.all());
+        assert!(o.stderr.contains(want), "{want}: {}", o.stderr);
+    }
+    // At the bounds: 16 fields, 8 files.
+    let eight: Vec<&str> = vec!["t.jsonl"; 8];
+    let o = rccar(d, &[&["plot"][..], &eight, &["--y", &sixteen, "-o", "p.png"]].concat());
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    assert_eq!(image::image_dimensions(d.join("p.png")).unwrap(), (1000, 40 + 260 * 16));
+    // A 2 MiB line, and 625,001 records × 16 fields = 10,000,016 points.
+    std::fs::write(d.join("long.jsonl"), format!("{{\"time_s\":1,\"s\":\"{}\"}}\n", "x".repeat(2 << 20))).unwrap();
+    let o = rccar(d, &["plot", "long.jsonl", "--y", "steer"]);
+    assert!(o.code == Some(2) && o.stderr.contains("long.jsonl:1: line longer than 1048576 bytes"), "{}", o.all());
+    let big: String = (0..625_001).map(|i| format!("{{\"time_s\":{i},\"steer\":1}}\n")).collect();
+    std::fs::write(d.join("big.jsonl"), big).unwrap();
+    let o = rccar(d, &["plot", "big.jsonl", "--y", &sixteen]);
+    assert!(
+        o.code == Some(2) && o.stderr.contains("big.jsonl:625001: more than 10000000 points"),
+        "{}",
+        o.all()
+    );
+}
+
 /// A structurally whole PNG whose header claims `w × h` (one tiny IDAT).
 fn png_claiming(w: u32, h: u32) -> Vec<u8> {
     fn crc(data: &[u8]) -> u32 {
