@@ -900,6 +900,91 @@ fn plot_bounds_its_fields_files_points_and_lines() {
     );
 }
 
+/// Issue 24: every size and count a flag of `rccar` controls has a stated bound (in `--help`),
+/// enforced with an error naming the flag (or file) and the bound. One case per bound class:
+/// counts of things (files, boxes, pairs, pings, jobs), sizes in pixels, lengths and times,
+/// and files read whole (a cascade, a calibration, a pairs CSV given as /dev/zero, an image
+/// whose header claims 100000 × 100000 pixels). Before: `stereo --box 9223372036854775807,0,5,5`
+/// panicked, `link --latency 18446744073709551615` would ask for that many slots, `/dev/zero`
+/// as a cascade or calibration was read until memory ran out; the rest were taken silently.
+#[test]
+fn every_flag_names_its_bound() {
+    let p = project();
+    let d = p.path();
+    std::fs::write(d.join("big.png"), png_claiming(100_000, 100_000)).unwrap();
+    let img = sample_png(0).display().to_string();
+    let cascade = cascade_path(d);
+    let mut many_pairs = String::from("row_px,distance_m\n");
+    for i in 0..10_001 {
+        many_pairs += &format!("{},{}\n", 100 + i % 100, 0.5 + i as f64 * 1e-5);
+    }
+    std::fs::write(d.join("many.csv"), many_pairs).unwrap();
+    let boxes: Vec<String> = (0..1001).map(|_| "--box=1,1,5,5".to_string()).collect();
+    let imgs_101: Vec<&str> = vec![img.as_str(); 101];
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        // detect
+        (vec!["detect", "--cascade", &cascade, &img, "--min-neighbors", "101"], "--min-neighbors 101: must be 0..=100"),
+        (vec!["detect", "--cascade", &cascade, &img, "--min-size", "16385x5"], "--min-size 16385x5: each side must be 0..=16384"),
+        (vec!["detect", "--cascade", &cascade, &img, "--max-size", "5x99999"], "--max-size 5x99999: each side must be 0..=16384"),
+        ([&["detect"][..], &["--cascade", &cascade].repeat(17), &[img.as_str()]].concat(), "17 --cascade files: at most 16"),
+        (vec!["detect", "--cascade", "/dev/zero", &img], "/dev/zero: larger than a cascade file may be (33554432 bytes)"),
+        // calibrate camera / stereo
+        (vec!["calibrate", "camera", &img, "--square", "2"], "--square 2 must be a length in metres, > 0 and <= 1"),
+        (vec!["calibrate", "camera", &img, "--subpix-win", "0"], "--subpix-win 0: must be 1..=32"),
+        (vec!["calibrate", "camera", &img, "--subpix-win", "1000"], "--subpix-win 1000: must be 1..=32"),
+        ([&["calibrate", "camera"][..], &imgs_101].concat(), "101 images: at most 100"),
+        (vec!["calibrate", "camera", "big.png", "big.png", "big.png"], "big.png: 100000×100000 pixels is outside the image limit"),
+        (vec!["calibrate", "stereo", "--left", &img, "--right", &img, "--max-rms-px", "6"], "--max-rms-px 6: must be > 0 and <= 5"),
+        // calibrate ranging
+        (vec!["calibrate", "ranging", "--from-sim", "10", "--max-rms-px", "1000"], "--max-rms-px 1000: must be > 0 and <= 100"),
+        (vec!["calibrate", "ranging", "--from-sim", "10", "--v0-sigma-px", "1e9"], "--v0-sigma-px 1000000000: must be 0..=1000"),
+        (vec!["calibrate", "ranging", "many.csv"], "many.csv: 10001 pairs; at most 10000"),
+        (vec!["calibrate", "ranging", "/dev/zero"], "/dev/zero: larger than 1048576 bytes"),
+        // stereo
+        (vec!["stereo", &img, &img, "--box", "9223372036854775807,0,5,5"], "X and Y must be 0..=16384, W and H 1..=16384"),
+        (vec!["stereo", &img, &img, "--box", "0,0,0,5"], "X and Y must be 0..=16384, W and H 1..=16384"),
+        ([&["stereo", &img, &img][..], &boxes.iter().map(String::as_str).collect::<Vec<_>>()].concat(), "1001 --box flags: at most 1000"),
+        (vec!["stereo", "big.png", "big.png", "--box", "1,1,5,5"], "big.png: 100000×100000 pixels is outside the image limit"),
+        (vec!["stereo", &img, &img, "--box", "1,1,5,5", "--set", "stereo.calibration=/dev/zero"], "larger than a calibration file may be (16777216 bytes)"),
+        // link (checked before the port is opened)
+        (vec!["link", "--port", "/nonexistent", "--latency", "18446744073709551615"], "--latency 18446744073709551615: must be 1..=10000"),
+        (vec!["link", "--port", "/nonexistent", "--seconds", "1e9"], "--seconds 1000000000: must be > 0 and <= 86400"),
+        // drive
+        (vec!["drive", "--camera", "sim", "--dry-run", "--seconds", "1e20"], "--seconds 100000000000000000000: must be > 0 and <= 86400"),
+        (vec!["drive", "--camera", "sim", "--dry-run", "--seconds", "1", "--status-every", "NaN"], "--status-every NaN: must be 0.2..=3600"),
+        (vec!["drive", "--camera", "sim", "--dry-run", "--seconds", "1", "--record-max-mb", "1e300"], "must be 1..=1000000 megabytes (as record.max_mb)"),
+        // sim
+        (vec!["sim", "--sweep", "steering.kp=0.5:1:2", "--jobs", "0"], "--jobs 0: must be 1..=256"),
+        (vec!["sim", "--sweep", "steering.kp=0.5:1:2", "--jobs", "100000"], "--jobs 100000: must be 1..=256"),
+        (vec!["sim", "--kick", "1e9:0.01"], "--kick `1e9:0.01`: expected T:DY (seconds 0..=36000 : metres)"),
+        (vec!["sim", "--sweep", "steering.kp=0:1:1000", "--sweep", "steering.kd=0:1:2"], "at most 1000"),
+    ];
+    let mut failed = Vec::new();
+    for (args, want) in &cases {
+        let o = rccar_lenient(d, args);
+        if !(o.code == Some(2) && o.stderr.contains(want)) {
+            let shown: Vec<&str> = args.iter().take(8).copied().collect();
+            failed.push(format!("{shown:?}: want exit 2 and {want:?}, got {:?}: {}", o.code, o.stderr.trim()));
+        }
+    }
+    assert!(failed.is_empty(), "{} of {} cases:\n{}", failed.len(), cases.len(), failed.join("\n"));
+}
+
+/// [`rccar`] without its panic check (the panic is reported as a failed case instead).
+fn rccar_lenient(cwd: &Path, args: &[&str]) -> Out {
+    let o = Command::new(env!("CARGO_BIN_EXE_rccar"))
+        .current_dir(cwd)
+        .args(args)
+        .env_remove("RCCAR_CONFIG")
+        .output()
+        .unwrap();
+    Out {
+        code: o.status.code(),
+        stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&o.stderr).chars().take(300).collect(),
+    }
+}
+
 /// A structurally whole PNG whose header claims `w × h` (one tiny IDAT).
 fn png_claiming(w: u32, h: u32) -> Vec<u8> {
     fn crc(data: &[u8]) -> u32 {

@@ -49,6 +49,9 @@ pub struct StereoCalibration {
     pub rectification: Rectification,
 }
 
+/// Largest calibration results file read, bytes (100 photo pairs write about 50 kB).
+pub const MAX_FILE_BYTES: u64 = 16 << 20;
+
 /// Shortest stereo baseline a calibration may have, metres. The project's pairs are 6–12 cm
 /// apart (`stereo.base_m` is 0.01..=2); a shorter one is a calibration made from the same
 /// photos given as left and right (|T| ≈ 1e-17 m), and ranges by b·f/d would be noise.
@@ -261,7 +264,20 @@ impl CalibrationFile {
     /// Reads a results file.
     pub fn load(path: &Path) -> Result<CalibrationFile, FileError> {
         let p = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|err| FileError::Io { path: p.clone(), err })?;
+        use std::io::Read;
+        let io = |err| FileError::Io { path: p.clone(), err };
+        let mut text = String::new();
+        std::fs::File::open(path)
+            .map_err(io)?
+            .take(MAX_FILE_BYTES + 1)
+            .read_to_string(&mut text)
+            .map_err(io)?;
+        if text.len() as u64 > MAX_FILE_BYTES {
+            return Err(FileError::Parse {
+                path: p,
+                msg: format!("larger than a calibration file may be ({MAX_FILE_BYTES} bytes)"),
+            });
+        }
         serde_json::from_str(&text).map_err(|e| FileError::Parse {
             path: p,
             msg: e.to_string(),

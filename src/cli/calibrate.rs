@@ -39,7 +39,8 @@ pub enum CalibrateCmd {
 /// `rccar calibrate ranging` flags.
 #[derive(Args, Debug)]
 pub struct RangingArgs {
-    /// CSV of `row_px,distance_m[,height_m]` lines (header and `#` comments allowed).
+    /// CSV of `row_px,distance_m[,height_m]` lines (header and `#` comments allowed; at most
+    /// 10,000 pairs, 1 MiB).
     pub pairs: Option<PathBuf>,
     /// Also fit a_y (needs pairs spread over many rows).
     #[arg(long)]
@@ -52,7 +53,7 @@ pub struct RangingArgs {
     #[arg(long)]
     pub dry_run: bool,
     /// Refuse a fit whose rms row error is above this, pixels (a good tape-measure
-    /// calibration is below 1 px).
+    /// calibration is below 1 px); 0 < N <= 100.
     #[arg(long, default_value_t = 2.0)]
     pub max_rms_px: f64,
     /// Make N pairs in the simulator's lab instead of reading a CSV.
@@ -71,7 +72,7 @@ pub struct RangingArgs {
     #[arg(long)]
     pub sim_pairs_out: Option<PathBuf>,
     /// How far v0 may plausibly move from the image centre, pixels (a prior centred on the
-    /// image's middle row, never on the configured v0_offset_px; 0 = free).
+    /// image's middle row, never on the configured v0_offset_px; 0 = free); 0..=1000.
     #[arg(long, default_value_t = 3.0)]
     pub v0_sigma_px: f64,
     #[command(flatten)]
@@ -87,8 +88,30 @@ pub fn run(c: CalibrateCmd) -> Result<ExitCode> {
     }
 }
 
-/// Largest `--from-sim` pair count (the lab renders one frame per pair).
+/// Largest `--from-sim` pair count (the lab renders one frame per pair), and of a CSV.
 const MAX_SIM_PAIRS: usize = 10_000;
+/// Largest pairs CSV, bytes (10,000 pairs of ~25 bytes fit 25 times over).
+const MAX_CSV_BYTES: u64 = 1 << 20;
+/// Largest override file edited in place, bytes.
+const MAX_OVERRIDE_BYTES: u64 = 1 << 20;
+/// Largest `--max-rms-px`, pixels.
+const MAX_RMS_PX: f64 = 100.0;
+/// Largest `--v0-sigma-px`, pixels (4× the largest image side is no prior at all).
+const MAX_V0_SIGMA_PX: f64 = 1000.0;
+
+/// Reads a text file of at most `max` bytes; the error names the file and the bound.
+fn read_small(path: &Path, max: u64) -> Result<String> {
+    use std::io::Read;
+    let f = std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let mut text = String::new();
+    f.take(max + 1)
+        .read_to_string(&mut text)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    if text.len() as u64 > max {
+        bail!("{}: larger than {max} bytes; not a file this command reads", path.display());
+    }
+    Ok(text)
+}
 /// Two fits of the same pairs, one started from the image centre and one from the configured
 /// values, must agree within this tilt, degrees, ...
 const START_TOL_DEG: f64 = 0.01;
@@ -100,12 +123,12 @@ const START_TOL_AY: f64 = 1e-3;
 fn ranging(a: RangingArgs) -> Result<ExitCode> {
     let loaded = a.config.load_full()?;
     let cfg = loaded.cfg.clone();
-    if !(a.max_rms_px.is_finite() && a.max_rms_px > 0.0) {
-        bail!("--max-rms-px {}: must be a finite number of pixels > 0", a.max_rms_px);
+    if !(a.max_rms_px > 0.0 && a.max_rms_px <= MAX_RMS_PX) {
+        bail!("--max-rms-px {}: must be > 0 and <= {MAX_RMS_PX} pixels", a.max_rms_px);
     }
-    if !(a.v0_sigma_px.is_finite() && a.v0_sigma_px >= 0.0) {
+    if !(a.v0_sigma_px >= 0.0 && a.v0_sigma_px <= MAX_V0_SIGMA_PX) {
         bail!(
-            "--v0-sigma-px {}: must be a finite number of pixels >= 0 (0 = free)",
+            "--v0-sigma-px {}: must be 0..={MAX_V0_SIGMA_PX} pixels (0 = free)",
             a.v0_sigma_px
         );
     }
@@ -144,8 +167,12 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
             p
         }
         (Some(path), None) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-            parse_pairs_csv(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?
+            let text = read_small(path, MAX_CSV_BYTES)?;
+            let p = parse_pairs_csv(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?;
+            if p.len() > MAX_SIM_PAIRS {
+                bail!("{}: {} pairs; at most {MAX_SIM_PAIRS}", path.display(), p.len());
+            }
+            p
         }
         (None, None) => bail!("give a PAIRS.csv or --from-sim N"),
     };
@@ -261,10 +288,9 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     }
     // 6. The new override file, validated merged with the configuration before writing.
     let target = a.write.clone().unwrap_or_else(|| loaded.dir.join("local.toml"));
-    let old = match std::fs::read_to_string(&target) {
-        Ok(t) => Some(t),
+    let old = match std::fs::metadata(&target) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-        Err(e) => bail!("{}: cannot read: {e}", target.display()),
+        _ => Some(read_small(&target, MAX_OVERRIDE_BYTES)?),
     };
     let round = |v: f64| (v * 1e4).round() / 1e4;
     let new = edit_override(

@@ -55,7 +55,7 @@ pub struct DriveArgs {
     /// arms).
     #[arg(long)]
     pub arm: bool,
-    /// Stop after this many seconds of wall-clock time (default: until stopped).
+    /// Stop after this many seconds of wall-clock time (default: until stopped); 0 < S <= 86400.
     #[arg(long)]
     pub seconds: Option<f64>,
     /// With `--camera sim`: laps to drive before stopping (default: `sim.laps`; 0 = no limit).
@@ -74,14 +74,14 @@ pub struct DriveArgs {
     /// `rccar replay DIR --right DIR2` replays the pair.
     #[arg(long, value_name = "DIR2", requires = "record")]
     pub record_right: Option<PathBuf>,
-    /// Disk budget of the recording, megabytes (default `record.max_mb`); the oldest frames go
-    /// first, the telemetry is always kept.
+    /// Disk budget of the recording, megabytes (default `record.max_mb`; 1..=1000000); the
+    /// oldest frames go first, the telemetry is always kept.
     #[arg(long, value_name = "MB")]
     pub record_max_mb: Option<f64>,
     /// Output folder for telemetry.jsonl and summary.json.
     #[arg(long, short, default_value = "out/drive")]
     pub out: PathBuf,
-    /// Seconds between status lines.
+    /// Seconds between status lines (0.2..=3600).
     #[arg(long, default_value_t = 2.0)]
     pub status_every: f64,
     /// Test hook: with `--camera sim`, the camera delivers nothing from T for D seconds
@@ -105,8 +105,16 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         cfg = cfg.with_override(&format!("sim.laps={l}"))?;
     }
     if let Some(s) = a.seconds {
-        if !(s.is_finite() && s > 0.0) {
-            bail!("--seconds {s}: must be a positive number of seconds");
+        if !(s > 0.0 && s <= 86_400.0) {
+            bail!("--seconds {s}: must be > 0 and <= 86400 seconds (a day)");
+        }
+    }
+    if !(0.2..=3600.0).contains(&a.status_every) {
+        bail!("--status-every {}: must be 0.2..=3600 seconds", a.status_every);
+    }
+    if let Some(mb) = a.record_max_mb {
+        if !(1.0..=1_000_000.0).contains(&mb) {
+            bail!("--record-max-mb {mb:?}: must be 1..=1000000 megabytes (as record.max_mb)");
         }
     }
     if a.port.is_none() && !a.dry_run {

@@ -61,7 +61,7 @@ pub struct SimArgs {
     /// e.g. `--kick 5:0.05`; then measure as with --start-offset.
     #[arg(long, value_name = "T:DY")]
     pub kick: Option<String>,
-    /// Parallel runs in a sweep (default: the number of cores).
+    /// Parallel runs in a sweep (default: the number of cores; 1..=256).
     #[arg(long)]
     pub jobs: Option<usize>,
     /// Write zeros instead of measured stage times (reproducible telemetry).
@@ -426,9 +426,9 @@ fn parse_step(offset: Option<f64>, kick: Option<&str>, lane_width: f64) -> Resul
             Ok(Some(StepReq { kick: false, t: 0.0, dy: m }))
         }
         (None, Some(k)) => {
-            let form = || format!("--kick `{k}`: expected T:DY (seconds:metres), e.g. 5:0.05");
+            let form = || format!("--kick `{k}`: expected T:DY (seconds 0..=36000 : metres), e.g. 5:0.05");
             let (t, dy) = k.split_once(':').with_context(form)?;
-            let t: f64 = t.trim().parse().ok().filter(|t: &f64| t.is_finite() && *t >= 0.0).with_context(form)?;
+            let t: f64 = t.trim().parse().ok().filter(|t: &f64| (0.0..=36_000.0).contains(t)).with_context(form)?;
             let dy: f64 = dy.trim().parse().ok().filter(|d: &f64| d.is_finite()).with_context(form)?;
             check("--kick", dy)?;
             Ok(Some(StepReq { kick: true, t, dy }))
@@ -468,10 +468,13 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, font: Option<&'static [u8
         })
         .collect::<Result<_>>()?;
     let scene = Arc::new(Scene::new(track));
+    if let Some(j) = a.jobs.filter(|j| !(1..=256).contains(j)) {
+        bail!("--jobs {j}: must be 1..=256 parallel runs");
+    }
     let jobs = a
         .jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-        .max(1);
+        .clamp(1, 256);
     println!(
         "sweep {} over {} run(s) on {} thread(s), track {}",
         keys.join(" × "),
