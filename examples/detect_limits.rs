@@ -35,7 +35,7 @@ fn main() {
     let mut s = 0.0;
     while s < len {
         sim.place_at(s);
-        let step = sim.step(&mut NoTimer);
+        let step = sim.step();
         s += 0.05;
         let objs: Vec<_> = step
             .truth

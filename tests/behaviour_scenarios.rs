@@ -76,7 +76,7 @@ fn run(cfg: &Config, track: &Track, start: f64, seconds: f64) -> (Summary, Vec<S
     sim.place_at(start);
     let mut steps = Vec::new();
     let summary = sim
-        .run(&mut NoTimer, |_, s| {
+        .run(|_, s| {
             steps.push(s.clone());
             Ok::<(), ()>(())
         })

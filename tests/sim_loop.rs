@@ -28,7 +28,7 @@ fn run(cfg: &Config, start: Option<f64>) -> (Summary, Vec<StepOutput>) {
     }
     let mut steps = Vec::new();
     let summary = sim
-        .run(&mut NoTimer, |_, s| {
+        .run(|_, s| {
             steps.push(s.clone());
             Ok::<(), ()>(())
         })

@@ -10,15 +10,15 @@ use rccar::sim::step::{step_metrics, StepOptions};
 use rccar::sim::sweep::{self, Chatter, SweepRun};
 use clap::Args;
 use rccar::config::Config;
-use rccar::drive::{Driver, Flow, FrameContext, LoopEnd, LoopError, Observer, Parts, StopReason};
-use rccar::pipeline::Pipeline;
+use rccar::drive::{Clock, Level, LoopEnd, NoClock, Observer, StopReason};
+use rccar::session::{ArmAt, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
 use rccar::sim::plot;
+use rccar::sim::report::RunReport;
 use rccar::sim::run::{Simulation, Summary};
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
-use rccar::sim::world::{lock, SharedWorld, SimCamera, SimScore, SimVehicle, World};
-use rccar::telemetry::JsonlWriter;
-use rccar::timing::{NoTimer, StageTimer};
+use rccar::sim::world::lock;
+use rccar::timing::NoTimer;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -107,21 +107,6 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         }
         return run_sweep(&a, &cfg, &track, font);
     }
-
-    let stop = super::signals::install();
-    let world = World::new(&cfg, Arc::new(Scene::new(&track)))?.shared();
-    if let Some(m) = a.start_offset {
-        lock(&world).kick(m, 0.0);
-    }
-    // With a dashboard the operator ends the run (a parked, disarmed car is not "stalled").
-    let mut camera = SimCamera::new(world.clone()).ending_with_world(!a.dash.dashboard);
-    // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
-    let fps = cfg.camera.fps;
-    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, Some(world.clone()), &stop, Some(fps), None)?;
-    let mut vehicle = dash.sink(SimVehicle::new(world.clone()));
-    let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
-    let mut pipeline = Pipeline::new(&cfg)?;
-    // ranging.method = "stereo": a camera pair (src/sim/stereo.rs `other_camera`).
     let stereo = cfg.ranging.method == "stereo" && !a.truth_boxes;
     if a.record_right.is_some() && !stereo {
         bail!(
@@ -131,47 +116,44 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     if stereo && a.record.is_some() && a.record_right.is_none() {
         bail!("--record with ranging.method = \"stereo\": give --record-right DIR2 for the right camera's frames");
     }
-    if a.truth_boxes {
-        println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
-        camera.set_truth_boxes(true);
-        super::common::warn_single_camera(&cfg);
-    } else {
-        pipeline.set_detector(super::common::load_detector(&cfg)?);
-    }
-    if stereo {
-        let scene = lock(&world).scene().clone();
-        camera.set_other(Some(rccar::sim::stereo::other_camera(
-            &cfg,
-            scene,
-            rccar::sim::render::RenderOptions::from_config(&cfg.sim),
-        )));
-        rccar::drive::stereo::install(&mut pipeline);
-        if let Some(line) = rccar::drive::stereo::calibration_line(&pipeline, &cfg) {
-            println!("{line}");
-        }
-        println!(
-            "sim: stereo pair, reference camera {} with the other {} m to its {} (ranging.method = \"stereo\")",
-            cfg.stereo.reference,
-            cfg.stereo.base_m,
-            if cfg.stereo.reference == "right" { "left" } else { "right" }
-        );
-    }
-    // Without recording nobody looks at the frames: render only the rows the pipeline reads
-    // on each frame (the lane's; the detectors' too on detection frames): the same decisions.
-    // A stereo pair is rendered whole (matching reads beyond the detector's rows).
-    if a.record.is_some() || dash.enabled() || stereo {
-        camera.set_rows(None);
-    } else {
-        camera.set_row_plan(Some(pipeline.row_plan()));
-    }
     for dir in a.record.iter().chain(&a.record_right) {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     }
-    let tel_path = a.out.join("telemetry.jsonl");
-    let mut tel = JsonlWriter::new(
-        std::fs::File::create(&tel_path).with_context(|| format!("{}: cannot create", tel_path.display()))?,
-        tel_path.display().to_string(),
+    let stop = super::signals::install();
+    let clock: Arc<dyn Clock + Send + Sync> = if a.no_timing { Arc::new(NoClock) } else { Arc::new(super::timer::WallClock::new()) };
+    let say: rccar::drive::Say = Arc::new(|level, line: &str| match level {
+        Level::Info => super::signals::say(line),
+        Level::Warn => super::signals::say_err(line),
+    });
+    let mut spec = SessionSpec::new(
+        SourceSpec::Sim {
+            scene: SceneSpec::Shared(Arc::new(Scene::new(&track))),
+            // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
+            timing: if a.dash.dashboard { Timing::RealTime } else { Timing::LockStep },
+            stall: None,
+            start_offset_m: a.start_offset,
+        },
+        SinkSpec::DryRun,
     );
+    spec.arm = if a.dash.dashboard { ArmAt::Operator } else { ArmAt::Start };
+    spec.truth_boxes = a.truth_boxes;
+    spec.frames_viewed = a.record.is_some() || a.dash.dashboard;
+    spec.operator_ends_run = a.dash.dashboard;
+    spec.telemetry = Some(a.out.join("telemetry.jsonl"));
+    let timer: Box<dyn rccar::timing::StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
+    let env = SessionEnv { clock: clock.clone(), stop: stop.clone(), timer, say: say.clone() };
+    let mut session = Session::build(&cfg, spec, env)?;
+    if a.truth_boxes {
+        println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
+    }
+    for (level, line) in session.notes() {
+        match level {
+            Level::Info => println!("sim: {line}"),
+            Level::Warn => eprintln!("{line}"),
+        }
+    }
+    let world = session.world().expect("a simulation has a world").clone();
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, &session, &stop, clock)?;
     println!(
         "sim: track {} ({:.2} m, tightest lane radius {:.2} m), {} lap(s), at most {} s",
         track.name,
@@ -180,43 +162,27 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         cfg.sim.laps,
         cfg.sim.max_seconds
     );
-    let mut wall = WallTimer::new();
-    let mut none = NoTimer;
-    let timer: &mut dyn StageTimer = if a.no_timing { &mut none } else { &mut wall };
-    let mut report = Report {
-        world: world.clone(),
-        record: a.record.clone(),
-        record_right: a.record_right.clone(),
-        reference_left: cfg.stereo.reference != "right",
-        stereo: StereoTally::default(),
-        series: plot::Series::default(),
-        kick: step.filter(|s| s.kick).map(|s| (s.t, s.dy)),
-        kicked_at: None,
-    };
+    let mut report = RunReport::new(world.clone(), say);
+    report.record = a.record.clone();
+    report.record_right = a.record_right.clone();
+    report.reference_left = cfg.stereo.reference != "right";
+    report.kick = step.filter(|s| s.kick).map(|s| (s.t, s.dy));
     let started = std::time::Instant::now();
-    let clock = super::timer::WallClock::new();
     let end = {
-        let mut tel = dash.tag(&mut tel);
-        let mut obs: [&mut dyn Observer; 4] = [&mut score, &mut tel, &mut report, &mut dash];
-        Driver::new(cfg.camera.fps).run(Parts {
-            source: &mut camera,
-            pipeline: &mut pipeline,
-            sink: &mut *vehicle,
-            stop: &stop,
-            clock: &clock,
-            timer,
-            observer: &mut obs,
-        })?
+        let mut obs: [&mut dyn Observer; 2] = [&mut report, &mut dash];
+        session.run(&mut obs)
     };
     let interrupted = match end {
-        LoopEnd::Stopped(why) => {
+        Ok(LoopEnd::Stopped(why)) => {
             lock(&world).interrupt();
             Some(why)
         }
         _ => None,
     };
-    tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;
-    let summary = lock(&world).summary();
+    let outcome = session.finish()?;
+    end?;
+    let summary = outcome.summary.clone().expect("a simulation has a score");
+    let tel_path = outcome.telemetry.as_ref().map(|t| t.0.clone()).unwrap_or_default();
     let scene = lock(&world).scene().clone();
     let wall_s = started.elapsed().as_secs_f64();
     print_summary(&summary);
@@ -257,42 +223,12 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         .with_context(|| format!("{}: cannot write", cfg_path.display()))?;
     println!("  telemetry: {}", tel_path.display());
     println!("  summary:   {}", sum_path.display());
-    if let Some(font) = font {
-        plot::register_font(font);
-        let p1 = a.out.join("xte_steer.png");
-        save(&plot::time_plot(&report.series, summary.lane_width_m)?, &p1)?;
-        let p2 = a.out.join("path.png");
-        save(&plot::path_plot(&report.series, &scene)?, &p2)?;
-        println!("  plots:     {} {}", p1.display(), p2.display());
-        if let Some(m) = &step_fig {
-            let p3 = a.out.join("step.png");
-            save(&plot::step_plot(&report.series.t, &report.series.xte, m)?, &p3)?;
-            println!("  step:      {}", p3.display());
-        }
-    } else {
-        println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
-    }
-    match (&a.record, &a.record_right) {
-        (Some(dir), Some(right)) => println!(
-            "  frames:    {}/ and {}/ ({} PNG each; replay with `rccar replay {} --right {} --set ranging.method=stereo`)",
-            dir.display(),
-            right.display(),
-            summary.frames,
-            dir.display(),
-            right.display()
-        ),
-        (Some(dir), None) => println!(
-            "  frames:    {}/ ({} PNG; replay with `rccar replay {}`)",
-            dir.display(),
-            summary.frames,
-            dir.display()
-        ),
-        _ => {}
-    }
+    write_plots(&a, font, &report, &summary, &scene, step_fig.as_ref())?;
+    print_frames(&a, summary.frames);
     if let Some(why) = interrupted {
         println!(
             "sim: interrupted ({}) after {} frames; the summary and plots cover what ran",
-            if why == StopReason::Terminate { "SIGTERM" } else { "Ctrl-C" },
+            signal_name(why),
             summary.frames
         );
         return Ok(ExitCode::from(why.exit_code()));
@@ -301,73 +237,63 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
-/// What `rccar sim` shows and keeps while the loop runs: transitions on the terminal, the
-/// plots' series, the recorded frames.
-struct Report {
-    world: SharedWorld,
-    /// The (left) camera's frames.
-    record: Option<PathBuf>,
-    /// A stereo pair's right camera's frames.
-    record_right: Option<PathBuf>,
-    /// `stereo.reference = "left"`.
-    reference_left: bool,
-    stereo: StereoTally,
-    series: plot::Series,
-    /// `--kick T:DY`: (T seconds, DY metres), done once.
-    kick: Option<(f64, f64)>,
-    /// Time of the frame after which the kick was applied, seconds.
-    kicked_at: Option<f64>,
+/// How a stop reason is said.
+fn signal_name(why: StopReason) -> &'static str {
+    match why {
+        StopReason::Terminate => "SIGTERM",
+        StopReason::Hangup => "SIGHUP",
+        StopReason::Quit => "SIGQUIT",
+        StopReason::Interrupt => "Ctrl-C",
+        StopReason::Fault => "a fault",
+        StopReason::Requested => "requested",
+    }
 }
 
-/// Stereo frames and boxes of a run.
-#[derive(Debug, Default)]
-struct StereoTally {
-    pairs: u64,
-    ranged: u64,
-    unmatched: u64,
+/// The time and path plots (and the step plot), when the font is there.
+fn write_plots(
+    a: &SimArgs,
+    font: Option<&'static [u8]>,
+    report: &RunReport,
+    summary: &Summary,
+    scene: &Scene,
+    step: Option<&rccar::sim::step::StepMetrics>,
+) -> Result<()> {
+    let Some(font) = font else {
+        println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
+        return Ok(());
+    };
+    plot::register_font(font);
+    let p1 = a.out.join("xte_steer.png");
+    save(&plot::time_plot(&report.series, summary.lane_width_m)?, &p1)?;
+    let p2 = a.out.join("path.png");
+    save(&plot::path_plot(&report.series, scene)?, &p2)?;
+    println!("  plots:     {} {}", p1.display(), p2.display());
+    if let Some(m) = step {
+        let p3 = a.out.join("step.png");
+        save(&plot::step_plot(&report.series.t, &report.series.xte, m)?, &p3)?;
+        println!("  step:      {}", p3.display());
+    }
+    Ok(())
 }
 
-impl Observer for Report {
-    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
-        // With a pair, the reference camera's image goes to its side's folder.
-        let other = ctx.frame.other.as_ref().map(|o| &o.image);
-        let (left, right) = match other {
-            Some(o) if !self.reference_left => (o, Some(&ctx.frame.image)),
-            o => (&ctx.frame.image, o),
-        };
-        for (dir, img) in [(&self.record, Some(left)), (&self.record_right, right)] {
-            if let (Some(dir), Some(img)) = (dir, img) {
-                let p = dir.join(&ctx.frame.name);
-                img.save(&p)
-                    .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
-            }
-        }
-        if let Some(s) = &ctx.record.stereo {
-            self.stereo.pairs += 1;
-            self.stereo.ranged += s.ranged;
-            self.stereo.unmatched += s.unmatched;
-        }
-        if let Some(tr) = &ctx.record.transition {
-            println!(
-                "  t={:7.2} s  {} -> {}: {}",
-                ctx.record.time_s,
-                tr.from.name(),
-                tr.to.name(),
-                tr.reason
-            );
-        }
-        let mut w = lock(&self.world);
-        if let Some(truth) = w.last_truth() {
-            self.series.push_parts(ctx.frame.time_s, truth, ctx.output.command.steer);
-        }
-        if let Some((t, dy)) = self.kick {
-            if self.kicked_at.is_none() && ctx.frame.time_s + 1e-9 >= t {
-                w.kick(dy, 0.0);
-                self.kicked_at = Some(ctx.frame.time_s);
-                println!("  t={:7.2} s  kicked {:+.3} m sideways", ctx.frame.time_s, dy);
-            }
-        }
-        Ok(Flow::Continue)
+/// Where the recorded frames went.
+fn print_frames(a: &SimArgs, frames: u64) {
+    match (&a.record, &a.record_right) {
+        (Some(dir), Some(right)) => println!(
+            "  frames:    {}/ and {}/ ({} PNG each; replay with `rccar replay {} --right {} --set ranging.method=stereo`)",
+            dir.display(),
+            right.display(),
+            frames,
+            dir.display(),
+            right.display()
+        ),
+        (Some(dir), None) => println!(
+            "  frames:    {}/ ({} PNG; replay with `rccar replay {}`)",
+            dir.display(),
+            frames,
+            dir.display()
+        ),
+        _ => {}
     }
 }
 
@@ -499,7 +425,7 @@ fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, font: Option<&'static [u8
                         let mut chatter = Chatter::default();
                         // Ctrl-C ends every run of the sweep at its next frame
                         let sum = sim
-                            .run(&mut NoTimer, |_, st| {
+                            .run(|_, st| {
                                 chatter.push(st.out.command.steer);
                                 if stop.is_set() {
                                     Err(())

@@ -24,7 +24,7 @@ use anyhow::{Context, Result};
 use image::{Rgb, RgbImage};
 use rccar::config::Config;
 use rccar::dashboard::{self, Control, ControlSender, Live, PlaceRequest, PlotPoint, SetRequest, Snapshot};
-use rccar::drive::{ArmState, Latest, StopSignal};
+use rccar::drive::{Actor, Arming, Latest, StopSignal};
 use rccar::sim::world::{lock, SharedWorld};
 use serde_json::{json, Value};
 use std::collections::{BTreeMap, VecDeque};
@@ -57,15 +57,13 @@ pub struct Options {
     /// The loop's inbox.
     pub tx: ControlSender,
     /// Arming and e-stop.
-    pub arm: Arc<ArmState>,
+    pub arm: Arc<Arming>,
     /// What the sink sent.
     pub sent: Arc<Sent>,
     /// The simulator's world (sim controls), `None` on the car.
     pub world: Option<SharedWorld>,
     /// The run's stop signal (the server's threads end with it).
     pub stop: StopSignal,
-    /// Called when the page arms (the car: ask the link to arm as the start button does).
-    pub on_arm: Option<std::sync::Arc<dyn Fn() + Send + Sync>>,
 }
 
 /// The newest state for `GET /api/state`.
@@ -87,7 +85,7 @@ struct Shared {
     changed: Mutex<BTreeMap<String, f64>>,
     local: PathBuf,
     tx: ControlSender,
-    arm: Arc<ArmState>,
+    arm: Arc<Arming>,
     sent: Arc<Sent>,
     track_length: Option<f64>,
     need_token: bool,
@@ -103,7 +101,6 @@ struct Shared {
     connections: AtomicUsize,
     frames_sent: AtomicU64,
     closed: AtomicBool,
-    on_arm: Option<std::sync::Arc<dyn Fn() + Send + Sync>>,
     live: Arc<Live>,
 }
 
@@ -179,7 +176,6 @@ impl Server {
             connections: AtomicUsize::new(0),
             frames_sent: AtomicU64::new(0),
             closed: AtomicBool::new(false),
-            on_arm: o.on_arm,
             live: o.live,
         });
         if need_token {
@@ -237,7 +233,7 @@ fn watchdog(sh: Arc<Shared>, stop: StopSignal) {
         }
         let age = now_ms(&sh).saturating_sub(sh.last_heartbeat_ms.load(Ordering::SeqCst));
         if age > sh.heartbeat_ms {
-            sh.arm.disarm();
+            sh.arm.disarm(Actor::Heartbeat);
             sh.armed_by_page.store(false, Ordering::SeqCst);
             let msg = format!(
                 "disarmed: no heartbeat from the dashboard for {age} ms (limit {} ms) at wall {:.3} s",
@@ -565,13 +561,13 @@ fn handle(mut stream: TcpStream, sh: &Shared) {
                 return;
             }
             sh.sent.mark_estop();
-            sh.arm.estop();
+            sh.arm.estop(Actor::Page);
             sh.armed_by_page.store(false, Ordering::SeqCst);
             let _ = respond(&mut stream, 200, "application/json", b"{\"estop\":true}");
             println!("dashboard: EMERGENCY STOP from {who}");
             sh.tx.send(Control::Note(format!(
                 "EMERGENCY STOP from dashboard {who} at wall {:.3} s",
-                sh.sent.estop_wall_s.get()
+                sh.sent.estop_clock_s.get()
             )));
             return;
         }
@@ -612,25 +608,23 @@ fn handle(mut stream: TcpStream, sh: &Shared) {
     let note = |what: &str| format!("{what} from dashboard {who} at wall {:.3} s", sh.sent.now());
     match path {
         "/api/release" => {
-            sh.arm.release();
+            sh.arm.release(Actor::Page);
             sh.tx.send(Control::Note(note("e-stop released")));
             json_reply(&mut stream, 200, &json!({"estop": false}));
         }
         "/api/arm" => {
             sh.last_heartbeat_ms.store(now_ms(sh), Ordering::SeqCst);
-            if sh.arm.arm() {
-                sh.armed_by_page.store(true, Ordering::SeqCst);
-                if let Some(f) = &sh.on_arm {
-                    f();
+            match sh.arm.arm(Actor::Page) {
+                Ok(()) => {
+                    sh.armed_by_page.store(true, Ordering::SeqCst);
+                    sh.tx.send(Control::Note(note("armed")));
+                    json_reply(&mut stream, 200, &json!({"armed": true}));
                 }
-                sh.tx.send(Control::Note(note("armed")));
-                json_reply(&mut stream, 200, &json!({"armed": true}));
-            } else {
-                error_reply(&mut stream, 409, "the emergency stop is pressed: release it first");
+                Err(why) => error_reply(&mut stream, 409, &why.to_string()),
             }
         }
         "/api/disarm" => {
-            sh.arm.disarm();
+            sh.arm.disarm(Actor::Page);
             sh.armed_by_page.store(false, Ordering::SeqCst);
             sh.tx.send(Control::Note(note("disarmed")));
             json_reply(&mut stream, 200, &json!({"armed": false}));
@@ -756,10 +750,10 @@ fn state_json(sh: &Shared, since: f64, authorized: bool) -> Value {
         "stream_frames": sh.frames_sent.load(Ordering::SeqCst),
         "wall_s": s.now(),
         "epoch_ms": std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64() * 1e3),
-        "sent": {"throttle": opt(s.throttle.get()), "steer": opt(s.steer.get()), "wall_s": opt(s.wall_s.get()), "sim_s": opt(s.sim_s.get())},
+        "sent": {"throttle": opt(s.throttle.get()), "steer": opt(s.steer.get()), "wall_s": opt(s.clock_s.get()), "sim_s": opt(s.frame_s.get())},
         "estop_timing": {
-            "pressed_wall_s": opt(s.estop_wall_s.get()), "pressed_sim_s": opt(s.estop_sim_s.get()),
-            "neutral_wall_s": opt(s.neutral_wall_s.get()), "neutral_sim_s": opt(s.neutral_sim_s.get()),
+            "pressed_wall_s": opt(s.estop_clock_s.get()), "pressed_sim_s": opt(s.estop_frame_s.get()),
+            "neutral_clock_s": opt(s.neutral_clock_s.get()), "neutral_frame_s": opt(s.neutral_frame_s.get()),
         },
         "points": points,
         "changed": *sh.changed.lock().unwrap_or_else(|e| e.into_inner()),
