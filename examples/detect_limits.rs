@@ -11,7 +11,6 @@ use rccar::config::Config;
 use rccar::detect::Rect;
 use rccar::sim::run::Simulation;
 use rccar::sim::track::Track;
-use rccar::timing::NoTimer;
 use std::path::Path;
 
 fn main() {

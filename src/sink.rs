@@ -200,6 +200,7 @@ mod tests {
                 },
                 0.1,
             )
+            .map(|_| ())
         };
         assert!(drive(log.clone()).is_err());
         assert_eq!(

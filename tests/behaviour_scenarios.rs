@@ -17,7 +17,6 @@ use rccar::config::Config;
 use rccar::control::behaviour::Mode;
 use rccar::sim::run::{Simulation, StepOutput, Summary};
 use rccar::sim::track::{LightState, ObjectKind, Track};
-use rccar::timing::NoTimer;
 use std::path::Path;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");

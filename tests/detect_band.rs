@@ -11,7 +11,6 @@ use rccar::detect::{DetectStage, Rect};
 use rccar::pipeline::{detect_bands, detect_limits, load_detector};
 use rccar::sim::run::Simulation;
 use rccar::sim::track::Track;
-use rccar::timing::NoTimer;
 use std::path::Path;
 use std::time::Instant;
 

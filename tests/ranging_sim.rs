@@ -20,7 +20,6 @@ use rccar::config::Config;
 use rccar::ranging::{fit, BoxRanging, FitOptions, ObjectClass, Pair, TiltRanging};
 use rccar::sim::run::Simulation;
 use rccar::sim::track::{ObjectKind, Track};
-use rccar::timing::NoTimer;
 use std::path::{Path, PathBuf};
 
 /// A straight with one object of `kind` on the driven lane's centre, 3 m ahead of the start.

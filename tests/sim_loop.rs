@@ -8,7 +8,6 @@
 use rccar::config::Config;
 use rccar::sim::run::{EndReason, Simulation, StepOutput, Summary};
 use rccar::sim::track::{Piece, Track};
-use rccar::timing::NoTimer;
 use std::path::Path;
 
 fn track() -> Track {

@@ -95,7 +95,7 @@ pub struct DriveArgs {
 }
 
 /// The session `rccar drive` asks for.
-fn spec(a: &DriveArgs, track: PathBuf) -> Result<SessionSpec> {
+fn spec(a: &DriveArgs, track: PathBuf, stereo: bool) -> Result<SessionSpec> {
     if a.port.is_none() && !a.dry_run {
         bail!("no --port: name the Arduino's serial port (e.g. --port /dev/ttyACM0), or --dry-run to run without one");
     }
@@ -116,7 +116,16 @@ fn spec(a: &DriveArgs, track: PathBuf) -> Result<SessionSpec> {
             start_offset_m: None,
         }
     } else {
-        let cam = |s: &str| CameraSpec::parse(s).map_err(anyhow::Error::msg);
+        if a.camera_right.is_some() && !stereo {
+            bail!(
+                "--camera-right {}: ranging.method is not \"stereo\", so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
+                a.camera_right.as_deref().unwrap_or_default()
+            );
+        }
+        let cam = |s: &str| match CameraSpec::parse(s).map_err(anyhow::Error::msg)? {
+            CameraSpec::Folder(p) if !p.is_dir() => bail!("--camera {s}: not `sim`, `v4l:INDEX` or a folder of frames"),
+            c => Ok(c),
+        };
         SourceSpec::Cameras {
             left: cam(&a.camera)?,
             right: a.camera_right.as_deref().map(cam).transpose()?,
@@ -152,7 +161,7 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     if let Some(mb) = a.record_max_mb {
         cfg = cfg.with_override(&format!("record.max_mb={mb}"))?;
     }
-    let spec = spec(&a, PathBuf::from(&cfg.sim.track))?;
+    let spec = spec(&a, PathBuf::from(&cfg.sim.track), cfg.ranging.method == "stereo")?;
     let stop = super::signals::install();
     let clock = Arc::new(WallClock::new());
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
@@ -165,7 +174,10 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
             Level::Warn => say_err(line),
         }),
     };
-    let mut session = Session::build(&cfg, spec, env)?;
+    let mut session = Session::build(&cfg, spec, env).map_err(|e| match e {
+        rccar::session::SessionError::Pair(m) => anyhow::anyhow!("--camera-right: {m}"),
+        e => e.into(),
+    })?;
     for (level, line) in session.notes() {
         match level {
             Level::Info => say(&format!("drive: {line}")),

@@ -97,6 +97,13 @@ impl Observer for Summary {
 /// Runs the replay.
 pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
+    if let (Some(r), false) = (&a.right, cfg.ranging.method == "stereo") {
+        anyhow::bail!(
+            "--right {}: ranging.method is {:?}, so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
+            r.display(),
+            cfg.ranging.method
+        );
+    }
     let stop = super::signals::install();
     let clock: Arc<dyn Clock + Send + Sync> = if a.no_timing { Arc::new(NoClock) } else { Arc::new(super::timer::WallClock::new()) };
     let timer: Box<dyn StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
@@ -120,7 +127,10 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         }),
     };
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
-    let mut session = Session::build(&cfg, spec, env)?;
+    let mut session = Session::build(&cfg, spec, env).map_err(|e| match e {
+        rccar::session::SessionError::Pair(m) => anyhow::anyhow!("--right: {m}"),
+        e => e.into(),
+    })?;
     for (level, line) in session.notes() {
         match level {
             Level::Info => println!("replay: {line}"),

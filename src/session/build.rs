@@ -391,12 +391,6 @@ fn open_v4l(_cfg: &Config, _env: &SessionEnv, index: u32) -> Result<Box<dyn Fram
 
 /// A folder of frames; a recording (it has its telemetry) replays with its own frame times.
 fn open_folder(cfg: &Config, pipeline: &Pipeline, dir: &Path, notes: &mut Vec<(Level, String)>) -> Result<ReplayDir, SessionError> {
-    if !dir.is_dir() {
-        return Err(invalid(format!(
-            "--camera {}: not `sim`, `v4l:INDEX` or a folder of frames",
-            dir.display()
-        )));
-    }
     let (w, h) = pipeline.frame_size();
     // Frames smaller than the ROI's extent are refused instead of being blown up.
     let max_x = cfg.warp.src.iter().map(|p| p[0]).fold(0.0f64, f64::max);
@@ -428,7 +422,7 @@ fn open_folder(cfg: &Config, pipeline: &Pipeline, dir: &Path, notes: &mut Vec<(L
 fn check_pair_folders(cfg: &Config, pipeline: &Pipeline, ldir: &Path, rdir: &Path) -> Result<(), SessionError> {
     let (w, h) = pipeline.frame_size();
     let list = |d: &Path| ReplayDir::open(d, cfg.camera.fps, w, h, (1, 1)).map(|s| s.files().to_vec());
-    check_pair(ldir, &list(ldir)?, rdir, &list(rdir)?).map_err(invalid)
+    check_pair(ldir, &list(ldir)?, rdir, &list(rdir)?).map_err(SessionError::Pair)
 }
 
 /// The two folders of a stereo pair must hold the same frames (file names, in order) of the
@@ -438,7 +432,7 @@ pub fn check_pair(ldir: &Path, left: &[PathBuf], rdir: &Path, right: &[PathBuf])
     for (l, r) in left.iter().zip(right) {
         if rel(ldir, l) != rel(rdir, r) {
             return Err(format!(
-                "the right camera's folder: {} has no partner: the right folder's frame at that place is {} (the folders must hold the same frame names; {} and {} frames)",
+                "{} has no partner: the right folder's frame at that place is {} (the folders must hold the same frame names; {} and {} frames)",
                 l.display(),
                 r.display(),
                 left.len(),
@@ -449,7 +443,7 @@ pub fn check_pair(ldir: &Path, left: &[PathBuf], rdir: &Path, right: &[PathBuf])
     if left.len() != right.len() {
         let (longer, n) = if left.len() > right.len() { (left, right.len()) } else { (right, left.len()) };
         return Err(format!(
-            "the right camera's folder: {} has no partner in the other folder ({} has {} frames, {} has {}); the folders must hold the same frames",
+            "{} has no partner in the other folder ({} has {} frames, {} has {}); the folders must hold the same frames",
             longer[n].display(),
             ldir.display(),
             left.len(),
@@ -467,7 +461,7 @@ pub fn check_pair(ldir: &Path, left: &[PathBuf], rdir: &Path, right: &[PathBuf])
         if let (Some(a), Some(b)) = (dims(l), dims(r)) {
             if a != b {
                 return Err(format!(
-                    "the right camera's folder: {} is {}x{} but {} is {}x{}: the two cameras' frames must have one size",
+                    "{} is {}x{} but {} is {}x{}: the two cameras' frames must have one size",
                     l.display(),
                     a.0,
                     a.1,

@@ -43,6 +43,9 @@ pub enum SessionError {
     /// The spec asks for something that cannot work together (names the flags or keys).
     #[error("{0}")]
     Invalid(String),
+    /// The two folders of a camera pair do not pair up (names the frame).
+    #[error("{0}")]
+    Pair(String),
     /// The pipeline cannot be built from the configuration.
     #[error(transparent)]
     Pipeline(#[from] crate::pipeline::PipelineError),
