@@ -1,0 +1,113 @@
+//! `[ranging]`: the distance of each detected box: the camera's calibration corrections (pixels,
+//! a scale), what each class's box frames (heights and sizes, metres; margins), the box noise
+//! (pixels, relative), the object tracker's noise (m/s², relative), colour refinement and where
+//! the behaviours' distances come from (`method`).
+
+use super::check::Checker;
+use serde::{Deserialize, Serialize};
+
+/// `[ranging]`: distance of each detected box by tilt ranging (src/ranging.rs, docs/ranging.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RangingConfig {
+    /// Calibrated principal-point row minus the image centre row, pixels
+    /// (`rccar calibrate ranging` writes it).
+    pub v0_offset_px: f64,
+    /// Calibrated a_y divided by the nominal focal length from camera.hfov_deg.
+    pub a_y_scale: f64,
+    /// Height above the floor of a stop sign box's bottom edge (the face's lower edge), metres.
+    pub stop_sign_bottom_m: f64,
+    /// Height of a traffic-light box's bottom edge (the housing's lower edge), metres.
+    pub traffic_light_bottom_m: f64,
+    /// Height of an obstacle box's bottom edge, metres (0: it stands on the floor).
+    pub obstacle_bottom_m: f64,
+    /// [width, height] of the face a stop-sign box frames, metres (0 = unknown: not used).
+    pub stop_sign_size_m: [f64; 2],
+    /// [width, height] of the face a traffic-light box frames (the housing), metres.
+    pub traffic_light_size_m: [f64; 2],
+    /// [width, height] of an obstacle's face, metres (0, 0: obstacles differ; contact row only).
+    pub obstacle_size_m: [f64; 2],
+    /// A stop-sign detector box's size over the face's outline (the training margin).
+    pub stop_sign_box_margin: f64,
+    /// A traffic-light detector box's size over the housing's outline.
+    pub traffic_light_box_margin: f64,
+    /// An obstacle detector box's size over the obstacle's outline.
+    pub obstacle_box_margin: f64,
+    /// σ of a detector box's centre row, pixels.
+    pub box_centre_sigma_px: f64,
+    /// σ of a detector box's size, relative.
+    pub box_size_sigma: f64,
+    /// Object tracker: σ of an object's own acceleration along the line of sight, m/s².
+    pub track_accel_sigma: f64,
+    /// Object tracker: σ of the odometry's distance per frame, relative to that distance.
+    pub track_odometry_sigma: f64,
+    /// Object tracker: a track not matched on this many detection frames in a row is dropped.
+    pub track_max_missed: u32,
+    /// Refine stop-sign and traffic-light boxes by colour (red area, dark housing) before
+    /// ranging them.
+    pub refine_by_colour: bool,
+    /// Share of a stop sign's face (across the flats) that is red inside its white rim.
+    pub stop_sign_red_fraction: f64,
+    /// Where the behaviours' distances come from: "mono" (the tilt and box size of one
+    /// camera) or "stereo" (the pair's disparity, `[stereo]`; docs/stereo.md).
+    pub method: String,
+}
+
+impl Default for RangingConfig {
+    fn default() -> Self {
+        Self {
+            v0_offset_px: 0.0,
+            a_y_scale: 1.0,
+            stop_sign_bottom_m: 0.12,
+            traffic_light_bottom_m: 0.10,
+            obstacle_bottom_m: 0.0,
+            stop_sign_size_m: [0.10, 0.10],
+            traffic_light_size_m: [0.0, 0.12],
+            obstacle_size_m: [0.0, 0.0],
+            stop_sign_box_margin: 1.085,
+            traffic_light_box_margin: 1.21,
+            obstacle_box_margin: 1.36,
+            box_centre_sigma_px: 1.0,
+            box_size_sigma: 0.06,
+            track_accel_sigma: 0.5,
+            track_odometry_sigma: 0.1,
+            track_max_missed: 3,
+            refine_by_colour: true,
+            stop_sign_red_fraction: 0.9,
+            method: "mono".into(),
+        }
+    }
+}
+
+impl RangingConfig {
+    /// Range checks of `[ranging]` (the box bottoms against the camera height are checked in
+    /// `check.rs`).
+    pub(super) fn check(&self, c: &mut Checker) {
+        let r = self;
+        c.range("ranging.v0_offset_px", r.v0_offset_px, -200.0, 200.0);
+        c.range("ranging.a_y_scale", r.a_y_scale, 0.5, 2.0);
+        c.range("ranging.stop_sign_bottom_m", r.stop_sign_bottom_m, 0.0, 3.0);
+        c.range("ranging.traffic_light_bottom_m", r.traffic_light_bottom_m, 0.0, 3.0);
+        c.range("ranging.obstacle_bottom_m", r.obstacle_bottom_m, 0.0, 3.0);
+        for (key, v) in [
+            ("ranging.stop_sign_size_m", r.stop_sign_size_m),
+            ("ranging.traffic_light_size_m", r.traffic_light_size_m),
+            ("ranging.obstacle_size_m", r.obstacle_size_m),
+        ] {
+            c.range(&format!("{key}[0]"), v[0], 0.0, 3.0);
+            c.range(&format!("{key}[1]"), v[1], 0.0, 3.0);
+        }
+        c.range("ranging.stop_sign_box_margin", r.stop_sign_box_margin, 0.5, 3.0);
+        c.range("ranging.traffic_light_box_margin", r.traffic_light_box_margin, 0.5, 3.0);
+        c.range("ranging.obstacle_box_margin", r.obstacle_box_margin, 0.5, 3.0);
+        c.range("ranging.box_centre_sigma_px", r.box_centre_sigma_px, 0.01, 100.0);
+        c.range("ranging.box_size_sigma", r.box_size_sigma, 0.001, 1.0);
+        c.range("ranging.track_accel_sigma", r.track_accel_sigma, 0.0, 100.0);
+        c.range("ranging.track_odometry_sigma", r.track_odometry_sigma, 0.0, 1.0);
+        c.range("ranging.track_max_missed", r.track_max_missed, 0, 100);
+        c.range("ranging.stop_sign_red_fraction", r.stop_sign_red_fraction, 0.1, 1.0);
+        if r.method != "mono" && r.method != "stereo" {
+            c.fail("ranging.method", format!("{:?}", r.method), "\"mono\" or \"stereo\"");
+        }
+    }
+}
