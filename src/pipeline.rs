@@ -321,7 +321,7 @@ pub struct Pipeline {
 /// else an ideal pair of `[camera]` with `stereo.base_m`.
 fn stereo_ranging(cfg: &Config) -> Result<Option<crate::stereo::ranging::StereoRanging>, PipelineError> {
     use crate::stereo::ranging::StereoRanging;
-    if cfg.ranging.method != "stereo" {
+    if cfg.ranging.method != crate::config::RangingMethod::Stereo {
         return Ok(None);
     }
     if cfg.stereo.calibration.is_empty() {

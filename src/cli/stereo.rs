@@ -64,7 +64,7 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
         );
     }
     let (w, h) = l.dimensions();
-    let reference_left = cfg.stereo.reference == "left";
+    let reference_left = cfg.stereo.reference.is_left();
     let (mut gl, mut gr) = (image::GrayImage::new(0, 0), image::GrayImage::new(0, 0));
     rccar::detect::gray_from_rgb(&l, &mut gl);
     rccar::detect::gray_from_rgb(&r, &mut gr);

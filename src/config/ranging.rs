@@ -5,6 +5,35 @@
 
 use super::check::Checker;
 use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// `ranging.method`: where the behaviours' distances come from. A value other than these is
+/// refused when the configuration is read, naming the key, the value and the allowed ones.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RangingMethod {
+    /// `mono`: the tilt and box size of one camera (src/ranging.rs).
+    #[default]
+    Mono,
+    /// `stereo`: the disparity of a camera pair (`[stereo]`; docs/stereo.md).
+    Stereo,
+}
+
+impl RangingMethod {
+    /// The spelling in car.toml.
+    pub fn name(self) -> &'static str {
+        match self {
+            RangingMethod::Mono => "mono",
+            RangingMethod::Stereo => "stereo",
+        }
+    }
+}
+
+impl fmt::Display for RangingMethod {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// `[ranging]`: distance of each detected box by tilt ranging (src/ranging.rs, docs/ranging.md).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -48,9 +77,8 @@ pub struct RangingConfig {
     pub refine_by_colour: bool,
     /// Share of a stop sign's face (across the flats) that is red inside its white rim.
     pub stop_sign_red_fraction: f64,
-    /// Where the behaviours' distances come from: "mono" (the tilt and box size of one
-    /// camera) or "stereo" (the pair's disparity, `[stereo]`; docs/stereo.md).
-    pub method: String,
+    /// Where the behaviours' distances come from: `mono` or `stereo` ([`RangingMethod`]).
+    pub method: RangingMethod,
 }
 
 impl Default for RangingConfig {
@@ -74,7 +102,7 @@ impl Default for RangingConfig {
             track_max_missed: 3,
             refine_by_colour: true,
             stop_sign_red_fraction: 0.9,
-            method: "mono".into(),
+            method: RangingMethod::Mono,
         }
     }
 }
@@ -106,8 +134,39 @@ impl RangingConfig {
         c.range("ranging.track_odometry_sigma", r.track_odometry_sigma, 0.0, 1.0);
         c.range("ranging.track_max_missed", r.track_max_missed, 0, 100);
         c.range("ranging.stop_sign_red_fraction", r.stop_sign_red_fraction, 0.1, 1.0);
-        if r.method != "mono" && r.method != "stereo" {
-            c.fail("ranging.method", format!("{:?}", r.method), "\"mono\" or \"stereo\"");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::config::{Config, RangingMethod};
+
+    /// The TOML spellings are today's; another value names the key, the value and the
+    /// allowed ones, from a file and from `--set`.
+    #[test]
+    fn method_reads_its_spellings_and_names_a_wrong_one() {
+        for (text, want) in [("mono", RangingMethod::Mono), ("stereo", RangingMethod::Stereo)] {
+            let c = Config::from_toml_str(&format!("[ranging]\nmethod = \"{text}\"\n"), "t.toml").unwrap();
+            assert_eq!(
+                (c.ranging.method, c.ranging.method.to_string()),
+                (want, text.to_string())
+            );
+            assert!(c.to_toml().contains(&format!("method = \"{text}\"")));
         }
+        let e = Config::from_toml_str("[ranging]\nmethod = \"Stereo\"\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "t.toml: `ranging.method` = \"Stereo\": unknown variant `Stereo`, expected `mono` or `stereo`"
+        );
+        let e = Config::default()
+            .with_override("ranging.method=laser")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`ranging.method` = \"laser\"") && e.contains("expected `mono` or `stereo`"),
+            "{e}"
+        );
     }
 }

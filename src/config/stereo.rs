@@ -4,6 +4,49 @@
 
 use super::check::Checker;
 use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// `stereo.reference`: the camera of the pair that lane keeping and detection run on (the
+/// other is only searched for matches). A value other than these is refused when the
+/// configuration is read, naming the key, the value and the allowed ones.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StereoReference {
+    /// `left`: the left camera (the other is to its right).
+    #[default]
+    Left,
+    /// `right`: the right camera (the other is to its left).
+    Right,
+}
+
+impl StereoReference {
+    /// The spelling in car.toml.
+    pub fn name(self) -> &'static str {
+        match self {
+            StereoReference::Left => "left",
+            StereoReference::Right => "right",
+        }
+    }
+
+    /// Whether the reference is the left camera.
+    pub fn is_left(self) -> bool {
+        self == StereoReference::Left
+    }
+
+    /// The other camera of the pair.
+    pub fn other(self) -> StereoReference {
+        match self {
+            StereoReference::Left => StereoReference::Right,
+            StereoReference::Right => StereoReference::Left,
+        }
+    }
+}
+
+impl fmt::Display for StereoReference {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// `[stereo]`: a second camera for stereo ranging (src/stereo/, docs/stereo.md; Zaarane et
 /// al. 2020, Abdollahi 2011).
@@ -12,8 +55,8 @@ use serde::{Deserialize, Serialize};
 pub struct StereoConfig {
     /// Distance between the two lenses, metres (used when `calibration` is empty).
     pub base_m: f64,
-    /// Which camera detection runs on: `left` or `right`.
-    pub reference: String,
+    /// Which camera detection runs on: `left` or `right` ([`StereoReference`]).
+    pub reference: StereoReference,
     /// Results file of `rccar calibrate stereo` (JSON); empty = an ideal pair of `[camera]`.
     pub calibration: String,
     /// Lowest normalised cross-correlation that counts as a match (-1..1).
@@ -34,7 +77,7 @@ impl Default for StereoConfig {
     fn default() -> Self {
         Self {
             base_m: 0.06,
-            reference: "left".into(),
+            reference: StereoReference::Left,
             calibration: String::new(),
             min_ncc: 0.6,
             max_disparity_px: 120,
@@ -51,16 +94,39 @@ impl StereoConfig {
     pub(super) fn check(&self, c: &mut Checker, frame_width: u32) {
         let st = self;
         c.range("stereo.base_m", st.base_m, 0.01, 2.0);
-        if st.reference != "left" && st.reference != "right" {
-            c.fail(
-                "stereo.reference",
-                format!("{:?}", st.reference),
-                "\"left\" or \"right\"",
-            );
-        }
         c.range("stereo.min_ncc", st.min_ncc, -1.0, 1.0);
         c.range("stereo.max_disparity_px", st.max_disparity_px, 1, frame_width.max(1));
         c.range("stereo.max_skew_ms", st.max_skew_ms, 0.0, 1000.0);
         c.range("stereo.near_peak_ratio", st.near_peak_ratio, 0.5, 1.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::config::{Config, StereoReference};
+
+    /// The TOML spellings are today's; another value names the key, the value and the
+    /// allowed ones.
+    #[test]
+    fn reference_reads_its_spellings_and_names_a_wrong_one() {
+        for (text, want) in [("left", StereoReference::Left), ("right", StereoReference::Right)] {
+            let c = Config::default()
+                .with_override(&format!("stereo.reference={text}"))
+                .unwrap();
+            assert_eq!(
+                (c.stereo.reference, c.stereo.reference.to_string()),
+                (want, text.to_string())
+            );
+            assert_eq!(c.stereo.reference.is_left(), text == "left");
+            assert_ne!(c.stereo.reference.other(), want);
+            assert!(c.to_toml().contains(&format!("reference = \"{text}\"")));
+        }
+        let e = Config::from_toml_str("[stereo]\nreference = \"middle\"\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "t.toml: `stereo.reference` = \"middle\": unknown variant `middle`, expected `left` or `right`"
+        );
     }
 }

@@ -137,7 +137,7 @@ pub fn sign_face_box(r: &Renderer, pose: &Pose, ob: &super::track::Object) -> Op
 pub fn other_camera(cfg: &Config, scene: Arc<Scene>, opts: RenderOptions) -> OtherCamera {
     let mut cam = PinholeCamera::from_config(&cfg.camera);
     let base = cfg.stereo.base_m;
-    cam.lateral_m = if cfg.stereo.reference != "right" { -base } else { base };
+    cam.lateral_m = if cfg.stereo.reference.is_left() { -base } else { base };
     let mut o = opts;
     o.seed = o.seed.wrapping_add(0x5EED);
     let lens = LensWarp::from_config(cfg).map(|l| (l, RgbImage::new(0, 0)));

@@ -148,7 +148,7 @@ impl StereoRanging {
 
     /// With the geometry of a calibration (`StereoGeometry::from_calibration`).
     pub fn with_geometry(cfg: &Config, geometry: StereoGeometry) -> Self {
-        let left = cfg.stereo.reference != "right";
+        let left = cfg.stereo.reference.is_left();
         Self {
             options: MatchOptions {
                 max_disparity: cfg.stereo.max_disparity_px,
@@ -173,7 +173,7 @@ impl StereoRanging {
     /// every pair ([`super::rectify::PairRectifier`]), from the file `rccar calibrate stereo`
     /// wrote (loaded by the caller, e.g. [`crate::pipeline::Pipeline::new`]).
     pub fn with_calibration(cfg: &Config, st: &crate::calib::file::StereoCalibration) -> Self {
-        let left = cfg.stereo.reference != "right";
+        let left = cfg.stereo.reference.is_left();
         let geometry = StereoGeometry::from_calibration(st, cfg.camera.tilt_deg.to_radians(), left);
         let mut s = Self::with_geometry(cfg, geometry);
         s.rectifier = Some(super::rectify::PairRectifier::new(st, left));
