@@ -21,7 +21,7 @@
 
 use rccar::config::Config;
 use rccar::detect::{CascadeSpec, DetectParams, DetectStage};
-use rccar::ranging::{BoxRanging, ObjectClass};
+use rccar::ranging::ObjectClass;
 use rccar::sim::render::RenderOptions;
 use rccar::sim::scene::Scene;
 use rccar::sim::stereo::StereoRig;
@@ -106,7 +106,7 @@ fn measure(s: &mut Setup, base: f64, d: f64, matcher: &mut Matcher) -> Option<Ro
         (rect.x + rect.width) as f64 - 0.5,
         (rect.y + rect.height) as f64 - 0.5,
     ];
-    let mono = BoxRanging::from_config(&cfg.camera, &cfg.ranging)
+    let mono = cfg.ranging.box_ranging(&cfg.camera)
         .range(s.class, bbox)
         .map(|r| r.0);
     let mut planes = PairPlanes::default();

@@ -3,6 +3,7 @@
 //! (m/s) and the passing manoeuvre (steer and throttle 0..=1, distances in metres).
 
 use super::check::Checker;
+use crate::control::behaviour::BehaviourOptions;
 use serde::{Deserialize, Serialize};
 
 /// `[behaviour]`: the state machine of src/control/behaviour.rs (docs/behaviour.md).
@@ -125,5 +126,35 @@ impl BehaviourConfig {
         c.range("behaviour.pass_return_m", b.pass_return_m, 0.1, 50.0);
         c.range("behaviour.lost_throttle", b.lost_throttle, 0.0, 1.0);
         c.range("behaviour.lost_stop_s", b.lost_stop_s, 0.0, 60.0);
+    }
+}
+
+impl From<&BehaviourConfig> for BehaviourOptions {
+    /// The state machine's thresholds of `[behaviour]` (`stop_window_m` and `pass_return_m`
+    /// are the simulator's score, not the machine's).
+    fn from(b: &BehaviourConfig) -> Self {
+        Self {
+            confirm_frames: b.confirm_frames,
+            window_frames: b.window_frames,
+            standstill_mps: b.standstill_mps,
+            stop_trigger_m: b.stop_trigger_m,
+            stop_hold_s: b.stop_hold_s,
+            stop_ignore_m: b.stop_ignore_m,
+            stop_ignore_s: b.stop_ignore_s,
+            light_trigger_m: b.light_trigger_m,
+            green_confirm_frames: b.green_confirm_frames,
+            light_lost_s: b.light_lost_s,
+            obstacle_stop_m: b.obstacle_stop_m,
+            obstacle_lane_half_m: b.obstacle_lane_half_m,
+            pass_enabled: b.pass_enabled,
+            pass_trigger_m: b.pass_trigger_m,
+            pass_wait_s: b.pass_wait_s,
+            pass_steer: b.pass_steer,
+            pass_turn_m: b.pass_turn_m,
+            pass_along_m: b.pass_along_m,
+            pass_throttle: b.pass_throttle,
+            lost_throttle: b.lost_throttle,
+            lost_stop_s: b.lost_stop_s,
+        }
     }
 }

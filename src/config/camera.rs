@@ -2,6 +2,7 @@
 //! is mounted on the car (lens height in metres, tilt and field of view in degrees).
 
 use super::check::Checker;
+use crate::camera::PinholeCamera;
 use serde::{Deserialize, Serialize};
 
 /// `[camera]`: the image the pipeline works on and the camera's pose on the car.
@@ -44,5 +45,26 @@ impl CameraConfig {
         c.range("camera.height_m", self.height_m, 0.01, 5.0);
         c.range("camera.tilt_deg", self.tilt_deg, -10.0, 89.0);
         c.range("camera.hfov_deg", self.hfov_deg, 10.0, 170.0);
+    }
+}
+
+impl From<&CameraConfig> for PinholeCamera {
+    /// The camera described by `[camera]`.
+    fn from(c: &CameraConfig) -> Self {
+        PinholeCamera::new(c.width, c.height, c.hfov_deg, c.height_m, c.tilt_deg)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The camera tests of src/camera.rs use the shipped camera by its numbers.
+    #[test]
+    fn default_is_the_camera_the_stage_tests_use() {
+        assert_eq!(
+            PinholeCamera::from(&CameraConfig::default()),
+            PinholeCamera::new(320, 240, 62.2, 0.20, 20.0)
+        );
     }
 }

@@ -3,29 +3,13 @@
 //! the lane width and the car's centre offset (bird's-eye pixels).
 
 use super::check::Checker;
+use super::Config;
+pub use crate::lane::lines::PeakMode;
+use crate::lane::lines::LineOptions;
+pub use crate::lane::threshold::ThresholdMode;
+use crate::lane::warp::WarpError;
+use crate::lane::{CannyOptions, LaneDetector, LaneOptions};
 use serde::{Deserialize, Serialize};
-
-/// How the binary image is thresholded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ThresholdMode {
-    /// Fixed grey level (`lane.threshold`).
-    Fixed,
-    /// Otsu's method picks the level per frame.
-    Otsu,
-}
-
-/// How a line's column is read from its histogram peak (`lane.peak`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum PeakMode {
-    /// Centroid of the run of columns around the highest that reach half its height
-    /// (sub-pixel; a wide bright blob next to the line drags it).
-    #[default]
-    Centroid,
-    /// The highest column (the paper's argmax; the middle of a flat top), whole pixels.
-    Argmax,
-}
 
 /// `[lane]`: extracting the lane lines from the bird's-eye image.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -96,5 +80,35 @@ impl LaneConfig {
             -(bird_width as f64) / 2.0,
             bird_width as f64 / 2.0,
         );
+    }
+}
+
+impl From<&LaneConfig> for LaneOptions {
+    /// The lane stage's options of `[lane]`.
+    fn from(l: &LaneConfig) -> Self {
+        Self {
+            threshold_mode: l.threshold_mode,
+            threshold: l.threshold,
+            canny: CannyOptions {
+                low: l.canny_low,
+                high: l.canny_high,
+                blur: l.blur,
+            },
+            lines: LineOptions {
+                band: l.band,
+                min_peak: l.min_peak,
+                peak: l.peak,
+                lane_width_px: l.lane_width_px,
+                width_tolerance: l.width_tolerance,
+                center_offset_px: l.center_offset_px,
+            },
+        }
+    }
+}
+
+impl Config {
+    /// The lane detector of `[camera]` (frame size), `[warp]` and `[lane]`.
+    pub fn lane_detector(&self) -> Result<LaneDetector, WarpError> {
+        LaneDetector::new(self.camera.width, self.camera.height, &(&self.warp).into(), (&self.lane).into())
     }
 }

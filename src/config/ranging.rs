@@ -4,6 +4,10 @@
 //! the behaviours' distances come from (`method`).
 
 use super::check::Checker;
+use super::CameraConfig;
+use crate::camera::PinholeCamera;
+use crate::ranging::track::TrackerOptions;
+use crate::ranging::{BoxRanging, ClassBox, TiltRanging};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
@@ -134,6 +138,52 @@ impl RangingConfig {
         c.range("ranging.track_odometry_sigma", r.track_odometry_sigma, 0.0, 1.0);
         c.range("ranging.track_max_missed", r.track_max_missed, 0, 100);
         c.range("ranging.stop_sign_red_fraction", r.stop_sign_red_fraction, 0.1, 1.0);
+    }
+}
+
+impl RangingConfig {
+    /// Box ranging with the camera of `[camera]` corrected by the calibration of `[ranging]`
+    /// (`v0_offset_px`, `a_y_scale`), what each class's box frames and the box noise.
+    pub fn box_ranging(&self, camera: &CameraConfig) -> BoxRanging {
+        let mut camera = PinholeCamera::from(camera);
+        camera.v0 += self.v0_offset_px;
+        camera.f_px *= self.a_y_scale;
+        let class = |size: [f64; 2], bottom_m: f64, margin: f64| ClassBox {
+            width_m: size[0],
+            height_m: size[1],
+            bottom_m,
+            margin,
+        };
+        BoxRanging {
+            tilt: TiltRanging::from_camera(&camera),
+            camera,
+            classes: [
+                class(self.stop_sign_size_m, self.stop_sign_bottom_m, self.stop_sign_box_margin),
+                class(
+                    self.traffic_light_size_m,
+                    self.traffic_light_bottom_m,
+                    self.traffic_light_box_margin,
+                ),
+                class(self.obstacle_size_m, self.obstacle_bottom_m, self.obstacle_box_margin),
+            ],
+            centre_sigma_px: self.box_centre_sigma_px,
+            size_sigma: self.box_size_sigma,
+            refine: self.refine_by_colour,
+            red_fraction: self.stop_sign_red_fraction,
+        }
+    }
+}
+
+impl From<&RangingConfig> for TrackerOptions {
+    /// The object tracker's noise and patience of `[ranging]` (its association gates are the
+    /// tracker's own defaults).
+    fn from(r: &RangingConfig) -> Self {
+        TrackerOptions {
+            accel_sigma: r.track_accel_sigma,
+            odometry_sigma: r.track_odometry_sigma,
+            max_missed: r.track_max_missed,
+            ..Default::default()
+        }
     }
 }
 

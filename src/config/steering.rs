@@ -2,6 +2,7 @@
 //! integral, derivative and its filter; steer units, -1..=1, for the limits).
 
 use super::check::Checker;
+use crate::control::pid::PidGains;
 use serde::{Deserialize, Serialize};
 
 /// `[steering]`: PID on the normalised lane error.
@@ -50,5 +51,20 @@ impl SteeringConfig {
         c.range("steering.max_steer", s.max_steer, 0.0, 1.0);
         c.range("steering.slew_rate", s.slew_rate, 0.1, 1000.0);
         c.range("steering.derivative_tau", s.derivative_tau, 0.0, 5.0);
+    }
+}
+
+impl From<&SteeringConfig> for PidGains {
+    /// The PID's gains and limits of `[steering]`.
+    fn from(s: &SteeringConfig) -> Self {
+        Self {
+            kp: s.kp,
+            ki: s.ki,
+            kd: s.kd,
+            integral_limit: s.integral_limit,
+            max_out: s.max_steer,
+            slew_rate: s.slew_rate,
+            derivative_tau: s.derivative_tau,
+        }
     }
 }

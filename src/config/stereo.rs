@@ -3,6 +3,11 @@
 //! pixels) and how far apart in time two frames may be paired (milliseconds).
 
 use super::check::Checker;
+use super::Config;
+use crate::calib::file::StereoCalibration;
+use crate::camera::PinholeCamera;
+use crate::stereo::ranging::StereoRanging;
+use crate::stereo::{MatchOptions, StereoGeometry};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
@@ -98,6 +103,35 @@ impl StereoConfig {
         c.range("stereo.max_disparity_px", st.max_disparity_px, 1, frame_width.max(1));
         c.range("stereo.max_skew_ms", st.max_skew_ms, 0.0, 1000.0);
         c.range("stereo.near_peak_ratio", st.near_peak_ratio, 0.5, 1.0);
+    }
+}
+
+impl From<&StereoConfig> for MatchOptions {
+    /// The box matcher's thresholds and reference camera of `[stereo]`.
+    fn from(st: &StereoConfig) -> Self {
+        MatchOptions {
+            max_disparity: st.max_disparity_px,
+            min_score: st.min_ncc,
+            near_peak_ratio: st.near_peak_ratio,
+            reject_repeats: st.reject_repeats,
+            reference_left: st.reference.is_left(),
+            ..MatchOptions::default()
+        }
+    }
+}
+
+impl Config {
+    /// Stereo ranging of an ideal, rectified pair of `[camera]` with `[stereo]`'s base and
+    /// reference.
+    pub fn stereo_ranging(&self) -> StereoRanging {
+        let cam = PinholeCamera::from(&self.camera);
+        StereoRanging::new(StereoGeometry::ideal(&cam, self.stereo.base_m), (&self.stereo).into())
+    }
+
+    /// Stereo ranging of the calibrated pair `st` (the file `stereo.calibration` names), with
+    /// `[camera]`'s tilt and `[stereo]`'s matcher.
+    pub fn stereo_ranging_calibrated(&self, st: &StereoCalibration) -> StereoRanging {
+        StereoRanging::with_calibration(st, self.camera.tilt_deg.to_radians(), (&self.stereo).into())
     }
 }
 

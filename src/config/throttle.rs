@@ -2,6 +2,7 @@
 //! and how long the lane may be lost, seconds).
 
 use super::check::Checker;
+use crate::control::throttle::ThrottleOptions;
 use serde::{Deserialize, Serialize};
 
 /// `[throttle]`: speed policy.
@@ -37,5 +38,17 @@ impl ThrottleConfig {
         c.range("throttle.min", t.min, 0.0, t.base.max(0.0));
         c.range("throttle.error_slowdown", t.error_slowdown, 0.0, 5.0);
         c.range("throttle.lost_timeout_s", t.lost_timeout_s, 0.0, 60.0);
+    }
+}
+
+impl From<&ThrottleConfig> for ThrottleOptions {
+    /// The throttle policy of `[throttle]`.
+    fn from(t: &ThrottleConfig) -> Self {
+        Self {
+            base: t.base,
+            min: t.min,
+            error_slowdown: t.error_slowdown,
+            lost_timeout_s: t.lost_timeout_s,
+        }
     }
 }

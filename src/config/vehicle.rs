@@ -3,6 +3,7 @@
 //! response to the throttle (metres per second, seconds).
 
 use super::check::Checker;
+use crate::control::behaviour::DeadReckoning;
 use serde::{Deserialize, Serialize};
 
 /// `[vehicle]`: the simulated car, a kinematic bicycle (rear-axle reference point).
@@ -54,5 +55,12 @@ impl VehicleConfig {
         c.range("vehicle.servo_delay_s", v.servo_delay_s, 0.0, 1.0);
         c.range("vehicle.max_speed_mps", v.max_speed_mps, 0.01, 20.0);
         c.range("vehicle.speed_tau_s", v.speed_tau_s, 0.0, 10.0);
+    }
+}
+
+impl From<&VehicleConfig> for DeadReckoning {
+    /// Dead reckoning at rest with the speed model of `[vehicle]`.
+    fn from(v: &VehicleConfig) -> Self {
+        DeadReckoning::new(v.max_speed_mps, v.speed_tau_s)
     }
 }

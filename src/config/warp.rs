@@ -2,6 +2,7 @@
 //! bird's-eye image it is warped to (pixels).
 
 use super::check::Checker;
+use crate::lane::WarpOptions;
 use serde::{Deserialize, Serialize};
 
 /// `[warp]`: the region of interest and its bird's-eye (top-down) view.
@@ -66,6 +67,36 @@ impl WarpConfig {
                     "left corners [0], [3] left of the right corners [1], [2]; this ROI is mirrored (make one with `rccar config roi`)",
                 );
             }
+        }
+    }
+}
+
+impl From<&WarpConfig> for WarpOptions {
+    /// The lane stage's bird's-eye view of `[warp]`.
+    fn from(w: &WarpConfig) -> Self {
+        Self {
+            src: w.src,
+            out_width: w.out_width,
+            out_height: w.out_height,
+            exact: w.exact,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::PinholeCamera;
+
+    /// The default ROI is the ground rectangle 0.40..1.00 m ahead, 0.25 m either side, seen by
+    /// the default camera (`rccar config roi`).
+    #[test]
+    fn default_roi_matches_config() {
+        let cam = PinholeCamera::from(&crate::config::CameraConfig::default());
+        let roi = cam.roi_of_ground_rect(0.40, 1.00, 0.25).unwrap();
+        let cfg = WarpConfig::default().src;
+        for (a, b) in roi.iter().zip(cfg.iter()) {
+            assert!((a[0] - b[0]).abs() < 0.01 && (a[1] - b[1]).abs() < 0.01, "{roi:?}");
         }
     }
 }
