@@ -122,12 +122,7 @@ pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectSt
     if !cfg.enabled {
         return Ok((None, Vec::new()));
     }
-    let params = DetectParams {
-        scale_factor: cfg.scale_factor,
-        min_neighbors: cfg.min_neighbors,
-        min_size: (cfg.min_size_px, cfg.min_size_px),
-        ..Default::default()
-    };
+    let params = DetectParams::from(cfg);
     let mut specs = Vec::new();
     let mut missing = Vec::new();
     for (label, file, light) in [

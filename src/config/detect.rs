@@ -3,6 +3,7 @@
 //! metres), and how often (frames).
 
 use super::check::Checker;
+use crate::detect::detector::DetectParams;
 use serde::{Deserialize, Serialize};
 
 /// `[detect]`: the cascades the pipeline runs on every frame (docs/detect.md). A missing file
@@ -111,5 +112,18 @@ impl DetectConfig {
             }
         }
         c.range("detect.every_n_frames", d.every_n_frames, 1, 30);
+    }
+}
+
+impl From<&DetectConfig> for DetectParams {
+    /// The cascade scan's parameters of `[detect]` (the same for every class; each class's
+    /// region and sizes are set per cascade by the pipeline, `pipeline::detect_limits`).
+    fn from(d: &DetectConfig) -> Self {
+        DetectParams {
+            scale_factor: d.scale_factor,
+            min_neighbors: d.min_neighbors,
+            min_size: (d.min_size_px, d.min_size_px),
+            ..Default::default()
+        }
     }
 }
