@@ -1,6 +1,6 @@
 //! The car's configuration: `config/car.toml`, the one file students edit.
 //!
-//! Loading goes in three steps ([`layers`]):
+//! Loading goes in three steps (`layers.rs`):
 //! 1. the base file is parsed as TOML (a syntax error names its line);
 //! 2. an optional personal override file (git-ignored, e.g. `config/local.toml`) is merged on
 //!    top, table by table, and `key=value` overrides from the command line after it;
