@@ -146,12 +146,12 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     let mut tel = JsonlWriter::new(tel_file, tel_path.display().to_string());
 
     let mut pipeline = Pipeline::new(&cfg)?;
-    let stereo = cfg.ranging.method == "stereo";
+    let stereo = cfg.ranging.method == rccar::config::RangingMethod::Stereo;
     if let Some(r) = &a.camera_right {
         if !stereo {
             bail!(
                 "--camera-right {r}: ranging.method is {:?}, so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
-                cfg.ranging.method
+                cfg.ranging.method.name()
             );
         }
         if a.camera == "sim" {

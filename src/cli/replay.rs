@@ -100,11 +100,11 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
     let mut pipeline = Pipeline::new(&cfg)?;
     if let Some(r) = &a.right {
-        if cfg.ranging.method != "stereo" {
+        if cfg.ranging.method != rccar::config::RangingMethod::Stereo {
             bail!(
                 "--right {}: ranging.method is {:?}, so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
                 r.display(),
-                cfg.ranging.method
+                cfg.ranging.method.name()
             );
         }
         rccar::drive::stereo::install(&mut pipeline);

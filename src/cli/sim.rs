@@ -122,7 +122,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
     let mut pipeline = Pipeline::new(&cfg)?;
     // ranging.method = "stereo": a camera pair (src/sim/stereo.rs `other_camera`).
-    let stereo = cfg.ranging.method == "stereo" && !a.truth_boxes;
+    let stereo = cfg.ranging.method == rccar::config::RangingMethod::Stereo && !a.truth_boxes;
     if a.record_right.is_some() && !stereo {
         bail!(
             "--record-right: there is one camera; it needs ranging.method = \"stereo\" (--set ranging.method=stereo) and no --truth-boxes"
@@ -153,7 +153,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             "sim: stereo pair, reference camera {} with the other {} m to its {} (ranging.method = \"stereo\")",
             cfg.stereo.reference,
             cfg.stereo.base_m,
-            if cfg.stereo.reference == "right" { "left" } else { "right" }
+            cfg.stereo.reference.other()
         );
     }
     // Without recording nobody looks at the frames: render only the rows the pipeline reads
@@ -187,7 +187,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         world: world.clone(),
         record: a.record.clone(),
         record_right: a.record_right.clone(),
-        reference_left: cfg.stereo.reference != "right",
+        reference_left: cfg.stereo.reference.is_left(),
         stereo: StereoTally::default(),
         series: plot::Series::default(),
         kick: step.filter(|s| s.kick).map(|s| (s.t, s.dy)),
