@@ -161,7 +161,7 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     if let Some(mb) = a.record_max_mb {
         cfg = cfg.with_override(&format!("record.max_mb={mb}"))?;
     }
-    let spec = spec(&a, PathBuf::from(&cfg.sim.track), cfg.ranging.method == "stereo")?;
+    let spec = spec(&a, PathBuf::from(&cfg.sim.track), cfg.ranging.method == rccar::config::RangingMethod::Stereo)?;
     let stop = super::signals::install();
     let clock = Arc::new(WallClock::new());
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;

@@ -97,11 +97,11 @@ impl Observer for Summary {
 /// Runs the replay.
 pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
-    if let (Some(r), false) = (&a.right, cfg.ranging.method == "stereo") {
+    if let (Some(r), false) = (&a.right, cfg.ranging.method == rccar::config::RangingMethod::Stereo) {
         anyhow::bail!(
             "--right {}: ranging.method is {:?}, so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
             r.display(),
-            cfg.ranging.method
+            cfg.ranging.method.name()
         );
     }
     let stop = super::signals::install();

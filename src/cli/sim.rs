@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use rccar::sim::step::{step_metrics, StepOptions};
 use rccar::sim::sweep::{self, Chatter, SweepRun};
 use clap::Args;
-use rccar::config::Config;
+use rccar::config::{Config, RangingMethod, StereoReference};
 use rccar::drive::{Clock, Level, LoopEnd, NoClock, Observer, StopReason};
 use rccar::session::{ArmAt, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
 use rccar::sim::plot;
@@ -107,7 +107,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         }
         return run_sweep(&a, &cfg, &track, font);
     }
-    let stereo = cfg.ranging.method == "stereo" && !a.truth_boxes;
+    let stereo = cfg.ranging.method == RangingMethod::Stereo && !a.truth_boxes;
     if a.record_right.is_some() && !stereo {
         bail!(
             "--record-right: there is one camera; it needs ranging.method = \"stereo\" (--set ranging.method=stereo) and no --truth-boxes"
@@ -165,7 +165,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut report = RunReport::new(world.clone(), say);
     report.record = a.record.clone();
     report.record_right = a.record_right.clone();
-    report.reference_left = cfg.stereo.reference != "right";
+    report.reference_left = cfg.stereo.reference != StereoReference::Right;
     report.kick = step.filter(|s| s.kick).map(|s| (s.t, s.dy));
     let started = std::time::Instant::now();
     let end = {

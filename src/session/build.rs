@@ -5,7 +5,7 @@
 use super::observers::{CameraHealth, CarState, Pacer, StatusLine};
 use super::spec::*;
 use super::{Own, Session, SessionError};
-use crate::config::Config;
+use crate::config::{Config, RangingMethod, StereoReference};
 use crate::control::Command;
 use crate::drive::{Actor, Arming, Driver, Gate, GateOptions};
 use crate::health::{Health, Part, PartState};
@@ -157,7 +157,7 @@ fn is_wall_clock(spec: &SessionSpec) -> bool {
 }
 
 fn is_pair(cfg: &Config, spec: &SessionSpec) -> bool {
-    cfg.ranging.method == "stereo"
+    cfg.ranging.method == RangingMethod::Stereo
         && match &spec.source {
             SourceSpec::Cameras { right, .. } => right.is_some(),
             SourceSpec::Sim { .. } => !spec.truth_boxes,
@@ -173,11 +173,11 @@ fn check(cfg: &Config, spec: &SessionSpec) -> Result<(), SessionError> {
     }
     let timing = source_timing(spec);
     match (&spec.source, &spec.sink) {
-        (SourceSpec::Cameras { right: Some(r), .. }, _) if cfg.ranging.method != "stereo" => {
+        (SourceSpec::Cameras { right: Some(r), .. }, _) if cfg.ranging.method != RangingMethod::Stereo => {
             return Err(invalid(format!(
                 "a second camera ({}): ranging.method is {:?}, so it would not be used; add --set ranging.method=stereo (docs/stereo.md)",
                 r.label(),
-                cfg.ranging.method
+                cfg.ranging.method.name()
             )))
         }
         (SourceSpec::Cameras { timing: Timing::RealTime, .. }, _) => {
@@ -218,7 +218,7 @@ fn setup_pipeline(cfg: &Config, spec: &SessionSpec, pipeline: &mut Pipeline, par
         if let Some(line) = crate::drive::stereo::calibration_line(pipeline, cfg) {
             parts.notes.push((Level::Info, line));
         }
-    } else if cfg.ranging.method == "stereo" {
+    } else if cfg.ranging.method == RangingMethod::Stereo {
         parts.notes.push((
             Level::Warn,
             "ranging: method = \"stereo\" but this run has one camera; ranges are monocular \
@@ -325,7 +325,7 @@ fn sim_camera(
                 "stereo pair, reference camera {} with the other {} m to its {} (ranging.method = \"stereo\")",
                 cfg.stereo.reference,
                 cfg.stereo.base_m,
-                if cfg.stereo.reference == "right" { "left" } else { "right" }
+                if cfg.stereo.reference == StereoReference::Right { "left" } else { "right" }
             ),
         ));
     }
