@@ -69,7 +69,10 @@ impl RunStart {
     /// The start as a folder name: local time `YYYYmmdd-HHMMSS`.
     pub fn stamp(&self) -> String {
         let c = Civil::from_unix(self.unix_s + i64::from(self.utc_offset_s));
-        format!("{:04}{:02}{:02}-{:02}{:02}{:02}", c.year, c.month, c.day, c.hour, c.minute, c.second)
+        format!(
+            "{:04}{:02}{:02}-{:02}{:02}{:02}",
+            c.year, c.month, c.day, c.hour, c.minute, c.second
+        )
     }
 
     /// The start in ISO 8601 with the UTC offset, e.g. `2026-11-25T14:30:12+01:00`.
@@ -104,7 +107,7 @@ impl Civil {
         let z = days + 719_468;
         let era = z.div_euclid(146_097);
         let doe = z.rem_euclid(146_097); // day of era, 0..=146096
-        // 2. Year of era, day of year (from March 1), month (March = 0).
+                                         // 2. Year of era, day of year (from March 1), month (March = 0).
         let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
         let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
         let mp = (5 * doy + 2) / 153;
@@ -286,6 +289,19 @@ pub enum RunState {
     Failed,
 }
 
+impl RunState {
+    /// The state of a run whose loop ended by `stop` (`None`: it ran to its end): Ctrl-C and
+    /// SIGTERM interrupt, a fault fails, a requested stop (`--seconds`, the button) finishes.
+    pub fn from_stop(stop: Option<crate::drive::StopReason>) -> RunState {
+        use crate::drive::StopReason;
+        match stop {
+            None | Some(StopReason::Requested) => RunState::Finished,
+            Some(StopReason::Interrupt | StopReason::Terminate) => RunState::Interrupted,
+            Some(StopReason::Fault) => RunState::Failed,
+        }
+    }
+}
+
 /// The contents of run.json.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunRecord {
@@ -357,7 +373,11 @@ impl RunDir {
                     return Err(RunDirError::InsideInput {
                         flag: flag.to_string(),
                         path: p.to_path_buf(),
-                        how: if resolved == inp { "the same folder as" } else { "inside" },
+                        how: if resolved == inp {
+                            "the same folder as"
+                        } else {
+                            "inside"
+                        },
                         input_flag: input_flag.clone(),
                         input: input.clone(),
                     });
@@ -551,7 +571,11 @@ impl RunDir {
             self.ancestors.extend(missing);
         }
         for n in 1..=MAX_SAME_SECOND {
-            let name = if n == 1 { stamp.to_string() } else { format!("{stamp}-{n}") };
+            let name = if n == 1 {
+                stamp.to_string()
+            } else {
+                format!("{stamp}-{n}")
+            };
             let dir = parent.join(&name);
             match std::fs::create_dir(&dir) {
                 Ok(()) => {
@@ -730,10 +754,17 @@ pub fn check_new_or_empty(flag: &str, p: &Path, utc_offset_s: i32) -> Result<(),
 fn describe_run(dir: &Path, names: &[String], utc_offset_s: i32) -> Option<String> {
     let has = |n: &str| names.iter().any(|x| x == n);
     let tel = dir.join(TELEMETRY_FILE);
-    let frames = || count_lines(&tel).ok().map(|n| format!(" ({n} frames)")).unwrap_or_default();
+    let frames = || {
+        count_lines(&tel)
+            .ok()
+            .map(|n| format!(" ({n} frames)"))
+            .unwrap_or_default()
+    };
     if has(RUN_FILE) {
         let rec = read_record(&dir.join(RUN_FILE)).ok();
-        let date = rec.as_ref().map_or_else(|| "an unknown date".to_string(), |r| readable(&r.started));
+        let date = rec
+            .as_ref()
+            .map_or_else(|| "an unknown date".to_string(), |r| readable(&r.started));
         let n = match rec.as_ref().and_then(|r| r.telemetry_frames) {
             Some(n) => format!(" ({n} frames)"),
             None if tel.is_file() => frames(),
@@ -747,8 +778,14 @@ fn describe_run(dir: &Path, names: &[String], utc_offset_s: i32) -> Option<Strin
             .filter_map(|n| std::fs::metadata(dir.join(n)).and_then(|m| m.modified()).ok())
             .max()
             .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok());
-        let date = newest.map_or_else(|| "an unknown date".to_string(), |d| readable(&iso8601(d.as_secs() as i64, utc_offset_s)));
-        return Some(format!("a run of {date}{}", if tel.is_file() { frames() } else { String::new() }));
+        let date = newest.map_or_else(
+            || "an unknown date".to_string(),
+            |d| readable(&iso8601(d.as_secs() as i64, utc_offset_s)),
+        );
+        return Some(format!(
+            "a run of {date}{}",
+            if tel.is_file() { frames() } else { String::new() }
+        ));
     }
     let n = count_frames(dir);
     (n > 0).then(|| format!("{n} frames (a recording)"))
@@ -765,7 +802,11 @@ fn count_frames(dir: &Path) -> usize {
     let mut n = 0;
     for e in rd.flatten() {
         let p = e.path();
-        if p.is_dir() && e.file_name().to_string_lossy().starts_with(crate::record::SEGMENT_PREFIX) {
+        if p.is_dir()
+            && e.file_name()
+                .to_string_lossy()
+                .starts_with(crate::record::SEGMENT_PREFIX)
+        {
             n += std::fs::read_dir(&p).map_or(0, |r| r.flatten().filter(|e| is_frame(&e.path())).count());
         } else if is_frame(&p) {
             n += 1;
@@ -848,7 +889,10 @@ pub fn check_run(dir: &Path) -> Result<RunCheck, RunDirError> {
         if !p.is_file() {
             continue;
         }
-        let text = std::fs::read_to_string(&p).map_err(|source| RunDirError::Read { path: p.clone(), source })?;
+        let text = std::fs::read_to_string(&p).map_err(|source| RunDirError::Read {
+            path: p.clone(),
+            source,
+        })?;
         let v: serde_json::Value = match serde_json::from_str(&text) {
             Ok(v) => v,
             Err(e) => {
@@ -866,7 +910,9 @@ pub fn check_run(dir: &Path) -> Result<RunCheck, RunDirError> {
             for (name, theirs) in &ids {
                 match theirs {
                     Some(t) if t == id => {}
-                    Some(t) => c.problems.push(format!("{name} is run {t}'s, {RUN_FILE} is run {id}'s")),
+                    Some(t) => c
+                        .problems
+                        .push(format!("{name} is run {t}'s, {RUN_FILE} is run {id}'s")),
                     None => c.problems.push(format!(
                         "{name} has no run_id: not written by run {id} (an older rccar's file, or copied in)"
                     )),
@@ -887,7 +933,9 @@ pub fn check_run(dir: &Path) -> Result<RunCheck, RunDirError> {
     if let Some(n) = tel_lines {
         if let Some(m) = summary_frames {
             if m != n {
-                c.problems.push(format!("{TELEMETRY_FILE} has {n} frames, summary.json says the run had {m}"));
+                c.problems.push(format!(
+                    "{TELEMETRY_FILE} has {n} frames, summary.json says the run had {m}"
+                ));
             }
         }
     }
@@ -901,7 +949,10 @@ pub fn check_run(dir: &Path) -> Result<RunCheck, RunDirError> {
                 "{TELEMETRY_FILE} has {n} frames, {RUN_FILE} says run {} wrote {m}",
                 r.run_id
             )),
-            (_, Some(m), None) => c.problems.push(format!("{TELEMETRY_FILE} is missing; run {} wrote {m} frames", r.run_id)),
+            (_, Some(m), None) => c.problems.push(format!(
+                "{TELEMETRY_FILE} is missing; run {} wrote {m} frames",
+                r.run_id
+            )),
             _ => {}
         }
         // 3. Every file is one the run wrote.
@@ -910,14 +961,23 @@ pub fn check_run(dir: &Path) -> Result<RunCheck, RunDirError> {
                 path: dir.to_path_buf(),
                 source,
             })?;
-            let mut names: Vec<String> = rd.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect();
+            let mut names: Vec<String> = rd
+                .flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
             names.sort();
             for n in names {
-                let data = matches!(n.as_str(), "summary.json" | "config.json" | TELEMETRY_FILE | "sweep.csv");
+                let data = matches!(
+                    n.as_str(),
+                    "summary.json" | "config.json" | TELEMETRY_FILE | "sweep.csv"
+                );
                 let plot = n.to_ascii_lowercase().ends_with(".png") && !n.starts_with("frame_");
-                if (data || plot) && !r.files.iter().any(|f| *f == n) {
+                if (data || plot) && !r.files.contains(&n) {
                     if data {
-                        c.problems.push(format!("{n} was not written by run {} (not in {RUN_FILE}'s files)", r.run_id));
+                        c.problems.push(format!(
+                            "{n} was not written by run {} (not in {RUN_FILE}'s files)",
+                            r.run_id
+                        ));
                     } else {
                         c.foreign.push(n);
                     }
@@ -963,19 +1023,37 @@ mod tests {
     fn the_default_place_gets_a_new_folder_per_run_and_latest() {
         let t = tempfile::tempdir().unwrap();
         let parent = t.path().join("out/sim");
-        let mut a = RunDir::create(&RunRequest::new(Target::Under(parent.clone())), &start(1_795_185_012, 1)).unwrap();
+        let mut a = RunDir::create(
+            &RunRequest::new(Target::Under(parent.clone())),
+            &start(1_795_185_012, 1),
+        )
+        .unwrap();
         a.started().unwrap();
         // The same second: -2.
-        let mut b = RunDir::create(&RunRequest::new(Target::Under(parent.clone())), &start(1_795_185_012, 2)).unwrap();
+        let mut b = RunDir::create(
+            &RunRequest::new(Target::Under(parent.clone())),
+            &start(1_795_185_012, 2),
+        )
+        .unwrap();
         b.started().unwrap();
         assert_eq!(a.path(), parent.join("20261120-153012"));
         assert_eq!(b.path(), parent.join("20261120-153012-2"));
-        assert_eq!(std::fs::read_link(parent.join(LATEST)).unwrap(), PathBuf::from("20261120-153012-2"));
+        assert_eq!(
+            std::fs::read_link(parent.join(LATEST)).unwrap(),
+            PathBuf::from("20261120-153012-2")
+        );
         let rec = read_record(&b.join(RUN_FILE)).unwrap();
-        assert_eq!((rec.run_id.as_str(), rec.state), ("20261120-153012-2", RunState::Running));
+        assert_eq!(
+            (rec.run_id.as_str(), rec.state),
+            ("20261120-153012-2", RunState::Running)
+        );
         assert_eq!(rec.started, "2026-11-20T15:30:12+01:00");
         // Nothing but the two runs and latest (no temporary files left).
-        let mut names: Vec<String> = std::fs::read_dir(&parent).unwrap().flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect();
+        let mut names: Vec<String> = std::fs::read_dir(&parent)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
         names.sort();
         assert_eq!(names, ["20261120-153012", "20261120-153012-2", "latest"]);
     }
@@ -984,7 +1062,11 @@ mod tests {
     fn an_explicit_folder_must_be_new_or_empty() {
         let t = tempfile::tempdir().unwrap();
         let dir = t.path().join("mine");
-        let mut r = RunDir::create(&RunRequest::new(Target::Explicit(dir.clone())), &start(1_795_185_012, 1)).unwrap();
+        let mut r = RunDir::create(
+            &RunRequest::new(Target::Explicit(dir.clone())),
+            &start(1_795_185_012, 1),
+        )
+        .unwrap();
         r.started().unwrap();
         std::fs::write(r.join(TELEMETRY_FILE), "{}\n{}\n{}\n").unwrap();
         r.finish(RunEnd {
@@ -993,19 +1075,31 @@ mod tests {
         })
         .unwrap();
         drop(r);
-        let e = RunDir::create(&RunRequest::new(Target::Explicit(dir.clone())), &start(1_795_185_100, 2)).unwrap_err().to_string();
+        let e = RunDir::create(
+            &RunRequest::new(Target::Explicit(dir.clone())),
+            &start(1_795_185_100, 2),
+        )
+        .unwrap_err()
+        .to_string();
         assert_eq!(
             e,
-            format!("--out {}: holds a run of 2026-11-20 15:30:12 (3 frames); choose another --out, or remove it", dir.display())
+            format!(
+                "--out {}: holds a run of 2026-11-20 15:30:12 (3 frames); choose another --out, or remove it",
+                dir.display()
+            )
         );
         // Anything else in it: not empty. A file: not a folder. Nothing was created.
         let notes = t.path().join("notes");
         std::fs::create_dir(&notes).unwrap();
         std::fs::write(notes.join("a.txt"), "x").unwrap();
-        let e = RunDir::create(&RunRequest::new(Target::Explicit(notes.clone())), &start(1, 2)).unwrap_err().to_string();
+        let e = RunDir::create(&RunRequest::new(Target::Explicit(notes.clone())), &start(1, 2))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("not empty (1 entry: a.txt)"), "{e}");
         assert_eq!(std::fs::read_dir(&notes).unwrap().count(), 1);
-        let e = RunDir::create(&RunRequest::new(Target::Explicit(notes.join("a.txt"))), &start(1, 2)).unwrap_err().to_string();
+        let e = RunDir::create(&RunRequest::new(Target::Explicit(notes.join("a.txt"))), &start(1, 2))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("is a file"), "{e}");
         // A recording of frames.
         let frames = t.path().join("frames");
@@ -1016,7 +1110,10 @@ mod tests {
         let mut req = RunRequest::new(Target::Explicit(t.path().join("new")));
         req.also.push(("--record".into(), frames.clone()));
         let e = RunDir::create(&req, &start(1, 2)).unwrap_err().to_string();
-        assert!(e.starts_with("--record ") && e.contains("holds 4 frames (a recording); choose another --record"), "{e}");
+        assert!(
+            e.starts_with("--record ") && e.contains("holds 4 frames (a recording); choose another --record"),
+            "{e}"
+        );
         assert!(!t.path().join("new").exists(), "checked before anything was created");
     }
 
@@ -1034,7 +1131,11 @@ mod tests {
         std::fs::write(empty.join("x.jpg"), "").unwrap();
         r.write_json("summary.json", &serde_json::json!({"frames": 0})).unwrap();
         drop(r);
-        let left: Vec<String> = std::fs::read_dir(t.path()).unwrap().flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect();
+        let left: Vec<String> = std::fs::read_dir(t.path())
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
         assert_eq!(left, ["empty"], "only the folder that was there, empty again");
         assert_eq!(std::fs::read_dir(&empty).unwrap().count(), 0);
         // Under a default parent: the parent made for it goes too, a shared one stays.
@@ -1044,7 +1145,11 @@ mod tests {
         let mut kept = RunDir::create(&RunRequest::new(Target::Under(parent.clone())), &start(1, 1)).unwrap();
         kept.started().unwrap();
         drop(RunDir::create(&RunRequest::new(Target::Under(parent.clone())), &start(1, 2)).unwrap());
-        assert_eq!(std::fs::read_dir(&parent).unwrap().count(), 2, "the started run and latest");
+        assert_eq!(
+            std::fs::read_dir(&parent).unwrap().count(),
+            2,
+            "the started run and latest"
+        );
     }
 
     #[test]
@@ -1052,7 +1157,11 @@ mod tests {
         let t = tempfile::tempdir().unwrap();
         let rec = t.path().join("rec");
         std::fs::create_dir_all(rec.join("seg_000000")).unwrap();
-        for (out, how) in [(rec.join("replay"), "inside"), (rec.join("seg_000000/../x"), "inside"), (rec.clone(), "the same folder as")] {
+        for (out, how) in [
+            (rec.join("replay"), "inside"),
+            (rec.join("seg_000000/../x"), "inside"),
+            (rec.clone(), "the same folder as"),
+        ] {
             let mut req = RunRequest::new(Target::Explicit(out.clone()));
             req.reads.push(("DIR".into(), rec.clone()));
             let e = RunDir::create(&req, &start(1, 1)).unwrap_err().to_string();
@@ -1060,7 +1169,10 @@ mod tests {
         }
         let mut req = RunRequest::new(Target::Under(rec.clone()));
         req.reads.push(("DIR".into(), rec.clone()));
-        assert!(matches!(RunDir::create(&req, &start(1, 1)), Err(RunDirError::InsideInput { .. })));
+        assert!(matches!(
+            RunDir::create(&req, &start(1, 1)),
+            Err(RunDirError::InsideInput { .. })
+        ));
         assert!(!rec.join("replay").exists() && !rec.join("x").exists());
         // Beside it is fine.
         let mut req = RunRequest::new(Target::Explicit(t.path().join("rec2")));
@@ -1071,7 +1183,11 @@ mod tests {
     #[test]
     fn summaries_are_written_whole_with_the_run_id() {
         let t = tempfile::tempdir().unwrap();
-        let mut r = RunDir::create(&RunRequest::new(Target::Explicit(t.path().join("o"))), &start(1_795_185_012, 7)).unwrap();
+        let mut r = RunDir::create(
+            &RunRequest::new(Target::Explicit(t.path().join("o"))),
+            &start(1_795_185_012, 7),
+        )
+        .unwrap();
         #[derive(Serialize)]
         struct S {
             zeta: u32,
@@ -1080,7 +1196,10 @@ mod tests {
         r.write_json("summary.json", &S { zeta: 1, alpha: 0.5 }).unwrap();
         let text = std::fs::read_to_string(r.join("summary.json")).unwrap();
         // The run id first, then the fields in their order.
-        assert_eq!(text, "{\n  \"run_id\": \"20261120-153012-7\",\n  \"zeta\": 1,\n  \"alpha\": 0.5\n}\n");
+        assert_eq!(
+            text,
+            "{\n  \"run_id\": \"20261120-153012-7\",\n  \"zeta\": 1,\n  \"alpha\": 0.5\n}\n"
+        );
         r.write("sweep.csv", b"a,b\n").unwrap();
         r.finish(RunEnd {
             state: RunState::Interrupted,
@@ -1099,11 +1218,17 @@ mod tests {
     }
 
     fn finished_run(dir: &Path, frames: u64, pid: u32) -> RunDir {
-        let mut r = RunDir::create(&RunRequest::new(Target::Explicit(dir.to_path_buf())), &start(1_795_185_012, pid)).unwrap();
+        let mut r = RunDir::create(
+            &RunRequest::new(Target::Explicit(dir.to_path_buf())),
+            &start(1_795_185_012, pid),
+        )
+        .unwrap();
         r.started().unwrap();
         std::fs::write(r.join(TELEMETRY_FILE), "{}\n".repeat(frames as usize)).unwrap();
-        r.write_json("summary.json", &serde_json::json!({"frames": frames})).unwrap();
-        r.write_json("config.json", &serde_json::json!({"steering": {"kp": 1.0}})).unwrap();
+        r.write_json("summary.json", &serde_json::json!({"frames": frames}))
+            .unwrap();
+        r.write_json("config.json", &serde_json::json!({"steering": {"kp": 1.0}}))
+            .unwrap();
         r.write("path.png", b"png").unwrap();
         r.finish(RunEnd {
             state: RunState::Finished,
@@ -1120,7 +1245,10 @@ mod tests {
         finished_run(&a, 15, 1);
         finished_run(&b, 30, 2);
         let c = check_run(&a).unwrap();
-        assert!(c.problems.is_empty() && c.notes.is_empty() && c.foreign.is_empty(), "{c:?}");
+        assert!(
+            c.problems.is_empty() && c.notes.is_empty() && c.foreign.is_empty(),
+            "{c:?}"
+        );
         // b's telemetry in a.
         std::fs::copy(b.join(TELEMETRY_FILE), a.join(TELEMETRY_FILE)).unwrap();
         let c = check_run(&a).unwrap();
@@ -1135,7 +1263,10 @@ mod tests {
         finished_run(&t.path().join("c"), 15, 3);
         std::fs::copy(b.join("config.json"), t.path().join("c/config.json")).unwrap();
         let c = check_run(&t.path().join("c")).unwrap();
-        assert_eq!(c.problems, ["config.json is run 20261120-153012-2's, run.json is run 20261120-153012-3's"]);
+        assert_eq!(
+            c.problems,
+            ["config.json is run 20261120-153012-2's, run.json is run 20261120-153012-3's"]
+        );
         // A plot of another run: foreign, not a problem.
         let d = t.path().join("d");
         finished_run(&d, 5, 4);
@@ -1151,7 +1282,10 @@ mod tests {
         std::fs::write(t.path().join("summary.json"), r#"{"frames": 28}"#).unwrap();
         std::fs::write(t.path().join(TELEMETRY_FILE), "").unwrap();
         let c = check_run(t.path()).unwrap();
-        assert_eq!(c.problems, ["telemetry.jsonl has 0 frames, summary.json says the run had 28"]);
+        assert_eq!(
+            c.problems,
+            ["telemetry.jsonl has 0 frames, summary.json says the run had 28"]
+        );
         assert_eq!(c.notes.len(), 1);
         assert!(c.notes[0].contains("no run.json"), "{:?}", c.notes);
         std::fs::write(t.path().join(TELEMETRY_FILE), "{}\n".repeat(28)).unwrap();
