@@ -447,10 +447,10 @@ fn a_recording_with_bad_times_or_frame_numbers_is_refused_naming_the_line() {
             Box::new(|k| {
                 format!(
                     "{{\"frame\":{k},\"time_s\":{}}}",
-                    if k == 2 { -100.0 } else { k as f64 / 30.0 }
+                    if k == 0 { -100.0 } else { k as f64 / 30.0 }
                 )
             }),
-            ":3:",
+            ":1:",
         ),
         (
             "time going back",
