@@ -188,12 +188,12 @@ fn an_explicit_out_that_holds_a_run_is_refused_before_anything_is_written() {
 #[test]
 fn a_drive_that_fails_to_start_leaves_the_previous_run_whole() {
     let t = tempfile::tempdir().unwrap();
-    let ok = rccar(t.path(), &["drive", "--camera", "sim", "--dry-run", "--seconds", "1"]);
+    let ok = rccar(t.path(), &["drive", "--camera", "sim", "--dry-run", "--seconds", "2"]);
     assert_eq!(ok.code, Some(0), "{}{}", ok.stdout, ok.stderr);
     let before = telemetry_files(t.path());
     assert_eq!(before.len(), 1);
     let n = before[0].1;
-    assert!(n >= 10, "{n} frames in 1 s");
+    assert!(n >= 10, "{n} frames in 2 s");
     let folders = run_folders(&t.path().join("out/drive"));
     // Fails after the output was set up (the frame source is checked late).
     let bad = rccar(t.path(), &["drive", "--camera", "no/such/folder", "--dry-run"]);
@@ -247,7 +247,7 @@ fn a_failed_drive_record_leaves_nothing_and_the_retry_works() {
             "sim",
             "--dry-run",
             "--seconds",
-            "1",
+            "2",
             "--record",
             "rec",
             "-o",
