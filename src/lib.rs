@@ -34,6 +34,7 @@ pub mod link;
 pub mod pipeline;
 pub mod ranging;
 pub mod record;
+pub mod run_dir;
 pub mod session;
 pub mod sim;
 pub mod sink;

@@ -20,6 +20,7 @@ use super::timer::{WallClock, WallTimer};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rccar::drive::{Actor, LoopEnd, LoopStats};
+use rccar::run_dir::{RunDir, RunState};
 use rccar::session::{ArmAt, CameraSpec, Level, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -70,9 +71,10 @@ pub struct DriveArgs {
     /// first, the telemetry is always kept.
     #[arg(long, value_name = "MB")]
     pub record_max_mb: Option<f64>,
-    /// Output folder for telemetry.jsonl and summary.json.
-    #[arg(long, short, default_value = "out/drive")]
-    pub out: PathBuf,
+    /// Output folder for telemetry.jsonl and summary.json: new or empty (default: a new
+    /// folder under out/drive/, with out/drive/latest pointing at it).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
     /// Seconds between status lines.
     #[arg(long, default_value_t = 2.0)]
     pub status_every: f64,
@@ -95,7 +97,7 @@ pub struct DriveArgs {
 }
 
 /// The session `rccar drive` asks for.
-fn spec(a: &DriveArgs, track: PathBuf, stereo: bool) -> Result<SessionSpec> {
+fn spec(a: &DriveArgs, track: PathBuf, stereo: bool, run: &RunDir) -> Result<SessionSpec> {
     if a.port.is_none() && !a.dry_run {
         bail!("no --port: name the Arduino's serial port (e.g. --port /dev/ttyACM0), or --dry-run to run without one");
     }
@@ -144,7 +146,7 @@ fn spec(a: &DriveArgs, track: PathBuf, stereo: bool) -> Result<SessionSpec> {
     let mut s = SessionSpec::new(source, sink);
     s.arm = if a.arm { ArmAt::Flag } else { ArmAt::Operator };
     s.frames_viewed = a.record.is_some() || a.dash.dashboard;
-    s.telemetry = Some(a.out.join("telemetry.jsonl"));
+    s.telemetry = Some(run.join("telemetry.jsonl"));
     s.record = a.record.clone().map(|d| (d, a.record_right.clone()));
     s.seconds = a.seconds;
     s.status_every_s = Some(a.status_every);
@@ -161,10 +163,17 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     if let Some(mb) = a.record_max_mb {
         cfg = cfg.with_override(&format!("record.max_mb={mb}"))?;
     }
-    let spec = spec(&a, PathBuf::from(&cfg.sim.track), cfg.ranging.method == rccar::config::RangingMethod::Stereo)?;
+    // The run folder (and the recordings): new, or refused before anything is written; a run
+    // that does not start takes back what it made.
+    let reads: Vec<(&str, &std::path::Path)> = [("--camera", Some(a.camera.as_str())), ("--camera-right", a.camera_right.as_deref())]
+        .into_iter()
+        .filter_map(|(f, c)| c.map(std::path::Path::new).filter(|p| p.is_dir()).map(|p| (f, p)))
+        .collect();
+    let record = [("--record", a.record.as_deref()), ("--record-right", a.record_right.as_deref())];
+    let mut run = super::outdir::create("drive", a.out.as_deref(), "out/drive", &record, &reads)?;
+    let spec = spec(&a, PathBuf::from(&cfg.sim.track), cfg.ranging.method == rccar::config::RangingMethod::Stereo, &run)?;
     let stop = super::signals::install();
     let clock = Arc::new(WallClock::new());
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     let env = SessionEnv {
         clock: clock.clone(),
         stop: stop.clone(),
@@ -193,11 +202,19 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         if a.arm { "arming from the first frame" } else { "disarmed (press the button, or arm on the dashboard)" }
     ));
     let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, &session, &stop, clock)?;
+    super::outdir::started(&mut run);
     let end = session.run(&mut dash);
     print_loop_stats(session.stats());
     // Neutral has gone out (the session's gate); now the files.
     let outcome = session.finish()?;
-    report(&a, &outcome)?;
+    report(&mut run, &outcome)?;
+    let state = match &end {
+        _ if outcome.fault.is_some() => RunState::Failed,
+        Ok(LoopEnd::Stopped(why)) => RunState::from_stop(Some(*why)),
+        Ok(_) => RunState::Finished,
+        Err(_) => RunState::Failed,
+    };
+    super::outdir::finish(&mut run, state, outcome.telemetry.as_ref().map(|t| t.1))?;
     let end = end?;
     Ok(exit_code(end, &outcome))
 }
@@ -221,7 +238,7 @@ fn hooks(session: &Session) {
 }
 
 /// The end of the run on the terminal, and summary.json (every way out writes it).
-fn report(a: &DriveArgs, o: &rccar::session::Outcome) -> Result<()> {
+fn report(run: &mut RunDir, o: &rccar::session::Outcome) -> Result<()> {
     if let Some(rec) = &o.recorded {
         let (dir, st) = &rec.main;
         match st {
@@ -264,8 +281,7 @@ fn report(a: &DriveArgs, o: &rccar::session::Outcome) -> Result<()> {
         "stalls": o.stats.stalls, "fault": o.fault.as_ref().map(|f| f.to_string()),
         "bits_flipped": o.bits_flipped,
     });
-    let p = a.out.join("summary.json");
-    std::fs::write(&p, serde_json::to_string_pretty(&json)?).with_context(|| format!("{}: cannot write", p.display()))?;
+    run.write_json("summary.json", &json)?;
     Ok(())
 }
 

@@ -25,9 +25,10 @@ pub struct ReplayArgs {
     /// `ranging.method = "stereo"`. Frames are paired by time (`stereo.max_skew_ms`).
     #[arg(long, value_name = "DIR2")]
     pub right: Option<PathBuf>,
-    /// Output folder for telemetry.jsonl and annotated frames.
-    #[arg(long, short, default_value = "out/replay")]
-    pub out: PathBuf,
+    /// Output folder for telemetry.jsonl and annotated frames: new or empty, never the
+    /// recording itself (default: a new folder under out/replay/, with out/replay/latest).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
     /// Don't write annotated frames (overrides `replay.annotate`).
     #[arg(long)]
     pub no_annotate: bool,
@@ -115,7 +116,11 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         },
         SinkSpec::DryRun,
     );
-    let tel_path = a.out.join("telemetry.jsonl");
+    // The run folder: new, never the recording itself or inside it.
+    let mut reads = vec![("DIR", a.dir.as_path())];
+    reads.extend(a.right.as_deref().map(|r| ("--right", r)));
+    let mut run = super::outdir::create("replay", a.out.as_deref(), "out/replay", &[], &reads)?;
+    let tel_path = run.join("telemetry.jsonl");
     spec.telemetry = Some(tel_path.clone());
     let env = SessionEnv {
         clock,
@@ -126,7 +131,6 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
             Level::Warn => super::signals::say_err(line),
         }),
     };
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     let mut session = Session::build(&cfg, spec, env).map_err(|e| match e {
         rccar::session::SessionError::Pair(m) => anyhow::anyhow!("--right: {m}"),
         e => e.into(),
@@ -137,9 +141,10 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
             Level::Warn => eprintln!("{line}"),
         }
     }
-    let annotate_dir = a.out.join("annotated");
+    let annotate_dir = run.join("annotated");
     let annotate_frames = cfg.replay.annotate && !a.no_annotate;
     if annotate_frames {
+        run.note_file("annotated");
         std::fs::create_dir_all(&annotate_dir).with_context(|| format!("{}: cannot create", annotate_dir.display()))?;
     }
     let bar = ProgressBar::new(session.source().len_hint().unwrap_or(0) as u64);
@@ -159,10 +164,16 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         stereo: (0, 0, 0, 0.0, 0),
     };
     // Replay moves nothing: its sink forgets the commands (they are in the telemetry).
+    super::outdir::started(&mut run);
     let end = session.run(&mut s);
     s.bar.finish_and_clear();
-    session.finish()?;
+    let outcome = session.finish()?;
     let end = end?;
+    let stopped = match end {
+        LoopEnd::Stopped(why) => Some(why),
+        _ => None,
+    };
+    super::outdir::finish(&mut run, rccar::run_dir::RunState::from_stop(stopped), outcome.telemetry.as_ref().map(|t| t.1))?;
 
     let seen = s.status[LaneStatus::Both as usize]
         + s.status[LaneStatus::LeftOnly as usize]

@@ -7,14 +7,14 @@ use super::common::ConfigArgs;
 use super::timer::WallTimer;
 use anyhow::{bail, Context, Result};
 use rccar::sim::step::{step_metrics, StepOptions};
-use rccar::sim::sweep::{self, Chatter, SweepRun};
 use clap::Args;
-use rccar::config::{Config, RangingMethod, StereoReference};
+use rccar::config::{RangingMethod, StereoReference};
 use rccar::drive::{Clock, Level, LoopEnd, NoClock, Observer, StopReason};
 use rccar::session::{ArmAt, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
 use rccar::sim::plot;
 use rccar::sim::report::RunReport;
-use rccar::sim::run::{Simulation, Summary};
+use rccar::run_dir::{RunDir, RunState};
+use rccar::sim::run::Summary;
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
 use rccar::sim::world::lock;
@@ -46,9 +46,10 @@ pub struct SimArgs {
     /// folder (`--record` then holds the left camera's), for `rccar replay DIR --right DIR2`.
     #[arg(long, value_name = "DIR2")]
     pub record_right: Option<PathBuf>,
-    /// Output folder for telemetry.jsonl, summary.json and the plots.
-    #[arg(long, short, default_value = "out/sim")]
-    pub out: PathBuf,
+    /// Output folder for telemetry.jsonl, summary.json and the plots: new or empty (default: a
+    /// new folder under out/sim/, with out/sim/latest pointing at it).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
     /// Gain sweep: `KEY=LO:HI:N`, e.g. `steering.kp=0.2:2.0:10` (any numeric config key).
     /// Give it twice for a grid over two keys (sweep.csv and the heat map sweep_grid.png).
     #[arg(long, value_name = "KEY=LO:HI:N")]
@@ -98,14 +99,10 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     }
     let track_path = a.track.clone().unwrap_or_else(|| PathBuf::from(&cfg.sim.track));
     let track = Track::load(&track_path)?;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     let font = load_font();
     let step = parse_step(a.start_offset, a.kick.as_deref(), track.spec.road.lane_width_m)?;
-    if !a.sweep.is_empty() {
-        if step.is_some() {
-            bail!("--start-offset/--kick: not with --sweep (one run at a time)");
-        }
-        return run_sweep(&a, &cfg, &track, font);
+    if !a.sweep.is_empty() && step.is_some() {
+        bail!("--start-offset/--kick: not with --sweep (one run at a time)");
     }
     let stereo = cfg.ranging.method == RangingMethod::Stereo && !a.truth_boxes;
     if a.record_right.is_some() && !stereo {
@@ -116,8 +113,16 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     if stereo && a.record.is_some() && a.record_right.is_none() {
         bail!("--record with ranging.method = \"stereo\": give --record-right DIR2 for the right camera's frames");
     }
-    for dir in a.record.iter().chain(&a.record_right) {
-        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    // The run folder (and the --record folders): new, or refused before anything is written.
+    let sweeping = !a.sweep.is_empty();
+    let record: [(&str, Option<&Path>); 2] = if sweeping {
+        [("--record", None), ("--record-right", None)]
+    } else {
+        [("--record", a.record.as_deref()), ("--record-right", a.record_right.as_deref())]
+    };
+    let mut run = super::outdir::create("sim", a.out.as_deref(), "out/sim", &record, &[])?;
+    if sweeping {
+        return super::sweep::run_sweep(&a.sweep, a.jobs, &cfg, &track, font, run);
     }
     let stop = super::signals::install();
     let clock: Arc<dyn Clock + Send + Sync> = if a.no_timing { Arc::new(NoClock) } else { Arc::new(super::timer::WallClock::new()) };
@@ -139,7 +144,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     spec.truth_boxes = a.truth_boxes;
     spec.frames_viewed = a.record.is_some() || a.dash.dashboard;
     spec.operator_ends_run = a.dash.dashboard;
-    spec.telemetry = Some(a.out.join("telemetry.jsonl"));
+    spec.telemetry = Some(run.join("telemetry.jsonl"));
     let timer: Box<dyn rccar::timing::StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
     let env = SessionEnv { clock: clock.clone(), stop: stop.clone(), timer, say: say.clone() };
     let mut session = Session::build(&cfg, spec, env)?;
@@ -168,6 +173,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     report.reference_left = cfg.stereo.reference != StereoReference::Right;
     report.kick = step.filter(|s| s.kick).map(|s| (s.t, s.dy));
     let started = std::time::Instant::now();
+    super::outdir::started(&mut run);
     let end = {
         let mut obs: [&mut dyn Observer; 2] = [&mut report, &mut dash];
         session.run(&mut obs)
@@ -214,17 +220,15 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             None => println!("  step response: the run ended before the kick at t = {} s", st.t),
         }
     }
-    let sum_path = a.out.join("summary.json");
-    std::fs::write(&sum_path, serde_json::to_string_pretty(&sum_json)?)
-        .with_context(|| format!("{}: cannot write", sum_path.display()))?;
-    // The run's configuration, for `rccar report` (differences from the defaults).
-    let cfg_path = a.out.join("config.json");
-    std::fs::write(&cfg_path, serde_json::to_string_pretty(&cfg)?)
-        .with_context(|| format!("{}: cannot write", cfg_path.display()))?;
+    // Summary and configuration (for `rccar report`), each whole or not at all.
+    let sum_path = run.write_json("summary.json", &sum_json)?;
+    run.write_json("config.json", &cfg)?;
     println!("  telemetry: {}", tel_path.display());
     println!("  summary:   {}", sum_path.display());
-    write_plots(&a, font, &report, &summary, &scene, step_fig.as_ref())?;
+    write_plots(&mut run, font, &report, &summary, &scene, step_fig.as_ref())?;
     print_frames(&a, summary.frames);
+    let tel_lines = outcome.telemetry.as_ref().map(|t| t.1);
+    super::outdir::finish(&mut run, RunState::from_stop(interrupted), tel_lines)?;
     if let Some(why) = interrupted {
         println!(
             "sim: interrupted ({}) after {} frames; the summary and plots cover what ran",
@@ -251,7 +255,7 @@ fn signal_name(why: StopReason) -> &'static str {
 
 /// The time and path plots (and the step plot), when the font is there.
 fn write_plots(
-    a: &SimArgs,
+    run: &mut RunDir,
     font: Option<&'static [u8]>,
     report: &RunReport,
     summary: &Summary,
@@ -263,14 +267,11 @@ fn write_plots(
         return Ok(());
     };
     plot::register_font(font);
-    let p1 = a.out.join("xte_steer.png");
-    save(&plot::time_plot(&report.series, summary.lane_width_m)?, &p1)?;
-    let p2 = a.out.join("path.png");
-    save(&plot::path_plot(&report.series, scene)?, &p2)?;
+    let p1 = save(run, "xte_steer.png", &plot::time_plot(&report.series, summary.lane_width_m)?)?;
+    let p2 = save(run, "path.png", &plot::path_plot(&report.series, scene)?)?;
     println!("  plots:     {} {}", p1.display(), p2.display());
     if let Some(m) = step {
-        let p3 = a.out.join("step.png");
-        save(&plot::step_plot(&report.series.t, &report.series.xte, m)?, &p3)?;
+        let p3 = save(run, "step.png", &plot::step_plot(&report.series.t, &report.series.xte, m)?)?;
         println!("  step:      {}", p3.display());
     }
     Ok(())
@@ -304,8 +305,12 @@ pub(crate) fn load_font() -> Option<&'static [u8]> {
     std::fs::read(FONT).ok().map(|b| &*Box::leak(b.into_boxed_slice()))
 }
 
-fn save(img: &image::RgbImage, p: &Path) -> Result<()> {
-    img.save(p).with_context(|| format!("{}: cannot write", p.display()))
+/// Writes a plot into the run folder as `name` (PNG, atomically); returns its path.
+pub(crate) fn save(run: &mut RunDir, name: &str, img: &image::RgbImage) -> Result<PathBuf> {
+    let mut png = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png)
+        .with_context(|| format!("{}: cannot encode PNG", run.join(name).display()))?;
+    Ok(run.write(name, &png.into_inner())?)
 }
 
 fn print_summary(s: &Summary) {
@@ -376,123 +381,4 @@ fn print_step(m: &rccar::sim::step::StepMetrics) {
         s(m.settling_time_s),
         m.band_m * 1000.0
     );
-}
-
-fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, font: Option<&'static [u8]>) -> Result<ExitCode> {
-    let axes = sweep::parse_axes(&a.sweep)?;
-    let keys: Vec<&str> = axes.iter().map(|x| x.key.as_str()).collect();
-    let points = sweep::grid(&axes);
-    // Check every value before spending minutes.
-    let cfgs: Vec<Config> = points
-        .iter()
-        .map(|p| {
-            let mut c = cfg.clone();
-            for (k, v) in keys.iter().zip(p) {
-                c = c.with_override(&format!("{k}={v}")).with_context(|| format!("--sweep {k}={v}"))?;
-            }
-            Ok(c)
-        })
-        .collect::<Result<_>>()?;
-    let scene = Arc::new(Scene::new(track));
-    let jobs = a
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-        .max(1);
-    println!(
-        "sweep {} over {} run(s) on {} thread(s), track {}",
-        keys.join(" × "),
-        cfgs.len(),
-        jobs,
-        track.name
-    );
-    let stop = super::signals::install();
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    // One slot per run: its summary and steering chatter, or why it could not start.
-    type RunResult = Result<(Summary, f64), String>;
-    let results: Vec<std::sync::Mutex<Option<RunResult>>> =
-        (0..cfgs.len()).map(|_| std::sync::Mutex::new(None)).collect();
-    std::thread::scope(|s| {
-        for _ in 0..jobs.min(cfgs.len()) {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if i >= cfgs.len() {
-                    break;
-                }
-                let r = Simulation::with_scene(&cfgs[i], scene.clone())
-                    .map_err(|e| e.to_string())
-                    .map(|mut sim| {
-                        sim.set_full_frames(false);
-                        let mut chatter = Chatter::default();
-                        // Ctrl-C ends every run of the sweep at its next frame
-                        let sum = sim
-                            .run(|_, st| {
-                                chatter.push(st.out.command.steer);
-                                if stop.is_set() {
-                                    Err(())
-                                } else {
-                                    Ok(())
-                                }
-                            })
-                            .unwrap_or_else(|_| sim.summary());
-                        (sum, chatter.rms())
-                    });
-                if let Ok(mut slot) = results[i].lock() {
-                    *slot = Some(r);
-                }
-            });
-        }
-    });
-    let head: Vec<String> = keys.iter().map(|k| format!("{k:>12}")).collect();
-    println!(
-        "{} {:>5} {:>10} {:>10} {:>6} {:>10} {:>9} {:>8}  end",
-        head.join(" "),
-        "laps",
-        "rms_m",
-        "max_m",
-        "dep",
-        "rev/s",
-        "dsteer",
-        "lost"
-    );
-    let mut runs = Vec::new();
-    for (p, slot) in points.iter().zip(results) {
-        let vals: Vec<String> = p.iter().map(|v| format!("{v:>12.4}")).collect();
-        let vals = vals.join(" ");
-        match slot.into_inner().ok().flatten() {
-            Some(Ok((s, chatter))) => {
-                println!(
-                    "{vals} {:>5} {:>10.4} {:>10.4} {:>6} {:>10.2} {:>9.4} {:>8}  {:?}",
-                    s.laps, s.xte_rms_m, s.xte_max_m, s.lane_departures, s.steer_reversals_per_s, chatter, s.lane_lost_frames, s.end
-                );
-                runs.push(SweepRun {
-                    values: p.clone(),
-                    summary: s,
-                    steer_diff_rms: chatter,
-                });
-            }
-            Some(Err(e)) => println!("{vals} error: {e}"),
-            None => println!("{vals} error: the run panicked"),
-        }
-    }
-    let csv_path = a.out.join("sweep.csv");
-    std::fs::write(&csv_path, sweep::csv(&keys, &runs)).with_context(|| format!("{}: cannot write", csv_path.display()))?;
-    if let Some(why) = stop.reason() {
-        println!("sweep: interrupted; the rows above cover each run up to that moment");
-        return Ok(ExitCode::from(why.exit_code()));
-    }
-    println!("  table: {}", csv_path.display());
-    if let Some(font) = font {
-        plot::register_font(font);
-        if axes.len() == 1 {
-            let rows: Vec<(f64, Summary)> = runs.iter().map(|r| (r.values[0], r.summary.clone())).collect();
-            let p = a.out.join("sweep.png");
-            save(&plot::sweep_plot(keys[0], &rows)?, &p)?;
-            println!("  plot:  {}", p.display());
-        } else {
-            let p = a.out.join("sweep_grid.png");
-            save(&plot::grid_plot(keys[0], keys[1], &axes[0].values, &axes[1].values, &runs)?, &p)?;
-            println!("  heat map: {}", p.display());
-        }
-    }
-    Ok(ExitCode::SUCCESS)
 }

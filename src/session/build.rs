@@ -396,20 +396,19 @@ fn open_folder(cfg: &Config, pipeline: &Pipeline, dir: &Path, notes: &mut Vec<(L
     let max_x = cfg.warp.src.iter().map(|p| p[0]).fold(0.0f64, f64::max);
     let max_y = cfg.warp.src.iter().map(|p| p[1]).fold(0.0f64, f64::max);
     let min_size = ((max_x.ceil() as u32).min(w), (max_y.ceil() as u32).min(h));
-    let mut src = ReplayDir::open(dir, cfg.camera.fps, w, h, min_size)?;
-    if dir.join(crate::record::TELEMETRY_FILE).is_file() {
-        if let Ok(t) = crate::record::recorded_times(dir) {
-            if !t.times.is_empty() {
-                notes.push((
-                    Level::Info,
-                    format!(
-                        "{}: a recording; frame times from its telemetry ({} frames)",
-                        dir.display(),
-                        t.times.len()
-                    ),
-                ));
-                src = src.with_recorded_times(t.times);
-            }
+    // A recording of `rccar drive --record`: replayed with the time steps the car saw.
+    let (src, recorded) = ReplayDir::open_recording(dir, cfg.camera.fps, w, h, min_size)?;
+    if let Some(t) = recorded {
+        notes.push((
+            Level::Info,
+            format!("{}: a recording; frame times from its telemetry ({} frames)", dir.display(), t.times.len()),
+        ));
+        let tel = dir.join(crate::record::TELEMETRY_FILE);
+        for l in &t.cut_lines {
+            notes.push((
+                Level::Info,
+                format!("skipped {}:{l}: a cut line (not JSON); its frame has no time and is skipped", tel.display()),
+            ));
         }
     }
     for i in src.ignored() {
