@@ -210,8 +210,8 @@ pub enum CarStatus {
     WaitingLink,
     /// The emergency stop is pressed.
     EStopped,
-    /// Everything is up; not armed.
-    Ready,
+    /// Everything is up; not armed (the LED's "ready": a press arms).
+    Disarmed,
     /// Armed, but the ultrasonic brake holds the car.
     Braking,
     /// Armed and driving.
@@ -230,7 +230,7 @@ impl CarStatus {
         } else if estop {
             CarStatus::EStopped
         } else if !armed {
-            CarStatus::Ready
+            CarStatus::Disarmed
         } else if braking {
             CarStatus::Braking
         } else {
@@ -245,7 +245,7 @@ impl CarStatus {
             CarStatus::WaitingCamera => "waiting for camera",
             CarStatus::WaitingLink => "waiting for Arduino",
             CarStatus::EStopped => "e-stopped",
-            CarStatus::Ready => "disarmed",
+            CarStatus::Disarmed => "disarmed",
             CarStatus::Braking => "braking",
             CarStatus::Driving => "driving",
         }
@@ -284,7 +284,7 @@ mod tests {
             gpio: PartState::Ok,
         };
         assert_eq!(CarStatus::of(&ok, false, true, false, false), CarStatus::Driving);
-        assert_eq!(CarStatus::of(&ok, false, false, false, false), CarStatus::Ready);
+        assert_eq!(CarStatus::of(&ok, false, false, false, false), CarStatus::Disarmed);
         assert_eq!(CarStatus::of(&ok, true, false, false, false), CarStatus::Fault);
         let waiting = HealthSnapshot {
             camera: PartState::Waiting,

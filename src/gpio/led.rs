@@ -60,7 +60,7 @@ impl LedState {
             CarStatus::Fault | CarStatus::EStopped | CarStatus::Braking => LedState::Fault,
             CarStatus::WaitingCamera => LedState::WaitingCamera,
             CarStatus::WaitingLink => LedState::WaitingArduino,
-            CarStatus::Ready => LedState::Ready,
+            CarStatus::Disarmed => LedState::Ready,
             CarStatus::Driving => LedState::Driving,
         }
     }
@@ -110,7 +110,7 @@ mod tests {
     fn every_car_status_has_its_blink_code() {
         use crate::health::CarStatus;
         assert_eq!(LedState::for_status(CarStatus::Driving), LedState::Driving);
-        assert_eq!(LedState::for_status(CarStatus::Ready), LedState::Ready);
+        assert_eq!(LedState::for_status(CarStatus::Disarmed), LedState::Ready);
         assert_eq!(LedState::for_status(CarStatus::Fault), LedState::Fault);
         assert_eq!(LedState::for_status(CarStatus::EStopped), LedState::Fault);
         assert_eq!(LedState::for_status(CarStatus::WaitingCamera), LedState::WaitingCamera);

@@ -194,6 +194,13 @@ impl Session {
         &self.cfg
     }
 
+    /// Replaces the frame source by one the spec cannot name (a test's scripted camera, a
+    /// tool's own source); `device`: its end is a fault, as a camera's is.
+    pub fn set_source(&mut self, source: Box<dyn FrameSource>, device: bool) {
+        self.source = source;
+        self.device = device;
+    }
+
     /// The frame source (how many frames to expect, for a progress bar).
     pub fn source(&self) -> &dyn FrameSource {
         self.source.as_ref()

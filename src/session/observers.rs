@@ -14,9 +14,9 @@ use std::sync::Arc;
 pub struct CameraHealth(pub Arc<Arming>);
 
 impl Observer for CameraHealth {
-    fn on_frame(&mut self, _ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+    /// A frame arrived: the camera is up (before anyone reads the status of this frame).
+    fn decorate(&mut self, _r: &mut FrameRecord) {
         self.0.health().set(Part::Camera, PartState::Ok, "");
-        Ok(Flow::Continue)
     }
     fn on_stall(&mut self, e: &FrameError) {
         self.0.health().set(Part::Camera, PartState::Lost, &e.to_string());
