@@ -153,10 +153,8 @@ fn sigterm_stops_the_dry_run_with_143_and_complete_telemetry() {
         .spawn()
         .unwrap();
     let t0 = Instant::now();
-    while t0.elapsed() < Duration::from_secs(30) {
-        if std::fs::read_to_string(out.join("telemetry.jsonl")).map_or(0, |s| s.lines().count()) > 30 {
-            break;
-        }
+    while std::fs::read_to_string(out.join("telemetry.jsonl")).map_or(0, |s| s.lines().count()) <= 30 {
+        assert!(t0.elapsed() < Duration::from_secs(60), "the dry run wrote no 30 frames in 60 s");
         std::thread::sleep(Duration::from_millis(50));
     }
     let _ = Command::new("kill").args(["-TERM", &child.id().to_string()]).status();
