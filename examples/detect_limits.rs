@@ -24,7 +24,7 @@ fn main() {
     for l in ["stop_sign", "traffic_light", "obstacle"] {
         det.set_limits(l, None, (0, 0), (0, 0));
     }
-    let f_px = rccar::camera::PinholeCamera::from_config(&cfg.camera).f_px;
+    let f_px = rccar::camera::PinholeCamera::from(&cfg.camera).f_px;
     let (w, h) = (cfg.camera.width as f64, cfg.camera.height as f64);
     let mut sim = Simulation::new(&cfg, &track).unwrap();
     let len = track.length;

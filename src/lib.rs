@@ -33,6 +33,7 @@ pub mod link;
 pub mod pipeline;
 pub mod ranging;
 pub mod record;
+pub mod run_dir;
 pub mod sim;
 pub mod sink;
 pub mod source;

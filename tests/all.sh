@@ -25,8 +25,9 @@ DEB_PACKAGES=(
   opencv-doc                                   # OpenCV's stereo chessboard pairs (calib parity stage)
 )
 # The Pi cross-build stage (tests/cross/run.sh) and its packages (skip with RCCAR_CROSS=0). Cold
-# it compiles every dependency for aarch64: ~6 min of CPU with `serial,gpio` (the suite's
-# default), ~11 min with the camera (RCCAR_CROSS_CAMERA=1). With target/cross kept: 21 s when
+# it compiles every dependency for aarch64: ~6 min of CPU with `serial,gpio` (axum, hyper and
+# tokio of the suite's default `serial,gpio,dashboard` add a few minutes), ~11 min with the
+# camera (RCCAR_CROSS_CAMERA=1). With target/cross kept: 21 s when
 # nothing changed, a few minutes after a source change (rccar itself recompiled for aarch64).
 if [ "${RCCAR_CROSS:-1}" = 1 ]; then
   DEB_PACKAGES+=(rustc-web cargo-web libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user)

@@ -23,6 +23,7 @@ mod lane_replay;
 mod ranging_calibrate_cli;
 mod ranging_sim;
 mod record_replay;
+mod runs;
 mod sim_loop;
 mod sim_replay;
 mod sim_track;

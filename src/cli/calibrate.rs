@@ -145,7 +145,7 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     // 2. Refuse data that cannot determine the unknowns.
     check_pairs(&pairs, &cfg, a.fit_ay).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 3. Fit from the configured (nominal) camera.
-    let cam = PinholeCamera::from_config(&cfg.camera);
+    let cam = PinholeCamera::from(&cfg.camera);
     let mut start = TiltRanging::from_camera(&cam);
     start.v0 += cfg.ranging.v0_offset_px;
     start.a_y *= cfg.ranging.a_y_scale;

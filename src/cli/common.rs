@@ -104,7 +104,7 @@ impl ConfigArgs {
 /// --truth-boxes` have one frame source: with `ranging.method = "stereo"` they say so once,
 /// on stderr, rather than range by mono silently.
 pub fn warn_single_camera(cfg: &Config) {
-    if cfg.ranging.method == "stereo" {
+    if cfg.ranging.method == rccar::config::RangingMethod::Stereo {
         eprintln!(
             "ranging: method = \"stereo\" but this run has one camera; ranges are monocular \
              (a pair: `rccar drive --camera-right`, `rccar replay DIR --right DIR2`, `rccar sim` \

@@ -21,6 +21,7 @@ use rccar::config::Config;
 use rccar::control::Command;
 use rccar::drive::{Clock, Driver, Flow, FrameContext, LoopEnd, LoopError, LoopStats, Observer, Parts, StopReason, StopSignal};
 use rccar::pipeline::Pipeline;
+use rccar::run_dir::RunState;
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
 use rccar::sim::world::{lock, SharedWorld, SimScore, World};
@@ -78,9 +79,10 @@ pub struct DriveArgs {
     /// first, the telemetry is always kept.
     #[arg(long, value_name = "MB")]
     pub record_max_mb: Option<f64>,
-    /// Output folder for telemetry.jsonl and summary.json.
-    #[arg(long, short, default_value = "out/drive")]
-    pub out: PathBuf,
+    /// Output folder for telemetry.jsonl and summary.json: new or empty. Default: a new folder
+    /// per run, out/drive/<YYYYmmdd-HHMMSS>/, with out/drive/latest pointing at the newest.
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
     /// Seconds between status lines.
     #[arg(long, default_value_t = 2.0)]
     pub status_every: f64,
@@ -118,7 +120,25 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     if let Some(mb) = a.record_max_mb {
         cfg = cfg.with_override(&format!("record.max_mb={mb}"))?;
     }
-    // Everything that can fail is checked before the car can move: the recording folder…
+    // Everything that can fail is checked before the car can move: the run folder and the
+    // recording folders (new or empty; a run that fails to start takes them back)…
+    let reads: Vec<(&str, &std::path::Path)> = [
+        ("--camera", Some(a.camera.as_str())),
+        ("--camera-right", a.camera_right.as_deref()),
+    ]
+    .into_iter()
+    .filter_map(|(f, c)| c.map(std::path::Path::new).filter(|p| p.is_dir()).map(|p| (f, p)))
+    .collect();
+    let mut run = super::outdir::create(
+        "drive",
+        a.out.as_deref(),
+        "out/drive",
+        &[
+            ("--record", a.record.as_deref()),
+            ("--record-right", a.record_right.as_deref()),
+        ],
+        &reads,
+    )?;
     let mut recorder = match &a.record {
         Some(dir) => Some(RecordObs {
             rec: rccar::record::Recorder::create(dir, cfg.record.options())
@@ -140,18 +160,17 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     let stop = super::signals::install();
     super::signals::install_button();
     let clock = Arc::new(WallClock::new());
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
-    let tel_path = a.out.join("telemetry.jsonl");
+    let tel_path = run.join("telemetry.jsonl");
     let tel_file = std::fs::File::create(&tel_path).with_context(|| format!("{}: cannot create", tel_path.display()))?;
     let mut tel = JsonlWriter::new(tel_file, tel_path.display().to_string());
 
     let mut pipeline = Pipeline::new(&cfg)?;
-    let stereo = cfg.ranging.method == "stereo";
+    let stereo = cfg.ranging.method == rccar::config::RangingMethod::Stereo;
     if let Some(r) = &a.camera_right {
         if !stereo {
             bail!(
                 "--camera-right {r}: ranging.method is {:?}, so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
-                cfg.ranging.method
+                cfg.ranging.method.name()
             );
         }
         if a.camera == "sim" {
@@ -288,6 +307,7 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         let mut obs: [&mut dyn Observer; 6] = [gpio_obs, score_obs, &mut tel, &mut status, &mut dash, rec_obs];
         let mut timer = WallTimer::new();
         let mut driver = Driver::new(cfg.camera.fps);
+        super::outdir::started(&mut run);
         let r = driver.run(Parts {
             source: &mut *source,
             pipeline: &mut pipeline,
@@ -335,9 +355,14 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
             "  sim: {} laps, RMS cross-track {:.4} m, max {:.4} m, departures {}, ended {:?}",
             sum.laps, sum.xte_rms_m, sum.xte_max_m, sum.lane_departures, sum.end
         );
-        let p = a.out.join("summary.json");
-        std::fs::write(&p, serde_json::to_string_pretty(&sum)?).with_context(|| format!("{}: cannot write", p.display()))?;
+        run.write_json("summary.json", &sum)?;
     }
+    let state = match &end {
+        Ok(LoopEnd::Stopped(why)) => RunState::from_stop(Some(*why)),
+        Ok(_) => RunState::Finished,
+        Err(_) => RunState::Failed,
+    };
+    super::outdir::finish(&mut run, state, Some(tel_lines))?;
     let end = end?;
     Ok(match end {
         LoopEnd::Stopped(why) => {

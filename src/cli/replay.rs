@@ -26,9 +26,11 @@ pub struct ReplayArgs {
     /// `ranging.method = "stereo"`. Frames are paired by time (`stereo.max_skew_ms`).
     #[arg(long, value_name = "DIR2")]
     pub right: Option<PathBuf>,
-    /// Output folder for telemetry.jsonl and annotated frames.
-    #[arg(long, short, default_value = "out/replay")]
-    pub out: PathBuf,
+    /// Output folder for telemetry.jsonl and annotated frames: new or empty, and not inside
+    /// DIR. Default: a new folder per run, out/replay/<YYYYmmdd-HHMMSS>/, with
+    /// out/replay/latest pointing at the newest.
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
     /// Don't write annotated frames (overrides `replay.annotate`).
     #[arg(long)]
     pub no_annotate: bool,
@@ -100,11 +102,11 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
     let mut pipeline = Pipeline::new(&cfg)?;
     if let Some(r) = &a.right {
-        if cfg.ranging.method != "stereo" {
+        if cfg.ranging.method != rccar::config::RangingMethod::Stereo {
             bail!(
                 "--right {}: ranging.method is {:?}, so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
                 r.display(),
-                cfg.ranging.method
+                cfg.ranging.method.name()
             );
         }
         rccar::drive::stereo::install(&mut pipeline);
@@ -122,15 +124,20 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         let max_y = cfg.warp.src.iter().map(|p| p[1]).fold(0.0f64, f64::max);
         ((max_x.ceil() as u32).min(w), (max_y.ceil() as u32).min(h))
     };
+    // A recording of `rccar drive --record`: replayed with the time steps the car saw.
     let open = |dir: &PathBuf| -> Result<ReplayDir> {
-        let mut source = ReplayDir::open(dir, cfg.camera.fps, w, h, min_size)?;
-        // A recording of `rccar drive --record`: replay with the time steps the car saw.
-        if dir.join(rccar::record::TELEMETRY_FILE).is_file() {
-            if let Ok(t) = rccar::record::recorded_times(dir) {
-                if !t.times.is_empty() {
-                    println!("replay: a recording; frame times from its telemetry ({} frames)", t.times.len());
-                    source = source.with_recorded_times(t.times);
-                }
+        let (source, recorded) = ReplayDir::open_recording(dir, cfg.camera.fps, w, h, min_size)?;
+        if let Some(t) = recorded {
+            println!(
+                "replay: a recording; frame times from its telemetry ({} frames)",
+                t.times.len()
+            );
+            for l in &t.cut_lines {
+                let tel = dir.join(rccar::record::TELEMETRY_FILE);
+                println!(
+                    "  skipped {}:{l}: a cut line (not JSON); its frame has no time and is skipped",
+                    tel.display()
+                );
             }
         }
         Ok(source)
@@ -155,13 +162,17 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
             )
         }
     };
-    let annotate_dir = a.out.join("annotated");
+    // The run folder: new, never the recording itself or inside it.
+    let mut reads = vec![("DIR", a.dir.as_path())];
+    reads.extend(a.right.as_deref().map(|r| ("--right", r)));
+    let mut run = super::outdir::create("replay", a.out.as_deref(), "out/replay", &[], &reads)?;
+    let annotate_dir = run.join("annotated");
     let annotate_frames = cfg.replay.annotate && !a.no_annotate;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     if annotate_frames {
+        run.note_file("annotated");
         std::fs::create_dir_all(&annotate_dir).with_context(|| format!("{}: cannot create", annotate_dir.display()))?;
     }
-    let tel_path = a.out.join("telemetry.jsonl");
+    let tel_path = run.join("telemetry.jsonl");
     let mut tel = JsonlWriter::new(
         std::fs::File::create(&tel_path).with_context(|| format!("{}: cannot create", tel_path.display()))?,
         tel_path.display().to_string(),
@@ -189,6 +200,7 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let timer: &mut dyn StageTimer = if a.no_timing { &mut none } else { &mut wall };
     let wall_clock = super::timer::WallClock::new();
     let clock: &dyn Clock = if a.no_timing { &NoClock } else { &wall_clock };
+    super::outdir::started(&mut run);
     let end = {
         let mut obs: [&mut dyn Observer; 2] = [&mut tel, &mut s];
         // Replay moves nothing: its sink forgets the commands (they are in the telemetry).
@@ -203,7 +215,13 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         })?
     };
     s.bar.finish_and_clear();
+    let tel_lines = tel.lines();
     tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;
+    let stopped = match end {
+        LoopEnd::Stopped(why) => Some(why),
+        _ => None,
+    };
+    super::outdir::finish(&mut run, rccar::run_dir::RunState::from_stop(stopped), Some(tel_lines))?;
 
     let seen = s.status[LaneStatus::Both as usize]
         + s.status[LaneStatus::LeftOnly as usize]

@@ -7,19 +7,18 @@ use super::common::ConfigArgs;
 use super::timer::WallTimer;
 use anyhow::{bail, Context, Result};
 use rccar::sim::step::{step_metrics, StepOptions};
-use rccar::sim::sweep::{self, Chatter, SweepRun};
 use clap::Args;
-use rccar::config::Config;
 use rccar::drive::{Driver, Flow, FrameContext, LoopEnd, LoopError, Observer, Parts, StopReason};
 use rccar::pipeline::Pipeline;
+use rccar::run_dir::{RunDir, RunState};
 use rccar::sim::plot;
-use rccar::sim::run::{Simulation, Summary};
+use rccar::sim::run::Summary;
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
 use rccar::sim::world::{lock, SharedWorld, SimCamera, SimScore, SimVehicle, World};
 use rccar::telemetry::JsonlWriter;
 use rccar::timing::{NoTimer, StageTimer};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 
@@ -46,9 +45,11 @@ pub struct SimArgs {
     /// folder (`--record` then holds the left camera's), for `rccar replay DIR --right DIR2`.
     #[arg(long, value_name = "DIR2")]
     pub record_right: Option<PathBuf>,
-    /// Output folder for telemetry.jsonl, summary.json and the plots.
-    #[arg(long, short, default_value = "out/sim")]
-    pub out: PathBuf,
+    /// Output folder for telemetry.jsonl, summary.json and the plots: new or empty (a folder
+    /// holding a run is refused). Default: a new folder per run, out/sim/<YYYYmmdd-HHMMSS>/,
+    /// with out/sim/latest pointing at the newest.
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
     /// Gain sweep: `KEY=LO:HI:N`, e.g. `steering.kp=0.2:2.0:10` (any numeric config key).
     /// Give it twice for a grid over two keys (sweep.csv and the heat map sweep_grid.png).
     #[arg(long, value_name = "KEY=LO:HI:N")]
@@ -98,14 +99,24 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     }
     let track_path = a.track.clone().unwrap_or_else(|| PathBuf::from(&cfg.sim.track));
     let track = Track::load(&track_path)?;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     let font = load_font();
     let step = parse_step(a.start_offset, a.kick.as_deref(), track.spec.road.lane_width_m)?;
-    if !a.sweep.is_empty() {
-        if step.is_some() {
-            bail!("--start-offset/--kick: not with --sweep (one run at a time)");
-        }
-        return run_sweep(&a, &cfg, &track, font);
+    if !a.sweep.is_empty() && step.is_some() {
+        bail!("--start-offset/--kick: not with --sweep (one run at a time)");
+    }
+    // The run folder (and the --record folders): new, or refused before anything is written.
+    let sweeping = !a.sweep.is_empty();
+    let record: [(&str, Option<&std::path::Path>); 2] = if sweeping {
+        [("--record", None), ("--record-right", None)]
+    } else {
+        [
+            ("--record", a.record.as_deref()),
+            ("--record-right", a.record_right.as_deref()),
+        ]
+    };
+    let mut run = super::outdir::create("sim", a.out.as_deref(), "out/sim", &record, &[])?;
+    if sweeping {
+        return super::sweep::run_sweep(&a.sweep, a.jobs, &cfg, &track, font, run);
     }
 
     let stop = super::signals::install();
@@ -122,7 +133,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
     let mut pipeline = Pipeline::new(&cfg)?;
     // ranging.method = "stereo": a camera pair (src/sim/stereo.rs `other_camera`).
-    let stereo = cfg.ranging.method == "stereo" && !a.truth_boxes;
+    let stereo = cfg.ranging.method == rccar::config::RangingMethod::Stereo && !a.truth_boxes;
     if a.record_right.is_some() && !stereo {
         bail!(
             "--record-right: there is one camera; it needs ranging.method = \"stereo\" (--set ranging.method=stereo) and no --truth-boxes"
@@ -153,7 +164,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             "sim: stereo pair, reference camera {} with the other {} m to its {} (ranging.method = \"stereo\")",
             cfg.stereo.reference,
             cfg.stereo.base_m,
-            if cfg.stereo.reference == "right" { "left" } else { "right" }
+            cfg.stereo.reference.other()
         );
     }
     // Without recording nobody looks at the frames: render only the rows the pipeline reads
@@ -164,10 +175,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     } else {
         camera.set_row_plan(Some(pipeline.row_plan()));
     }
-    for dir in a.record.iter().chain(&a.record_right) {
-        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    }
-    let tel_path = a.out.join("telemetry.jsonl");
+    let tel_path = run.join("telemetry.jsonl");
     let mut tel = JsonlWriter::new(
         std::fs::File::create(&tel_path).with_context(|| format!("{}: cannot create", tel_path.display()))?,
         tel_path.display().to_string(),
@@ -187,7 +195,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         world: world.clone(),
         record: a.record.clone(),
         record_right: a.record_right.clone(),
-        reference_left: cfg.stereo.reference != "right",
+        reference_left: cfg.stereo.reference.is_left(),
         stereo: StereoTally::default(),
         series: plot::Series::default(),
         kick: step.filter(|s| s.kick).map(|s| (s.t, s.dy)),
@@ -195,6 +203,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     };
     let started = std::time::Instant::now();
     let clock = super::timer::WallClock::new();
+    super::outdir::started(&mut run);
     let end = {
         let mut tel = dash.tag(&mut tel);
         let mut obs: [&mut dyn Observer; 4] = [&mut score, &mut tel, &mut report, &mut dash];
@@ -215,6 +224,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         }
         _ => None,
     };
+    let tel_lines = tel.lines();
     tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;
     let summary = lock(&world).summary();
     let scene = lock(&world).scene().clone();
@@ -248,25 +258,26 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             None => println!("  step response: the run ended before the kick at t = {} s", st.t),
         }
     }
-    let sum_path = a.out.join("summary.json");
-    std::fs::write(&sum_path, serde_json::to_string_pretty(&sum_json)?)
-        .with_context(|| format!("{}: cannot write", sum_path.display()))?;
-    // The run's configuration, for `rccar report` (differences from the defaults).
-    let cfg_path = a.out.join("config.json");
-    std::fs::write(&cfg_path, serde_json::to_string_pretty(&cfg)?)
-        .with_context(|| format!("{}: cannot write", cfg_path.display()))?;
+    // Summary and configuration (for `rccar report`), each whole or not at all.
+    let sum_path = run.write_json("summary.json", &sum_json)?;
+    run.write_json("config.json", &cfg)?;
     println!("  telemetry: {}", tel_path.display());
     println!("  summary:   {}", sum_path.display());
     if let Some(font) = font {
         plot::register_font(font);
-        let p1 = a.out.join("xte_steer.png");
-        save(&plot::time_plot(&report.series, summary.lane_width_m)?, &p1)?;
-        let p2 = a.out.join("path.png");
-        save(&plot::path_plot(&report.series, &scene)?, &p2)?;
+        let p1 = save(
+            &mut run,
+            "xte_steer.png",
+            &plot::time_plot(&report.series, summary.lane_width_m)?,
+        )?;
+        let p2 = save(&mut run, "path.png", &plot::path_plot(&report.series, &scene)?)?;
         println!("  plots:     {} {}", p1.display(), p2.display());
         if let Some(m) = &step_fig {
-            let p3 = a.out.join("step.png");
-            save(&plot::step_plot(&report.series.t, &report.series.xte, m)?, &p3)?;
+            let p3 = save(
+                &mut run,
+                "step.png",
+                &plot::step_plot(&report.series.t, &report.series.xte, m)?,
+            )?;
             println!("  step:      {}", p3.display());
         }
     } else {
@@ -289,6 +300,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         ),
         _ => {}
     }
+    super::outdir::finish(&mut run, RunState::from_stop(interrupted), Some(tel_lines))?;
     if let Some(why) = interrupted {
         println!(
             "sim: interrupted ({}) after {} frames; the summary and plots cover what ran",
@@ -378,8 +390,12 @@ pub(crate) fn load_font() -> Option<&'static [u8]> {
     std::fs::read(FONT).ok().map(|b| &*Box::leak(b.into_boxed_slice()))
 }
 
-fn save(img: &image::RgbImage, p: &Path) -> Result<()> {
-    img.save(p).with_context(|| format!("{}: cannot write", p.display()))
+/// Writes a plot into the run folder as `name` (PNG, atomically); returns its path.
+pub(crate) fn save(run: &mut RunDir, name: &str, img: &image::RgbImage) -> Result<PathBuf> {
+    let mut png = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png)
+        .with_context(|| format!("{}: cannot encode PNG", run.join(name).display()))?;
+    Ok(run.write(name, &png.into_inner())?)
 }
 
 fn print_summary(s: &Summary) {
@@ -450,123 +466,4 @@ fn print_step(m: &rccar::sim::step::StepMetrics) {
         s(m.settling_time_s),
         m.band_m * 1000.0
     );
-}
-
-fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, font: Option<&'static [u8]>) -> Result<ExitCode> {
-    let axes = sweep::parse_axes(&a.sweep)?;
-    let keys: Vec<&str> = axes.iter().map(|x| x.key.as_str()).collect();
-    let points = sweep::grid(&axes);
-    // Check every value before spending minutes.
-    let cfgs: Vec<Config> = points
-        .iter()
-        .map(|p| {
-            let mut c = cfg.clone();
-            for (k, v) in keys.iter().zip(p) {
-                c = c.with_override(&format!("{k}={v}")).with_context(|| format!("--sweep {k}={v}"))?;
-            }
-            Ok(c)
-        })
-        .collect::<Result<_>>()?;
-    let scene = Arc::new(Scene::new(track));
-    let jobs = a
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-        .max(1);
-    println!(
-        "sweep {} over {} run(s) on {} thread(s), track {}",
-        keys.join(" × "),
-        cfgs.len(),
-        jobs,
-        track.name
-    );
-    let stop = super::signals::install();
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    // One slot per run: its summary and steering chatter, or why it could not start.
-    type RunResult = Result<(Summary, f64), String>;
-    let results: Vec<std::sync::Mutex<Option<RunResult>>> =
-        (0..cfgs.len()).map(|_| std::sync::Mutex::new(None)).collect();
-    std::thread::scope(|s| {
-        for _ in 0..jobs.min(cfgs.len()) {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if i >= cfgs.len() {
-                    break;
-                }
-                let r = Simulation::with_scene(&cfgs[i], scene.clone())
-                    .map_err(|e| e.to_string())
-                    .map(|mut sim| {
-                        sim.set_full_frames(false);
-                        let mut chatter = Chatter::default();
-                        // Ctrl-C ends every run of the sweep at its next frame
-                        let sum = sim
-                            .run(&mut NoTimer, |_, st| {
-                                chatter.push(st.out.command.steer);
-                                if stop.is_set() {
-                                    Err(())
-                                } else {
-                                    Ok(())
-                                }
-                            })
-                            .unwrap_or_else(|_| sim.summary());
-                        (sum, chatter.rms())
-                    });
-                if let Ok(mut slot) = results[i].lock() {
-                    *slot = Some(r);
-                }
-            });
-        }
-    });
-    let head: Vec<String> = keys.iter().map(|k| format!("{k:>12}")).collect();
-    println!(
-        "{} {:>5} {:>10} {:>10} {:>6} {:>10} {:>9} {:>8}  end",
-        head.join(" "),
-        "laps",
-        "rms_m",
-        "max_m",
-        "dep",
-        "rev/s",
-        "dsteer",
-        "lost"
-    );
-    let mut runs = Vec::new();
-    for (p, slot) in points.iter().zip(results) {
-        let vals: Vec<String> = p.iter().map(|v| format!("{v:>12.4}")).collect();
-        let vals = vals.join(" ");
-        match slot.into_inner().ok().flatten() {
-            Some(Ok((s, chatter))) => {
-                println!(
-                    "{vals} {:>5} {:>10.4} {:>10.4} {:>6} {:>10.2} {:>9.4} {:>8}  {:?}",
-                    s.laps, s.xte_rms_m, s.xte_max_m, s.lane_departures, s.steer_reversals_per_s, chatter, s.lane_lost_frames, s.end
-                );
-                runs.push(SweepRun {
-                    values: p.clone(),
-                    summary: s,
-                    steer_diff_rms: chatter,
-                });
-            }
-            Some(Err(e)) => println!("{vals} error: {e}"),
-            None => println!("{vals} error: the run panicked"),
-        }
-    }
-    let csv_path = a.out.join("sweep.csv");
-    std::fs::write(&csv_path, sweep::csv(&keys, &runs)).with_context(|| format!("{}: cannot write", csv_path.display()))?;
-    if let Some(why) = stop.reason() {
-        println!("sweep: interrupted; the rows above cover each run up to that moment");
-        return Ok(ExitCode::from(why.exit_code()));
-    }
-    println!("  table: {}", csv_path.display());
-    if let Some(font) = font {
-        plot::register_font(font);
-        if axes.len() == 1 {
-            let rows: Vec<(f64, Summary)> = runs.iter().map(|r| (r.values[0], r.summary.clone())).collect();
-            let p = a.out.join("sweep.png");
-            save(&plot::sweep_plot(keys[0], &rows)?, &p)?;
-            println!("  plot:  {}", p.display());
-        } else {
-            let p = a.out.join("sweep_grid.png");
-            save(&plot::grid_plot(keys[0], keys[1], &axes[0].values, &axes[1].values, &runs)?, &p)?;
-            println!("  heat map: {}", p.display());
-        }
-    }
-    Ok(ExitCode::SUCCESS)
 }

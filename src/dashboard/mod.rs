@@ -137,8 +137,8 @@ pub fn apply_value(p: &mut Pipeline, key: &str, value: f64) -> bool {
         "steering.kp" => c.pid.gains.kp = value,
         "steering.ki" => c.pid.gains.ki = value,
         "steering.kd" => c.pid.gains.kd = value,
-        "throttle.base" => c.throttle.config_mut().base = value,
-        "throttle.min" => c.throttle.config_mut().min = value,
+        "throttle.base" => c.throttle.options_mut().base = value,
+        "throttle.min" => c.throttle.options_mut().min = value,
         _ => return false,
     }
     true
@@ -382,8 +382,8 @@ fn get_value_pipeline(p: &mut Pipeline, key: &str) -> Option<f64> {
         "steering.kp" => c.pid.gains.kp,
         "steering.ki" => c.pid.gains.ki,
         "steering.kd" => c.pid.gains.kd,
-        "throttle.base" => c.throttle.config_mut().base,
-        "throttle.min" => c.throttle.config_mut().min,
+        "throttle.base" => c.throttle.options_mut().base,
+        "throttle.min" => c.throttle.options_mut().min,
         _ => return None,
     })
 }
@@ -479,7 +479,7 @@ impl Observer for DashObserver {
 fn throttle_cfg(p: &Pipeline) -> (f64, f64) {
     // `Throttle` exposes its settings mutably only; read them through a clone.
     let mut t = p.controller().throttle.clone();
-    let c = t.config_mut();
+    let c = t.options_mut();
     (c.base, c.min)
 }
 

@@ -169,7 +169,7 @@ pub fn stop_sign_picture(cfg: &Config) -> image::RgbImage {
     let pose = pose_before_object(cfg, &track, 0.35).expect("the road has its sign");
     let scene = std::sync::Arc::new(super::scene::Scene::new(&track));
     let mount = CameraMount {
-        camera: crate::camera::PinholeCamera::from_config(&cfg.camera),
+        camera: crate::camera::PinholeCamera::from(&cfg.camera),
         x_m: cfg.vehicle.camera_x_m,
     };
     let mut r = Renderer::new(scene, mount, RenderOptions::clean());

@@ -152,7 +152,7 @@ impl World {
     /// A car at rest at the start of the scene's track, centred in its lane, under `cfg`.
     pub fn new(cfg: &Config, scene: Arc<Scene>) -> Result<World, crate::lane::warp::WarpError> {
         let mount = CameraMount {
-            camera: PinholeCamera::from_config(&cfg.camera),
+            camera: PinholeCamera::from(&cfg.camera),
             x_m: cfg.vehicle.camera_x_m,
         };
         let renderer = Renderer::new(scene.clone(), mount, RenderOptions::from_config(&cfg.sim));
