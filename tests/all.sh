@@ -115,7 +115,8 @@ FEAT=serial,camera,gpio,dashboard,jpeg-turbo
 # then only run, and the machine is quiet for the wall-clock ones.
 stage feature-build bash -c "cargo test --release --features $FEAT --no-run --lib --test car && cargo build --release --features $FEAT --bins --example decode"
 stage link-hil cargo test --release --features $FEAT --test car link_hil::
-stage labs-link cargo test --release --features $FEAT --test car labs::lab11
+# lab 11 and the labs' key (it reruns every figure the lab pages quote, lab 11's with the firmware)
+stage labs-link cargo test --release --features $FEAT --test car -- labs::lab11 labs::key_matches_committed
 # the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr,
 # on the wall clock. The two whole laps (closed loop; 1e-3 bit errors) run side by side, one
 # emulator per core (~2.5 min); the timed faults (kill -9, Ctrl-C, stall, vanished pty) and
