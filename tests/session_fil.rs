@@ -62,21 +62,23 @@ fn a_folder_camera_drives_the_firmware_in_process() {
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
     assert_eq!(tel.len(), 32, "one record per frame of the folder (32 PNG)");
-    // The firmware drove what the pipeline asked: the servo showed the width of the last
-    // frame's steering (within 1 µs) while armed ...
-    let want = f64::from(permille_to_us(to_permille(tel.last().unwrap()["steer"].as_f64().unwrap()), 1000, 1500, 2000));
-    let ok = sim.wait_until(Duration::from_secs(5), || (), |s| {
-        s.pulses(true).iter().any(|&(w, _)| (w - want).abs() <= 1.0) && !s.rx_times(id::DISARM).is_empty()
-    });
+    // The firmware drove what the pipeline asked: the servo widths of the frames' steering
+    // (firmware default end points) show up at D9 within 1 µs. The link sends the newest DRIVE
+    // only, so a frame whose DRIVE was superseded before it was written never shows: most do.
+    let width = |r: &serde_json::Value| f64::from(permille_to_us(to_permille(r["steer"].as_f64().unwrap()), 1000, 1500, 2000));
+    let got_disarm = sim.wait_until(Duration::from_secs(5), || (), |s| !s.rx_times(id::DISARM).is_empty());
+    let servo = sim.pulses(true);
+    let shown = tel.iter().filter(|r| servo.iter().any(|&(w, _)| (w - width(r)).abs() <= 1.0)).count();
     let drives = sim.rx_times(id::DRIVE).len();
     let esc = sim.pulses(false);
     println!(
-        "{} frames; {drives} DRIVE frames at the firmware; servo showed {want} µs; last ESC width {:?}",
+        "{} frames; {drives} DRIVE frames at the firmware; {shown} frames' steering seen at the servo; {} servo changes",
         tel.len(),
-        esc.last()
+        servo.len()
     );
-    assert!(ok, "servo never showed {want} µs, or no DISARM");
+    assert!(got_disarm, "no DISARM at the end of the session");
     assert!(drives >= 30, "{drives} DRIVE frames for 32 frames");
+    assert!(shown * 10 >= tel.len() * 8, "only {shown} of {} frames' steering reached the servo", tel.len());
     assert!(esc.iter().any(|&(w, _)| w > 1550.0), "the ESC drove");
     // ... and the session's end sent DISARM and neutral: the ESC ends at 1500 µs.
     let neutral = sim.wait_until(Duration::from_secs(2), || (), |s| s.last_width(false).is_some_and(|w| (w - 1500.0).abs() <= 1.0));

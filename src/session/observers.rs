@@ -112,7 +112,7 @@ impl Observer for StatusLine {
     }
 
     fn on_stall(&mut self, e: &FrameError) {
-        (self.say)(Level::Warn, &format!("t={:6.1} s  camera stalled: {e}; neutral sent, waiting for frames", self.t()));
+        (self.say)(Level::Info, &format!("t={:6.1} s  camera stalled: {e}; neutral sent, waiting for frames", self.t()));
         if self.deadline.is_some_and(|d| self.t() >= d) {
             self.stop.request(StopReason::Requested);
         }
