@@ -299,7 +299,7 @@ fn dry_run_sim_stays_parked_until_the_button_arms_it_and_stops_when_pressed_agai
     assert!(max_parked < 1e-6, "the disarmed car moved: {max_parked} m/s");
     assert!(est_parked < 1e-6, "dead reckoning drove a parked car {est_parked} m");
     assert!(parked.iter().all(|r| r["sent"]["throttle"].as_f64().or(r["throttle"].as_f64()) == Some(0.0) && r["car"] == "disarmed"));
-    let driving = recs.iter().filter(|r| t(r) > armed_at + 2.0 && t(r) < disarmed_at).map(|r| speed(r)).fold(0.0, f64::max);
+    let driving = recs.iter().filter(|r| t(r) > armed_at + 2.0 && t(r) < disarmed_at).map(&speed).fold(0.0, f64::max);
     assert!(driving > 0.2, "armed, the car drives: {driving} m/s");
     let last = speed(recs.last().unwrap());
     println!("armed: up to {driving:.3} m/s; 2 s after the button: {last:.4} m/s");

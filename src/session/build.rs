@@ -479,6 +479,9 @@ type LinkOut = Option<super::LinkHandles>;
 #[cfg(not(feature = "serial"))]
 type LinkOut = ();
 
+/// The actuators, the link's handles and the firmware's pulse watcher.
+type Sinks = (Box<dyn Actuators>, LinkOut, Option<crate::sim::pwm::PwmWatcher>);
+
 /// The actuators: the simulated car, the link (with the firmware's pulses moving the
 /// simulated car), or nothing.
 fn open_sink(
@@ -486,7 +489,7 @@ fn open_sink(
     spec: &SessionSpec,
     env: &SessionEnv,
     parts: &mut Parts,
-) -> Result<(Box<dyn Actuators>, LinkOut, Option<crate::sim::pwm::PwmWatcher>), SessionError> {
+) -> Result<Sinks, SessionError> {
     let wall = is_wall_clock(spec);
     match (&spec.sink, &parts.world) {
         (SinkSpec::DryRun, Some(w)) if !wall => Ok((Box::new(SimVehicle::new(w.clone())), Default::default(), None)),
