@@ -11,7 +11,6 @@ use rccar::config::Config;
 use rccar::detect::Rect;
 use rccar::sim::run::Simulation;
 use rccar::sim::track::Track;
-use rccar::timing::NoTimer;
 use std::path::Path;
 
 fn main() {
@@ -35,7 +34,7 @@ fn main() {
     let mut s = 0.0;
     while s < len {
         sim.place_at(s);
-        let step = sim.step(&mut NoTimer);
+        let step = sim.step();
         s += 0.05;
         let objs: Vec<_> = step
             .truth

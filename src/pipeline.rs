@@ -662,6 +662,12 @@ impl Pipeline {
         o
     }
 
+    /// What the motors were really sent for the last frame (the gate's answer): dead
+    /// reckoning integrates this, so a parked, disarmed car is not "driving" at its wish.
+    pub fn note_sent(&mut self, sent: Command) {
+        self.last_throttle = sent.throttle;
+    }
+
     /// The lane detector (its intermediate images, for annotation).
     pub fn lane(&self) -> &LaneDetector {
         &self.lane

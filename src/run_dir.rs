@@ -291,12 +291,12 @@ pub enum RunState {
 
 impl RunState {
     /// The state of a run whose loop ended by `stop` (`None`: it ran to its end): Ctrl-C and
-    /// SIGTERM interrupt, a fault fails, a requested stop (`--seconds`, the button) finishes.
+    /// SIGTERM, SIGHUP and SIGQUIT interrupt, a fault fails, a requested stop (`--seconds`, the button) finishes.
     pub fn from_stop(stop: Option<crate::drive::StopReason>) -> RunState {
         use crate::drive::StopReason;
         match stop {
             None | Some(StopReason::Requested) => RunState::Finished,
-            Some(StopReason::Interrupt | StopReason::Terminate) => RunState::Interrupted,
+            Some(StopReason::Interrupt | StopReason::Terminate | StopReason::Hangup | StopReason::Quit) => RunState::Interrupted,
             Some(StopReason::Fault) => RunState::Failed,
         }
     }

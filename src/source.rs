@@ -31,7 +31,7 @@ pub struct Frame {
     pub name: String,
     /// The image, resized to the configured camera size.
     pub image: RgbImage,
-    /// When the frame was captured on the caller's clock ([`crate::drive::Clock`]), seconds;
+    /// When the frame was captured on the caller's clock ([`crate::timing::Clock`]), seconds;
     /// `None`: the loop takes the time it received the frame.
     pub captured_s: Option<f64>,
     /// Ground truth the source knows (the simulator), as JSON: telemetry carries it without
@@ -137,6 +137,51 @@ pub trait FrameSource {
     /// How many frames to expect, if known (for progress bars).
     fn len_hint(&self) -> Option<usize> {
         None
+    }
+    /// Why the source ended when it cannot be used at all (a camera that delivers the wrong
+    /// size, a device gone for good), as one line naming it; `None` for a normal end (the end
+    /// of a folder) or while it runs.
+    fn fatal(&self) -> Option<String> {
+        None
+    }
+}
+
+/// A source played at its frames' own times on a clock (a folder of frames as the car's
+/// camera on the bench: `rccar drive --camera DIR`). The first frame sets the origin; each
+/// later frame is held back until its time has come, and stamped with the capture time.
+pub struct Paced<S> {
+    inner: S,
+    clock: std::sync::Arc<dyn crate::timing::Clock + Send + Sync>,
+    t0: Option<f64>,
+}
+
+impl<S: FrameSource> Paced<S> {
+    /// Plays `inner` on `clock`.
+    pub fn new(inner: S, clock: std::sync::Arc<dyn crate::timing::Clock + Send + Sync>) -> Self {
+        Self { inner, clock, t0: None }
+    }
+}
+
+impl<S: FrameSource> FrameSource for Paced<S> {
+    fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
+        let item = self.inner.next_frame()?;
+        if let Ok(f) = &item {
+            let t0 = *self.t0.get_or_insert_with(|| self.clock.now_s() - f.time_s);
+            let wait = t0 + f.time_s - self.clock.now_s();
+            if wait > 0.0 {
+                self.clock.sleep_s(wait);
+            }
+        }
+        Some(item.map(|mut f| {
+            f.captured_s = Some(self.clock.now_s());
+            f
+        }))
+    }
+    fn len_hint(&self) -> Option<usize> {
+        self.inner.len_hint()
+    }
+    fn fatal(&self) -> Option<String> {
+        self.inner.fatal()
     }
 }
 

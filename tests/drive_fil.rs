@@ -557,3 +557,88 @@ fn bit_errors_at_1e_3_for_a_lap_cause_no_departure() {
     assert_eq!(s["laps"].as_u64(), Some(1));
     assert_eq!(s["lane_departures"].as_u64(), Some(0));
 }
+
+/// Issue 24: SIGHUP (an SSH session closing — how students start the car) ended `drive` with
+/// 129, no neutral, no DISARM, no summary; only the firmware's watchdog stopped the car. Now
+/// it is handled like Ctrl-C: DISARM and a neutral pulse from `drive` itself, long before the
+/// failsafe, then the summary.
+#[test]
+fn sighup_sends_neutral_and_disarm_then_writes_the_summary() {
+    let dir = scratch("hup");
+    let (sim, log) = start_sim(&dir, "hup");
+    let out = dir.join("drive");
+    let mut child = drive(&sim, &log, &out, &["--set", "detect.enabled=false"]);
+    wait_frames(&out, 120, Duration::from_secs(60));
+    assert!(sim.last_width(false).is_some_and(|w| w > 1550.0), "driving before SIGHUP");
+    let n_before = esc(&sim).len();
+    let t0 = Instant::now();
+    let _ = Proc::new("kill").args(["-HUP", &child.id().to_string()]).status();
+    let mut neutral_wall = None;
+    while t0.elapsed() < Duration::from_secs(5) {
+        if esc(&sim)[n_before..].iter().any(|&(w, _)| (w - 1500.0).abs() <= 1.0) {
+            neutral_wall = Some(t0.elapsed());
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let (code, stdout, _) = wait(&mut child, &out, Duration::from_secs(10));
+    let neutral_wall = neutral_wall.expect("ESC neutral after SIGHUP");
+    let disarms = sim.rx_times(rccar::link::protocol::id::DISARM);
+    println!(
+        "SIGHUP: ESC neutral after {:.0} ms, code {code:?}, DISARM frames {}",
+        neutral_wall.as_secs_f64() * 1e3,
+        disarms.len()
+    );
+    assert_eq!(code, Some(129));
+    assert!(stdout.contains("neutral sent"), "{stdout}");
+    assert!(!disarms.is_empty(), "no DISARM frame reached the firmware");
+    let s = summary(&out);
+    assert_eq!(s["drive"]["frames"].as_u64(), Some(telemetry(&out).len() as u64));
+}
+
+/// Issue 24: a serial port that vanished mid-drive went unnoticed (the status line kept
+/// printing "throttle +0.50" for 4.5 s, then exit 0). Now the lost link is reported within
+/// 300 ms of the emulator's death (measured from the kill to the line on stderr), the car is
+/// disarmed, and when it stays lost for `--link-timeout` the run ends as a fault (exit 3)
+/// naming it.
+#[test]
+fn killing_the_emulator_is_reported_within_300_ms_and_ends_the_run_as_a_fault() {
+    let dir = scratch("lost");
+    let (sim, log) = start_sim(&dir, "lost");
+    let out = dir.join("drive");
+    let mut child = drive(&sim, &log, &out, &["--set", "detect.enabled=false", "--link-timeout", "2"]);
+    wait_frames(&out, 120, Duration::from_secs(60));
+    assert!(sim.last_width(false).is_some_and(|w| w > 1550.0), "driving before the kill");
+    let stderr_path = out.with_extension("stderr");
+    let t0 = Instant::now();
+    drop(sim); // the emulator is killed: its pty is gone
+    let mut reported = None;
+    while t0.elapsed() < Duration::from_secs(5) {
+        if std::fs::read_to_string(&stderr_path).unwrap_or_default().contains("link lost") {
+            reported = Some(t0.elapsed());
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let (code, _, stderr) = wait(&mut child, &out, Duration::from_secs(15));
+    let ended = t0.elapsed();
+    let reported = reported.unwrap_or_else(|| panic!("the lost link was not reported:\n{stderr}"));
+    println!(
+        "emulator killed: 'link lost' on stderr after {:.0} ms (bound 300 ms), exit {code:?} after {:.1} s\n{}",
+        reported.as_secs_f64() * 1e3,
+        ended.as_secs_f64(),
+        stderr.lines().filter(|l| l.contains("link") || l.contains("fault")).collect::<Vec<_>>().join("\n")
+    );
+    assert!(reported <= Duration::from_millis(300), "reported after {reported:?}");
+    assert_eq!(code, Some(3), "{stderr}");
+    assert!(stderr.contains("drive: fault: link: lost for"), "{stderr}");
+    let s = summary(&out);
+    assert!(s["drive"]["fault"].as_str().is_some_and(|f| f.starts_with("link:")), "{s}");
+    // every record after the loss says what the car did: nothing
+    let tel = telemetry(&out);
+    let lost = tel
+        .iter()
+        .position(|r| r["events"].as_array().is_some_and(|e| e.iter().any(|e| e.as_str().is_some_and(|e| e.contains("link lost")))))
+        .expect("the loss is in telemetry");
+    assert!(tel[lost..].iter().all(|r| r["car"] == "fault" && r["sent"]["throttle"].as_f64().or(r["throttle"].as_f64()) == Some(0.0)));
+}

@@ -24,6 +24,7 @@ mod ranging_calibrate_cli;
 mod ranging_sim;
 mod record_replay;
 mod runs;
+mod session;
 mod sim_loop;
 mod sim_replay;
 mod sim_track;

@@ -20,7 +20,6 @@ use rccar::config::Config;
 use rccar::ranging::{fit, FitOptions, ObjectClass, Pair, TiltRanging};
 use rccar::sim::run::Simulation;
 use rccar::sim::track::{ObjectKind, Track};
-use rccar::timing::NoTimer;
 use std::path::{Path, PathBuf};
 
 /// A straight with one object of `kind` on the driven lane's centre, 3 m ahead of the start.
@@ -49,7 +48,7 @@ fn measure(kind: &str, class: ObjectClass, ds: &[f64]) -> Vec<(f64, f64, f64, f6
         // place_at puts the car's centre there; the lens is camera_x − wheelbase/2 ahead.
         let lens_ahead = cfg.vehicle.camera_x_m - cfg.vehicle.wheelbase_m / 2.0;
         sim.place_at(3.0 - near - d - lens_ahead);
-        let step = sim.step(&mut NoTimer);
+        let step = sim.step();
         let Some(o) = step.objects.iter().find(|o| o.class == class) else {
             panic!("{kind} not boxed at {d} m");
         };
@@ -232,7 +231,7 @@ fn approach(kind: &str, stage: &mut rccar::detect::DetectStage, from: f64, to: f
     let mut d = from;
     while d >= to - 1e-9 {
         sim.place_at(3.0 - near - d - lens_ahead);
-        let step = sim.step(&mut NoTimer);
+        let step = sim.step();
         let truth_m = face_distance(&cfg, &ob, step.truth.pose);
         let bbox = step
             .truth
@@ -434,7 +433,7 @@ fn the_pipeline_tracks_objects_between_detections() {
     let (mut predicted, mut detected, mut ids) = (0, 0, std::collections::BTreeSet::new());
     let mut worst: f64 = 0.0;
     for k in 0..60 {
-        let step = sim.step(&mut NoTimer);
+        let step = sim.step();
         let truth = face_distance(&cfg, &ob, step.truth.pose);
         for o in step.objects.iter().filter(|o| o.class == ObjectClass::StopSign) {
             let d = o.distance_m.expect("a tracked sign has a distance");

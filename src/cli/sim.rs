@@ -8,17 +8,18 @@ use super::timer::WallTimer;
 use anyhow::{bail, Context, Result};
 use rccar::sim::step::{step_metrics, StepOptions};
 use clap::Args;
-use rccar::drive::{Driver, Flow, FrameContext, LoopEnd, LoopError, Observer, Parts, StopReason};
-use rccar::pipeline::Pipeline;
-use rccar::run_dir::{RunDir, RunState};
+use rccar::config::{RangingMethod, StereoReference};
+use rccar::drive::{Clock, Level, LoopEnd, NoClock, Observer, StopReason};
+use rccar::session::{ArmAt, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
 use rccar::sim::plot;
+use rccar::sim::report::RunReport;
+use rccar::run_dir::{RunDir, RunState};
 use rccar::sim::run::Summary;
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
-use rccar::sim::world::{lock, SharedWorld, SimCamera, SimScore, SimVehicle, World};
-use rccar::telemetry::JsonlWriter;
-use rccar::timing::{NoTimer, StageTimer};
-use std::path::PathBuf;
+use rccar::sim::world::lock;
+use rccar::timing::NoTimer;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
@@ -45,9 +46,8 @@ pub struct SimArgs {
     /// folder (`--record` then holds the left camera's), for `rccar replay DIR --right DIR2`.
     #[arg(long, value_name = "DIR2")]
     pub record_right: Option<PathBuf>,
-    /// Output folder for telemetry.jsonl, summary.json and the plots: new or empty (a folder
-    /// holding a run is refused). Default: a new folder per run, out/sim/<YYYYmmdd-HHMMSS>/,
-    /// with out/sim/latest pointing at the newest.
+    /// Output folder for telemetry.jsonl, summary.json and the plots: new or empty (default: a
+    /// new folder under out/sim/, with out/sim/latest pointing at it).
     #[arg(long, short)]
     pub out: Option<PathBuf>,
     /// Gain sweep: `KEY=LO:HI:N`, e.g. `steering.kp=0.2:2.0:10` (any numeric config key).
@@ -104,36 +104,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     if !a.sweep.is_empty() && step.is_some() {
         bail!("--start-offset/--kick: not with --sweep (one run at a time)");
     }
-    // The run folder (and the --record folders): new, or refused before anything is written.
-    let sweeping = !a.sweep.is_empty();
-    let record: [(&str, Option<&std::path::Path>); 2] = if sweeping {
-        [("--record", None), ("--record-right", None)]
-    } else {
-        [
-            ("--record", a.record.as_deref()),
-            ("--record-right", a.record_right.as_deref()),
-        ]
-    };
-    let mut run = super::outdir::create("sim", a.out.as_deref(), "out/sim", &record, &[])?;
-    if sweeping {
-        return super::sweep::run_sweep(&a.sweep, a.jobs, &cfg, &track, font, run);
-    }
-
-    let stop = super::signals::install();
-    let world = World::new(&cfg, Arc::new(Scene::new(&track)))?.shared();
-    if let Some(m) = a.start_offset {
-        lock(&world).kick(m, 0.0);
-    }
-    // With a dashboard the operator ends the run (a parked, disarmed car is not "stalled").
-    let mut camera = SimCamera::new(world.clone()).ending_with_world(!a.dash.dashboard);
-    // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
-    let fps = cfg.camera.fps;
-    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, Some(world.clone()), &stop, Some(fps), None)?;
-    let mut vehicle = dash.sink(SimVehicle::new(world.clone()));
-    let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
-    let mut pipeline = Pipeline::new(&cfg)?;
-    // ranging.method = "stereo": a camera pair (src/sim/stereo.rs `other_camera`).
-    let stereo = cfg.ranging.method == rccar::config::RangingMethod::Stereo && !a.truth_boxes;
+    let stereo = cfg.ranging.method == RangingMethod::Stereo && !a.truth_boxes;
     if a.record_right.is_some() && !stereo {
         bail!(
             "--record-right: there is one camera; it needs ranging.method = \"stereo\" (--set ranging.method=stereo) and no --truth-boxes"
@@ -142,44 +113,52 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     if stereo && a.record.is_some() && a.record_right.is_none() {
         bail!("--record with ranging.method = \"stereo\": give --record-right DIR2 for the right camera's frames");
     }
+    // The run folder (and the --record folders): new, or refused before anything is written.
+    let sweeping = !a.sweep.is_empty();
+    let record: [(&str, Option<&Path>); 2] = if sweeping {
+        [("--record", None), ("--record-right", None)]
+    } else {
+        [("--record", a.record.as_deref()), ("--record-right", a.record_right.as_deref())]
+    };
+    let mut run = super::outdir::create("sim", a.out.as_deref(), "out/sim", &record, &[])?;
+    if sweeping {
+        return super::sweep::run_sweep(&a.sweep, a.jobs, &cfg, &track, font, run);
+    }
+    let stop = super::signals::install();
+    let clock: Arc<dyn Clock + Send + Sync> = if a.no_timing { Arc::new(NoClock) } else { Arc::new(super::timer::WallClock::new()) };
+    let say: rccar::drive::Say = Arc::new(|level, line: &str| match level {
+        Level::Info => super::signals::say(line),
+        Level::Warn => super::signals::say_err(line),
+    });
+    let mut spec = SessionSpec::new(
+        SourceSpec::Sim {
+            scene: SceneSpec::Shared(Arc::new(Scene::new(&track))),
+            // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
+            timing: if a.dash.dashboard { Timing::RealTime } else { Timing::LockStep },
+            stall: None,
+            start_offset_m: a.start_offset,
+        },
+        SinkSpec::DryRun,
+    );
+    spec.arm = if a.dash.dashboard { ArmAt::Operator } else { ArmAt::Start };
+    spec.truth_boxes = a.truth_boxes;
+    spec.frames_viewed = a.record.is_some() || a.dash.dashboard;
+    spec.operator_ends_run = a.dash.dashboard;
+    spec.telemetry = Some(run.join("telemetry.jsonl"));
+    let timer: Box<dyn rccar::timing::StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
+    let env = SessionEnv { clock: clock.clone(), stop: stop.clone(), timer, say: say.clone() };
+    let mut session = Session::build(&cfg, spec, env)?;
     if a.truth_boxes {
         println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
-        camera.set_truth_boxes(true);
-        super::common::warn_single_camera(&cfg);
-    } else {
-        pipeline.set_detector(super::common::load_detector(&cfg)?);
     }
-    if stereo {
-        let scene = lock(&world).scene().clone();
-        camera.set_other(Some(rccar::sim::stereo::other_camera(
-            &cfg,
-            scene,
-            rccar::sim::render::RenderOptions::from_config(&cfg.sim),
-        )));
-        rccar::drive::stereo::install(&mut pipeline);
-        if let Some(line) = rccar::drive::stereo::calibration_line(&pipeline, &cfg) {
-            println!("{line}");
+    for (level, line) in session.notes() {
+        match level {
+            Level::Info => println!("sim: {line}"),
+            Level::Warn => eprintln!("{line}"),
         }
-        println!(
-            "sim: stereo pair, reference camera {} with the other {} m to its {} (ranging.method = \"stereo\")",
-            cfg.stereo.reference,
-            cfg.stereo.base_m,
-            cfg.stereo.reference.other()
-        );
     }
-    // Without recording nobody looks at the frames: render only the rows the pipeline reads
-    // on each frame (the lane's; the detectors' too on detection frames): the same decisions.
-    // A stereo pair is rendered whole (matching reads beyond the detector's rows).
-    if a.record.is_some() || dash.enabled() || stereo {
-        camera.set_rows(None);
-    } else {
-        camera.set_row_plan(Some(pipeline.row_plan()));
-    }
-    let tel_path = run.join("telemetry.jsonl");
-    let mut tel = JsonlWriter::new(
-        std::fs::File::create(&tel_path).with_context(|| format!("{}: cannot create", tel_path.display()))?,
-        tel_path.display().to_string(),
-    );
+    let world = session.world().expect("a simulation has a world").clone();
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, &session, &stop, clock)?;
     println!(
         "sim: track {} ({:.2} m, tightest lane radius {:.2} m), {} lap(s), at most {} s",
         track.name,
@@ -188,45 +167,28 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         cfg.sim.laps,
         cfg.sim.max_seconds
     );
-    let mut wall = WallTimer::new();
-    let mut none = NoTimer;
-    let timer: &mut dyn StageTimer = if a.no_timing { &mut none } else { &mut wall };
-    let mut report = Report {
-        world: world.clone(),
-        record: a.record.clone(),
-        record_right: a.record_right.clone(),
-        reference_left: cfg.stereo.reference.is_left(),
-        stereo: StereoTally::default(),
-        series: plot::Series::default(),
-        kick: step.filter(|s| s.kick).map(|s| (s.t, s.dy)),
-        kicked_at: None,
-    };
+    let mut report = RunReport::new(world.clone(), say);
+    report.record = a.record.clone();
+    report.record_right = a.record_right.clone();
+    report.reference_left = cfg.stereo.reference != StereoReference::Right;
+    report.kick = step.filter(|s| s.kick).map(|s| (s.t, s.dy));
     let started = std::time::Instant::now();
-    let clock = super::timer::WallClock::new();
     super::outdir::started(&mut run);
     let end = {
-        let mut tel = dash.tag(&mut tel);
-        let mut obs: [&mut dyn Observer; 4] = [&mut score, &mut tel, &mut report, &mut dash];
-        Driver::new(cfg.camera.fps).run(Parts {
-            source: &mut camera,
-            pipeline: &mut pipeline,
-            sink: &mut *vehicle,
-            stop: &stop,
-            clock: &clock,
-            timer,
-            observer: &mut obs,
-        })?
+        let mut obs: [&mut dyn Observer; 2] = [&mut report, &mut dash];
+        session.run(&mut obs)
     };
     let interrupted = match end {
-        LoopEnd::Stopped(why) => {
+        Ok(LoopEnd::Stopped(why)) => {
             lock(&world).interrupt();
             Some(why)
         }
         _ => None,
     };
-    let tel_lines = tel.lines();
-    tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;
-    let summary = lock(&world).summary();
+    let outcome = session.finish()?;
+    end?;
+    let summary = outcome.summary.clone().expect("a simulation has a score");
+    let tel_path = outcome.telemetry.as_ref().map(|t| t.0.clone()).unwrap_or_default();
     let scene = lock(&world).scene().clone();
     let wall_s = started.elapsed().as_secs_f64();
     print_summary(&summary);
@@ -263,48 +225,14 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     run.write_json("config.json", &cfg)?;
     println!("  telemetry: {}", tel_path.display());
     println!("  summary:   {}", sum_path.display());
-    if let Some(font) = font {
-        plot::register_font(font);
-        let p1 = save(
-            &mut run,
-            "xte_steer.png",
-            &plot::time_plot(&report.series, summary.lane_width_m)?,
-        )?;
-        let p2 = save(&mut run, "path.png", &plot::path_plot(&report.series, &scene)?)?;
-        println!("  plots:     {} {}", p1.display(), p2.display());
-        if let Some(m) = &step_fig {
-            let p3 = save(
-                &mut run,
-                "step.png",
-                &plot::step_plot(&report.series.t, &report.series.xte, m)?,
-            )?;
-            println!("  step:      {}", p3.display());
-        }
-    } else {
-        println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
-    }
-    match (&a.record, &a.record_right) {
-        (Some(dir), Some(right)) => println!(
-            "  frames:    {}/ and {}/ ({} PNG each; replay with `rccar replay {} --right {} --set ranging.method=stereo`)",
-            dir.display(),
-            right.display(),
-            summary.frames,
-            dir.display(),
-            right.display()
-        ),
-        (Some(dir), None) => println!(
-            "  frames:    {}/ ({} PNG; replay with `rccar replay {}`)",
-            dir.display(),
-            summary.frames,
-            dir.display()
-        ),
-        _ => {}
-    }
-    super::outdir::finish(&mut run, RunState::from_stop(interrupted), Some(tel_lines))?;
+    write_plots(&mut run, font, &report, &summary, &scene, step_fig.as_ref())?;
+    print_frames(&a, summary.frames);
+    let tel_lines = outcome.telemetry.as_ref().map(|t| t.1);
+    super::outdir::finish(&mut run, RunState::from_stop(interrupted), tel_lines)?;
     if let Some(why) = interrupted {
         println!(
             "sim: interrupted ({}) after {} frames; the summary and plots cover what ran",
-            if why == StopReason::Terminate { "SIGTERM" } else { "Ctrl-C" },
+            signal_name(why),
             summary.frames
         );
         return Ok(ExitCode::from(why.exit_code()));
@@ -313,73 +241,60 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
-/// What `rccar sim` shows and keeps while the loop runs: transitions on the terminal, the
-/// plots' series, the recorded frames.
-struct Report {
-    world: SharedWorld,
-    /// The (left) camera's frames.
-    record: Option<PathBuf>,
-    /// A stereo pair's right camera's frames.
-    record_right: Option<PathBuf>,
-    /// `stereo.reference = "left"`.
-    reference_left: bool,
-    stereo: StereoTally,
-    series: plot::Series,
-    /// `--kick T:DY`: (T seconds, DY metres), done once.
-    kick: Option<(f64, f64)>,
-    /// Time of the frame after which the kick was applied, seconds.
-    kicked_at: Option<f64>,
+/// How a stop reason is said.
+fn signal_name(why: StopReason) -> &'static str {
+    match why {
+        StopReason::Terminate => "SIGTERM",
+        StopReason::Hangup => "SIGHUP",
+        StopReason::Quit => "SIGQUIT",
+        StopReason::Interrupt => "Ctrl-C",
+        StopReason::Fault => "a fault",
+        StopReason::Requested => "requested",
+    }
 }
 
-/// Stereo frames and boxes of a run.
-#[derive(Debug, Default)]
-struct StereoTally {
-    pairs: u64,
-    ranged: u64,
-    unmatched: u64,
+/// The time and path plots (and the step plot), when the font is there.
+fn write_plots(
+    run: &mut RunDir,
+    font: Option<&'static [u8]>,
+    report: &RunReport,
+    summary: &Summary,
+    scene: &Scene,
+    step: Option<&rccar::sim::step::StepMetrics>,
+) -> Result<()> {
+    let Some(font) = font else {
+        println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
+        return Ok(());
+    };
+    plot::register_font(font);
+    let p1 = save(run, "xte_steer.png", &plot::time_plot(&report.series, summary.lane_width_m)?)?;
+    let p2 = save(run, "path.png", &plot::path_plot(&report.series, scene)?)?;
+    println!("  plots:     {} {}", p1.display(), p2.display());
+    if let Some(m) = step {
+        let p3 = save(run, "step.png", &plot::step_plot(&report.series.t, &report.series.xte, m)?)?;
+        println!("  step:      {}", p3.display());
+    }
+    Ok(())
 }
 
-impl Observer for Report {
-    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
-        // With a pair, the reference camera's image goes to its side's folder.
-        let other = ctx.frame.other.as_ref().map(|o| &o.image);
-        let (left, right) = match other {
-            Some(o) if !self.reference_left => (o, Some(&ctx.frame.image)),
-            o => (&ctx.frame.image, o),
-        };
-        for (dir, img) in [(&self.record, Some(left)), (&self.record_right, right)] {
-            if let (Some(dir), Some(img)) = (dir, img) {
-                let p = dir.join(&ctx.frame.name);
-                img.save(&p)
-                    .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
-            }
-        }
-        if let Some(s) = &ctx.record.stereo {
-            self.stereo.pairs += 1;
-            self.stereo.ranged += s.ranged;
-            self.stereo.unmatched += s.unmatched;
-        }
-        if let Some(tr) = &ctx.record.transition {
-            println!(
-                "  t={:7.2} s  {} -> {}: {}",
-                ctx.record.time_s,
-                tr.from.name(),
-                tr.to.name(),
-                tr.reason
-            );
-        }
-        let mut w = lock(&self.world);
-        if let Some(truth) = w.last_truth() {
-            self.series.push_parts(ctx.frame.time_s, truth, ctx.output.command.steer);
-        }
-        if let Some((t, dy)) = self.kick {
-            if self.kicked_at.is_none() && ctx.frame.time_s + 1e-9 >= t {
-                w.kick(dy, 0.0);
-                self.kicked_at = Some(ctx.frame.time_s);
-                println!("  t={:7.2} s  kicked {:+.3} m sideways", ctx.frame.time_s, dy);
-            }
-        }
-        Ok(Flow::Continue)
+/// Where the recorded frames went.
+fn print_frames(a: &SimArgs, frames: u64) {
+    match (&a.record, &a.record_right) {
+        (Some(dir), Some(right)) => println!(
+            "  frames:    {}/ and {}/ ({} PNG each; replay with `rccar replay {} --right {} --set ranging.method=stereo`)",
+            dir.display(),
+            right.display(),
+            frames,
+            dir.display(),
+            right.display()
+        ),
+        (Some(dir), None) => println!(
+            "  frames:    {}/ ({} PNG; replay with `rccar replay {}`)",
+            dir.display(),
+            frames,
+            dir.display()
+        ),
+        _ => {}
     }
 }
 

@@ -250,7 +250,7 @@ impl Live {
 }
 
 /// The loop's side of the dashboard: publishes snapshots, applies control messages between
-/// frames, and hands its events to the telemetry (see [`DashObserver::tag`]).
+/// frames, and puts its events into the record of the first frame they act on.
 pub struct DashObserver {
     rx: Receiver<Control>,
     out: Arc<Latest<Arc<Snapshot>>>,
@@ -309,15 +309,6 @@ pub fn channel(cfg: &Config, world: Option<SharedWorld>, stop: Option<StopSignal
 }
 
 impl DashObserver {
-    /// Wraps the telemetry writer so that this observer's events land in the records it
-    /// writes (the record of the first frame a change acts on).
-    pub fn tag<'a>(&self, telemetry: &'a mut dyn Observer) -> WithEvents<'a> {
-        WithEvents {
-            inner: telemetry,
-            pending: self.pending.clone(),
-        }
-    }
-
     /// Whether the simulator is paused.
     pub fn paused(&self) -> bool {
         self.paused
@@ -421,6 +412,11 @@ impl Observer for DashObserver {
         Flow::Continue
     }
 
+    /// The operator's changes acted on from this frame on, in its record.
+    fn decorate(&mut self, r: &mut FrameRecord) {
+        r.events.append(&mut self.pending.lock().unwrap_or_else(|e| e.into_inner()));
+    }
+
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
         let r = ctx.record;
         self.live.time_bits.store(r.time_s.to_bits(), Ordering::SeqCst);
@@ -481,49 +477,6 @@ fn throttle_cfg(p: &Pipeline) -> (f64, f64) {
     let mut t = p.controller().throttle.clone();
     let c = t.options_mut();
     (c.base, c.min)
-}
-
-/// The telemetry writer with the dashboard's events added to the record of the frame they
-/// first act on.
-pub struct WithEvents<'a> {
-    inner: &'a mut dyn Observer,
-    pending: Arc<Mutex<Vec<String>>>,
-}
-
-impl<'a> WithEvents<'a> {
-    /// `telemetry` unchanged (no dashboard).
-    pub fn plain(telemetry: &'a mut dyn Observer) -> Self {
-        Self {
-            inner: telemetry,
-            pending: Arc::new(Mutex::new(Vec::new())),
-        }
-    }
-}
-
-impl Observer for WithEvents<'_> {
-    fn before_frame(&mut self, p: &mut Pipeline) -> Flow {
-        self.inner.before_frame(p)
-    }
-    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
-        let events = std::mem::take(&mut *self.pending.lock().unwrap_or_else(|e| e.into_inner()));
-        if events.is_empty() {
-            return self.inner.on_frame(ctx);
-        }
-        let mut rec = ctx.record.clone();
-        rec.events.extend(events);
-        self.inner.on_frame(&FrameContext {
-            frame: ctx.frame,
-            output: ctx.output,
-            record: &rec,
-            pipeline: ctx.pipeline,
-        })
-    }
-    fn on_skip(&mut self, e: &crate::source::FrameError) {
-        self.inner.on_skip(e)
-    }
-    fn on_stall(&mut self, e: &crate::source::FrameError) {
-        self.inner.on_stall(e)
-    }
 }
 
 #[cfg(test)]

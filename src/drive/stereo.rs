@@ -26,6 +26,9 @@ impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
     fn len_hint(&self) -> Option<usize> {
         (**self).len_hint()
     }
+    fn fatal(&self) -> Option<String> {
+        (**self).fatal()
+    }
 }
 
 /// Two sources, left and right, as one source of reference frames carrying the other image.
@@ -68,6 +71,10 @@ impl<L: FrameSource, R: FrameSource> StereoFrames<L, R> {
 }
 
 impl<L: FrameSource, R: FrameSource> FrameSource for StereoFrames<L, R> {
+    fn fatal(&self) -> Option<String> {
+        self.pair.fatal()
+    }
+
     fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
         let p = match self.pair.next_pair()? {
             Ok(p) => p,

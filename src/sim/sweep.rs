@@ -12,7 +12,6 @@
 use super::run::{EndReason, Simulation, Summary};
 use super::scene::Scene;
 use crate::config::Config;
-use crate::timing::NoTimer;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -278,7 +277,7 @@ pub fn run_all(
         };
         sim.set_full_frames(false);
         let mut chatter = Chatter::default();
-        let r = sim.run(&mut NoTimer, |_, st| {
+        let r = sim.run(|_, st| {
             chatter.push(st.out.command.steer);
             if stop() {
                 Err(())

@@ -12,6 +12,7 @@ use axum::http::{header, HeaderMap, HeaderValue, Method, Request, Response, Stat
 use axum::routing::{get, post};
 use axum::{Extension, Router};
 use rccar::dashboard::{self, Control, PlaceRequest, PlotPoint, SetRequest};
+use rccar::drive::Actor;
 use serde_json::{json, Value};
 use std::convert::Infallible;
 use std::sync::atomic::Ordering;
@@ -143,7 +144,7 @@ fn check(req: &Request<hyper::body::Incoming>, ctl: &ConnCtl, sh: &Shared) -> Re
 /// from anyone who can reach the server. Its log line and telemetry note go through a queue.
 fn estop(sh: &Shared, ctl: &ConnCtl, h: &HeaderMap) -> Response<Body> {
     sh.sent.mark_estop();
-    sh.arm.estop();
+    sh.arm.estop(Actor::Page);
     sh.armed_by_page.store(false, Ordering::SeqCst);
     let who = format!(
         "{} (Origin {}, Host {})",
@@ -154,7 +155,7 @@ fn estop(sh: &Shared, ctl: &ConnCtl, h: &HeaderMap) -> Response<Body> {
     sh.log.send(Msg::Out(format!("dashboard: EMERGENCY STOP from {who}")));
     sh.log.send(Msg::Note(format!(
         "EMERGENCY STOP from dashboard {who} at wall {:.3} s",
-        sh.sent.estop_wall_s.get()
+        sh.sent.estop_clock_s.get()
     )));
     reply(StatusCode::OK, &json!({"estop": true}))
 }
@@ -233,26 +234,23 @@ fn note(sh: &Shared, c: &Caller, what: &str) -> String {
 }
 
 async fn release(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> Response<Body> {
-    sh.arm.release();
+    sh.arm.release(Actor::Page);
     sh.tx.send(Control::Note(note(&sh, &c, "e-stop released")));
     reply(StatusCode::OK, &json!({"estop": false}))
 }
 
 async fn arm(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> Response<Body> {
     sh.last_heartbeat_ms.store(now_ms(&sh), Ordering::SeqCst);
-    if !sh.arm.arm() {
-        return error(StatusCode::CONFLICT, "the emergency stop is pressed: release it first");
+    if let Err(why) = sh.arm.arm(Actor::Page) {
+        return error(StatusCode::CONFLICT, &why.to_string());
     }
     sh.armed_by_page.store(true, Ordering::SeqCst);
-    if let Some(f) = &sh.on_arm {
-        f();
-    }
     sh.tx.send(Control::Note(note(&sh, &c, "armed")));
     reply(StatusCode::OK, &json!({"armed": true}))
 }
 
 async fn disarm(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> Response<Body> {
-    sh.arm.disarm();
+    sh.arm.disarm(Actor::Page);
     sh.armed_by_page.store(false, Ordering::SeqCst);
     sh.tx.send(Control::Note(note(&sh, &c, "disarmed")));
     reply(StatusCode::OK, &json!({"armed": false}))
@@ -422,10 +420,10 @@ fn state_json(sh: &Shared, since: f64, session: bool) -> Value {
         "stream_frames": sh.frames_sent.load(Ordering::SeqCst),
         "wall_s": s.now(),
         "epoch_ms": std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64() * 1e3),
-        "sent": {"throttle": opt(s.throttle.get()), "steer": opt(s.steer.get()), "wall_s": opt(s.wall_s.get()), "sim_s": opt(s.sim_s.get())},
+        "sent": {"throttle": opt(s.throttle.get()), "steer": opt(s.steer.get()), "wall_s": opt(s.clock_s.get()), "sim_s": opt(s.frame_s.get())},
         "estop_timing": {
-            "pressed_wall_s": opt(s.estop_wall_s.get()), "pressed_sim_s": opt(s.estop_sim_s.get()),
-            "neutral_wall_s": opt(s.neutral_wall_s.get()), "neutral_sim_s": opt(s.neutral_sim_s.get()),
+            "pressed_wall_s": opt(s.estop_clock_s.get()), "pressed_sim_s": opt(s.estop_frame_s.get()),
+            "neutral_wall_s": opt(s.neutral_clock_s.get()), "neutral_sim_s": opt(s.neutral_frame_s.get()),
         },
         "connections": {
             "open": sh.conns.open(), "max": lim.max, "reserve": lim.reserve,

@@ -10,7 +10,7 @@ use axum::http::{header, Response, StatusCode};
 use hyper::body::Frame;
 use image::{Rgb, RgbImage};
 use rccar::dashboard::{Control, ControlSender, Snapshot};
-use rccar::drive::{Latest, StopSignal};
+use rccar::drive::{Actor, Latest, StopSignal};
 use std::convert::Infallible;
 use std::future::Future;
 use std::pin::Pin;
@@ -111,7 +111,7 @@ pub fn watchdog(sh: Arc<Shared>, stop: StopSignal) {
         }
         let age = now_ms(&sh).saturating_sub(sh.last_heartbeat_ms.load(Ordering::SeqCst));
         if age > sh.heartbeat_ms {
-            sh.arm.disarm();
+            sh.arm.disarm(Actor::Heartbeat);
             sh.armed_by_page.store(false, Ordering::SeqCst);
             let msg = format!(
                 "disarmed: no heartbeat from the dashboard for {age} ms (limit {} ms) at wall {:.3} s",

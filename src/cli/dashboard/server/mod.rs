@@ -33,7 +33,7 @@ use super::Sent;
 use anyhow::{Context, Result};
 use rccar::config::Config;
 use rccar::dashboard::{ControlSender, Live, PlotPoint, Snapshot};
-use rccar::drive::{ArmState, Latest, StopSignal};
+use rccar::drive::{Arming, Latest, StopSignal};
 use rccar::sim::world::{lock, SharedWorld};
 use std::collections::{BTreeMap, VecDeque};
 use std::net::SocketAddr;
@@ -59,15 +59,13 @@ pub struct Options {
     /// The loop's inbox.
     pub tx: ControlSender,
     /// Arming and e-stop.
-    pub arm: Arc<ArmState>,
+    pub arm: Arc<Arming>,
     /// What the sink sent.
     pub sent: Arc<Sent>,
     /// The simulator's world (sim controls), `None` on the car.
     pub world: Option<SharedWorld>,
     /// The run's stop signal (the server's threads end with it).
     pub stop: StopSignal,
-    /// Called when the page arms (the car: ask the link to arm as the start button does).
-    pub on_arm: Option<Arc<dyn Fn() + Send + Sync>>,
 }
 
 /// The newest state for `GET /api/state`.
@@ -83,7 +81,7 @@ struct Shared {
     changed: Mutex<BTreeMap<String, f64>>,
     local: PathBuf,
     tx: ControlSender,
-    arm: Arc<ArmState>,
+    arm: Arc<Arming>,
     sent: Arc<Sent>,
     track_length: Option<f64>,
     access: access::Access,
@@ -99,7 +97,6 @@ struct Shared {
     closed: AtomicBool,
     /// `true` once the server is closing: every connection and stream ends.
     shutdown: tokio::sync::watch::Sender<bool>,
-    on_arm: Option<Arc<dyn Fn() + Send + Sync>>,
     live: Arc<Live>,
     log: hub::Log,
     conns: conn::Conns,
@@ -172,7 +169,6 @@ impl Server {
             frames_sent: AtomicU64::new(0),
             closed: AtomicBool::new(false),
             shutdown: tokio::sync::watch::Sender::new(false),
-            on_arm: o.on_arm,
             live: o.live,
             log,
             conns: conn::Conns::new(limits),

@@ -35,6 +35,8 @@
 //! `jpeg_quality` (1..=100); JPEG changes pixel values slightly, so a replay of a recording
 //! sees frames that differ from the live ones by a few grey levels.
 
+pub mod observer;
+
 use image::codecs::jpeg::JpegEncoder;
 use image::RgbImage;
 use std::collections::VecDeque;
