@@ -127,7 +127,7 @@ fn main() {
     {
         let mut sim = Simulation::new(&cfg, &track).unwrap();
         sim.place_at(*s);
-        sim.step(&mut NoTimer);
+        sim.step();
         let p = dir.join(format!("frame_{k:02}.png"));
         sim.image().save(&p).unwrap();
         paths.push(p);

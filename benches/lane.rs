@@ -6,7 +6,6 @@
 //! Flags after `--`: `--reps N` (default 30), `--quick` (5 reps).
 
 use rccar::config::Config;
-use rccar::lane::LaneDetector;
 use rccar::timing::{StageTimer, StageTimes};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::Path;
@@ -61,7 +60,7 @@ fn main() {
         .collect();
     frames_paths.sort();
     let frames: Vec<_> = frames_paths.iter().map(|p| image::open(p).unwrap().to_rgb8()).collect();
-    let mut det = LaneDetector::from_config(&cfg).unwrap();
+    let mut det = cfg.lane_detector().unwrap();
 
     // Ours: each stage timed separately with a real clock, averaged over all frames per rep.
     struct Clock(Instant);

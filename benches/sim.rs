@@ -42,7 +42,7 @@ fn main() {
     let mut sim = Simulation::new(&cfg, &track).expect("sim");
     // Drive a little so the view is a typical one (and warm the caches).
     for _ in 0..60 {
-        sim.step(&mut NoTimer);
+        sim.step();
     }
     let pose = sim.vehicle().pose;
     let mut renderer = sim.renderer().clone();
@@ -94,11 +94,11 @@ fn main() {
         frame += 1;
     });
     let step = time(600, || {
-        std::hint::black_box(sim.step(&mut NoTimer));
+        std::hint::black_box(sim.step());
     });
     sim.set_full_frames(false);
     let step_roi = time(600, || {
-        std::hint::black_box(sim.step(&mut NoTimer));
+        std::hint::black_box(sim.step());
     });
     // The closed loop as `rccar sim` runs it (issue 13): the shipped cascades on every
     // `detect.every_n_frames`-th frame, only the rows the pipeline reads rendered on each frame
@@ -111,7 +111,7 @@ fn main() {
     let (cpu0, t0) = (cpu_ns(), Instant::now());
     let n_det = 900;
     for _ in 0..n_det {
-        std::hint::black_box(sim_det.step(&mut NoTimer));
+        std::hint::black_box(sim_det.step());
     }
     let wall_det = t0.elapsed().as_secs_f64() * 1e6 / n_det as f64;
     let cpu_det = cpu0.zip(cpu_ns()).map(|(a, b)| (b - a) as f64 / 1e3 / n_det as f64);

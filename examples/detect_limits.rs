@@ -11,7 +11,6 @@ use rccar::config::Config;
 use rccar::detect::Rect;
 use rccar::sim::run::Simulation;
 use rccar::sim::track::Track;
-use rccar::timing::NoTimer;
 use std::path::Path;
 
 fn main() {
@@ -24,7 +23,7 @@ fn main() {
     for l in ["stop_sign", "traffic_light", "obstacle"] {
         det.set_limits(l, None, (0, 0), (0, 0));
     }
-    let f_px = rccar::camera::PinholeCamera::from_config(&cfg.camera).f_px;
+    let f_px = rccar::camera::PinholeCamera::from(&cfg.camera).f_px;
     let (w, h) = (cfg.camera.width as f64, cfg.camera.height as f64);
     let mut sim = Simulation::new(&cfg, &track).unwrap();
     let len = track.length;
@@ -35,7 +34,7 @@ fn main() {
     let mut s = 0.0;
     while s < len {
         sim.place_at(s);
-        let step = sim.step(&mut NoTimer);
+        let step = sim.step();
         s += 0.05;
         let objs: Vec<_> = step
             .truth

@@ -1,7 +1,6 @@
 //! Runs the lane detector over the sample frames many times: a target for profilers
 //! (`valgrind --tool=callgrind target/release/examples/lane_profile`).
 use rccar::config::Config;
-use rccar::lane::LaneDetector;
 use rccar::timing::{NoTimer, StageTimes};
 
 fn main() {
@@ -10,7 +9,7 @@ fn main() {
     let f = image::open(root.join("tests/data/lane_sample/frame_000.png"))
         .unwrap()
         .to_rgb8();
-    let mut det = LaneDetector::from_config(&cfg).unwrap();
+    let mut det = cfg.lane_detector().unwrap();
     let n: usize = std::env::args().nth(1).and_then(|a| a.parse().ok()).unwrap_or(20);
     let mut t = StageTimes::default();
     let mut acc = 0.0;

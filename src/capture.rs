@@ -128,7 +128,7 @@ impl CaptureSource {
     }
 
     /// Why the source ended, if the camera cannot be used at all.
-    pub fn fatal(&self) -> Option<String> {
+    pub fn fatal_reason(&self) -> Option<String> {
         self.fatal.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
@@ -139,6 +139,10 @@ impl CaptureSource {
 }
 
 impl FrameSource for CaptureSource {
+    fn fatal(&self) -> Option<String> {
+        self.fatal_reason()
+    }
+
     fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
         match self.slot.wait_take(self.stall_after) {
             Some(shot) => {
@@ -284,7 +288,7 @@ mod tests {
             Duration::from_millis(50),
         );
         assert!(src.next_frame().is_none());
-        let e = src.fatal().expect("fatal error");
+        let e = src.fatal_reason().expect("fatal error");
         assert!(e.contains("640×480") && e.contains("320×240"), "{e}");
     }
 }

@@ -30,7 +30,7 @@ use crate::detect::stage::{CascadeSpec, DetectStage};
 use crate::detect::Rect;
 use crate::lane::warp::WarpError;
 use crate::lane::{LaneDetector, LaneMeasurement};
-use crate::ranging::track::{Measurement, Tracker, TrackerOptions};
+use crate::ranging::track::{Measurement, Tracker};
 use crate::ranging::{BoxRanging, ObjectClass};
 use crate::timing::{StageTimer, StageTimes};
 use image::RgbImage;
@@ -124,6 +124,19 @@ pub struct MissingCascade {
     pub path: PathBuf,
 }
 
+impl std::fmt::Display for MissingCascade {
+    /// The key, the file and the fix, as the binary and the session report it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} = {:?}: no such cascade file; give the cascade's path (a relative path is read from the config file's folder), set {} = \"\" to run without that detector, or detect.enabled = false for lane keeping only",
+            self.key,
+            self.path.display().to_string(),
+            self.key
+        )
+    }
+}
+
 /// Loads the `[detect]` cascades that exist (paths relative to `base`; an empty path switches
 /// that class off). Returns the stage (`None` when no file exists or detection is off) and the
 /// configured files that were missing, which the binary refuses (a configured model that is
@@ -136,12 +149,7 @@ pub fn load_detector(
     if !cfg.enabled {
         return Ok((None, Vec::new()));
     }
-    let params = DetectParams {
-        scale_factor: cfg.scale_factor,
-        min_neighbors: cfg.min_neighbors,
-        min_size: (cfg.min_size_px, cfg.min_size_px),
-        ..Default::default()
-    };
+    let params = DetectParams::from(cfg);
     let mut specs = Vec::new();
     let mut missing = Vec::new();
     for (label, key, file, light) in [
@@ -190,7 +198,7 @@ pub struct DetectLimits {
 /// Only widths are limited (the window's aspect is the cascade's).
 pub fn detect_limits(cfg: &Config) -> [DetectLimits; 3] {
     let d = &cfg.detect;
-    let f = crate::camera::PinholeCamera::from_config(&cfg.camera).f_px;
+    let f = crate::camera::PinholeCamera::from(&cfg.camera).f_px;
     let (w, h) = (cfg.camera.width as f64, cfg.camera.height as f64);
     let lim = |label, r: [f64; 4], b: [f64; 2]| {
         let (x0, y0) = ((r[0] * w).floor() as i32, (r[1] * h).floor() as i32);
@@ -238,7 +246,7 @@ pub fn detect_bands(cfg: &Config) -> [Option<crate::detect::RowBand>; 3] {
     }
     let d = &cfg.detect;
     let r = &cfg.ranging;
-    let cam = BoxRanging::from_config(&cfg.camera, &cfg.ranging).camera;
+    let cam = cfg.ranging.box_ranging(&cfg.camera).camera;
     let w_img = cfg.camera.width as usize;
     let band = |box_m: [f64; 2], z: f64| {
         // (lowest, highest) box-bottom row per box width; width up to twice the frame's.
@@ -337,31 +345,31 @@ pub struct Pipeline {
 /// `stereo.calibration` names a file (read here, once; its image size must be the camera's),
 /// else an ideal pair of `[camera]` with `stereo.base_m`.
 fn stereo_ranging(cfg: &Config) -> Result<Option<crate::stereo::ranging::StereoRanging>, PipelineError> {
-    use crate::stereo::ranging::StereoRanging;
-    if cfg.ranging.method != "stereo" {
+    if cfg.ranging.method != crate::config::RangingMethod::Stereo {
         return Ok(None);
     }
     if cfg.stereo.calibration.is_empty() {
-        return Ok(Some(StereoRanging::from_config(cfg)));
+        return Ok(Some(cfg.stereo_ranging()));
     }
     let path = std::path::Path::new(&cfg.stereo.calibration);
     let st = crate::calib::file::CalibrationFile::load_stereo(path, cfg.camera.width, cfg.camera.height)?;
-    Ok(Some(StereoRanging::with_calibration(cfg, &st)))
+    Ok(Some(cfg.stereo_ranging_calibrated(&st)))
 }
 
 impl Pipeline {
     /// Builds the pipeline for `cfg` (precomputes the warp map), without a detector: see
     /// [`Pipeline::set_detector`] and [`load_detector`].
     pub fn new(cfg: &Config) -> Result<Self, PipelineError> {
+        let ranging = cfg.ranging.box_ranging(&cfg.camera);
         Ok(Self {
-            lane: LaneDetector::from_config(cfg)?,
-            control: Controller::from_config(cfg),
+            lane: cfg.lane_detector()?,
+            control: Controller::new((&cfg.steering).into(), (&cfg.throttle).into()),
             width: cfg.camera.width,
             height: cfg.camera.height,
             detect: None,
-            ranging: BoxRanging::from_config(&cfg.camera, &cfg.ranging),
-            behaviour: Behaviour::new(cfg.behaviour.clone()),
-            dead: DeadReckoning::new(&cfg.vehicle),
+            ranging,
+            behaviour: Behaviour::new((&cfg.behaviour).into()),
+            dead: (&cfg.vehicle).into(),
             obstacle_lane_half_m: cfg.behaviour.obstacle_lane_half_m,
             time_s: 0.0,
             last_throttle: 0.0,
@@ -369,10 +377,7 @@ impl Pipeline {
             detect_limits: detect_limits(cfg),
             detect_bands: detect_bands(cfg),
             detect_rows: Vec::new(),
-            tracker: Tracker::new(
-                tracker_options(cfg),
-                BoxRanging::from_config(&cfg.camera, &cfg.ranging).camera,
-            ),
+            tracker: Tracker::new((&cfg.ranging).into(), ranging.camera),
             measurements: Vec::with_capacity(16),
             every_n: cfg.detect.every_n_frames.max(1) as u64,
             frame_index: 0,
@@ -687,6 +692,12 @@ impl Pipeline {
         o
     }
 
+    /// What the motors were really sent for the last frame (the gate's answer): dead
+    /// reckoning integrates this, so a parked, disarmed car is not "driving" at its wish.
+    pub fn note_sent(&mut self, sent: Command) {
+        self.last_throttle = sent.throttle;
+    }
+
     /// The lane detector (its intermediate images, for annotation).
     pub fn lane(&self) -> &LaneDetector {
         &self.lane
@@ -721,16 +732,6 @@ impl Pipeline {
     /// The box ranging in use.
     pub fn ranging(&self) -> &BoxRanging {
         &self.ranging
-    }
-}
-
-/// The tracker options of `[ranging]`.
-fn tracker_options(cfg: &Config) -> TrackerOptions {
-    TrackerOptions {
-        accel_sigma: cfg.ranging.track_accel_sigma,
-        odometry_sigma: cfg.ranging.track_odometry_sigma,
-        max_missed: cfg.ranging.track_max_missed,
-        ..Default::default()
     }
 }
 

@@ -406,33 +406,6 @@ pub struct BoxRanging {
 }
 
 impl BoxRanging {
-    /// From `[camera]` (tilt, possibly calibrated) and `[ranging]` (v0 offset, a_y scale,
-    /// what each class's box frames, box noise).
-    pub fn from_config(cam: &crate::config::CameraConfig, r: &crate::config::RangingConfig) -> Self {
-        let mut camera = PinholeCamera::from_config(cam);
-        camera.v0 += r.v0_offset_px;
-        camera.f_px *= r.a_y_scale;
-        let class = |size: [f64; 2], bottom_m: f64, margin: f64| ClassBox {
-            width_m: size[0],
-            height_m: size[1],
-            bottom_m,
-            margin,
-        };
-        Self {
-            tilt: TiltRanging::from_camera(&camera),
-            camera,
-            classes: [
-                class(r.stop_sign_size_m, r.stop_sign_bottom_m, r.stop_sign_box_margin),
-                class(r.traffic_light_size_m, r.traffic_light_bottom_m, r.traffic_light_box_margin),
-                class(r.obstacle_size_m, r.obstacle_bottom_m, r.obstacle_box_margin),
-            ],
-            centre_sigma_px: r.box_centre_sigma_px,
-            size_sigma: r.box_size_sigma,
-            refine: r.refine_by_colour,
-            red_fraction: r.stop_sign_red_fraction,
-        }
-    }
-
     /// The contact height of a class's box bottom, metres.
     pub fn bottom_of(&self, class: ObjectClass) -> f64 {
         self.classes[class as usize].bottom_m
@@ -704,16 +677,20 @@ pub fn parse_pairs_csv(text: &str, origin: &str) -> Result<Vec<Pair>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::CameraConfig;
     use crate::lane::synth::SplitMix;
 
+    /// The shipped camera (`[camera]`).
+    fn camera() -> PinholeCamera {
+        PinholeCamera::new(320, 240, 62.2, 0.20, 20.0)
+    }
+
     fn nominal() -> TiltRanging {
-        TiltRanging::from_camera(&PinholeCamera::from_config(&CameraConfig::default()))
+        TiltRanging::from_camera(&camera())
     }
 
     #[test]
     fn eq5_agrees_with_the_camera_projection() {
-        let cam = PinholeCamera::from_config(&CameraConfig::default());
+        let cam = camera();
         let r = TiltRanging::from_camera(&cam);
         for &d in &[0.2, 0.5, 1.0, 1.5] {
             for &z in &[0.0, 0.08, 0.3] {
@@ -829,8 +806,27 @@ mod tests {
         ));
     }
 
+    /// The shipped `[ranging]` with the shipped camera.
     fn box_ranging() -> BoxRanging {
-        BoxRanging::from_config(&CameraConfig::default(), &crate::config::RangingConfig::default())
+        let class = |width_m, height_m, bottom_m, margin| ClassBox {
+            width_m,
+            height_m,
+            bottom_m,
+            margin,
+        };
+        BoxRanging {
+            tilt: nominal(),
+            camera: camera(),
+            classes: [
+                class(0.10, 0.10, 0.12, 1.085),
+                class(0.0, 0.12, 0.10, 1.21),
+                class(0.0, 0.0, 0.0, 1.36),
+            ],
+            centre_sigma_px: 1.0,
+            size_sigma: 0.06,
+            refine: true,
+            red_fraction: 0.9,
+        }
     }
 
     #[test]

@@ -13,24 +13,45 @@ pub struct SinkError(pub String);
 
 /// Something that executes commands.
 pub trait CommandSink {
-    /// Delivers one command. `now_s` is the time of the frame it answers, seconds.
-    fn send(&mut self, cmd: Command, now_s: f64) -> Result<(), SinkError>;
+    /// Delivers one command and returns what was really sent (a gate sends neutral while the
+    /// car is disarmed). `now_s` is the time of the frame it answers, seconds.
+    fn send(&mut self, cmd: Command, now_s: f64) -> Result<Command, SinkError>;
 
     /// Brings the car to the safe state (steer straight, motor stopped). Must not fail
     /// silently: implementations try their best and report.
     fn stop(&mut self) -> Result<(), SinkError> {
-        self.send(Command::NEUTRAL, f64::NAN)
+        self.send(Command::NEUTRAL, f64::NAN).map(|_| ())
     }
+
+    /// Moves what happened at the actuators since the last call (armed by the button, link
+    /// lost…) into `out`, for the frame's telemetry record. Default: nothing happens.
+    fn drain_events(&mut self, _out: &mut Vec<String>) {}
 }
 
 /// A borrowed sink is a sink (so the loop can wrap `&mut dyn CommandSink` in
 /// [`NeutralOnDrop`]).
 impl<S: CommandSink + ?Sized> CommandSink for &mut S {
-    fn send(&mut self, cmd: Command, now_s: f64) -> Result<(), SinkError> {
+    fn send(&mut self, cmd: Command, now_s: f64) -> Result<Command, SinkError> {
         (**self).send(cmd, now_s)
     }
     fn stop(&mut self) -> Result<(), SinkError> {
         (**self).stop()
+    }
+    fn drain_events(&mut self, out: &mut Vec<String>) {
+        (**self).drain_events(out)
+    }
+}
+
+/// A boxed sink is a sink.
+impl<S: CommandSink + ?Sized> CommandSink for Box<S> {
+    fn send(&mut self, cmd: Command, now_s: f64) -> Result<Command, SinkError> {
+        (**self).send(cmd, now_s)
+    }
+    fn stop(&mut self) -> Result<(), SinkError> {
+        (**self).stop()
+    }
+    fn drain_events(&mut self, out: &mut Vec<String>) {
+        (**self).drain_events(out)
     }
 }
 
@@ -39,8 +60,8 @@ impl<S: CommandSink + ?Sized> CommandSink for &mut S {
 pub struct NullSink;
 
 impl CommandSink for NullSink {
-    fn send(&mut self, _cmd: Command, _now_s: f64) -> Result<(), SinkError> {
-        Ok(())
+    fn send(&mut self, cmd: Command, _now_s: f64) -> Result<Command, SinkError> {
+        Ok(cmd)
     }
 }
 
@@ -52,9 +73,9 @@ pub struct RecordingSink {
 }
 
 impl CommandSink for RecordingSink {
-    fn send(&mut self, cmd: Command, now_s: f64) -> Result<(), SinkError> {
+    fn send(&mut self, cmd: Command, now_s: f64) -> Result<Command, SinkError> {
         self.log.push((now_s, cmd));
-        Ok(())
+        Ok(cmd)
     }
 }
 
@@ -83,11 +104,14 @@ impl<S: CommandSink> NeutralOnDrop<S> {
 }
 
 impl<S: CommandSink> CommandSink for NeutralOnDrop<S> {
-    fn send(&mut self, cmd: Command, now_s: f64) -> Result<(), SinkError> {
+    fn send(&mut self, cmd: Command, now_s: f64) -> Result<Command, SinkError> {
         self.get_mut().send(cmd, now_s)
     }
     fn stop(&mut self) -> Result<(), SinkError> {
         self.get_mut().stop()
+    }
+    fn drain_events(&mut self, out: &mut Vec<String>) {
+        self.get_mut().drain_events(out)
     }
 }
 
@@ -101,6 +125,48 @@ impl<S: CommandSink> Drop for NeutralOnDrop<S> {
     }
 }
 
+/// The state of the connection to the actuators, as the gate sees it before each command.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Connection {
+    /// Up (or nothing to connect: the simulator, a dry run).
+    Up,
+    /// Down, with the reason (port gone, silent firmware); may come back.
+    Down(String),
+    /// Up again after being down, or the firmware restarted: it forgot that it was armed.
+    Reconnected,
+}
+
+/// Something that moves the car: the serial link, the simulated car, or nothing. The gate arms
+/// and disarms it as the [`crate::drive::Arming`] state says; on its own it never arms.
+pub trait Actuators: CommandSink {
+    /// Arms the actuators (the firmware's ARM). Default: nothing to arm.
+    fn arm(&mut self) -> Result<(), SinkError> {
+        Ok(())
+    }
+    /// Disarms them (the firmware's DISARM, neutral). Default: neutral.
+    fn disarm(&mut self) -> Result<(), SinkError> {
+        self.stop()
+    }
+    /// How the connection is now. Default: always up.
+    fn connection(&mut self) -> Connection {
+        Connection::Up
+    }
+}
+
+impl<A: Actuators + ?Sized> Actuators for Box<A> {
+    fn arm(&mut self) -> Result<(), SinkError> {
+        (**self).arm()
+    }
+    fn disarm(&mut self) -> Result<(), SinkError> {
+        (**self).disarm()
+    }
+    fn connection(&mut self) -> Connection {
+        (**self).connection()
+    }
+}
+
+impl Actuators for NullSink {}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -108,9 +174,9 @@ mod tests {
     /// Records into a shared log, so the test can look after the guard is gone.
     struct Shared(std::rc::Rc<std::cell::RefCell<Vec<Command>>>);
     impl CommandSink for Shared {
-        fn send(&mut self, cmd: Command, _now_s: f64) -> Result<(), SinkError> {
+        fn send(&mut self, cmd: Command, _now_s: f64) -> Result<Command, SinkError> {
             self.0.borrow_mut().push(cmd);
-            Ok(())
+            Ok(cmd)
         }
     }
 
@@ -126,7 +192,7 @@ mod tests {
                 },
                 0.0,
             )?;
-            Err(SinkError("simulated failure".into()))?;
+            Err::<(), _>(SinkError("simulated failure".into()))?;
             sink.send(
                 Command {
                     steer: 0.0,
@@ -134,6 +200,7 @@ mod tests {
                 },
                 0.1,
             )
+            .map(|_| ())
         };
         assert!(drive(log.clone()).is_err());
         assert_eq!(

@@ -31,7 +31,7 @@ pub struct Frame {
     pub name: String,
     /// The image, resized to the configured camera size.
     pub image: RgbImage,
-    /// When the frame was captured on the caller's clock ([`crate::drive::Clock`]), seconds;
+    /// When the frame was captured on the caller's clock ([`crate::timing::Clock`]), seconds;
     /// `None`: the loop takes the time it received the frame.
     pub captured_s: Option<f64>,
     /// Ground truth the source knows (the simulator), as JSON: telemetry carries it without
@@ -124,6 +124,10 @@ pub enum SourceError {
     /// The folder has no PNG or JPEG files.
     #[error("{0}: no .png/.jpg/.jpeg frames in this folder")]
     Empty(PathBuf),
+    /// The folder is a recording whose telemetry cannot be used (see
+    /// [`crate::record::recorded_times`]).
+    #[error(transparent)]
+    Recording(#[from] crate::record::RecordError),
 }
 
 /// Something that produces frames.
@@ -133,6 +137,51 @@ pub trait FrameSource {
     /// How many frames to expect, if known (for progress bars).
     fn len_hint(&self) -> Option<usize> {
         None
+    }
+    /// Why the source ended when it cannot be used at all (a camera that delivers the wrong
+    /// size, a device gone for good), as one line naming it; `None` for a normal end (the end
+    /// of a folder) or while it runs.
+    fn fatal(&self) -> Option<String> {
+        None
+    }
+}
+
+/// A source played at its frames' own times on a clock (a folder of frames as the car's
+/// camera on the bench: `rccar drive --camera DIR`). The first frame sets the origin; each
+/// later frame is held back until its time has come, and stamped with the capture time.
+pub struct Paced<S> {
+    inner: S,
+    clock: std::sync::Arc<dyn crate::timing::Clock + Send + Sync>,
+    t0: Option<f64>,
+}
+
+impl<S: FrameSource> Paced<S> {
+    /// Plays `inner` on `clock`.
+    pub fn new(inner: S, clock: std::sync::Arc<dyn crate::timing::Clock + Send + Sync>) -> Self {
+        Self { inner, clock, t0: None }
+    }
+}
+
+impl<S: FrameSource> FrameSource for Paced<S> {
+    fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
+        let item = self.inner.next_frame()?;
+        if let Ok(f) = &item {
+            let t0 = *self.t0.get_or_insert_with(|| self.clock.now_s() - f.time_s);
+            let wait = t0 + f.time_s - self.clock.now_s();
+            if wait > 0.0 {
+                self.clock.sleep_s(wait);
+            }
+        }
+        Some(item.map(|mut f| {
+            f.captured_s = Some(self.clock.now_s());
+            f
+        }))
+    }
+    fn len_hint(&self) -> Option<usize> {
+        self.inner.len_hint()
+    }
+    fn fatal(&self) -> Option<String> {
+        self.inner.fatal()
     }
 }
 
@@ -148,6 +197,8 @@ pub struct ReplayDir {
     min_size: (u32, u32),
     /// A recording's frame times (frame index → seconds), see [`ReplayDir::with_recorded_times`].
     times: Option<std::collections::BTreeMap<u64, f64>>,
+    /// The frame number last handed out with a recorded time.
+    last_recorded: Option<u64>,
 }
 
 fn is_frame_file(p: &Path) -> bool {
@@ -224,12 +275,39 @@ impl ReplayDir {
             height,
             min_size,
             times: None,
+            last_recorded: None,
         })
+    }
+
+    /// [`ReplayDir::open`], and when `dir` is a recording (it holds the recorder's
+    /// telemetry.jsonl with times), the recording's own frame numbers and times
+    /// ([`ReplayDir::with_recorded_times`]). The times read back are returned too (cut lines
+    /// to report). A telemetry that contradicts itself is refused
+    /// ([`SourceError::Recording`], naming its file and line).
+    pub fn open_recording(
+        dir: &Path,
+        fps: f64,
+        width: u32,
+        height: u32,
+        min_size: (u32, u32),
+    ) -> Result<(Self, Option<crate::record::RecordedTimes>), SourceError> {
+        let source = Self::open(dir, fps, width, height, min_size)?;
+        if !dir.join(crate::record::TELEMETRY_FILE).is_file() {
+            return Ok((source, None));
+        }
+        let t = crate::record::recorded_times(dir)?;
+        if t.times.is_empty() {
+            return Ok((source, None));
+        }
+        Ok((source.with_recorded_times(t.times.clone()), Some(t)))
     }
 
     /// Uses a recording's own frame numbers and times (`crate::record::recorded_times`) for the
     /// frames named `frame_NNNNNNNNN.jpg`, so a replay sees the time steps the car saw (the car
-    /// drops late frames; they are not always 1/fps apart). Other names keep 1/fps.
+    /// drops late frames; they are not always 1/fps apart). A frame without a time (its line
+    /// was cut, or it is not named as the recorder names frames) or whose number is not above
+    /// the last one's (a copy from another run) is an unusable frame, named and skipped:
+    /// never a frame number twice or a time step of zero.
     pub fn with_recorded_times(mut self, times: std::collections::BTreeMap<u64, f64>) -> Self {
         self.ignored.retain(|n| n != crate::record::TELEMETRY_FILE);
         self.times = Some(times);
@@ -257,14 +335,34 @@ impl FrameSource for ReplayDir {
         let index = self.next as u64;
         self.next += 1;
         let name = path.file_name().map(escape_name).unwrap_or_default();
-        let (index, time_s) = self
-            .times
-            .as_ref()
-            .and_then(|t| {
-                let i = crate::record::frame_index(&name)?;
-                Some((i, *t.get(&i)?))
-            })
-            .unwrap_or((index, index as f64 / self.fps));
+        let (index, time_s) = match &self.times {
+            None => (index, index as f64 / self.fps),
+            Some(t) => {
+                let Some(i) = crate::record::frame_index(&name) else {
+                    return Some(Err(FrameError::bad(
+                        index,
+                        name,
+                        "not a frame of this recording (the recorder names them frame_NNNNNNNNN.jpg); skipped",
+                    )));
+                };
+                if let Some(last) = self.last_recorded.filter(|&l| i <= l) {
+                    return Some(Err(FrameError::bad(
+                        i,
+                        name,
+                        format!("frame {i} comes after frame {last}: a frame of another run; skipped"),
+                    )));
+                }
+                let Some(&ts) = t.get(&i) else {
+                    return Some(Err(FrameError::bad(
+                        i,
+                        name,
+                        "no time in the recording's telemetry (its line is cut or missing); skipped",
+                    )));
+                };
+                self.last_recorded = Some(i);
+                (i, ts)
+            }
+        };
         Some(match self.load(&path) {
             Ok(image) => Ok(Frame::new(index, time_s, name, image)),
             Err(reason) => Err(FrameError::bad(index, name, reason)),

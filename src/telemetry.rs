@@ -82,6 +82,13 @@ pub struct FrameRecord {
     /// stall, the emergency brake. Explains a run afterwards.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub events: Vec<String>,
+    /// What the gate really sent to the motors, when it differs from `steer`/`throttle` (the
+    /// car disarmed, e-stopped, braking, or a fault): plots show this, not the wish.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sent: Option<Command>,
+    /// The car's status on a car run (waiting, disarmed, driving, fault…).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub car: Option<crate::health::CarStatus>,
     /// A stereo pair's frame (`ranging.method = "stereo"` with two cameras): the other
     /// camera's frame, the skew and how many boxes were ranged by stereo.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -143,6 +150,8 @@ impl FrameRecord {
             dropped: None,
             ultrasonic_m: None,
             events: Vec::new(),
+            sent: None,
+            car: None,
             stereo: None,
         }
     }
@@ -194,6 +203,11 @@ impl<W: std::io::Write> JsonlWriter<W> {
         Ok(())
     }
 
+    /// What errors call the output (the file's path).
+    pub fn label(&self) -> &str {
+        &self.label
+    }
+
     /// Lines written so far.
     pub fn lines(&self) -> u64 {
         self.lines
@@ -203,13 +217,5 @@ impl<W: std::io::Write> JsonlWriter<W> {
     pub fn finish(mut self) -> std::io::Result<W> {
         self.out.flush()?;
         Ok(self.out)
-    }
-}
-
-impl<W: std::io::Write> crate::drive::Observer for JsonlWriter<W> {
-    fn on_frame(&mut self, ctx: &crate::drive::FrameContext<'_>) -> Result<crate::drive::Flow, crate::drive::LoopError> {
-        self.write(ctx.record)
-            .map_err(|e| crate::drive::LoopError::Observer(format!("{}: cannot write: {e}", self.label)))?;
-        Ok(crate::drive::Flow::Continue)
     }
 }

@@ -1,4 +1,4 @@
-//! Per-stage timing without reading the clock in the library.
+//! Per-stage timing and the run's clock, without reading the clock in the library.
 //!
 //! The library only calls [`StageTimer::lap_us`] between stages; the binary passes a timer
 //! built on `std::time::Instant`, tests pass [`NoTimer`] so their output is deterministic.
@@ -45,5 +45,35 @@ impl StageTimes {
     pub fn sum(&mut self) {
         self.total_us =
             self.warp_us + self.canny_us + self.threshold_us + self.histogram_us + self.lines_us + self.control_us;
+    }
+}
+
+/// A clock the caller hands in (the library reads none). Only used for *reporting* latency and
+/// loop period; decisions use the frames' own timestamps, so replay and the simulator stay
+/// deterministic.
+pub trait Clock {
+    /// Seconds since some fixed start.
+    fn now_s(&self) -> f64;
+    /// `false` for a clock that measures nothing ([`NoClock`]): latency and period are then
+    /// left out of the telemetry, so it stays reproducible.
+    fn is_real(&self) -> bool {
+        true
+    }
+    /// Waits `s` seconds on this clock (pacing a source on the wall clock). The default waits
+    /// not at all: a clock that measures nothing has nothing to wait for.
+    fn sleep_s(&self, _s: f64) {}
+}
+
+/// A clock that always reads 0: latency and period are then reported as 0 (tests, golden
+/// files).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct NoClock;
+
+impl Clock for NoClock {
+    fn now_s(&self) -> f64 {
+        0.0
+    }
+    fn is_real(&self) -> bool {
+        false
     }
 }

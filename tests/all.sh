@@ -25,8 +25,9 @@ DEB_PACKAGES=(
   opencv-doc                                   # OpenCV's stereo chessboard pairs (calib parity stage)
 )
 # The Pi cross-build stage (tests/cross/run.sh) and its packages (skip with RCCAR_CROSS=0). Cold
-# it compiles every dependency for aarch64: ~6 min of CPU with `serial,gpio` (the suite's
-# default), ~11 min with the camera (RCCAR_CROSS_CAMERA=1). With target/cross kept: 21 s when
+# it compiles every dependency for aarch64: ~6 min of CPU with `serial,gpio` (axum, hyper and
+# tokio of the suite's default `serial,gpio,dashboard` add a few minutes), ~11 min with the
+# camera (RCCAR_CROSS_CAMERA=1). With target/cross kept: 21 s when
 # nothing changed, a few minutes after a source change (rccar itself recompiled for aarch64).
 if [ "${RCCAR_CROSS:-1}" = 1 ]; then
   DEB_PACKAGES+=(rustc-web cargo-web libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user)
@@ -114,7 +115,8 @@ FEAT=serial,camera,gpio,dashboard,jpeg-turbo
 # then only run, and the machine is quiet for the wall-clock ones.
 stage feature-build bash -c "cargo test --release --features $FEAT --no-run --lib --test car && cargo build --release --features $FEAT --bins --example decode"
 stage link-hil cargo test --release --features $FEAT --test car link_hil::
-stage labs-link cargo test --release --features $FEAT --test car labs::lab11
+# lab 11 and the labs' key (it reruns every figure the lab pages quote, lab 11's with the firmware)
+stage labs-link cargo test --release --features $FEAT --test car -- labs::lab11 labs::key_matches_committed
 # the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr,
 # on the wall clock. The two whole laps (closed loop; 1e-3 bit errors) run side by side, one
 # emulator per core (~2.5 min); the timed faults (kill -9, Ctrl-C, stall, vanished pty) and

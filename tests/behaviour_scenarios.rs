@@ -17,7 +17,6 @@ use rccar::config::Config;
 use rccar::control::behaviour::Mode;
 use rccar::sim::run::{Simulation, StepOutput, Summary};
 use rccar::sim::track::{LightState, ObjectKind, Track};
-use rccar::timing::NoTimer;
 use std::path::Path;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
@@ -76,7 +75,7 @@ fn run(cfg: &Config, track: &Track, start: f64, seconds: f64) -> (Summary, Vec<S
     sim.place_at(start);
     let mut steps = Vec::new();
     let summary = sim
-        .run(&mut NoTimer, |_, s| {
+        .run(|_, s| {
             steps.push(s.clone());
             Ok::<(), ()>(())
         })

@@ -24,7 +24,7 @@ fn board() -> Board {
 
 #[test]
 fn recovers_the_simulated_cameras_intrinsics() {
-    let cam = PinholeCamera::from_config(&Config::default().camera);
+    let cam = PinholeCamera::from(&Config::default().camera);
     let b = board();
     let poses = b.calibration_poses(&cam, 0.42, 12);
     let mut views = vec![];
@@ -57,7 +57,7 @@ fn recovers_the_simulated_cameras_intrinsics() {
 
 #[test]
 fn recovers_the_simulated_stereo_base() {
-    let cam = PinholeCamera::from_config(&Config::default().camera);
+    let cam = PinholeCamera::from(&Config::default().camera);
     let b = board();
     let base = 0.06;
     let (mut lv, mut rv) = (vec![], vec![]);
@@ -123,7 +123,7 @@ fn rccar(args: &[&str], dir: &std::path::Path) -> (i32, String, String) {
 fn calibrate_commands_on_rendered_boards_and_bad_input() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let cam = PinholeCamera::from_config(&Config::default().camera);
+    let cam = PinholeCamera::from(&Config::default().camera);
     let b = board();
     let mut names = vec![];
     for (i, p) in b.calibration_poses(&cam, 0.42, 8).iter().enumerate() {

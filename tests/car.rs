@@ -14,3 +14,4 @@ mod drive_cli;
 mod drive_fil;
 mod labs;
 mod link_hil;
+mod session_fil;

@@ -848,8 +848,8 @@ fn a_missing_cascade_is_an_error_naming_the_key_and_the_fix() {
     assert_eq!(o.code, Some(2), "{}", o.all());
     assert!(o.stderr.contains("/nonexistent.xml"), "{}", o.stderr);
     // The shipped cascades, and one class switched off on purpose: the run goes on.
-    for extra in [None, Some("detect.stop_sign=")] {
-        let mut args = vec!["sim", "--seconds", "1", "--no-timing", "-o", "out/sim2"];
+    for (extra, out) in [(None, "out/sim2"), (Some("detect.stop_sign="), "out/sim3")] {
+        let mut args = vec!["sim", "--seconds", "1", "--no-timing", "-o", out];
         if let Some(e) = extra {
             args.extend(["--set", e]);
         }

@@ -1,96 +1,195 @@
-//! The dashboard under bad and hostile requests (issue 11, must-show 3), against a running
-//! `rccar sim --dashboard` bound to 127.0.0.2 (a loopback address that is *not* 127.0.0.1, so
-//! the token rules apply as on the car's Wi-Fi address). One case per test; all share one
-//! server (it ends itself after 60 s of simulated time).
+//! The dashboard under bad and hostile requests (issues 11 and 24), against running
+//! `rccar sim --dashboard` servers:
 //!
-//! `cargo test --release --features dashboard --test car dashboard_security::`
+//! - `remote()` on 127.0.0.2 (a loopback address that is *not* 127.0.0.1, so the token rules
+//!   apply as on the car's Wi-Fi address): login, cookie, token never in a URL, bad input;
+//! - `local()` on 127.0.0.1 (the default), started with the soft open-file limit of a Pi
+//!   (1024): cross-origin / wrong-Host / text-plain / secret-less requests change nothing and
+//!   are logged; the e-stop is answered within 50 ms while 1,000 idle connections are held,
+//!   and beyond the connection bound with slow clients trickling bytes.
+//!
+//! One case per test; the servers are shared and killed when the test binary exits.
+//! `cargo test --release --features dashboard --test car -- --test-threads 1 dashboard_security::`
 #![cfg(feature = "dashboard")]
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
+use std::os::unix::process::CommandExt;
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
-use std::sync::OnceLock;
+use std::process::{Command, Stdio};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 struct Server {
     addr: String,
-    token: String,
+    /// Off loopback: the token printed at start.
+    token: Option<String>,
     dir: PathBuf,
-    _child: Child,
+    pid: u32,
+    /// Killed when the test binary exits (`kill_servers`).
+    _child: std::process::Child,
+    /// Everything the server printed on stdout so far.
+    stdout: Arc<Mutex<Vec<u8>>>,
+    /// The first stdout lines (the URL, the token).
+    start_lines: Vec<String>,
 }
 
-static SERVER: OnceLock<Server> = OnceLock::new();
+static LOCAL: OnceLock<Server> = OnceLock::new();
+static REMOTE: OnceLock<Server> = OnceLock::new();
+static PIDS: Mutex<Vec<u32>> = Mutex::new(Vec::new());
 
-fn server() -> &'static Server {
-    SERVER.get_or_init(|| {
-        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-        let dir = std::env::temp_dir().join(format!("rccar-dash-sec-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        std::fs::copy(root.join("config/car.toml"), dir.join("car.toml")).unwrap();
-        // Tracks and cascades are found relative to the config file: link them beside it.
-        for e in std::fs::read_dir(root.join("config")).unwrap() {
-            let name = e.unwrap().file_name();
-            let n = name.to_string_lossy();
-            if n != "car.toml" && !n.ends_with("local.toml") && !dir.join(&name).exists() {
-                std::os::unix::fs::symlink(root.join("config").join(&name), dir.join(&name)).unwrap();
-            }
-        }
-        std::fs::write(dir.join("local.toml"), "# local\n").unwrap();
-        let port = {
-            let l = std::net::TcpListener::bind("127.0.0.2:0").unwrap();
-            l.local_addr().unwrap().port()
+extern "C" fn kill_servers() {
+    for pid in PIDS.lock().map(|p| p.clone()).unwrap_or_default() {
+        // SAFETY: a plain signal to a child this process started.
+        unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
+    }
+}
+
+/// Raises this process's soft open-file limit to the hard one (the tests hold ~1,200 sockets).
+fn raise_own_nofile() -> u64 {
+    // SAFETY: getrlimit/setrlimit with a local struct.
+    unsafe {
+        let mut r = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
         };
-        let addr = format!("127.0.0.2:{port}");
-        let mut child = Command::new(env!("CARGO_BIN_EXE_rccar"))
-            .current_dir(&root)
-            .args(["sim", "--dashboard", "--truth-boxes", "--listen", &addr, "--seconds", "60", "--laps", "100"])
-            .arg("--config")
-            .arg(dir.join("car.toml"))
-            .arg("--local")
-            .arg(dir.join("local.toml"))
-            .arg("-o")
-            .arg(dir.join("out"))
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        // The first line names the address and the token.
-        let mut out = child.stdout.take().unwrap();
-        let mut line = Vec::new();
-        let mut b = [0u8; 1];
-        while out.read(&mut b).unwrap_or(0) == 1 && b[0] != b'\n' {
+        libc::getrlimit(libc::RLIMIT_NOFILE, &mut r);
+        r.rlim_cur = r.rlim_max.min(1 << 20);
+        libc::setrlimit(libc::RLIMIT_NOFILE, &r);
+        libc::getrlimit(libc::RLIMIT_NOFILE, &mut r);
+        r.rlim_cur
+    }
+}
+
+/// `rccar sim --dashboard` on `ip`, with a temp copy of the config and its own local.toml;
+/// `pi_nofile`: started with a soft open-file limit of 1024, as on a Raspberry Pi.
+fn start(ip: &str, pi_nofile: bool) -> Server {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let dir = std::env::temp_dir().join(format!("rccar-dash-sec-{}-{ip}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(root.join("config/car.toml"), dir.join("car.toml")).unwrap();
+    // Tracks and cascades are found relative to the config file: link them beside it.
+    for e in std::fs::read_dir(root.join("config")).unwrap() {
+        let name = e.unwrap().file_name();
+        let n = name.to_string_lossy();
+        if n != "car.toml" && !n.ends_with("local.toml") && !dir.join(&name).exists() {
+            std::os::unix::fs::symlink(root.join("config").join(&name), dir.join(&name)).unwrap();
+        }
+    }
+    std::fs::write(dir.join("local.toml"), "# local\n").unwrap();
+    let port = {
+        let l = std::net::TcpListener::bind(format!("{ip}:0")).unwrap();
+        l.local_addr().unwrap().port()
+    };
+    let addr = format!("{ip}:{port}");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_rccar"));
+    cmd.current_dir(&root)
+        .args([
+            "sim",
+            "--dashboard",
+            "--truth-boxes",
+            "--listen",
+            &addr,
+            "--seconds",
+            "300",
+            "--laps",
+            "100",
+        ])
+        .arg("--config")
+        .arg(dir.join("car.toml"))
+        .arg("--local")
+        .arg(dir.join("local.toml"))
+        .arg("-o")
+        .arg(dir.join("out"))
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(dir.join("stderr.log")).unwrap());
+    if pi_nofile {
+        // SAFETY: only async-signal-safe calls between fork and exec.
+        unsafe {
+            cmd.pre_exec(|| {
+                let mut r = libc::rlimit {
+                    rlim_cur: 0,
+                    rlim_max: 0,
+                };
+                libc::getrlimit(libc::RLIMIT_NOFILE, &mut r);
+                r.rlim_cur = 1024.min(r.rlim_max);
+                libc::setrlimit(libc::RLIMIT_NOFILE, &r);
+                Ok(())
+            });
+        }
+    }
+    let mut child = cmd.spawn().unwrap();
+    {
+        let mut p = PIDS.lock().unwrap();
+        if p.is_empty() {
+            // SAFETY: registers a plain extern "C" function.
+            unsafe { libc::atexit(kill_servers) };
+        }
+        p.push(child.id());
+    }
+    let mut out = child.stdout.take().unwrap();
+    let mut start_lines = Vec::new();
+    let mut line = Vec::new();
+    let mut b = [0u8; 1];
+    // The URL line, and off loopback the token line (or the first line that is neither).
+    let want = if ip == "127.0.0.1" { 1 } else { 2 };
+    while start_lines.len() < want && out.read(&mut b).unwrap_or(0) == 1 {
+        if b[0] == b'\n' {
+            start_lines.push(String::from_utf8_lossy(&line).to_string());
+            line.clear();
+        } else {
             line.push(b[0]);
         }
-        let line = String::from_utf8_lossy(&line).to_string();
-        let token = line
-            .split("token=")
-            .nth(1)
-            .and_then(|s| s.split_whitespace().next())
-            .unwrap_or_else(|| panic!("no token in `{line}`"))
-            .to_string();
-        // Keep draining stdout so the child never blocks on a full pipe.
+    }
+    let token = (want == 2).then(|| {
+        start_lines
+            .iter()
+            .find_map(|l| l.strip_prefix("dashboard token: "))
+            .unwrap_or_else(|| panic!("no `dashboard token:` line in {start_lines:?}"))
+            .trim()
+            .to_string()
+    });
+    // Keep draining stdout (kept for the log checks) so the child never blocks on a pipe.
+    let stdout = Arc::new(Mutex::new(Vec::new()));
+    {
+        let stdout = stdout.clone();
         std::thread::spawn(move || {
-            let mut sink = Vec::new();
-            let _ = out.read_to_end(&mut sink);
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = out.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                stdout.lock().unwrap().extend_from_slice(&buf[..n]);
+            }
         });
-        let s = Server {
-            addr,
-            token,
-            dir,
-            _child: child,
-        };
-        let t0 = Instant::now();
-        while state(&s).is_none() {
-            assert!(t0.elapsed() < Duration::from_secs(30), "dashboard did not come up");
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        s
-    })
+    }
+    let s = Server {
+        addr,
+        token,
+        dir,
+        pid: child.id(),
+        _child: child,
+        stdout,
+        start_lines,
+    };
+    let t0 = Instant::now();
+    while state(&s).is_none() {
+        assert!(t0.elapsed() < Duration::from_secs(30), "dashboard did not come up");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    s
 }
 
-/// Sends raw bytes, returns (status, body).
-fn raw(addr: &str, req: &[u8]) -> (u16, String) {
+fn remote() -> &'static Server {
+    REMOTE.get_or_init(|| start("127.0.0.2", false))
+}
+
+fn local() -> &'static Server {
+    LOCAL.get_or_init(|| start("127.0.0.1", true))
+}
+
+/// Sends raw bytes, returns (status, head, body).
+fn raw_full(addr: &str, req: &[u8]) -> (u16, String, String) {
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
     let _ = s.write_all(req);
@@ -98,27 +197,69 @@ fn raw(addr: &str, req: &[u8]) -> (u16, String) {
     let _ = s.read_to_end(&mut buf);
     let text = String::from_utf8_lossy(&buf).to_string();
     let code = text.split(' ').nth(1).and_then(|c| c.parse().ok()).unwrap_or(0);
-    let body = text.split_once("\r\n\r\n").map_or(String::new(), |(_, b)| b.to_string());
-    (code, body)
+    let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
+    (code, head.to_string(), body.to_string())
 }
 
-fn req(s: &Server, method: &str, path: &str, token: bool, body: &str) -> (u16, String) {
-    let tok = if token { format!("X-Token: {}\r\n", s.token) } else { String::new() };
+fn raw(addr: &str, req: &[u8]) -> (u16, String) {
+    let (c, _, b) = raw_full(addr, req);
+    (c, b)
+}
+
+/// A request with `Connection: close`, `Host` = the server's address unless `headers` give one.
+fn send(s: &Server, method: &str, path: &str, headers: &[(&str, &str)], body: &str) -> (u16, String, String) {
+    let mut h = String::new();
+    if !headers.iter().any(|(k, _)| k.eq_ignore_ascii_case("host")) {
+        h += &format!("Host: {}\r\n", s.addr);
+    }
+    for (k, v) in headers {
+        h += &format!("{k}: {v}\r\n");
+    }
     let r = format!(
-        "{method} {path} HTTP/1.1\r\nHost: x\r\n{tok}Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        "{method} {path} HTTP/1.1\r\n{h}Connection: close\r\nContent-Length: {}\r\n\r\n{body}",
         body.len()
     );
-    raw(&s.addr, r.as_bytes())
+    raw_full(&s.addr, r.as_bytes())
+}
+
+/// The secret the server puts into its page (empty when it puts none).
+fn secret(s: &Server, extra: &[(&str, &str)]) -> String {
+    let (_, _, page) = send(s, "GET", "/", extra, "");
+    page.split("name=\"rccar-secret\" content=\"")
+        .nth(1)
+        .and_then(|r| r.split('"').next())
+        .unwrap_or("")
+        .to_string()
+}
+
+/// A control request with every proof the server asks for (the page's secret, JSON, and off
+/// loopback the token header).
+fn req(s: &Server, method: &str, path: &str, body: &str) -> (u16, String) {
+    let sec = secret(s, &[]);
+    let mut h = vec![("Content-Type", "application/json"), ("X-Rccar-Secret", sec.as_str())];
+    if let Some(t) = &s.token {
+        h.push(("X-Token", t));
+    }
+    let (c, _, b) = send(s, method, path, &h, body);
+    (c, b)
 }
 
 fn state(s: &Server) -> Option<serde_json::Value> {
-    let (c, b) = req(s, "GET", "/api/state?since=1e300", false, "");
+    let (c, _, b) = send(s, "GET", "/api/state?since=1e300", &[], "");
     let v: serde_json::Value = serde_json::from_str(&b).ok()?;
     (c == 200 && v.get("frame").is_some()).then_some(v)
 }
 
 fn frame(s: &Server) -> u64 {
     state(s).unwrap()["frame"].as_u64().unwrap()
+}
+
+fn stdout_text(s: &Server) -> String {
+    String::from_utf8_lossy(&s.stdout.lock().unwrap()).to_string()
+}
+
+fn stderr_text(s: &Server) -> String {
+    std::fs::read_to_string(s.dir.join("stderr.log")).unwrap_or_default()
 }
 
 const CONTROL: &[&str] = &[
@@ -136,24 +277,40 @@ const CONTROL: &[&str] = &[
 ];
 
 #[test]
-fn no_token_gives_401_on_every_control_endpoint_and_the_stream() {
-    let s = server();
+fn remote_without_login_every_control_and_the_stream_are_refused_403() {
+    let s = remote();
+    let sec = secret(s, &[]);
+    assert!(
+        sec.is_empty(),
+        "the page gave its secret to a client that is not logged in"
+    );
+    let zero = "0".repeat(32);
     for p in CONTROL {
-        let (c, b) = req(s, "POST", p, false, r#"{"key":"steering.kp","value":0.5}"#);
-        assert_eq!(c, 401, "{p}: {b}");
-        let (c, _) = req(s, "POST", &format!("{p}?token=wrong{}", "0".repeat(24)), false, "{}");
-        assert_eq!(c, 401, "{p} with a wrong token");
+        let h = [("Content-Type", "application/json"), ("X-Rccar-Secret", zero.as_str())];
+        let (c, _, b) = send(s, "POST", p, &h, r#"{"key":"steering.kp","value":0.5}"#);
+        assert_eq!(c, 403, "{p}: {b}");
+        let (c, _, _) = send(
+            s,
+            "POST",
+            p,
+            &[
+                ("Content-Type", "application/json"),
+                ("X-Token", "wrong0000000000000000000"),
+            ],
+            "{}",
+        );
+        assert_eq!(c, 403, "{p} with a wrong token");
     }
-    let (c, _) = req(s, "GET", "/stream.mjpg", false, "");
-    assert_eq!(c, 401, "stream");
-    // Read-only view: the page and the state, marked read-only.
-    let (c, b) = req(s, "GET", "/", false, "");
-    assert!(c == 200 && b.contains("EMERGENCY STOP"));
+    let (c, _, _) = send(s, "GET", "/stream.mjpg", &[], "");
+    assert_eq!(c, 403, "stream");
+    // Read-only view: the page (with the login form and the e-stop) and the state.
+    let (c, _, b) = send(s, "GET", "/", &[], "");
+    assert!(c == 200 && b.contains("EMERGENCY STOP") && b.contains("name=\"rccar-login\" content=\"1\""));
     assert_eq!(state(s).unwrap()["read_only"], true);
     // With the token the same endpoints work.
-    let (c, b) = req(s, "POST", "/api/heartbeat", true, "");
+    let (c, b) = req(s, "POST", "/api/heartbeat", "");
     assert_eq!(c, 200, "{b}");
-    let (c, b) = req(s, "POST", "/api/set", true, r#"{"key":"steering.kd","value":0.06}"#);
+    let (c, b) = req(s, "POST", "/api/set", r#"{"key":"steering.kd","value":0.06}"#);
     assert_eq!(c, 200, "{b}");
     // Nothing was changed by the refused requests: kp is still the configured 1.0.
     std::thread::sleep(Duration::from_millis(300));
@@ -161,81 +318,196 @@ fn no_token_gives_401_on_every_control_endpoint_and_the_stream() {
 }
 
 #[test]
-fn estop_needs_no_token_from_this_machine() {
-    let s = server();
-    let (c, b) = req(s, "POST", "/api/estop", false, "");
+fn remote_login_gives_an_httponly_samesite_strict_cookie_and_the_token_is_never_in_a_url() {
+    let s = remote();
+    let token = s.token.clone().unwrap();
+    let url_line = &s.start_lines[0];
+    assert!(
+        url_line.starts_with("dashboard: http://") && !url_line.contains(&token),
+        "{url_line}"
+    );
+    // A token in the URL is not a proof.
+    let (c, _, _) = send(
+        s,
+        "POST",
+        &format!("/api/heartbeat?token={token}"),
+        &[("Content-Type", "application/json")],
+        "",
+    );
+    assert_eq!(c, 403);
+    // Wrong token: refused and logged.
+    let form = [("Content-Type", "application/x-www-form-urlencoded")];
+    let (c, _, _) = send(s, "POST", "/login", &form, "token=0123456789abcdef");
+    assert_eq!(c, 403);
+    let (c, head, _) = send(s, "POST", "/login", &form, &format!("token={token}"));
+    assert_eq!(c, 303, "{head}");
+    let set = head
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("set-cookie: ")
+                .or_else(|| l.strip_prefix("Set-Cookie: "))
+        })
+        .unwrap_or_else(|| panic!("no cookie in {head}"));
+    assert!(set.contains("HttpOnly") && set.contains("SameSite=Strict"), "{set}");
+    assert!(!set.contains(&token), "the cookie is not the token itself: {set}");
+    let cookie = set.split(';').next().unwrap().to_string();
+    // Logged in: the page carries the secret; controls need cookie AND secret.
+    let sec = secret(s, &[("Cookie", &cookie)]);
+    assert_eq!(sec.len(), 32, "the page's secret after login");
+    let good = [
+        ("Cookie", cookie.as_str()),
+        ("Content-Type", "application/json"),
+        ("X-Rccar-Secret", sec.as_str()),
+    ];
+    let (c, _, b) = send(s, "POST", "/api/heartbeat", &good, "");
+    assert_eq!(c, 200, "{b}");
+    let (c, _, _) = send(s, "POST", "/api/heartbeat", &good[..2], "");
+    assert_eq!(c, 403, "cookie without the page's secret");
+    let (c, _, _) = send(s, "POST", "/api/heartbeat", &[good[1], good[2]], "");
+    assert_eq!(c, 403, "secret without the cookie");
+    // The stream never ends: read its head only.
+    let mut sock = TcpStream::connect(&s.addr).unwrap();
+    sock.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    let r = format!(
+        "GET /stream.mjpg HTTP/1.1\r\nHost: {}\r\nCookie: {cookie}\r\n\r\n",
+        s.addr
+    );
+    sock.write_all(r.as_bytes()).unwrap();
+    let mut head = [0u8; 12];
+    sock.read_exact(&mut head).unwrap();
+    assert_eq!(&head, b"HTTP/1.1 200", "stream with the cookie");
+}
+
+#[test]
+fn estop_is_accepted_from_anyone_and_logged_with_its_origin() {
+    let s = remote();
+    let h = [
+        ("Host", "evil.example"),
+        ("Origin", "http://evil.example"),
+        ("Content-Type", "text/plain"),
+    ];
+    let (c, _, b) = send(s, "POST", "/api/estop", &h, "x");
     assert_eq!(c, 200, "{b}");
     assert_eq!(state(s).unwrap()["estop"], true);
-    let (c, _) = req(s, "POST", "/api/release", true, "");
+    let t0 = Instant::now();
+    while !stdout_text(s).contains("EMERGENCY STOP from 127.0.0.1") {
+        assert!(
+            t0.elapsed() < Duration::from_secs(5),
+            "e-stop not logged: {}",
+            stdout_text(s)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(
+        stdout_text(s).contains("Origin http://evil.example"),
+        "{}",
+        stdout_text(s)
+    );
+    let (c, _) = req(s, "POST", "/api/release", "");
     assert_eq!(c, 200);
 }
 
 #[test]
 fn malformed_json_is_refused() {
-    let s = server();
-    for body in [r#"{"key":"steering.kp","value":"#, "not json", "[1,2]", "", r#"{"key":3,"value":1}"#] {
-        let (c, b) = req(s, "POST", "/api/set", true, body);
+    let s = remote();
+    for body in [
+        r#"{"key":"steering.kp","value":"#,
+        "not json",
+        "[1,2]",
+        "",
+        r#"{"key":3,"value":1}"#,
+    ] {
+        let (c, b) = req(s, "POST", "/api/set", body);
         assert_eq!(c, 400, "{body:?}: {b}");
         assert!(b.contains("malformed request"), "{b}");
     }
-    let (c, _) = req(s, "POST", "/api/sim/place", true, "{\"s\":");
+    let (c, _) = req(s, "POST", "/api/sim/place", "{\"s\":");
     assert_eq!(c, 400);
 }
 
 #[test]
 fn huge_bodies_and_heads_are_refused_before_reading() {
-    let s = server();
+    let s = remote();
     let t = Instant::now();
     let head = format!(
-        "POST /api/set HTTP/1.1\r\nX-Token: {}\r\nContent-Length: 100000000\r\n\r\n",
-        s.token
+        "POST /api/set HTTP/1.1\r\nHost: {}\r\nX-Token: {}\r\nContent-Type: application/json\r\nContent-Length: 100000000\r\n\r\n",
+        s.addr,
+        s.token.as_ref().unwrap()
     );
     let (c, b) = raw(&s.addr, head.as_bytes());
     assert_eq!(c, 413, "{b}");
-    assert!(t.elapsed() < Duration::from_secs(2), "answered without waiting for the body");
-    let big = format!("GET /api/state HTTP/1.1\r\nX-Pad: {}\r\n\r\n", "a".repeat(20_000));
+    assert!(
+        t.elapsed() < Duration::from_secs(2),
+        "answered without waiting for the body"
+    );
+    let big = format!(
+        "GET /api/state HTTP/1.1\r\nHost: {}\r\nX-Pad: {}\r\n\r\n",
+        s.addr,
+        "a".repeat(20_000)
+    );
     let (c, _) = raw(&s.addr, big.as_bytes());
     assert_eq!(c, 431);
-    let chunked = "POST /api/set HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n5\r\nhello\r\n0\r\n\r\n";
+    let chunked = format!(
+        "POST /api/set HTTP/1.1\r\nHost: {}\r\nX-Token: {}\r\nContent-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n5\r\nhello\r\n0\r\n\r\n",
+        s.addr,
+        s.token.as_ref().unwrap()
+    );
     assert_eq!(raw(&s.addr, chunked.as_bytes()).0, 411);
 }
 
 #[test]
 fn unknown_keys_and_fields_are_refused_with_the_key() {
-    let s = server();
-    let (c, b) = req(s, "POST", "/api/set", true, r#"{"key":"camera.fps","value":10}"#);
+    let s = remote();
+    let (c, b) = req(s, "POST", "/api/set", r#"{"key":"camera.fps","value":10}"#);
     assert_eq!(c, 400);
     assert!(b.contains("unknown key `camera.fps`"), "{b}");
-    let (c, b) = req(s, "POST", "/api/set", true, r#"{"key":"steering.kp","value":1,"admin":true}"#);
+    let (c, b) = req(s, "POST", "/api/set", r#"{"key":"steering.kp","value":1,"admin":true}"#);
     assert_eq!(c, 400);
     assert!(b.contains("unknown field `admin`"), "{b}");
-    let (c, b) = req(s, "POST", "/api/set", true, r#"{"key":"steering.kp","value":25}"#);
+    let (c, b) = req(s, "POST", "/api/set", r#"{"key":"steering.kp","value":25}"#);
     assert_eq!(c, 400);
-    assert!(b.contains("steering.kp = 25 is out of range (allowed: 0 ..= 20)"), "{b}");
-    let (c, b) = req(s, "POST", "/api/sim/place", true, r#"{"s":1000}"#);
+    assert!(
+        b.contains("steering.kp = 25 is out of range (allowed: 0 ..= 20)"),
+        "{b}"
+    );
+    let (c, b) = req(s, "POST", "/api/sim/place", r#"{"s":1000}"#);
     assert_eq!(c, 400);
     assert!(b.contains("out of range"), "{b}");
 }
 
 #[test]
 fn nan_and_infinity_are_refused() {
-    let s = server();
-    for v in ["NaN", "nan", "Infinity", "-Infinity", "1e999", "-1e999", "\"NaN\"", "null"] {
-        let (c, b) = req(s, "POST", "/api/set", true, &format!(r#"{{"key":"steering.kp","value":{v}}}"#));
+    let s = remote();
+    for v in [
+        "NaN",
+        "nan",
+        "Infinity",
+        "-Infinity",
+        "1e999",
+        "-1e999",
+        "\"NaN\"",
+        "null",
+    ] {
+        let (c, b) = req(
+            s,
+            "POST",
+            "/api/set",
+            &format!(r#"{{"key":"steering.kp","value":{v}}}"#),
+        );
         assert_eq!(c, 400, "{v}: {b}");
-        let (c, _) = req(s, "POST", "/api/sim/place", true, &format!(r#"{{"s":{v}}}"#));
+        let (c, _) = req(s, "POST", "/api/sim/place", &format!(r#"{{"s":{v}}}"#));
         assert_eq!(c, 400, "place {v}");
     }
-    let (c, _) = req(s, "GET", "/api/state?since=NaN", false, "");
+    let (c, _, _) = send(s, "GET", "/api/state?since=NaN", &[], "");
     assert_eq!(c, 400);
-    let (c, _) = req(s, "GET", "/api/state?since=inf", false, "");
+    let (c, _, _) = send(s, "GET", "/api/state?since=inf", &[], "");
     assert_eq!(c, 400);
     assert_eq!(state(s).unwrap()["values"]["steering.kp"], 1.0);
 }
 
 #[test]
 fn path_traversal_finds_nothing() {
-    let s = server();
+    let s = remote();
     for p in [
         "/../../../../etc/passwd",
         "/%2e%2e/%2e%2e/etc/passwd",
@@ -247,24 +519,24 @@ fn path_traversal_finds_nothing() {
         "/stream.mjpg/../../etc/passwd",
     ] {
         for m in ["GET", "POST"] {
-            let (c, b) = req(s, m, p, true, "");
+            let (c, b) = req(s, m, p, "");
             assert_eq!(c, 404, "{m} {p}: {b}");
             assert!(!b.contains("root:") && !b.contains("[camera]"), "{p} leaked a file");
         }
     }
     // A path in a parameter is just a bad value, and save takes no file name.
-    let (c, _) = req(s, "GET", "/api/state?since=../../etc/passwd", false, "");
+    let (c, _, _) = send(s, "GET", "/api/state?since=../../etc/passwd", &[], "");
     assert_eq!(c, 400);
-    let (c, b) = req(s, "POST", "/api/save", true, r#"{"file":"/etc/passwd"}"#);
+    let (c, b) = req(s, "POST", "/api/save", r#"{"file":"/etc/passwd"}"#);
     assert_eq!(c, 400, "{b}");
-    let (c, _) = req(s, "POST", "/api/sim/place", true, r#"{"s":"../../etc"}"#);
+    let (c, _) = req(s, "POST", "/api/sim/place", r#"{"s":"../../etc"}"#);
     assert_eq!(c, 400);
     assert!(!s.dir.join("etc").exists());
 }
 
 #[test]
 fn slowloris_clients_are_cut_off_and_the_loop_runs_on() {
-    let s = server();
+    let s = remote();
     let f0 = frame(s);
     let t0 = Instant::now();
     // 40 clients that send a request head one byte every 300 ms.
@@ -299,20 +571,23 @@ fn slowloris_clients_are_cut_off_and_the_loop_runs_on() {
     // The loop went on meanwhile (paced at 30 fps; allow a busy machine half of that).
     let frames = frame(s) - f0;
     let secs = t0.elapsed().as_secs_f64();
-    assert!(frames as f64 >= 0.5 * 30.0 * secs * 0.5, "{frames} frames in {secs:.1} s during the attack");
+    assert!(
+        frames as f64 >= 0.5 * 30.0 * secs * 0.5,
+        "{frames} frames in {secs:.1} s during the attack"
+    );
     // And the server still answers.
     assert!(state(s).is_some());
 }
 
 #[test]
 fn a_silent_page_disarms_the_car_after_the_heartbeat_limit() {
-    let s = server();
-    // Arm (retry: another test may be holding the e-stop for a moment).
+    let s = remote();
     // The tests share one server: another test's e-stop or disarm may land between our arm
     // and our look, so arm until the state shows it.
     let t0 = Instant::now();
     loop {
-        let (c, b) = req(s, "POST", "/api/arm", true, "");
+        req(s, "POST", "/api/release", "");
+        let (c, b) = req(s, "POST", "/api/arm", "");
         if c == 200 && state(s).unwrap()["armed"] == true {
             break;
         }
@@ -322,21 +597,267 @@ fn a_silent_page_disarms_the_car_after_the_heartbeat_limit() {
     let armed_at = Instant::now();
     // No heartbeat: disarmed after dashboard.heartbeat_ms (1000 ms) plus the 20 ms watchdog tick.
     while state(s).unwrap()["armed"] == true {
-        assert!(armed_at.elapsed() < Duration::from_secs(3), "still armed after 3 s without a heartbeat");
+        assert!(
+            armed_at.elapsed() < Duration::from_secs(3),
+            "still armed after 3 s without a heartbeat"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     let after = armed_at.elapsed();
     assert!(after >= Duration::from_millis(950), "disarmed too early: {after:?}");
     // A page that keeps sending heartbeats stays armed.
-    let (c, _) = req(s, "POST", "/api/arm", true, "");
+    let (c, _) = req(s, "POST", "/api/arm", "");
     if c == 200 {
         let t = Instant::now();
         while t.elapsed() < Duration::from_millis(2000) {
-            req(s, "POST", "/api/heartbeat", true, "");
+            req(s, "POST", "/api/heartbeat", "");
             std::thread::sleep(Duration::from_millis(200));
         }
         let st = state(s).unwrap();
-        assert!(st["armed"] == true || st["estop"] == true, "disarmed despite heartbeats");
-        req(s, "POST", "/api/disarm", true, "");
+        assert!(
+            st["armed"] == true || st["estop"] == true,
+            "disarmed despite heartbeats"
+        );
+        req(s, "POST", "/api/disarm", "");
     }
+}
+
+/// The local server's settable values and its local.toml, to compare before and after.
+fn snapshot(s: &Server) -> (serde_json::Value, serde_json::Value, serde_json::Value, String) {
+    let st = state(s).unwrap();
+    let toml = std::fs::read_to_string(s.dir.join("local.toml")).unwrap();
+    (st["armed"].clone(), st["values"].clone(), st["changed"].clone(), toml)
+}
+
+#[test]
+fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() {
+    let s = local();
+    let sec = secret(s, &[]);
+    let port = s.addr.rsplit(':').next().unwrap();
+    let other = format!("http://127.0.0.1:{}", port.parse::<u16>().unwrap() ^ 1);
+    let before = snapshot(s);
+    let refused0 = state(s).unwrap()["refused"]["count"].as_u64().unwrap_or(0);
+    let json = ("Content-Type", "application/json");
+    let with_secret = ("X-Rccar-Secret", sec.as_str());
+    // Each attempt lacks exactly one proof (or, the first, the whole reported attack).
+    let attempts: Vec<(&str, Vec<(&str, &str)>)> = vec![
+        (
+            "text/plain from evil.example",
+            vec![("Origin", "http://evil.example"), ("Content-Type", "text/plain")],
+        ),
+        (
+            "a second local origin",
+            vec![("Origin", other.as_str()), json, with_secret],
+        ),
+        (
+            "DNS rebinding (wrong Host)",
+            vec![("Host", "rebind.evil.example"), json, with_secret],
+        ),
+        (
+            "text/plain, same origin",
+            vec![("Content-Type", "text/plain"), with_secret],
+        ),
+        ("no secret", vec![json]),
+        (
+            "wrong secret",
+            vec![json, ("X-Rccar-Secret", "00000000000000000000000000000000")],
+        ),
+        ("Origin null", vec![("Origin", "null"), json, with_secret]),
+    ];
+    let bodies = [
+        ("/api/release", ""),
+        ("/api/arm", ""),
+        ("/api/set", r#"{"key":"steering.kp","value":20}"#),
+        ("/api/save", ""),
+        ("/api/sim/place", r#"{"s":10}"#),
+        ("/api/sim/pause", ""),
+    ];
+    let mut n = 0;
+    for (what, h) in &attempts {
+        for (path, body) in bodies {
+            let (c, _, b) = send(s, "POST", path, h, body);
+            assert_eq!(c, 403, "{what}: POST {path} answered {c} {b}");
+            n += 1;
+        }
+    }
+    // A CORS preflight is never granted.
+    let (c, head, _) = send(
+        s,
+        "OPTIONS",
+        "/api/arm",
+        &[
+            ("Origin", "http://evil.example"),
+            ("Access-Control-Request-Method", "POST"),
+        ],
+        "",
+    );
+    assert_eq!(c, 403);
+    assert!(!head.to_ascii_lowercase().contains("access-control-allow"), "{head}");
+    n += 1;
+    // No other page may frame this one.
+    let (_, head, _) = send(s, "GET", "/", &[], "");
+    assert!(head.to_ascii_lowercase().contains("x-frame-options: deny"), "{head}");
+    std::thread::sleep(Duration::from_millis(500));
+    let after = snapshot(s);
+    assert_eq!(after.0, false, "armed");
+    assert_eq!(before.1, after.1, "values changed");
+    assert_eq!(after.2, serde_json::json!({}), "changed keys");
+    assert_eq!(before.3, after.3, "local.toml was written");
+    assert!(!state(s).unwrap()["paused"].as_bool().unwrap_or(false), "paused");
+    // Every refusal counted (state, for the page), logged on stderr with origin and path.
+    let st = state(s).unwrap();
+    assert!(
+        st["refused"]["count"].as_u64().unwrap() >= refused0 + n,
+        "{}",
+        st["refused"]
+    );
+    let log = stderr_text(s);
+    for needle in [
+        "refused POST /api/arm from 127.0.0.1",
+        "Origin http://evil.example",
+        &format!("Origin {other}"),
+        "Host rebind.evil.example",
+        "refused OPTIONS /api/arm",
+    ] {
+        assert!(log.contains(needle), "stderr lacks `{needle}`:\n{log}");
+    }
+    // And with every proof the same request works (the test could have changed something).
+    let own = format!("http://{}", s.addr);
+    let good = [json, with_secret, ("Origin", own.as_str())];
+    let (c, _, b) = send(s, "POST", "/api/set", &good, r#"{"key":"steering.kd","value":0.07}"#);
+    assert_eq!(c, 200, "{b}");
+}
+
+#[test]
+fn the_soft_open_file_limit_is_raised_to_the_hard_limit() {
+    let s = local();
+    let limits = std::fs::read_to_string(format!("/proc/{}/limits", s.pid)).unwrap();
+    let line = limits.lines().find(|l| l.starts_with("Max open files")).unwrap();
+    let v: Vec<&str> = line.split_whitespace().collect();
+    let (soft, hard) = (v[3], v[4]);
+    assert_eq!(soft, hard, "started with soft 1024 (a Pi's default): {line}");
+    let st = state(s).unwrap();
+    assert_eq!(st["connections"]["max"], 1024, "{}", st["connections"]);
+}
+
+/// Opens `n` connections that send nothing.
+fn idle(addr: &str, n: usize) -> Vec<TcpStream> {
+    (0..n)
+        .map(|i| TcpStream::connect(addr).unwrap_or_else(|e| panic!("idle connection {i}: {e}")))
+        .collect()
+}
+
+/// One e-stop on a new connection: (status, milliseconds from connect to the whole answer).
+fn timed_estop(addr: &str) -> (u16, f64) {
+    let t = Instant::now();
+    let (c, _, _) = raw_full(
+        addr,
+        format!("POST /api/estop HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: 0\r\n\r\n")
+            .as_bytes(),
+    );
+    (c, t.elapsed().as_secs_f64() * 1e3)
+}
+
+/// 20 timed e-stops: (median, max) ms; every one must be answered 200.
+fn twenty_estops(addr: &str) -> (f64, f64, Vec<f64>) {
+    let mut ms: Vec<f64> = (0..20)
+        .map(|i| {
+            let (c, t) = timed_estop(addr);
+            assert_eq!(c, 200, "e-stop {i} answered {c} after {t:.1} ms");
+            t
+        })
+        .collect();
+    let all = ms.clone();
+    ms.sort_by(f64::total_cmp);
+    ((ms[9] + ms[10]) / 2.0, ms[19], all)
+}
+
+fn open_connections(s: &Server) -> u64 {
+    state(s).map_or(0, |st| st["connections"]["open"].as_u64().unwrap_or(0))
+}
+
+#[test]
+fn estop_is_answered_within_50ms_while_1000_idle_connections_are_held() {
+    let s = local();
+    assert!(
+        raise_own_nofile() >= 1300,
+        "this test holds ~1,100 sockets: raise the hard open-file limit"
+    );
+    let held = idle(&s.addr, 1000);
+    // Wait until the server has taken them all (checked after the e-stops).
+    let t0 = Instant::now();
+    while open_connections(s) < 1000 && t0.elapsed() < Duration::from_secs(2) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let (median, max, all) = twenty_estops(&s.addr);
+    let open = open_connections(s);
+    println!("e-stop with 1,000 idle connections held: median {median:.2} ms, max {max:.2} ms over 20 ({all:.1?}); server held {open} connections after");
+    assert!(
+        open >= 1000,
+        "the idle connections were not held during the e-stops: {open}"
+    );
+    assert!(
+        median <= 50.0 && max <= 50.0,
+        "e-stop median {median:.1} ms, max {max:.1} ms (limit 50 ms): {all:.1?}"
+    );
+    assert_eq!(state(s).unwrap()["estop"], true);
+    drop(held);
+}
+
+#[test]
+fn estop_is_answered_within_50ms_beyond_the_connection_bound_with_slow_clients_trickling() {
+    let s = local();
+    assert!(
+        raise_own_nofile() >= 1300,
+        "this test holds ~1,200 sockets: raise the hard open-file limit"
+    );
+    let before = state(s).unwrap()["connections"].clone();
+    // 50 slow clients that trickle a request head, one byte every 100 ms, then 1,100 idle ones.
+    let mut slow = idle(&s.addr, 50);
+    let held = idle(&s.addr, 1100);
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let trickle = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let head =
+                b"POST /api/arm HTTP/1.1\r\nHost: x\r\nX-Pad: aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa";
+            let t0 = Instant::now();
+            let mut closed_at = vec![None; slow.len()];
+            let mut i = 0;
+            while !stop.load(std::sync::atomic::Ordering::SeqCst) && t0.elapsed() < Duration::from_secs(8) {
+                for (k, c) in slow.iter_mut().enumerate() {
+                    if closed_at[k].is_none() && c.write_all(&head[i % head.len()..][..1]).is_err() {
+                        closed_at[k] = Some(t0.elapsed());
+                    }
+                }
+                i += 1;
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            closed_at
+        })
+    };
+    std::thread::sleep(Duration::from_millis(300));
+    let (median, max, all) = twenty_estops(&s.addr);
+    let c = state(s).unwrap()["connections"].clone();
+    println!("e-stop with 1,100 idle + 50 trickling connections (bound 1,024): median {median:.2} ms, max {max:.2} ms over 20 ({all:.1?}); connections {c}");
+    assert!(
+        median <= 50.0 && max <= 50.0,
+        "e-stop median {median:.1} ms, max {max:.1} ms (limit 50 ms): {all:.1?}"
+    );
+    let open = c["open"].as_u64().unwrap();
+    let bound = c["max"].as_u64().unwrap() + c["reserve"].as_u64().unwrap();
+    assert!(open <= bound, "{open} connections open, bound {bound}");
+    assert!(
+        c["evicted"].as_u64().unwrap() > before["evicted"].as_u64().unwrap(),
+        "nothing was closed at the bound: {c}"
+    );
+    // The trickling clients are closed by the head deadline (3 s) or to make room, never kept.
+    let closed_at = {
+        std::thread::sleep(Duration::from_secs(4));
+        stop.store(true, std::sync::atomic::Ordering::SeqCst);
+        trickle.join().unwrap()
+    };
+    let kept = closed_at.iter().filter(|c| c.is_none()).count();
+    assert_eq!(kept, 0, "{kept} of 50 trickling clients still connected after 4.3 s");
+    drop(held);
 }

@@ -11,7 +11,6 @@ use rccar::detect::{DetectStage, Rect};
 use rccar::pipeline::{detect_bands, detect_limits, load_detector};
 use rccar::sim::run::Simulation;
 use rccar::sim::track::Track;
-use rccar::timing::NoTimer;
 use std::path::Path;
 use std::time::Instant;
 
@@ -60,7 +59,7 @@ fn the_band_keeps_every_object_box_in_range() {
             let mut sim = Simulation::new(&cfg, &t).unwrap();
             sim.set_truth_boxes(true);
             sim.place_at(3.0 - d - lens_ahead);
-            let step = sim.step(&mut NoTimer);
+            let step = sim.step();
             let Some(truth) = step.truth.objects.first() else {
                 continue;
             };

@@ -83,7 +83,7 @@ fn images() -> Vec<(String, GrayImage)> {
     for s in [3.0, 35.6, 37.2] {
         let mut sim = rccar::sim::run::Simulation::new(&cfg, &track).unwrap();
         sim.place_at(s);
-        sim.step(&mut rccar::timing::NoTimer);
+        sim.step();
         let rgb = sim.image().clone();
         let mut g = GrayImage::new(0, 0);
         rccar::detect::gray_from_rgb(&rgb, &mut g);

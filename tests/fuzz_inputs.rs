@@ -364,7 +364,7 @@ fn fuzz_image_files() {
 #[test]
 fn fuzz_calibration_csv() {
     use rccar::ranging::{fit, parse_pairs_csv, FitOptions, TiltRanging};
-    let cam = rccar::camera::PinholeCamera::from_config(&rccar::config::CameraConfig::default());
+    let cam = rccar::camera::PinholeCamera::from(&rccar::config::CameraConfig::default());
     let start = TiltRanging::from_camera(&cam);
     let mut r = Rng(19);
     let csv = |r: &mut Rng| {

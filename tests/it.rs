@@ -23,6 +23,8 @@ mod lane_replay;
 mod ranging_calibrate_cli;
 mod ranging_sim;
 mod record_replay;
+mod runs;
+mod session;
 mod sim_loop;
 mod sim_replay;
 mod sim_track;

@@ -5,14 +5,14 @@
 use rccar::camera::PinholeCamera;
 use rccar::config::Config;
 use rccar::lane::synth::{LaneScene, SplitMix};
-use rccar::lane::{LaneDetector, LaneStatus};
+use rccar::lane::LaneStatus;
 use rccar::timing::{NoTimer, StageTimes};
 
 #[test]
 fn lane_centre_within_a_pixel_of_truth() {
     let cfg = Config::default();
-    let cam = PinholeCamera::from_config(&cfg.camera);
-    let mut det = LaneDetector::from_config(&cfg).unwrap();
+    let cam = PinholeCamera::from(&cfg.camera);
+    let mut det = cfg.lane_detector().unwrap();
     let h = *det.warp_map().homography();
     let mut rng = SplitMix::new(2024);
     let mut errs = Vec::new();

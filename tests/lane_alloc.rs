@@ -3,7 +3,6 @@
 //! allocator wrapper, so this test binary holds only this test.
 
 use rccar::config::Config;
-use rccar::lane::LaneDetector;
 use rccar::pipeline::Pipeline;
 use rccar::timing::{NoTimer, StageTimes};
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -34,7 +33,7 @@ fn no_allocation_per_frame() {
         })
         .collect();
     let cfg = Config::default();
-    let mut det = LaneDetector::from_config(&cfg).unwrap();
+    let mut det = cfg.lane_detector().unwrap();
     let mut pipe = Pipeline::new(&cfg).unwrap();
     let mut t = StageTimes::default();
     det.measure(&frames[0], &mut NoTimer, &mut t);

@@ -17,7 +17,7 @@ use image::RgbImage;
 use rccar::camera::PinholeCamera;
 use rccar::config::{Config, PeakMode};
 use rccar::lane::synth::{LaneScene, SplitMix};
-use rccar::lane::{LaneDetector, LaneStatus};
+use rccar::lane::LaneStatus;
 use rccar::timing::{NoTimer, StageTimes};
 
 const DOC: &str = "/usr/share/doc/opencv-doc/examples/data/";
@@ -55,8 +55,8 @@ fn stats(mut v: Vec<f64>) -> (f64, f64, usize) {
 #[test]
 fn peak_mode_default_is_the_better_one() {
     let cfg = Config::default();
-    let cam = PinholeCamera::from_config(&cfg.camera);
-    let h = *LaneDetector::from_config(&cfg).unwrap().warp_map().homography();
+    let cam = PinholeCamera::from(&cfg.camera);
+    let h = *cfg.lane_detector().unwrap().warp_map().homography();
     let photos: Vec<RgbImage> = [
         "baboon.jpg",
         "fruits.jpg",
@@ -119,7 +119,7 @@ fn peak_mode_default_is_the_better_one() {
             for (mode, pm) in [("centroid", PeakMode::Centroid), ("argmax", PeakMode::Argmax)] {
                 let mut c = cfg.clone();
                 c.lane.peak = pm;
-                let mut det = LaneDetector::from_config(&c).unwrap();
+                let mut det = c.lane_detector().unwrap();
                 let m = det.measure(img, &mut NoTimer, &mut StageTimes::default());
                 let e = seen.entry((set, mode)).or_default();
                 e.1 += 1;

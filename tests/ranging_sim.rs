@@ -17,10 +17,9 @@
 //! (an obstacle's near face, a sign's face, a light's housing front), from the car's true pose.
 
 use rccar::config::Config;
-use rccar::ranging::{fit, BoxRanging, FitOptions, ObjectClass, Pair, TiltRanging};
+use rccar::ranging::{fit, FitOptions, ObjectClass, Pair, TiltRanging};
 use rccar::sim::run::Simulation;
 use rccar::sim::track::{ObjectKind, Track};
-use rccar::timing::NoTimer;
 use std::path::{Path, PathBuf};
 
 /// A straight with one object of `kind` on the driven lane's centre, 3 m ahead of the start.
@@ -34,7 +33,7 @@ fn measure(kind: &str, class: ObjectClass, ds: &[f64]) -> Vec<(f64, f64, f64, f6
     let cfg = Config::default();
     let t = track(kind);
     let ob = t.enabled_objects().next().unwrap().clone();
-    let ranging = BoxRanging::from_config(&cfg.camera, &cfg.ranging);
+    let ranging = cfg.ranging.box_ranging(&cfg.camera);
     // The point the box bottom stands for: the obstacle's near face, else the object itself.
     let near = if ob.kind == ObjectKind::Obstacle {
         ob.size[0] / 2.0
@@ -49,7 +48,7 @@ fn measure(kind: &str, class: ObjectClass, ds: &[f64]) -> Vec<(f64, f64, f64, f6
         // place_at puts the car's centre there; the lens is camera_x − wheelbase/2 ahead.
         let lens_ahead = cfg.vehicle.camera_x_m - cfg.vehicle.wheelbase_m / 2.0;
         sim.place_at(3.0 - near - d - lens_ahead);
-        let step = sim.step(&mut NoTimer);
+        let step = sim.step();
         let Some(o) = step.objects.iter().find(|o| o.class == class) else {
             panic!("{kind} not boxed at {d} m");
         };
@@ -112,7 +111,7 @@ fn sim_lab_calibration_recovers_tilt_within_half_a_degree() {
     real.camera.tilt_deg += 2.0;
     let pairs = rccar::sim::scenario_lab::calibration_pairs(&real, 10, 0.005, 42).unwrap();
     assert_eq!(pairs.len(), 10);
-    let start = TiltRanging::from_camera(&rccar::camera::PinholeCamera::from_config(&nominal.camera));
+    let start = TiltRanging::from_camera(&rccar::camera::PinholeCamera::from(&nominal.camera));
     let f = fit(&pairs, start, FitOptions::default()).unwrap();
     let err = (f.ranging.alpha.to_degrees() - real.camera.tilt_deg).abs();
     let worst = f
@@ -218,7 +217,7 @@ fn approach(kind: &str, stage: &mut rccar::detect::DetectStage, from: f64, to: f
     let cfg = Config::default();
     let t = track(kind);
     let ob = t.enabled_objects().next().unwrap().clone();
-    let ranging = BoxRanging::from_config(&cfg.camera, &cfg.ranging);
+    let ranging = cfg.ranging.box_ranging(&cfg.camera);
     let mut sim = Simulation::new(&cfg, &t).unwrap();
     sim.set_full_frames(true);
     let lens_ahead = cfg.vehicle.camera_x_m - cfg.vehicle.wheelbase_m / 2.0;
@@ -232,7 +231,7 @@ fn approach(kind: &str, stage: &mut rccar::detect::DetectStage, from: f64, to: f
     let mut d = from;
     while d >= to - 1e-9 {
         sim.place_at(3.0 - near - d - lens_ahead);
-        let step = sim.step(&mut NoTimer);
+        let step = sim.step();
         let truth_m = face_distance(&cfg, &ob, step.truth.pose);
         let bbox = step
             .truth
@@ -265,7 +264,7 @@ fn approach(kind: &str, stage: &mut rccar::detect::DetectStage, from: f64, to: f
 fn ranging_accuracy_with_the_detectors_boxes() {
     use rccar::ranging::track::{Measurement, Tracker, TrackerOptions};
     let cfg = Config::default();
-    let ranging = BoxRanging::from_config(&cfg.camera, &cfg.ranging);
+    let ranging = cfg.ranging.box_ranging(&cfg.camera);
     let opts = TrackerOptions {
         accel_sigma: cfg.ranging.track_accel_sigma,
         odometry_sigma: cfg.ranging.track_odometry_sigma,
@@ -387,7 +386,7 @@ fn ranging_accuracy_with_the_detectors_boxes() {
 #[ignore = "a measurement aid that prints CSV"]
 fn detector_boxes_against_the_face_model() {
     let cfg = Config::default();
-    let ranging = BoxRanging::from_config(&cfg.camera, &cfg.ranging);
+    let ranging = cfg.ranging.box_ranging(&cfg.camera);
     println!("kind,truth_m,left,top,right,bottom,h_box,h_model,c_box,c_model,bottom_model");
     for (kind, class) in CLASSES {
         let Some(mut stage) = detector(kind) else { continue };
@@ -434,7 +433,7 @@ fn the_pipeline_tracks_objects_between_detections() {
     let (mut predicted, mut detected, mut ids) = (0, 0, std::collections::BTreeSet::new());
     let mut worst: f64 = 0.0;
     for k in 0..60 {
-        let step = sim.step(&mut NoTimer);
+        let step = sim.step();
         let truth = face_distance(&cfg, &ob, step.truth.pose);
         for o in step.objects.iter().filter(|o| o.class == ObjectClass::StopSign) {
             let d = o.distance_m.expect("a tracked sign has a distance");

@@ -8,7 +8,6 @@
 use rccar::config::Config;
 use rccar::sim::run::{EndReason, Simulation, StepOutput, Summary};
 use rccar::sim::track::{Piece, Track};
-use rccar::timing::NoTimer;
 use std::path::Path;
 
 fn track() -> Track {
@@ -28,7 +27,7 @@ fn run(cfg: &Config, start: Option<f64>) -> (Summary, Vec<StepOutput>) {
     }
     let mut steps = Vec::new();
     let summary = sim
-        .run(&mut NoTimer, |_, s| {
+        .run(|_, s| {
             steps.push(s.clone());
             Ok::<(), ()>(())
         })

@@ -76,7 +76,7 @@ fn stereo_command_ranges_a_rendered_pair_with_and_without_calibration() {
     let f_ideal = forward(&out);
     let out_ideal = out.clone();
     // 2. Through a calibration made from rendered boards.
-    let cam = PinholeCamera::from_config(&cfg.camera);
+    let cam = PinholeCamera::from(&cfg.camera);
     let board = Board {
         size: BoardSize { cols: 9, rows: 6 },
         square_m: 0.025,

@@ -331,7 +331,7 @@ fn a_calibrated_pair_is_rectified_in_the_drive_loop() {
     // 1. Checkerboard pairs through the same two cameras: the left ideal, the right `base`
     //    to its right (X_r = X_l − (base, 0, 0)), then turned and bent as in the simulator.
     let cfg = rccar::config::Config::load(&Path::new(ROOT).join("config/car.toml"), &[], &[]).unwrap();
-    let cam = PinholeCamera::from_config(&cfg.camera);
+    let cam = PinholeCamera::from(&cfg.camera);
     let warp = LensWarp::new(&cam, err_deg, k1);
     let b = Board {
         size: BoardSize { cols: 9, rows: 6 },

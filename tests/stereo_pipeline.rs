@@ -9,7 +9,7 @@
 //!
 //!     cargo test --release --test it stereo_pipeline:: -- --nocapture
 
-use rccar::config::Config;
+use rccar::config::{Config, RangingMethod};
 use rccar::control::behaviour::Mode;
 use rccar::pipeline::Pipeline;
 use rccar::sim::render::RenderOptions;
@@ -32,10 +32,10 @@ struct Run {
     stereo_counts: (u64, u64),
 }
 
-fn run(method: &str) -> Run {
+fn run(method: RangingMethod) -> Run {
     let mut cfg = Config::default().with_override("steering.ki=0").unwrap();
     cfg.resolve_paths(&Path::new(ROOT).join("config"));
-    cfg.ranging.method = method.into();
+    cfg.ranging.method = method;
     cfg.validate().unwrap();
     let text = std::fs::read_to_string(Path::new(ROOT).join("config/tracks/scenarios.toml")).unwrap();
     let text = text.replace(
@@ -73,7 +73,7 @@ fn run(method: &str) -> Run {
     for k in 0..(12.0 * cfg.camera.fps) as usize {
         let t = k as f64 * dt;
         let (l, r) = rig.render(&car.pose, t, k as u64);
-        let o = if method == "stereo" {
+        let o = if method == RangingMethod::Stereo {
             pipeline.step_stereo(&l, &r, dt, &mut NoTimer)
         } else {
             pipeline.step(&l, dt, &mut NoTimer)
@@ -123,7 +123,7 @@ fn stereo_ranging_stops_at_the_sign_like_mono() {
     let cfg = Config::default();
     let w = cfg.behaviour.stop_window_m;
     let mut failures = vec![];
-    for method in ["mono", "stereo"] {
+    for method in [RangingMethod::Mono, RangingMethod::Stereo] {
         let r = run(method);
         println!(
             "ranging.method = {method}: at rest {} m from the sign (window {w:?}); stereo boxes matched {} / unmatched {}",
@@ -135,20 +135,26 @@ fn stereo_ranging_stops_at_the_sign_like_mono() {
             Some(d) if d >= w[0] && d <= w[1] => {}
             other => failures.push(format!("{method}: stopped at {other:?}")),
         }
-        if method == "stereo" && r.stereo_counts.0 < 3 * r.stereo_counts.1.max(1) {
+        if method == RangingMethod::Stereo && r.stereo_counts.0 < 3 * r.stereo_counts.1.max(1) {
             failures.push(format!("stereo: only {:?} boxes matched / unmatched", r.stereo_counts));
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
-/// `ranging.method` is validated.
+/// `ranging.method` is read as one of its spellings; another names the key, the value and the
+/// allowed ones.
 #[test]
 fn ranging_method_is_validated() {
-    let mut c = Config::default();
-    c.ranging.method = "laser".into();
-    let e = c.validate().unwrap_err().to_string();
-    assert!(e.contains("ranging.method"), "{e}");
-    c.ranging.method = "stereo".into();
+    let e = Config::default()
+        .with_override("ranging.method=laser")
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        e,
+        "config + command line: `ranging.method` = \"laser\": unknown variant `laser`, expected `mono` or `stereo`"
+    );
+    let c = Config::default().with_override("ranging.method=stereo").unwrap();
+    assert_eq!(c.ranging.method, RangingMethod::Stereo);
     c.validate().unwrap();
 }

@@ -126,7 +126,7 @@ fn hsv_template_detector_against_the_cascade_on_the_same_frames() {
         views.push((st.clone(), pose_before_object(&cfg, &st, d).unwrap()));
     }
     let mount = CameraMount {
-        camera: rccar::camera::PinholeCamera::from_config(&cfg.camera),
+        camera: rccar::camera::PinholeCamera::from(&cfg.camera),
         x_m: cfg.vehicle.camera_x_m,
     };
     let ropts = RenderOptions::from_config(&cfg.sim);

@@ -21,7 +21,7 @@
 
 use rccar::config::Config;
 use rccar::detect::{CascadeSpec, DetectParams, DetectStage};
-use rccar::ranging::{BoxRanging, ObjectClass};
+use rccar::ranging::ObjectClass;
 use rccar::sim::render::RenderOptions;
 use rccar::sim::scene::Scene;
 use rccar::sim::stereo::StereoRig;
@@ -106,7 +106,7 @@ fn measure(s: &mut Setup, base: f64, d: f64, matcher: &mut Matcher) -> Option<Ro
         (rect.x + rect.width) as f64 - 0.5,
         (rect.y + rect.height) as f64 - 0.5,
     ];
-    let mono = BoxRanging::from_config(&cfg.camera, &cfg.ranging)
+    let mono = cfg.ranging.box_ranging(&cfg.camera)
         .range(s.class, bbox)
         .map(|r| r.0);
     let mut planes = PairPlanes::default();
@@ -283,11 +283,16 @@ fn stereo_ranging_on_detector_boxes_in_the_simulator() {
 fn stereo_config_is_validated() {
     let mut c = Config::default();
     c.validate().unwrap();
-    c.stereo.reference = "middle".into();
     c.stereo.base_m = 0.0;
     c.stereo.max_disparity_px = 0;
     let e = c.validate().unwrap_err().to_string();
-    assert!(e.contains("stereo.reference"), "{e}");
     assert!(e.contains("stereo.base_m = 0"), "{e}");
     assert!(e.contains("stereo.max_disparity_px = 0"), "{e}");
+    let e = Config::from_toml_str("[stereo]\nreference = \"middle\"\n", "t.toml")
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        e,
+        "t.toml: `stereo.reference` = \"middle\": unknown variant `middle`, expected `left` or `right`"
+    );
 }

@@ -10,10 +10,13 @@
  *   RESET <t_us>                         the emulator reset the AVR (stdin "reset")
  *   HANG <t_us>                          stdin "hang": the CPU is sent into avr-libc's final
  *                                        `cli; rjmp .` loop, i.e. a hung firmware, for the watchdog
+ *   MARK <t_us>                          stdin "mark": the simulated time now, so a test can tell
+ *                                        when (in the firmware's time) something it did happened,
+ *                                        and wait for simulated time instead of wall-clock time
  *
  * Usage: rccar_sim FIRMWARE.elf [--link PATH] [--sniff] [--no-stdin]. --link makes PATH a symlink to the pty
  * (each test its own path; simavr's fixed /tmp/simavr-uart0 collides between parallel runs).
- * stdin: "reset" resets the AVR; "quit" or end of file exits, so the harness dies with the
+ * stdin: "reset" resets the AVR; "mark" prints MARK; "quit" or end of file exits, so the harness dies with the
  * test that started it; with --no-stdin stdin is not read (run it in the background: SIGTERM ends it). The simulation is paced to wall-clock time (never more than 2 ms ahead)
  * so the host sees real-time behaviour. SIGTERM exits with _exit: uart_pty_stop can hang. */
 #define _GNU_SOURCE
@@ -39,6 +42,8 @@
 static avr_t *avr;
 static uart_pty_t uart;
 static volatile int reset_requested, hang_requested;
+static volatile unsigned marks_requested; /* written by the stdin thread only */
+static unsigned marks_done;
 static uint32_t hang_pc; /* byte address of avr-libc's `_exit: cli; __stop_program: rjmp .-2` */
 static rc_parser sniffer;
 static int sniff;
@@ -97,6 +102,7 @@ static void *stdin_thread(void *arg) {
     while (fgets(line, sizeof line, stdin)) {
         if (strncmp(line, "reset", 5) == 0) reset_requested = 1;
         if (strncmp(line, "hang", 4) == 0) hang_requested = 1;
+        if (strncmp(line, "mark", 4) == 0) marks_requested++;
         if (strncmp(line, "quit", 4) == 0) break;
     }
     fflush(stdout);
@@ -205,6 +211,10 @@ int main(int argc, char **argv) {
             reset_requested = 0;
             avr_reset(avr);
             printf("RESET %.1f\n", t_us());
+        }
+        while (marks_done != marks_requested) {
+            marks_done++;
+            printf("MARK %.1f\n", t_us());
         }
         if (hang_requested) {
             /* a firmware bug, as the watchdog sees it: interrupts off, spinning forever */

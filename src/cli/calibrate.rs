@@ -185,7 +185,7 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     // 3. Fit. The prior on v0 sits at the image centre (a property of the image, not of the
     // last calibration: tilt and v0 trade off, so a prior at an earlier fit's v0 returns that
     // fit whatever the pairs say). Without --fit-ay, a_y is held at the configured scale.
-    let cam = PinholeCamera::from_config(&cfg.camera);
+    let cam = PinholeCamera::from(&cfg.camera);
     let centre = cam.v0;
     let mut from_image = TiltRanging::from_camera(&cam);
     if !a.fit_ay {

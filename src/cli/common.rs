@@ -100,36 +100,13 @@ impl ConfigArgs {
     }
 }
 
-/// `drive` and `replay` without a second camera (`--camera-right`, `--right`) and `sim
-/// --truth-boxes` have one frame source: with `ranging.method = "stereo"` they say so once,
-/// on stderr, rather than range by mono silently.
-pub fn warn_single_camera(cfg: &Config) {
-    if cfg.ranging.method == "stereo" {
-        eprintln!(
-            "ranging: method = \"stereo\" but this run has one camera; ranges are monocular \
-             (a pair: `rccar drive --camera-right`, `rccar replay DIR --right DIR2`, `rccar sim` \
-             without --truth-boxes; docs/stereo.md)"
-        );
-    }
-}
-
-/// Loads the `[detect]` cascades that exist and says once, on stderr, which are missing (the
-/// pipeline then runs without them: lane keeping only when none exists). The paths in `cfg`
-/// are absolute after [`ConfigArgs::load`].
+/// Loads the `[detect]` cascades; a configured one that is missing is an error naming the key,
+/// the file and the fix (an empty path switches a class off). The paths in `cfg` are absolute
+/// after [`ConfigArgs::load`].
 pub fn load_detector(cfg: &Config) -> Result<Option<rccar::detect::DetectStage>> {
     let (stage, missing) = rccar::pipeline::load_detector(&cfg.detect, Path::new("."))?;
     if let Some(m) = missing.first() {
-        let more: Vec<String> = missing[1..]
-            .iter()
-            .map(|m| format!("{} ({})", m.key, m.path.display()))
-            .collect();
-        bail!(
-            "{} = {:?}: no such cascade file{}; give the cascade's path (a relative path is read from the config file's folder), set {} = \"\" to run without that detector, or detect.enabled = false for lane keeping only",
-            m.key,
-            m.path.display().to_string(),
-            if more.is_empty() { String::new() } else { format!(" (also missing: {})", more.join(", ")) },
-            m.key
-        );
+        bail!("{m}");
     }
     Ok(stage)
 }
@@ -140,56 +117,4 @@ pub fn load_detector(cfg: &Config) -> Result<Option<rccar::detect::DetectStage>>
 fn built_from_config() -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config").join("car.toml");
     p.is_file().then_some(p)
-}
-
-/// The two folders of a stereo pair (`replay DIR --right DIR2`, `drive --camera DIR
-/// --camera-right DIR2`) must hold the same frames (file names, in order) of the same size:
-/// otherwise frames would pair with the wrong partner. The error names the file; `flag` is the
-/// option that named the second folder.
-pub fn check_pair(flag: &str, ldir: &Path, left: &[PathBuf], rdir: &Path, right: &[PathBuf]) -> Result<()> {
-    let rel = |dir: &Path, p: &PathBuf| p.strip_prefix(dir).unwrap_or(p).to_path_buf();
-    for (l, r) in left.iter().zip(right) {
-        if rel(ldir, l) != rel(rdir, r) {
-            bail!(
-                "{flag}: {} has no partner: the right folder's frame at that place is {} (the folders must hold the same frame names; {} and {} frames)",
-                l.display(),
-                r.display(),
-                left.len(),
-                right.len()
-            );
-        }
-    }
-    if left.len() != right.len() {
-        let (longer, n) = if left.len() > right.len() { (left, right.len()) } else { (right, left.len()) };
-        bail!(
-            "{flag}: {} has no partner in the other folder ({} has {} frames, {} has {}); the folders must hold the same frames",
-            longer[n].display(),
-            ldir.display(),
-            left.len(),
-            rdir.display(),
-            right.len()
-        );
-    }
-    let dims = |p: &PathBuf| {
-        image::ImageReader::open(p)
-            .ok()
-            .and_then(|r| r.with_guessed_format().ok())
-            .and_then(|r| r.into_dimensions().ok())
-    };
-    for (l, r) in left.iter().zip(right) {
-        if let (Some(a), Some(b)) = (dims(l), dims(r)) {
-            if a != b {
-                bail!(
-                    "{flag}: {} is {}x{} but {} is {}x{}: the two cameras' frames must have one size",
-                    l.display(),
-                    a.0,
-                    a.1,
-                    r.display(),
-                    b.0,
-                    b.1
-                );
-            }
-        }
-    }
-    Ok(())
 }

@@ -58,7 +58,7 @@ pub fn run(cmd: ConfigCmd) -> Result<ExitCode> {
                 bail!("--near {near} must be less than --far {far} (the near edge is closer to the car)");
             }
             let cfg = args.load()?;
-            let cam = PinholeCamera::from_config(&cfg.camera);
+            let cam = PinholeCamera::from(&cfg.camera);
             let roi = cam
                 .roi_of_ground_rect(near, far, half_width)
                 .ok_or_else(|| anyhow::anyhow!("the rectangle is behind or above the camera"))?;

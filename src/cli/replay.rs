@@ -2,19 +2,18 @@
 
 use super::common::ConfigArgs;
 use super::timer::WallTimer;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use rccar::annotate::annotate;
 use rccar::lane::LaneStatus;
-use rccar::drive::{Clock, Driver, Flow, FrameContext, LoopEnd, LoopError, NoClock, Observer, Parts, StopReason};
-use rccar::pipeline::Pipeline;
-use rccar::sink::NullSink;
-use rccar::source::{FrameError, FrameSource, ReplayDir};
-use rccar::telemetry::JsonlWriter;
+use rccar::drive::{Clock, Flow, FrameContext, Level, LoopEnd, LoopError, NoClock, Observer, StopReason};
+use rccar::session::{CameraSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
+use rccar::source::FrameError;
 use rccar::timing::{NoTimer, StageTimer};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
 
 /// Flags of `rccar replay`.
 #[derive(Args, Debug)]
@@ -26,9 +25,10 @@ pub struct ReplayArgs {
     /// `ranging.method = "stereo"`. Frames are paired by time (`stereo.max_skew_ms`).
     #[arg(long, value_name = "DIR2")]
     pub right: Option<PathBuf>,
-    /// Output folder for telemetry.jsonl and annotated frames.
-    #[arg(long, short, default_value = "out/replay")]
-    pub out: PathBuf,
+    /// Output folder for telemetry.jsonl and annotated frames: new or empty, never the
+    /// recording itself (default: a new folder under out/replay/, with out/replay/latest).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
     /// Don't write annotated frames (overrides `replay.annotate`).
     #[arg(long)]
     pub no_annotate: bool,
@@ -98,76 +98,56 @@ impl Observer for Summary {
 /// Runs the replay.
 pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
-    let mut pipeline = Pipeline::new(&cfg)?;
-    if let Some(r) = &a.right {
-        if cfg.ranging.method != "stereo" {
-            bail!(
-                "--right {}: ranging.method is {:?}, so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
-                r.display(),
-                cfg.ranging.method
-            );
-        }
-        rccar::drive::stereo::install(&mut pipeline);
-        if let Some(line) = rccar::drive::stereo::calibration_line(&pipeline, &cfg) {
-            println!("{line}");
-        }
-    } else {
-        super::common::warn_single_camera(&cfg);
+    if let (Some(r), false) = (&a.right, cfg.ranging.method == rccar::config::RangingMethod::Stereo) {
+        anyhow::bail!(
+            "--right {}: ranging.method is {:?}, so a second camera would not be used; add --set ranging.method=stereo (docs/stereo.md)",
+            r.display(),
+            cfg.ranging.method.name()
+        );
     }
-    pipeline.set_detector(super::common::load_detector(&cfg)?);
-    let (w, h) = pipeline.frame_size();
-    // Frames smaller than the ROI's extent are refused instead of being blown up.
-    let min_size = {
-        let max_x = cfg.warp.src.iter().map(|p| p[0]).fold(0.0f64, f64::max);
-        let max_y = cfg.warp.src.iter().map(|p| p[1]).fold(0.0f64, f64::max);
-        ((max_x.ceil() as u32).min(w), (max_y.ceil() as u32).min(h))
+    let stop = super::signals::install();
+    let clock: Arc<dyn Clock + Send + Sync> = if a.no_timing { Arc::new(NoClock) } else { Arc::new(super::timer::WallClock::new()) };
+    let timer: Box<dyn StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
+    let mut spec = SessionSpec::new(
+        SourceSpec::Cameras {
+            left: CameraSpec::Folder(a.dir.clone()),
+            right: a.right.clone().map(CameraSpec::Folder),
+            timing: Timing::LockStep,
+        },
+        SinkSpec::DryRun,
+    );
+    // The run folder: new, never the recording itself or inside it.
+    let mut reads = vec![("DIR", a.dir.as_path())];
+    reads.extend(a.right.as_deref().map(|r| ("--right", r)));
+    let mut run = super::outdir::create("replay", a.out.as_deref(), "out/replay", &[], &reads)?;
+    let tel_path = run.join("telemetry.jsonl");
+    spec.telemetry = Some(tel_path.clone());
+    let env = SessionEnv {
+        clock,
+        stop,
+        timer,
+        say: Arc::new(|level, line: &str| match level {
+            Level::Info => super::signals::say(line),
+            Level::Warn => super::signals::say_err(line),
+        }),
     };
-    let open = |dir: &PathBuf| -> Result<ReplayDir> {
-        let mut source = ReplayDir::open(dir, cfg.camera.fps, w, h, min_size)?;
-        // A recording of `rccar drive --record`: replay with the time steps the car saw.
-        if dir.join(rccar::record::TELEMETRY_FILE).is_file() {
-            if let Ok(t) = rccar::record::recorded_times(dir) {
-                if !t.times.is_empty() {
-                    println!("replay: a recording; frame times from its telemetry ({} frames)", t.times.len());
-                    source = source.with_recorded_times(t.times);
-                }
-            }
+    let mut session = Session::build(&cfg, spec, env).map_err(|e| match e {
+        rccar::session::SessionError::Pair(m) => anyhow::anyhow!("--right: {m}"),
+        e => e.into(),
+    })?;
+    for (level, line) in session.notes() {
+        match level {
+            Level::Info => println!("replay: {line}"),
+            Level::Warn => eprintln!("{line}"),
         }
-        Ok(source)
-    };
-    let left = open(&a.dir)?;
-    let ignored: Vec<String> = left.ignored().to_vec();
-    let mut source: Box<dyn FrameSource> = match &a.right {
-        None => Box::new(left),
-        Some(rdir) => {
-            let right = open(rdir)?;
-            super::common::check_pair("--right", &a.dir, left.files(), rdir, right.files())?;
-            println!(
-                "replay: stereo pair, left {} and right {} ({} frames each), reference {}",
-                a.dir.display(),
-                rdir.display(),
-                left.files().len(),
-                cfg.stereo.reference
-            );
-            Box::new(
-                rccar::drive::stereo::StereoFrames::from_config(left, right, &cfg)
-                    .with_labels(a.dir.display().to_string(), rdir.display().to_string()),
-            )
-        }
-    };
-    let annotate_dir = a.out.join("annotated");
+    }
+    let annotate_dir = run.join("annotated");
     let annotate_frames = cfg.replay.annotate && !a.no_annotate;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     if annotate_frames {
+        run.note_file("annotated");
         std::fs::create_dir_all(&annotate_dir).with_context(|| format!("{}: cannot create", annotate_dir.display()))?;
     }
-    let tel_path = a.out.join("telemetry.jsonl");
-    let mut tel = JsonlWriter::new(
-        std::fs::File::create(&tel_path).with_context(|| format!("{}: cannot create", tel_path.display()))?,
-        tel_path.display().to_string(),
-    );
-
-    let bar = ProgressBar::new(source.len_hint().unwrap_or(0) as u64);
+    let bar = ProgressBar::new(session.source().len_hint().unwrap_or(0) as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -183,27 +163,17 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         warp_src: cfg.warp.src,
         stereo: (0, 0, 0, 0.0, 0),
     };
-    let stop = super::signals::install();
-    let mut wall = WallTimer::new();
-    let mut none = NoTimer;
-    let timer: &mut dyn StageTimer = if a.no_timing { &mut none } else { &mut wall };
-    let wall_clock = super::timer::WallClock::new();
-    let clock: &dyn Clock = if a.no_timing { &NoClock } else { &wall_clock };
-    let end = {
-        let mut obs: [&mut dyn Observer; 2] = [&mut tel, &mut s];
-        // Replay moves nothing: its sink forgets the commands (they are in the telemetry).
-        Driver::new(cfg.camera.fps).run(Parts {
-            source: &mut *source,
-            pipeline: &mut pipeline,
-            sink: &mut NullSink,
-            stop: &stop,
-            clock,
-            timer,
-            observer: &mut obs,
-        })?
-    };
+    // Replay moves nothing: its sink forgets the commands (they are in the telemetry).
+    super::outdir::started(&mut run);
+    let end = session.run(&mut s);
     s.bar.finish_and_clear();
-    tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;
+    let outcome = session.finish()?;
+    let end = end?;
+    let stopped = match end {
+        LoopEnd::Stopped(why) => Some(why),
+        _ => None,
+    };
+    super::outdir::finish(&mut run, rccar::run_dir::RunState::from_stop(stopped), outcome.telemetry.as_ref().map(|t| t.1))?;
 
     let seen = s.status[LaneStatus::Both as usize]
         + s.status[LaneStatus::LeftOnly as usize]
@@ -239,9 +209,6 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     for k in &s.skipped {
         println!("    {k}");
     }
-    for i in &ignored {
-        println!("  ignored (not .png/.jpg/.jpeg): {i}");
-    }
     println!("  telemetry: {}", tel_path.display());
     if annotate_frames {
         println!("  annotated frames: {}/", annotate_dir.display());
@@ -249,7 +216,12 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     if let LoopEnd::Stopped(why) = end {
         println!(
             "replay: interrupted ({}) after {} frames; telemetry holds every frame processed",
-            if why == StopReason::Terminate { "SIGTERM" } else { "Ctrl-C" },
+            match why {
+                StopReason::Terminate => "SIGTERM",
+                StopReason::Hangup => "SIGHUP",
+                StopReason::Quit => "SIGQUIT",
+                _ => "Ctrl-C",
+            },
             s.frames
         );
         return Ok(ExitCode::from(why.exit_code()));

@@ -3,10 +3,16 @@
 //! writes `DIR/report.md` (images linked beside it) and `DIR/report.html` (self-contained:
 //! the images base64-embedded, so it survives e-mail).
 //!
-//! Contents: the configuration keys that differ from the defaults (`config.json`, written by
-//! `rccar sim`), the summary figures with units (and the step response when there is one),
-//! figures from the telemetry (frames, lane lost, RMS of the lane error, RMS of the frame-to-
-//! frame steering change), and every plot in DIR.
+//! Contents: the run (run.json), the configuration keys that differ from the defaults
+//! (`config.json`, written by `rccar sim`), the summary figures with units (and the step
+//! response when there is one), figures from the telemetry (frames, lane lost, RMS of the lane
+//! error, RMS of the frame-to-frame steering change), and every plot of the run in DIR.
+//!
+//! One run only ([`rccar::run_dir::check_run`]): files of different runs side by side (run ids
+//! that disagree, a telemetry with more or fewer frames than the run wrote) are refused, each
+//! mismatch named (`--force` writes the report anyway, the warning on top); a plot the run
+//! did not write is left out and named. DIR may also be a folder of runs (`out/sim`): its
+//! `latest` is reported.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -19,11 +25,15 @@ use std::process::ExitCode;
 /// Flags of `rccar report`.
 #[derive(Args, Debug)]
 pub struct ReportArgs {
-    /// A run's output folder (e.g. out/sim), holding summary.json and/or telemetry.jsonl.
+    /// A run's output folder (e.g. out/sim/latest), holding summary.json and/or
+    /// telemetry.jsonl; or a folder of runs (out/sim), whose newest run (latest) is reported.
     pub dir: PathBuf,
     /// Title of the report (default: "rccar run: DIR").
     #[arg(long)]
     pub title: Option<String>,
+    /// Write the report even when its files are not one run's (the mismatches on top).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Standard base64 (RFC 4648) of `bytes`, with padding.
@@ -117,6 +127,7 @@ fn config_diff(run: &Value) -> Vec<(String, String, String)> {
     let (mut a, mut b) = (Vec::new(), Vec::new());
     flatten(&def, "", &mut a);
     flatten(run, "", &mut b);
+    b.retain(|(k, _)| k != "run_id");
     let def: std::collections::BTreeMap<String, Value> = a.into_iter().collect();
     let mut out = Vec::new();
     for (k, v) in b {
@@ -186,14 +197,16 @@ fn telemetry_figures(path: &Path) -> Result<Vec<(String, String)>> {
     Ok(rows)
 }
 
-/// The plots in DIR, in a fixed order (the run's plots first), at most 20.
-fn plots(dir: &Path) -> Result<Vec<PathBuf>> {
+/// The plots in DIR (those of `check` that are not the run's left out), in a fixed order
+/// (the run's plots first), at most 20.
+fn plots(dir: &Path, check: &rccar::run_dir::RunCheck) -> Result<Vec<PathBuf>> {
     const ORDER: [&str; 6] = ["xte_steer.png", "path.png", "step.png", "sweep.png", "sweep_grid.png", "plot.png"];
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot read", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_file() && p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")))
         .filter(|p| !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("frame_")))
+        .filter(|p| !p.file_name().is_some_and(|n| check.is_foreign(&n.to_string_lossy())))
         .collect();
     let rank = |p: &PathBuf| {
         let n = p.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
@@ -221,10 +234,29 @@ struct Section {
 
 /// Runs `rccar report`.
 pub fn run(a: ReportArgs) -> Result<ExitCode> {
-    let dir = &a.dir;
+    let mut dir = a.dir.clone();
     if !dir.is_dir() {
-        bail!("{}: not a folder (give a run's output folder, e.g. out/sim)", dir.display());
+        bail!(
+            "{}: not a folder (give a run's output folder, e.g. out/sim/latest)",
+            dir.display()
+        );
     }
+    let is_run = |d: &Path| {
+        ["summary.json", "telemetry.jsonl", rccar::run_dir::RUN_FILE]
+            .iter()
+            .any(|f| d.join(f).is_file())
+    };
+    let latest = dir.join(rccar::run_dir::LATEST);
+    if !is_run(&dir) && latest.is_dir() {
+        let target = std::fs::read_link(&latest).map_or_else(|_| latest.clone(), |t| dir.join(t));
+        println!(
+            "report: {} is a folder of runs; reporting the newest, {}",
+            dir.display(),
+            target.display()
+        );
+        dir = target;
+    }
+    let dir = &dir;
     let sum_path = dir.join("summary.json");
     let tel_path = dir.join("telemetry.jsonl");
     if !sum_path.is_file() && !tel_path.is_file() {
@@ -233,7 +265,61 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
             dir.display()
         );
     }
+    // One run's files, or nothing (unless --force).
+    let check = rccar::run_dir::check_run(dir)?;
+    for n in &check.notes {
+        eprintln!("report: note: {n}");
+    }
+    for f in &check.foreign {
+        eprintln!(
+            "report: left out {}: not written by this run (not in {})",
+            dir.join(f).display(),
+            rccar::run_dir::RUN_FILE
+        );
+    }
+    if !check.problems.is_empty() {
+        if !a.force {
+            bail!(
+                "{}: these files are not one run's: {}; report one run's folder (each run writes a new one), or give --force to write the report anyway with this warning on top",
+                dir.display(),
+                check.problems.join("; ")
+            );
+        }
+        eprintln!(
+            "report: WARNING: {}: these files are not one run's: {}",
+            dir.display(),
+            check.problems.join("; ")
+        );
+    }
     let mut sections = Vec::new();
+    if !check.problems.is_empty() {
+        sections.push(Section {
+            title: "Warning: these files do not belong to one run".into(),
+            head: vec!["mismatch"],
+            rows: check.problems.iter().map(|p| vec![p.clone()]).collect(),
+            note: Some("The figures below mix runs (written with --force).".into()),
+        });
+    }
+    if let Some(r) = &check.record {
+        sections.push(Section {
+            title: "Run".into(),
+            head: vec!["", "value"],
+            rows: vec![
+                vec!["run id".into(), r.run_id.clone()],
+                vec!["command".into(), r.argv.join(" ")],
+                vec!["started".into(), r.started.clone()],
+                vec![
+                    "ended".into(),
+                    serde_json::to_value(r.state)
+                        .ok()
+                        .and_then(|v| v.as_str().map(String::from))
+                        .unwrap_or_default(),
+                ],
+                vec!["rccar".into(), r.rccar_version.clone()],
+            ],
+            note: None,
+        });
+    }
     let cfg_path = dir.join("config.json");
     if cfg_path.is_file() {
         let text = std::fs::read_to_string(&cfg_path).with_context(|| format!("{}: cannot read", cfg_path.display()))?;
@@ -261,6 +347,7 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
         let v: Value = serde_json::from_str(&text).with_context(|| format!("{}: not JSON", sum_path.display()))?;
         let mut flat = Vec::new();
         flatten(&v, "", &mut flat);
+        flat.retain(|(k, _)| k != "run_id");
         let (step, main): (Vec<_>, Vec<_>) = flat.into_iter().partition(|(k, _)| k.starts_with("step."));
         let main = ordered(
             main,
@@ -305,7 +392,7 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
             note: None,
         });
     }
-    let pngs = plots(dir)?;
+    let pngs = plots(dir, &check)?;
     let title = a.title.clone().unwrap_or_else(|| format!("rccar run: {}", dir.display()));
 
     // Markdown, images beside it.

@@ -1,94 +1,61 @@
-//! Ctrl-C (SIGINT) and SIGTERM for every long command: the first one raises the run's
-//! [`StopSignal`], so the loop ends at the next frame boundary — neutral first, then telemetry,
-//! summary and plots for what ran. A second one means "now": the emergency hooks run (neutral
-//! straight to the link from this thread, even if the main thread is stuck) and the process
-//! exits with 130 (SIGINT) or 143 (SIGTERM).
+//! The signals that can end a long command — SIGINT (Ctrl-C), SIGTERM (systemd, `kill`),
+//! SIGHUP (the SSH session a student started the car from closed) and SIGQUIT (Ctrl-\) — all
+//! do the same: the first one raises the run's [`StopSignal`], so the loop ends at the next
+//! frame boundary with neutral sent first, then telemetry, summary and plots for what ran. A
+//! second one means "now": the emergency hooks run (neutral straight to the link from this
+//! thread, even if the main thread is stuck) and the process exits with 128 + the signal.
 //!
-//! The handler only stores to atomics (async-signal-safe); a small watcher thread does the
-//! rest. A panic in any thread also raises the stop signal (as a fault). SIGUSR1 is the
-//! start/stop button at the desk (`kill -USR1 <pid>`): `rccar drive` arms or disarms on it.
+//! SIGUSR1 is the start/stop button at the desk (`kill -USR1 <pid>`): `rccar drive` arms or
+//! disarms on it through the car's one arming state ([`on_button`]).
+//!
+//! The signals are received by `signal-hook`'s iterator on a thread of its own (no hand-written
+//! handler); a panic in any thread also raises the stop signal (as a fault). After SIGHUP the
+//! terminal is gone: everything the commands print goes through [`say`], which never panics on
+//! a closed stdout or stderr.
 
 use rccar::drive::{StopReason, StopSignal};
-use std::sync::atomic::{AtomicU32, AtomicU8, Ordering};
+use signal_hook::consts::{SIGHUP, SIGINT, SIGQUIT, SIGTERM, SIGUSR1};
+use std::io::Write;
 use std::sync::{Mutex, OnceLock};
-use std::time::Duration;
-
-static COUNT: AtomicU32 = AtomicU32::new(0);
-/// SIGUSR1 presses (the start/stop button at the desk: `kill -USR1 PID`).
-static BUTTON: AtomicU32 = AtomicU32::new(0);
-
-extern "C" fn on_usr1(_: libc::c_int) {
-    BUTTON.fetch_add(1, Ordering::SeqCst);
-}
-
-/// Makes SIGUSR1 the desk's start/stop button (`rccar drive` only: other commands keep the
-/// default action).
-pub fn install_button() {
-    // SAFETY: the handler only touches an atomic.
-    unsafe {
-        libc::signal(libc::SIGUSR1, on_usr1 as *const () as libc::sighandler_t);
-    }
-}
-
-/// How many times SIGUSR1 (the desk's start/stop button) arrived so far.
-pub fn button_presses() -> u32 {
-    BUTTON.load(Ordering::SeqCst)
-}
-static LAST: AtomicU8 = AtomicU8::new(0);
 
 type Hook = Box<dyn Fn() + Send + Sync>;
+
 fn hooks() -> &'static Mutex<Vec<Hook>> {
     static H: OnceLock<Mutex<Vec<Hook>>> = OnceLock::new();
     H.get_or_init(|| Mutex::new(Vec::new()))
 }
 
-extern "C" fn on_signal(sig: libc::c_int) {
-    LAST.store(if sig == libc::SIGTERM { 2 } else { 1 }, Ordering::SeqCst);
-    COUNT.fetch_add(1, Ordering::SeqCst);
+fn button() -> &'static Mutex<Option<Hook>> {
+    static B: OnceLock<Mutex<Option<Hook>>> = OnceLock::new();
+    B.get_or_init(|| Mutex::new(None))
 }
 
-/// Installs the handlers (once per process) and returns the stop signal they raise.
+/// The stop reason and name of a terminating signal.
+fn reason(sig: i32) -> (StopReason, &'static str) {
+    match sig {
+        SIGTERM => (StopReason::Terminate, "SIGTERM"),
+        SIGHUP => (StopReason::Hangup, "SIGHUP"),
+        SIGQUIT => (StopReason::Quit, "SIGQUIT"),
+        _ => (StopReason::Interrupt, "Ctrl-C"),
+    }
+}
+
+/// Installs the handling (once per process) and returns the stop signal it raises.
 pub fn install() -> StopSignal {
     static STOP: OnceLock<StopSignal> = OnceLock::new();
     STOP.get_or_init(|| {
         let stop = StopSignal::new();
-        let s = stop.clone();
-        let watcher = std::thread::Builder::new().name("rccar-signals".into()).spawn(move || {
-            let mut seen = 0;
-            loop {
-                std::thread::sleep(Duration::from_millis(10));
-                let n = COUNT.load(Ordering::SeqCst);
-                if n == seen {
-                    continue;
+        match signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1]) {
+            Ok(mut signals) => {
+                let s = stop.clone();
+                let spawned = std::thread::Builder::new()
+                    .name("rccar-signals".into())
+                    .spawn(move || watch(&mut signals, &s));
+                if let Err(e) = spawned {
+                    say_err(&format!("warning: no signal thread ({e}): signals end the process at once"));
                 }
-                seen = n;
-                let why = if LAST.load(Ordering::SeqCst) == 2 {
-                    StopReason::Terminate
-                } else {
-                    StopReason::Interrupt
-                };
-                s.request(why);
-                if n >= 2 {
-                    eprintln!("second {}: stopping now", if why == StopReason::Terminate { "SIGTERM" } else { "Ctrl-C" });
-                    emergency();
-                    std::process::exit(why.exit_code().into());
-                }
-                eprintln!(
-                    "{}: stopping at the next frame (again to stop at once)",
-                    if why == StopReason::Terminate { "SIGTERM" } else { "Ctrl-C" }
-                );
             }
-        });
-        // The handlers only count; the watcher acts. Catch the signals only once the watcher
-        // runs: a process that cannot start a thread keeps the default actions, so Ctrl-C and
-        // SIGTERM still end it instead of being counted by nobody.
-        match watcher {
-            // SAFETY: the handler only touches atomics, which is async-signal-safe.
-            Ok(_) => unsafe {
-                libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
-                libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
-            },
-            Err(e) => eprintln!("warning: no signal thread ({e}): Ctrl-C and SIGTERM end the process at once"),
+            Err(e) => say_err(&format!("warning: cannot catch signals ({e}): they end the process at once")),
         }
         // A panic anywhere stops the run (the main thread's unwinding sends neutral too).
         let p = stop.clone();
@@ -100,6 +67,32 @@ pub fn install() -> StopSignal {
         stop
     })
     .clone()
+}
+
+fn watch(signals: &mut signal_hook::iterator::Signals, stop: &StopSignal) {
+    let mut count = 0;
+    for sig in signals.forever() {
+        if sig == SIGUSR1 {
+            if let Some(b) = button().lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
+                b();
+            }
+            continue;
+        }
+        count += 1;
+        let (why, name) = reason(sig);
+        stop.request(why);
+        if count >= 2 {
+            say_err(&format!("second {name}: stopping now"));
+            emergency();
+            std::process::exit(why.exit_code().into());
+        }
+        say_err(&format!("{name}: stopping at the next frame (again to stop at once)"));
+    }
+}
+
+/// What SIGUSR1 (the desk's start/stop button) does from now on.
+pub fn on_button(f: impl Fn() + Send + Sync + 'static) {
+    *button().lock().unwrap_or_else(|e| e.into_inner()) = Some(Box::new(f));
 }
 
 #[cfg_attr(not(feature = "serial"), allow(dead_code))]
@@ -114,4 +107,16 @@ pub fn emergency() {
     for h in hooks().lock().unwrap_or_else(|e| e.into_inner()).iter() {
         h();
     }
+}
+
+/// One line on stdout; a closed terminal (after SIGHUP) is not an error.
+pub fn say(line: &str) {
+    let mut o = std::io::stdout().lock();
+    let _ = writeln!(o, "{line}");
+    let _ = o.flush();
+}
+
+/// One line on stderr; a closed terminal is not an error.
+pub fn say_err(line: &str) {
+    let _ = writeln!(std::io::stderr().lock(), "{line}");
 }

@@ -7,18 +7,18 @@ use super::common::ConfigArgs;
 use super::timer::WallTimer;
 use anyhow::{bail, Context, Result};
 use rccar::sim::step::{step_metrics, StepOptions};
-use rccar::sim::sweep::{self, Chatter, SweepRun};
 use clap::Args;
-use rccar::config::Config;
-use rccar::drive::{Driver, Flow, FrameContext, LoopEnd, LoopError, Observer, Parts, StopReason};
-use rccar::pipeline::Pipeline;
+use rccar::config::{RangingMethod, StereoReference};
+use rccar::drive::{Clock, Level, LoopEnd, NoClock, Observer, StopReason};
+use rccar::session::{ArmAt, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
 use rccar::sim::plot;
-use rccar::sim::run::{Simulation, Summary};
+use rccar::sim::report::RunReport;
+use rccar::run_dir::{RunDir, RunState};
+use rccar::sim::run::Summary;
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
-use rccar::sim::world::{lock, SharedWorld, SimCamera, SimScore, SimVehicle, World};
-use rccar::telemetry::JsonlWriter;
-use rccar::timing::{NoTimer, StageTimer};
+use rccar::sim::world::lock;
+use rccar::timing::NoTimer;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -46,9 +46,10 @@ pub struct SimArgs {
     /// folder (`--record` then holds the left camera's), for `rccar replay DIR --right DIR2`.
     #[arg(long, value_name = "DIR2")]
     pub record_right: Option<PathBuf>,
-    /// Output folder for telemetry.jsonl, summary.json and the plots.
-    #[arg(long, short, default_value = "out/sim")]
-    pub out: PathBuf,
+    /// Output folder for telemetry.jsonl, summary.json and the plots: new or empty (default: a
+    /// new folder under out/sim/, with out/sim/latest pointing at it).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
     /// Gain sweep: `KEY=LO:HI:N`, e.g. `steering.kp=0.2:2.0:10` (any numeric config key).
     /// Give it twice for a grid over two keys (sweep.csv and the heat map sweep_grid.png).
     #[arg(long, value_name = "KEY=LO:HI:N")]
@@ -79,6 +80,9 @@ pub struct SimArgs {
 /// Runs `rccar sim`.
 pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut cfg = a.config.load()?;
+    if let Some(j) = a.jobs.filter(|j| !(1..=256).contains(j)) {
+        bail!("--jobs {j}: must be 1..=256 parallel runs");
+    }
     let mut sets = Vec::new();
     if let Some(l) = a.laps {
         sets.push(format!("sim.laps={l}"));
@@ -98,31 +102,12 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     }
     let track_path = a.track.clone().unwrap_or_else(|| PathBuf::from(&cfg.sim.track));
     let track = Track::load(&track_path)?;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     let font = load_font();
     let step = parse_step(a.start_offset, a.kick.as_deref(), track.spec.road.lane_width_m)?;
-    if !a.sweep.is_empty() {
-        if step.is_some() {
-            bail!("--start-offset/--kick: not with --sweep (one run at a time)");
-        }
-        return run_sweep(&a, &cfg, &track, font);
+    if !a.sweep.is_empty() && step.is_some() {
+        bail!("--start-offset/--kick: not with --sweep (one run at a time)");
     }
-
-    let stop = super::signals::install();
-    let world = World::new(&cfg, Arc::new(Scene::new(&track)))?.shared();
-    if let Some(m) = a.start_offset {
-        lock(&world).kick(m, 0.0);
-    }
-    // With a dashboard the operator ends the run (a parked, disarmed car is not "stalled").
-    let mut camera = SimCamera::new(world.clone()).ending_with_world(!a.dash.dashboard);
-    // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
-    let fps = cfg.camera.fps;
-    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, Some(world.clone()), &stop, Some(fps), None)?;
-    let mut vehicle = dash.sink(SimVehicle::new(world.clone()));
-    let mut score = SimScore::new(world.clone()).ending_the_run(!a.dash.dashboard);
-    let mut pipeline = Pipeline::new(&cfg)?;
-    // ranging.method = "stereo": a camera pair (src/sim/stereo.rs `other_camera`).
-    let stereo = cfg.ranging.method == "stereo" && !a.truth_boxes;
+    let stereo = cfg.ranging.method == RangingMethod::Stereo && !a.truth_boxes;
     if a.record_right.is_some() && !stereo {
         bail!(
             "--record-right: there is one camera; it needs ranging.method = \"stereo\" (--set ranging.method=stereo) and no --truth-boxes"
@@ -131,47 +116,52 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     if stereo && a.record.is_some() && a.record_right.is_none() {
         bail!("--record with ranging.method = \"stereo\": give --record-right DIR2 for the right camera's frames");
     }
+    // The run folder (and the --record folders): new, or refused before anything is written.
+    let sweeping = !a.sweep.is_empty();
+    let record: [(&str, Option<&Path>); 2] = if sweeping {
+        [("--record", None), ("--record-right", None)]
+    } else {
+        [("--record", a.record.as_deref()), ("--record-right", a.record_right.as_deref())]
+    };
+    let mut run = super::outdir::create("sim", a.out.as_deref(), "out/sim", &record, &[])?;
+    if sweeping {
+        return super::sweep::run_sweep(&a.sweep, a.jobs, &cfg, &track, font, run);
+    }
+    let stop = super::signals::install();
+    let clock: Arc<dyn Clock + Send + Sync> = if a.no_timing { Arc::new(NoClock) } else { Arc::new(super::timer::WallClock::new()) };
+    let say: rccar::drive::Say = Arc::new(|level, line: &str| match level {
+        Level::Info => super::signals::say(line),
+        Level::Warn => super::signals::say_err(line),
+    });
+    let mut spec = SessionSpec::new(
+        SourceSpec::Sim {
+            scene: SceneSpec::Shared(Arc::new(Scene::new(&track))),
+            // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
+            timing: if a.dash.dashboard { Timing::RealTime } else { Timing::LockStep },
+            stall: None,
+            start_offset_m: a.start_offset,
+        },
+        SinkSpec::DryRun,
+    );
+    spec.arm = if a.dash.dashboard { ArmAt::Operator } else { ArmAt::Start };
+    spec.truth_boxes = a.truth_boxes;
+    spec.frames_viewed = a.record.is_some() || a.dash.dashboard;
+    spec.operator_ends_run = a.dash.dashboard;
+    spec.telemetry = Some(run.join("telemetry.jsonl"));
+    let timer: Box<dyn rccar::timing::StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
+    let env = SessionEnv { clock: clock.clone(), stop: stop.clone(), timer, say: say.clone() };
+    let mut session = Session::build(&cfg, spec, env)?;
     if a.truth_boxes {
         println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
-        camera.set_truth_boxes(true);
-        super::common::warn_single_camera(&cfg);
-    } else {
-        pipeline.set_detector(super::common::load_detector(&cfg)?);
     }
-    if stereo {
-        let scene = lock(&world).scene().clone();
-        camera.set_other(Some(rccar::sim::stereo::other_camera(
-            &cfg,
-            scene,
-            rccar::sim::render::RenderOptions::from_config(&cfg.sim),
-        )));
-        rccar::drive::stereo::install(&mut pipeline);
-        if let Some(line) = rccar::drive::stereo::calibration_line(&pipeline, &cfg) {
-            println!("{line}");
+    for (level, line) in session.notes() {
+        match level {
+            Level::Info => println!("sim: {line}"),
+            Level::Warn => eprintln!("{line}"),
         }
-        println!(
-            "sim: stereo pair, reference camera {} with the other {} m to its {} (ranging.method = \"stereo\")",
-            cfg.stereo.reference,
-            cfg.stereo.base_m,
-            if cfg.stereo.reference == "right" { "left" } else { "right" }
-        );
     }
-    // Without recording nobody looks at the frames: render only the rows the pipeline reads
-    // on each frame (the lane's; the detectors' too on detection frames): the same decisions.
-    // A stereo pair is rendered whole (matching reads beyond the detector's rows).
-    if a.record.is_some() || dash.enabled() || stereo {
-        camera.set_rows(None);
-    } else {
-        camera.set_row_plan(Some(pipeline.row_plan()));
-    }
-    for dir in a.record.iter().chain(&a.record_right) {
-        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    }
-    let tel_path = a.out.join("telemetry.jsonl");
-    let mut tel = JsonlWriter::new(
-        std::fs::File::create(&tel_path).with_context(|| format!("{}: cannot create", tel_path.display()))?,
-        tel_path.display().to_string(),
-    );
+    let world = session.world().expect("a simulation has a world").clone();
+    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, &session, &stop, clock)?;
     println!(
         "sim: track {} ({:.2} m, tightest lane radius {:.2} m), {} lap(s), at most {} s",
         track.name,
@@ -180,43 +170,28 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         cfg.sim.laps,
         cfg.sim.max_seconds
     );
-    let mut wall = WallTimer::new();
-    let mut none = NoTimer;
-    let timer: &mut dyn StageTimer = if a.no_timing { &mut none } else { &mut wall };
-    let mut report = Report {
-        world: world.clone(),
-        record: a.record.clone(),
-        record_right: a.record_right.clone(),
-        reference_left: cfg.stereo.reference != "right",
-        stereo: StereoTally::default(),
-        series: plot::Series::default(),
-        kick: step.filter(|s| s.kick).map(|s| (s.t, s.dy)),
-        kicked_at: None,
-    };
+    let mut report = RunReport::new(world.clone(), say);
+    report.record = a.record.clone();
+    report.record_right = a.record_right.clone();
+    report.reference_left = cfg.stereo.reference != StereoReference::Right;
+    report.kick = step.filter(|s| s.kick).map(|s| (s.t, s.dy));
     let started = std::time::Instant::now();
-    let clock = super::timer::WallClock::new();
+    super::outdir::started(&mut run);
     let end = {
-        let mut tel = dash.tag(&mut tel);
-        let mut obs: [&mut dyn Observer; 4] = [&mut score, &mut tel, &mut report, &mut dash];
-        Driver::new(cfg.camera.fps).run(Parts {
-            source: &mut camera,
-            pipeline: &mut pipeline,
-            sink: &mut *vehicle,
-            stop: &stop,
-            clock: &clock,
-            timer,
-            observer: &mut obs,
-        })?
+        let mut obs: [&mut dyn Observer; 2] = [&mut report, &mut dash];
+        session.run(&mut obs)
     };
     let interrupted = match end {
-        LoopEnd::Stopped(why) => {
+        Ok(LoopEnd::Stopped(why)) => {
             lock(&world).interrupt();
             Some(why)
         }
         _ => None,
     };
-    tel.finish().with_context(|| format!("{}: cannot write", tel_path.display()))?;
-    let summary = lock(&world).summary();
+    let outcome = session.finish()?;
+    end?;
+    let summary = outcome.summary.clone().expect("a simulation has a score");
+    let tel_path = outcome.telemetry.as_ref().map(|t| t.0.clone()).unwrap_or_default();
     let scene = lock(&world).scene().clone();
     let wall_s = started.elapsed().as_secs_f64();
     print_summary(&summary);
@@ -248,51 +223,19 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             None => println!("  step response: the run ended before the kick at t = {} s", st.t),
         }
     }
-    let sum_path = a.out.join("summary.json");
-    std::fs::write(&sum_path, serde_json::to_string_pretty(&sum_json)?)
-        .with_context(|| format!("{}: cannot write", sum_path.display()))?;
-    // The run's configuration, for `rccar report` (differences from the defaults).
-    let cfg_path = a.out.join("config.json");
-    std::fs::write(&cfg_path, serde_json::to_string_pretty(&cfg)?)
-        .with_context(|| format!("{}: cannot write", cfg_path.display()))?;
+    // Summary and configuration (for `rccar report`), each whole or not at all.
+    let sum_path = run.write_json("summary.json", &sum_json)?;
+    run.write_json("config.json", &cfg)?;
     println!("  telemetry: {}", tel_path.display());
     println!("  summary:   {}", sum_path.display());
-    if let Some(font) = font {
-        plot::register_font(font);
-        let p1 = a.out.join("xte_steer.png");
-        save(&plot::time_plot(&report.series, summary.lane_width_m)?, &p1)?;
-        let p2 = a.out.join("path.png");
-        save(&plot::path_plot(&report.series, &scene)?, &p2)?;
-        println!("  plots:     {} {}", p1.display(), p2.display());
-        if let Some(m) = &step_fig {
-            let p3 = a.out.join("step.png");
-            save(&plot::step_plot(&report.series.t, &report.series.xte, m)?, &p3)?;
-            println!("  step:      {}", p3.display());
-        }
-    } else {
-        println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
-    }
-    match (&a.record, &a.record_right) {
-        (Some(dir), Some(right)) => println!(
-            "  frames:    {}/ and {}/ ({} PNG each; replay with `rccar replay {} --right {} --set ranging.method=stereo`)",
-            dir.display(),
-            right.display(),
-            summary.frames,
-            dir.display(),
-            right.display()
-        ),
-        (Some(dir), None) => println!(
-            "  frames:    {}/ ({} PNG; replay with `rccar replay {}`)",
-            dir.display(),
-            summary.frames,
-            dir.display()
-        ),
-        _ => {}
-    }
+    write_plots(&mut run, font, &report, &summary, &scene, step_fig.as_ref())?;
+    print_frames(&a, summary.frames);
+    let tel_lines = outcome.telemetry.as_ref().map(|t| t.1);
+    super::outdir::finish(&mut run, RunState::from_stop(interrupted), tel_lines)?;
     if let Some(why) = interrupted {
         println!(
             "sim: interrupted ({}) after {} frames; the summary and plots cover what ran",
-            if why == StopReason::Terminate { "SIGTERM" } else { "Ctrl-C" },
+            signal_name(why),
             summary.frames
         );
         return Ok(ExitCode::from(why.exit_code()));
@@ -301,73 +244,60 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
-/// What `rccar sim` shows and keeps while the loop runs: transitions on the terminal, the
-/// plots' series, the recorded frames.
-struct Report {
-    world: SharedWorld,
-    /// The (left) camera's frames.
-    record: Option<PathBuf>,
-    /// A stereo pair's right camera's frames.
-    record_right: Option<PathBuf>,
-    /// `stereo.reference = "left"`.
-    reference_left: bool,
-    stereo: StereoTally,
-    series: plot::Series,
-    /// `--kick T:DY`: (T seconds, DY metres), done once.
-    kick: Option<(f64, f64)>,
-    /// Time of the frame after which the kick was applied, seconds.
-    kicked_at: Option<f64>,
+/// How a stop reason is said.
+fn signal_name(why: StopReason) -> &'static str {
+    match why {
+        StopReason::Terminate => "SIGTERM",
+        StopReason::Hangup => "SIGHUP",
+        StopReason::Quit => "SIGQUIT",
+        StopReason::Interrupt => "Ctrl-C",
+        StopReason::Fault => "a fault",
+        StopReason::Requested => "requested",
+    }
 }
 
-/// Stereo frames and boxes of a run.
-#[derive(Debug, Default)]
-struct StereoTally {
-    pairs: u64,
-    ranged: u64,
-    unmatched: u64,
+/// The time and path plots (and the step plot), when the font is there.
+fn write_plots(
+    run: &mut RunDir,
+    font: Option<&'static [u8]>,
+    report: &RunReport,
+    summary: &Summary,
+    scene: &Scene,
+    step: Option<&rccar::sim::step::StepMetrics>,
+) -> Result<()> {
+    let Some(font) = font else {
+        println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
+        return Ok(());
+    };
+    plot::register_font(font);
+    let p1 = save(run, "xte_steer.png", &plot::time_plot(&report.series, summary.lane_width_m)?)?;
+    let p2 = save(run, "path.png", &plot::path_plot(&report.series, scene)?)?;
+    println!("  plots:     {} {}", p1.display(), p2.display());
+    if let Some(m) = step {
+        let p3 = save(run, "step.png", &plot::step_plot(&report.series.t, &report.series.xte, m)?)?;
+        println!("  step:      {}", p3.display());
+    }
+    Ok(())
 }
 
-impl Observer for Report {
-    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
-        // With a pair, the reference camera's image goes to its side's folder.
-        let other = ctx.frame.other.as_ref().map(|o| &o.image);
-        let (left, right) = match other {
-            Some(o) if !self.reference_left => (o, Some(&ctx.frame.image)),
-            o => (&ctx.frame.image, o),
-        };
-        for (dir, img) in [(&self.record, Some(left)), (&self.record_right, right)] {
-            if let (Some(dir), Some(img)) = (dir, img) {
-                let p = dir.join(&ctx.frame.name);
-                img.save(&p)
-                    .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
-            }
-        }
-        if let Some(s) = &ctx.record.stereo {
-            self.stereo.pairs += 1;
-            self.stereo.ranged += s.ranged;
-            self.stereo.unmatched += s.unmatched;
-        }
-        if let Some(tr) = &ctx.record.transition {
-            println!(
-                "  t={:7.2} s  {} -> {}: {}",
-                ctx.record.time_s,
-                tr.from.name(),
-                tr.to.name(),
-                tr.reason
-            );
-        }
-        let mut w = lock(&self.world);
-        if let Some(truth) = w.last_truth() {
-            self.series.push_parts(ctx.frame.time_s, truth, ctx.output.command.steer);
-        }
-        if let Some((t, dy)) = self.kick {
-            if self.kicked_at.is_none() && ctx.frame.time_s + 1e-9 >= t {
-                w.kick(dy, 0.0);
-                self.kicked_at = Some(ctx.frame.time_s);
-                println!("  t={:7.2} s  kicked {:+.3} m sideways", ctx.frame.time_s, dy);
-            }
-        }
-        Ok(Flow::Continue)
+/// Where the recorded frames went.
+fn print_frames(a: &SimArgs, frames: u64) {
+    match (&a.record, &a.record_right) {
+        (Some(dir), Some(right)) => println!(
+            "  frames:    {}/ and {}/ ({} PNG each; replay with `rccar replay {} --right {} --set ranging.method=stereo`)",
+            dir.display(),
+            right.display(),
+            frames,
+            dir.display(),
+            right.display()
+        ),
+        (Some(dir), None) => println!(
+            "  frames:    {}/ ({} PNG; replay with `rccar replay {}`)",
+            dir.display(),
+            frames,
+            dir.display()
+        ),
+        _ => {}
     }
 }
 
@@ -378,8 +308,12 @@ pub(crate) fn load_font() -> Option<&'static [u8]> {
     std::fs::read(FONT).ok().map(|b| &*Box::leak(b.into_boxed_slice()))
 }
 
-fn save(img: &image::RgbImage, p: &Path) -> Result<()> {
-    img.save(p).with_context(|| format!("{}: cannot write", p.display()))
+/// Writes a plot into the run folder as `name` (PNG, atomically); returns its path.
+pub(crate) fn save(run: &mut RunDir, name: &str, img: &image::RgbImage) -> Result<PathBuf> {
+    let mut png = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png)
+        .with_context(|| format!("{}: cannot encode PNG", run.join(name).display()))?;
+    Ok(run.write(name, &png.into_inner())?)
 }
 
 fn print_summary(s: &Summary) {
@@ -450,126 +384,4 @@ fn print_step(m: &rccar::sim::step::StepMetrics) {
         s(m.settling_time_s),
         m.band_m * 1000.0
     );
-}
-
-fn run_sweep(a: &SimArgs, cfg: &Config, track: &Track, font: Option<&'static [u8]>) -> Result<ExitCode> {
-    let axes = sweep::parse_axes(&a.sweep)?;
-    let keys: Vec<&str> = axes.iter().map(|x| x.key.as_str()).collect();
-    let points = sweep::grid(&axes);
-    // Check every value before spending minutes.
-    let cfgs: Vec<Config> = points
-        .iter()
-        .map(|p| {
-            let mut c = cfg.clone();
-            for (k, v) in keys.iter().zip(p) {
-                c = c.with_override(&format!("{k}={v}")).with_context(|| format!("--sweep {k}={v}"))?;
-            }
-            Ok(c)
-        })
-        .collect::<Result<_>>()?;
-    let scene = Arc::new(Scene::new(track));
-    if let Some(j) = a.jobs.filter(|j| !(1..=256).contains(j)) {
-        bail!("--jobs {j}: must be 1..=256 parallel runs");
-    }
-    let jobs = a
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-        .clamp(1, 256);
-    println!(
-        "sweep {} over {} run(s) on {} thread(s), track {}",
-        keys.join(" × "),
-        cfgs.len(),
-        jobs,
-        track.name
-    );
-    let stop = super::signals::install();
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    // One slot per run: its summary and steering chatter, or why it could not start.
-    type RunResult = Result<(Summary, f64), String>;
-    let results: Vec<std::sync::Mutex<Option<RunResult>>> =
-        (0..cfgs.len()).map(|_| std::sync::Mutex::new(None)).collect();
-    std::thread::scope(|s| {
-        for _ in 0..jobs.min(cfgs.len()) {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if i >= cfgs.len() {
-                    break;
-                }
-                let r = Simulation::with_scene(&cfgs[i], scene.clone())
-                    .map_err(|e| e.to_string())
-                    .map(|mut sim| {
-                        sim.set_full_frames(false);
-                        let mut chatter = Chatter::default();
-                        // Ctrl-C ends every run of the sweep at its next frame
-                        let sum = sim
-                            .run(&mut NoTimer, |_, st| {
-                                chatter.push(st.out.command.steer);
-                                if stop.is_set() {
-                                    Err(())
-                                } else {
-                                    Ok(())
-                                }
-                            })
-                            .unwrap_or_else(|_| sim.summary());
-                        (sum, chatter.rms())
-                    });
-                if let Ok(mut slot) = results[i].lock() {
-                    *slot = Some(r);
-                }
-            });
-        }
-    });
-    let head: Vec<String> = keys.iter().map(|k| format!("{k:>12}")).collect();
-    println!(
-        "{} {:>5} {:>10} {:>10} {:>6} {:>10} {:>9} {:>8}  end",
-        head.join(" "),
-        "laps",
-        "rms_m",
-        "max_m",
-        "dep",
-        "rev/s",
-        "dsteer",
-        "lost"
-    );
-    let mut runs = Vec::new();
-    for (p, slot) in points.iter().zip(results) {
-        let vals: Vec<String> = p.iter().map(|v| format!("{v:>12.4}")).collect();
-        let vals = vals.join(" ");
-        match slot.into_inner().ok().flatten() {
-            Some(Ok((s, chatter))) => {
-                println!(
-                    "{vals} {:>5} {:>10.4} {:>10.4} {:>6} {:>10.2} {:>9.4} {:>8}  {:?}",
-                    s.laps, s.xte_rms_m, s.xte_max_m, s.lane_departures, s.steer_reversals_per_s, chatter, s.lane_lost_frames, s.end
-                );
-                runs.push(SweepRun {
-                    values: p.clone(),
-                    summary: s,
-                    steer_diff_rms: chatter,
-                });
-            }
-            Some(Err(e)) => println!("{vals} error: {e}"),
-            None => println!("{vals} error: the run panicked"),
-        }
-    }
-    let csv_path = a.out.join("sweep.csv");
-    std::fs::write(&csv_path, sweep::csv(&keys, &runs)).with_context(|| format!("{}: cannot write", csv_path.display()))?;
-    if let Some(why) = stop.reason() {
-        println!("sweep: interrupted; the rows above cover each run up to that moment");
-        return Ok(ExitCode::from(why.exit_code()));
-    }
-    println!("  table: {}", csv_path.display());
-    if let Some(font) = font {
-        plot::register_font(font);
-        if axes.len() == 1 {
-            let rows: Vec<(f64, Summary)> = runs.iter().map(|r| (r.values[0], r.summary.clone())).collect();
-            let p = a.out.join("sweep.png");
-            save(&plot::sweep_plot(keys[0], &rows)?, &p)?;
-            println!("  plot:  {}", p.display());
-        } else {
-            let p = a.out.join("sweep_grid.png");
-            save(&plot::grid_plot(keys[0], keys[1], &axes[0].values, &axes[1].values, &runs)?, &p)?;
-            println!("  heat map: {}", p.display());
-        }
-    }
-    Ok(ExitCode::SUCCESS)
 }

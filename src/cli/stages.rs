@@ -6,7 +6,6 @@
 use super::common::ConfigArgs;
 use anyhow::{Context, Result};
 use clap::Args;
-use rccar::lane::LaneDetector;
 use rccar::source::{escape_name, load_frame, min_frame_size};
 use rccar::timing::{NoTimer, StageTimes};
 use std::io::Write;
@@ -31,7 +30,7 @@ pub struct StagesArgs {
 /// (extension kept, so `a.jpg` and `a.png` do not collide).
 pub fn run(a: StagesArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
-    let mut det = LaneDetector::from_config(&cfg)?;
+    let mut det = cfg.lane_detector()?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     let index_path = a.out.join("stages.jsonl");
     let mut index = std::io::BufWriter::new(

@@ -71,7 +71,7 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
         );
     }
     let (w, h) = l.dimensions();
-    let reference_left = cfg.stereo.reference == "left";
+    let reference_left = cfg.stereo.reference.is_left();
     let (mut gl, mut gr) = (image::GrayImage::new(0, 0), image::GrayImage::new(0, 0));
     rccar::detect::gray_from_rgb(&l, &mut gl);
     rccar::detect::gray_from_rgb(&r, &mut gr);
@@ -80,7 +80,7 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
         let mut cam_cfg = cfg.camera.clone();
         cam_cfg.width = w;
         cam_cfg.height = h;
-        StereoGeometry::ideal(&PinholeCamera::from_config(&cam_cfg), cfg.stereo.base_m)
+        StereoGeometry::ideal(&PinholeCamera::from(&cam_cfg), cfg.stereo.base_m)
     } else {
         let path = PathBuf::from(&cfg.stereo.calibration);
         let st = CalibrationFile::load_stereo(&path, w, h).context("[stereo] calibration")?;

@@ -23,7 +23,7 @@ pub struct SynthArgs {
 /// Writes the frames and their truth.
 pub fn run(a: SynthArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
-    let cam = PinholeCamera::from_config(&cfg.camera);
+    let cam = PinholeCamera::from(&cfg.camera);
     let h = Homography::from_quad_to_rect(&cfg.warp.src, cfg.warp.out_width, cfg.warp.out_height)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
     let mut truth = std::fs::File::create(a.out.join("truth.jsonl"))?;

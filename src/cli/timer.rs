@@ -1,7 +1,8 @@
-//! The wall-clock stage timer the binary hands to the library (which reads no clock itself).
+//! The wall clock and stage timer the binary hands to the library (which reads no clock
+//! itself).
 
 use rccar::timing::StageTimer;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Laps measured with `Instant`.
 pub struct WallTimer(Instant);
@@ -22,7 +23,8 @@ impl StageTimer for WallTimer {
     }
 }
 
-/// The wall clock the binary hands to the loop (latency, loop period); seconds since creation.
+/// The wall clock the binary hands to the loop (latency, loop period, pacing); seconds since
+/// creation.
 pub struct WallClock(Instant);
 
 impl WallClock {
@@ -35,5 +37,10 @@ impl WallClock {
 impl rccar::drive::Clock for WallClock {
     fn now_s(&self) -> f64 {
         self.0.elapsed().as_secs_f64()
+    }
+    fn sleep_s(&self, s: f64) {
+        if s.is_finite() && s > 0.0 {
+            std::thread::sleep(Duration::from_secs_f64(s.min(3600.0)));
+        }
     }
 }

@@ -24,8 +24,55 @@
 //!
 //! Units: metres, seconds, m/s; distances are forward distances from the lens.
 
-use crate::config::{BehaviourConfig, VehicleConfig};
 use serde::{Deserialize, Serialize};
+
+/// The machine's thresholds (`[behaviour]` of car.toml converts into them; docs/behaviour.md).
+/// Units: metres (forward distances from the lens), seconds, m/s; frames for the windows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BehaviourOptions {
+    /// A detection is confirmed when seen in `confirm_frames` of the last `window_frames`.
+    pub confirm_frames: u32,
+    /// Length of the confirmation window, frames.
+    pub window_frames: u32,
+    /// Below this estimated speed the car counts as stopped, m/s.
+    pub standstill_mps: f64,
+    /// Stop for a stop sign confirmed nearer than this, metres.
+    pub stop_trigger_m: f64,
+    /// Stand at a stop sign this long from standstill, seconds.
+    pub stop_hold_s: f64,
+    /// After a stop sign, ignore stop signs for this distance, metres...
+    pub stop_ignore_m: f64,
+    /// ...and at least this long, seconds.
+    pub stop_ignore_s: f64,
+    /// Stop for a red or amber light confirmed nearer than this, metres.
+    pub light_trigger_m: f64,
+    /// Green in this many consecutive frames releases a red-light stop.
+    pub green_confirm_frames: u32,
+    /// A red-light stop also ends after no light for this long, seconds.
+    pub light_lost_s: f64,
+    /// Stop while an obstacle in the lane is nearer than this, metres.
+    pub obstacle_stop_m: f64,
+    /// An obstacle is in the lane when its centre is within this of the car's axis, metres.
+    pub obstacle_lane_half_m: f64,
+    /// Pass a blocking obstacle through the other (left) lane.
+    pub pass_enabled: bool,
+    /// With passing, stop this far before an obstacle instead, metres.
+    pub pass_trigger_m: f64,
+    /// Stand this long before passing, seconds.
+    pub pass_wait_s: f64,
+    /// Steering of each half of the lane change, 0..=1.
+    pub pass_steer: f64,
+    /// Distance of each half of the lane change, metres.
+    pub pass_turn_m: f64,
+    /// Distance in the other lane before changing back, metres.
+    pub pass_along_m: f64,
+    /// Throttle while passing, 0..=1.
+    pub pass_throttle: f64,
+    /// Throttle while the lane is lost, before stopping, 0..=1.
+    pub lost_throttle: f64,
+    /// Stop after the lane has been lost this long, seconds.
+    pub lost_stop_s: f64,
+}
 
 /// A traffic light's colour as the detector read it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -152,11 +199,12 @@ pub struct DeadReckoning {
 }
 
 impl DeadReckoning {
-    /// At rest, with the speed model of `[vehicle]`.
-    pub fn new(v: &VehicleConfig) -> Self {
+    /// At rest, with the speed model of `[vehicle]`: `max_speed_mps` at full throttle, reached
+    /// with the time constant `speed_tau_s` seconds (0 = at once).
+    pub fn new(max_speed_mps: f64, speed_tau_s: f64) -> Self {
         Self {
-            max_speed: v.max_speed_mps,
-            tau: v.speed_tau_s,
+            max_speed: max_speed_mps,
+            tau: speed_tau_s,
             speed_mps: 0.0,
             odometry_m: 0.0,
         }
@@ -205,7 +253,7 @@ impl Window {
 /// The behaviour state machine.
 #[derive(Debug, Clone)]
 pub struct Behaviour {
-    cfg: BehaviourConfig,
+    cfg: BehaviourOptions,
     mode: Mode,
     /// When the current mode was entered, seconds.
     since: f64,
@@ -231,7 +279,7 @@ pub struct Behaviour {
 
 impl Behaviour {
     /// A machine in `Cruise` at time 0.
-    pub fn new(cfg: BehaviourConfig) -> Self {
+    pub fn new(cfg: BehaviourOptions) -> Self {
         Self {
             cfg,
             mode: Mode::Cruise,
@@ -261,8 +309,8 @@ impl Behaviour {
         self.last.as_ref()
     }
 
-    /// The configuration.
-    pub fn config(&self) -> &BehaviourConfig {
+    /// The thresholds in use.
+    pub fn options(&self) -> &BehaviourOptions {
         &self.cfg
     }
 
@@ -460,6 +508,38 @@ mod tests {
 
     const DT: f64 = 1.0 / 30.0;
 
+    /// The thresholds of the shipped `[behaviour]`.
+    fn defaults() -> BehaviourOptions {
+        BehaviourOptions {
+            confirm_frames: 3,
+            window_frames: 5,
+            standstill_mps: 0.01,
+            stop_trigger_m: 0.9,
+            stop_hold_s: 5.0,
+            stop_ignore_m: 1.0,
+            stop_ignore_s: 2.0,
+            light_trigger_m: 1.0,
+            green_confirm_frames: 2,
+            light_lost_s: 3.0,
+            obstacle_stop_m: 0.45,
+            obstacle_lane_half_m: 0.12,
+            pass_enabled: false,
+            pass_trigger_m: 0.85,
+            pass_wait_s: 1.0,
+            pass_steer: 0.8,
+            pass_turn_m: 0.6,
+            pass_along_m: 0.3,
+            pass_throttle: 0.35,
+            lost_throttle: 0.2,
+            lost_stop_s: 1.0,
+        }
+    }
+
+    /// The speed model of the shipped `[vehicle]` (1 m/s at full throttle, τ = 0.3 s).
+    fn car() -> DeadReckoning {
+        DeadReckoning::new(1.0, 0.3)
+    }
+
     /// A scripted run: a behaviour, a dead-reckoned car and a clock.
     struct Rig {
         b: Behaviour,
@@ -470,10 +550,10 @@ mod tests {
     }
 
     impl Rig {
-        fn new(cfg: BehaviourConfig) -> Rig {
+        fn new(cfg: BehaviourOptions) -> Rig {
             Rig {
                 b: Behaviour::new(cfg),
-                car: DeadReckoning::new(&VehicleConfig::default()),
+                car: car(),
                 t: 0.0,
                 log: Vec::new(),
             }
@@ -508,7 +588,7 @@ mod tests {
 
     #[test]
     fn dead_reckoning_matches_the_vehicle_lag() {
-        let mut c = DeadReckoning::new(&VehicleConfig::default());
+        let mut c = car();
         for _ in 0..300 {
             c.advance(0.5, 0.01);
         }
@@ -524,7 +604,7 @@ mod tests {
             stop_sign: (2.0 - odo > 0.3).then(|| at(2.0 - odo)),
             ..lane()
         };
-        let mut r = Rig::new(BehaviourConfig::default());
+        let mut r = Rig::new(defaults());
         let mut entered = None;
         let mut left = None;
         let mut stops = 0;
@@ -558,7 +638,7 @@ mod tests {
 
     #[test]
     fn flicker_of_one_frame_still_confirms_but_single_hits_do_not() {
-        let cfg = BehaviourConfig::default();
+        let cfg = defaults();
         // Seen, missed, seen, seen: 3 of the last 5 → confirmed on the 4th frame.
         let mut b = Behaviour::new(cfg.clone());
         let pattern = [true, false, true, true];
@@ -586,7 +666,7 @@ mod tests {
 
     #[test]
     fn flicker_during_the_hold_does_not_restart_it() {
-        let mut r = Rig::new(BehaviourConfig::default());
+        let mut r = Rig::new(defaults());
         // The sign stays at 0.7 m (the car is scripted as if it never moves), flickering.
         let mut k = 0usize;
         let mut left_at = None;
@@ -614,7 +694,7 @@ mod tests {
 
     #[test]
     fn red_light_waits_for_green_within_two_frames() {
-        let mut r = Rig::new(BehaviourConfig::default());
+        let mut r = Rig::new(defaults());
         // Red until 6 s, then green; the light 1.6 m ahead of the start.
         let mut green_at_mode = None;
         for _ in 0..(10.0 / DT) as usize {
@@ -639,7 +719,7 @@ mod tests {
 
     #[test]
     fn light_turning_green_while_stopping_releases_before_standstill() {
-        let mut b = Behaviour::new(BehaviourConfig::default());
+        let mut b = Behaviour::new(defaults());
         let mut t = 0.0;
         let mut step = |col, speed: f64| {
             let o = Observations {
@@ -660,7 +740,7 @@ mod tests {
         assert_eq!(d.mode, Mode::Cruise);
         assert_eq!(d.throttle, None);
         // Amber on approach counts as red.
-        let mut b = Behaviour::new(BehaviourConfig::default());
+        let mut b = Behaviour::new(defaults());
         let mut m = Mode::Cruise;
         for k in 0..3 {
             let o = Observations {
@@ -675,7 +755,7 @@ mod tests {
 
     #[test]
     fn far_red_light_or_sign_is_ignored() {
-        let mut b = Behaviour::new(BehaviourConfig::default());
+        let mut b = Behaviour::new(defaults());
         for k in 0..30 {
             let o = Observations {
                 light: Some((at(1.5), LightColor::Red)),
@@ -689,7 +769,7 @@ mod tests {
 
     #[test]
     fn obstacle_stops_and_waits_then_goes_when_clear() {
-        let mut b = Behaviour::new(BehaviourConfig::default());
+        let mut b = Behaviour::new(defaults());
         let mut t = 0.0;
         let mut step = |ob: Option<Ranged>, speed: f64| {
             t += DT;
@@ -729,9 +809,9 @@ mod tests {
 
     #[test]
     fn passing_is_an_s_out_a_stretch_and_an_s_back() {
-        let cfg = BehaviourConfig {
+        let cfg = BehaviourOptions {
             pass_enabled: true,
-            ..Default::default()
+            ..defaults()
         };
         let (turn, along) = (cfg.pass_turn_m, cfg.pass_along_m);
         let mut r = Rig::new(cfg);
@@ -770,13 +850,13 @@ mod tests {
 
     #[test]
     fn a_sign_seen_while_passing_is_obeyed_after_returning() {
-        let cfg = BehaviourConfig {
+        let cfg = BehaviourOptions {
             pass_enabled: true,
             pass_wait_s: 0.0,
-            ..Default::default()
+            ..defaults()
         };
         let mut b = Behaviour::new(cfg.clone());
-        let mut car = DeadReckoning::new(&VehicleConfig::default());
+        let mut car = car();
         let mut t = 0.0;
         let mut modes = vec![];
         for _ in 0..(25.0 / DT) as usize {
@@ -820,7 +900,7 @@ mod tests {
 
     #[test]
     fn lane_lost_slows_then_stops_then_recovers() {
-        let mut b = Behaviour::new(BehaviourConfig::default());
+        let mut b = Behaviour::new(defaults());
         let lost = Observations::default();
         let mut t = 0.0;
         let d = b.step(&lost, t);
@@ -838,7 +918,7 @@ mod tests {
 
     #[test]
     fn obstacle_beats_red_light_and_sign() {
-        let mut b = Behaviour::new(BehaviourConfig::default());
+        let mut b = Behaviour::new(defaults());
         let mut m = Mode::Cruise;
         for k in 0..4 {
             let o = Observations {

@@ -9,7 +9,6 @@ pub mod behaviour;
 pub mod pid;
 pub mod throttle;
 
-use crate::config::Config;
 use crate::lane::LaneMeasurement;
 use serde::{Deserialize, Serialize};
 
@@ -52,11 +51,12 @@ pub struct Controller {
 }
 
 impl Controller {
-    /// The controller configured in `cfg`.
-    pub fn from_config(cfg: &Config) -> Self {
+    /// A controller steering with `gains` and driving with the policy `throttle`
+    /// (`[steering]` and `[throttle]` of car.toml convert into them).
+    pub fn new(gains: pid::PidGains, throttle: throttle::ThrottleOptions) -> Self {
         Self {
-            pid: pid::Pid::new((&cfg.steering).into()),
-            throttle: throttle::Throttle::new(cfg.throttle.clone()),
+            pid: pid::Pid::new(gains),
+            throttle: throttle::Throttle::new(throttle),
         }
     }
 

@@ -11,9 +11,8 @@
 //!
 //! Time is passed in (`dt`, seconds): the controller never reads a clock.
 
-use crate::config::SteeringConfig;
-
-/// PID gains and limits (units: steer per unit of normalised error, seconds).
+/// PID gains and limits (units: steer per unit of normalised error, seconds); `[steering]` of
+/// car.toml converts into them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PidGains {
     /// Proportional gain.
@@ -30,20 +29,6 @@ pub struct PidGains {
     pub slew_rate: f64,
     /// Derivative low-pass time constant, seconds.
     pub derivative_tau: f64,
-}
-
-impl From<&SteeringConfig> for PidGains {
-    fn from(s: &SteeringConfig) -> Self {
-        Self {
-            kp: s.kp,
-            ki: s.ki,
-            kd: s.kd,
-            integral_limit: s.integral_limit,
-            max_out: s.max_steer,
-            slew_rate: s.slew_rate,
-            derivative_tau: s.derivative_tau,
-        }
-    }
 }
 
 /// A PID controller's state.

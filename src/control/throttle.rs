@@ -1,18 +1,29 @@
 //! Throttle policy: drive at a base speed, slower as the lane error grows (curves), and stop
 //! once the lane has been lost for a while. Time is passed in.
 
-use crate::config::ThrottleConfig;
+/// The policy's settings (`[throttle]` of car.toml converts into them). Throttle 0..=1.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ThrottleOptions {
+    /// Throttle on a straight with zero error.
+    pub base: f64,
+    /// Lowest throttle while the lane is seen (at most `base`).
+    pub min: f64,
+    /// Throttle drop per unit of |normalised error|.
+    pub error_slowdown: f64,
+    /// Once the lane has been lost this long, seconds, the throttle is zero.
+    pub lost_timeout_s: f64,
+}
 
 /// The throttle policy and how long the lane has been lost.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Throttle {
-    cfg: ThrottleConfig,
+    cfg: ThrottleOptions,
     lost_for_s: f64,
 }
 
 impl Throttle {
-    /// A policy from `[throttle]`.
-    pub fn new(cfg: ThrottleConfig) -> Self {
+    /// A policy with these settings.
+    pub fn new(cfg: ThrottleOptions) -> Self {
         Self { cfg, lost_for_s: 0.0 }
     }
 
@@ -40,7 +51,7 @@ impl Throttle {
     }
 
     /// The policy's settings (a dashboard changes `base`, `min` between frames).
-    pub fn config_mut(&mut self) -> &mut ThrottleConfig {
+    pub fn options_mut(&mut self) -> &mut ThrottleOptions {
         &mut self.cfg
     }
 
@@ -54,8 +65,8 @@ impl Throttle {
 mod tests {
     use super::*;
 
-    fn cfg() -> ThrottleConfig {
-        ThrottleConfig {
+    fn cfg() -> ThrottleOptions {
+        ThrottleOptions {
             base: 0.5,
             min: 0.2,
             error_slowdown: 0.6,

@@ -137,8 +137,8 @@ pub fn apply_value(p: &mut Pipeline, key: &str, value: f64) -> bool {
         "steering.kp" => c.pid.gains.kp = value,
         "steering.ki" => c.pid.gains.ki = value,
         "steering.kd" => c.pid.gains.kd = value,
-        "throttle.base" => c.throttle.config_mut().base = value,
-        "throttle.min" => c.throttle.config_mut().min = value,
+        "throttle.base" => c.throttle.options_mut().base = value,
+        "throttle.min" => c.throttle.options_mut().min = value,
         _ => return false,
     }
     true
@@ -250,7 +250,7 @@ impl Live {
 }
 
 /// The loop's side of the dashboard: publishes snapshots, applies control messages between
-/// frames, and hands its events to the telemetry (see [`DashObserver::tag`]).
+/// frames, and puts its events into the record of the first frame they act on.
 pub struct DashObserver {
     rx: Receiver<Control>,
     out: Arc<Latest<Arc<Snapshot>>>,
@@ -309,15 +309,6 @@ pub fn channel(cfg: &Config, world: Option<SharedWorld>, stop: Option<StopSignal
 }
 
 impl DashObserver {
-    /// Wraps the telemetry writer so that this observer's events land in the records it
-    /// writes (the record of the first frame a change acts on).
-    pub fn tag<'a>(&self, telemetry: &'a mut dyn Observer) -> WithEvents<'a> {
-        WithEvents {
-            inner: telemetry,
-            pending: self.pending.clone(),
-        }
-    }
-
     /// Whether the simulator is paused.
     pub fn paused(&self) -> bool {
         self.paused
@@ -382,8 +373,8 @@ fn get_value_pipeline(p: &mut Pipeline, key: &str) -> Option<f64> {
         "steering.kp" => c.pid.gains.kp,
         "steering.ki" => c.pid.gains.ki,
         "steering.kd" => c.pid.gains.kd,
-        "throttle.base" => c.throttle.config_mut().base,
-        "throttle.min" => c.throttle.config_mut().min,
+        "throttle.base" => c.throttle.options_mut().base,
+        "throttle.min" => c.throttle.options_mut().min,
         _ => return None,
     })
 }
@@ -419,6 +410,11 @@ impl Observer for DashObserver {
         }
         self.live.paused.store(false, Ordering::SeqCst);
         Flow::Continue
+    }
+
+    /// The operator's changes acted on from this frame on, in its record.
+    fn decorate(&mut self, r: &mut FrameRecord) {
+        r.events.append(&mut self.pending.lock().unwrap_or_else(|e| e.into_inner()));
     }
 
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
@@ -479,51 +475,8 @@ impl Observer for DashObserver {
 fn throttle_cfg(p: &Pipeline) -> (f64, f64) {
     // `Throttle` exposes its settings mutably only; read them through a clone.
     let mut t = p.controller().throttle.clone();
-    let c = t.config_mut();
+    let c = t.options_mut();
     (c.base, c.min)
-}
-
-/// The telemetry writer with the dashboard's events added to the record of the frame they
-/// first act on.
-pub struct WithEvents<'a> {
-    inner: &'a mut dyn Observer,
-    pending: Arc<Mutex<Vec<String>>>,
-}
-
-impl<'a> WithEvents<'a> {
-    /// `telemetry` unchanged (no dashboard).
-    pub fn plain(telemetry: &'a mut dyn Observer) -> Self {
-        Self {
-            inner: telemetry,
-            pending: Arc::new(Mutex::new(Vec::new())),
-        }
-    }
-}
-
-impl Observer for WithEvents<'_> {
-    fn before_frame(&mut self, p: &mut Pipeline) -> Flow {
-        self.inner.before_frame(p)
-    }
-    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
-        let events = std::mem::take(&mut *self.pending.lock().unwrap_or_else(|e| e.into_inner()));
-        if events.is_empty() {
-            return self.inner.on_frame(ctx);
-        }
-        let mut rec = ctx.record.clone();
-        rec.events.extend(events);
-        self.inner.on_frame(&FrameContext {
-            frame: ctx.frame,
-            output: ctx.output,
-            record: &rec,
-            pipeline: ctx.pipeline,
-        })
-    }
-    fn on_skip(&mut self, e: &crate::source::FrameError) {
-        self.inner.on_skip(e)
-    }
-    fn on_stall(&mut self, e: &crate::source::FrameError) {
-        self.inner.on_stall(e)
-    }
 }
 
 #[cfg(test)]

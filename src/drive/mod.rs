@@ -25,12 +25,15 @@
 //! — the end of the source, a stop request, an error, a panic unwinding — sends neutral before
 //! the caller gets control back, so files are flushed *after* the motor is safe.
 
-pub mod gate;
+pub mod arming;
+
 pub mod slot;
 pub mod stereo;
 pub mod stop;
 
-pub use gate::{ArmState, Gate};
+pub use crate::sink::{Actuators, Connection};
+pub use arming::{Actor, Arming, Gate, GateOptions, Refused, Sent};
+pub use crate::health::{CarStatus, Fault, Health, HealthSnapshot, Part, PartState};
 pub use slot::Latest;
 pub use stop::{StopReason, StopSignal};
 
@@ -39,35 +42,21 @@ use crate::pipeline::{FrameOutput, Pipeline};
 use crate::sink::{CommandSink, NeutralOnDrop, SinkError};
 use crate::source::{Frame, FrameError, FrameSource};
 use crate::telemetry::FrameRecord;
+pub use crate::timing::{Clock, NoClock};
 use crate::timing::StageTimer;
 use serde::Serialize;
 
-/// A clock the caller hands in (the library reads none). Only used for *reporting* latency and
-/// loop period; decisions use the frames' own timestamps, so replay and the simulator stay
-/// deterministic.
-pub trait Clock {
-    /// Seconds since some fixed start.
-    fn now_s(&self) -> f64;
-    /// `false` for a clock that measures nothing ([`NoClock`]): latency and period are then
-    /// left out of the telemetry, so it stays reproducible.
-    fn is_real(&self) -> bool {
-        true
-    }
+/// How a line a run reports should be shown (status lines, events, warnings).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Level {
+    /// Information (stdout).
+    Info,
+    /// A warning or fault (stderr).
+    Warn,
 }
 
-/// A clock that always reads 0: latency and period are then reported as 0 (tests, golden
-/// files).
-#[derive(Debug, Default, Clone, Copy)]
-pub struct NoClock;
-
-impl Clock for NoClock {
-    fn now_s(&self) -> f64 {
-        0.0
-    }
-    fn is_real(&self) -> bool {
-        false
-    }
-}
+/// Where a run's lines go (status lines, events, warnings): the binary prints them.
+pub type Say = std::sync::Arc<dyn Fn(Level, &str) + Send + Sync>;
 
 /// What the observer wants after a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -122,6 +111,41 @@ pub trait Observer {
     fn on_stall(&mut self, _err: &FrameError) {}
 }
 
+/// The telemetry file: one line per processed frame (here, not in `telemetry`, so that the
+/// record's module does not depend on the loop).
+impl<W: std::io::Write> Observer for crate::telemetry::JsonlWriter<W> {
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        self.write(ctx.record)
+            .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", self.label())))?;
+        Ok(Flow::Continue)
+    }
+}
+
+/// Observer for an optional part: nothing when absent.
+impl<T: Observer> Observer for Option<T> {
+    fn before_frame(&mut self, p: &mut Pipeline) -> Flow {
+        self.as_mut().map_or(Flow::Continue, |o| o.before_frame(p))
+    }
+    fn decorate(&mut self, r: &mut FrameRecord) {
+        if let Some(o) = self.as_mut() {
+            o.decorate(r)
+        }
+    }
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        self.as_mut().map_or(Ok(Flow::Continue), |o| o.on_frame(ctx))
+    }
+    fn on_skip(&mut self, e: &FrameError) {
+        if let Some(o) = self.as_mut() {
+            o.on_skip(e)
+        }
+    }
+    fn on_stall(&mut self, e: &FrameError) {
+        if let Some(o) = self.as_mut() {
+            o.on_stall(e)
+        }
+    }
+}
+
 /// An observer that does nothing.
 #[derive(Debug, Default)]
 pub struct NoObserver;
@@ -129,6 +153,25 @@ impl Observer for NoObserver {}
 
 /// Several observers, called in order (the first `Stop` wins, all still see the frame).
 impl<const N: usize> Observer for [&mut dyn Observer; N] {
+    fn before_frame(&mut self, pipeline: &mut Pipeline) -> Flow {
+        self.as_mut_slice().before_frame(pipeline)
+    }
+    fn decorate(&mut self, record: &mut FrameRecord) {
+        self.as_mut_slice().decorate(record)
+    }
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        self.as_mut_slice().on_frame(ctx)
+    }
+    fn on_skip(&mut self, err: &FrameError) {
+        self.as_mut_slice().on_skip(err)
+    }
+    fn on_stall(&mut self, err: &FrameError) {
+        self.as_mut_slice().on_stall(err)
+    }
+}
+
+/// Any number of observers, called in order (the first `Stop` wins, all still see the frame).
+impl Observer for [&mut dyn Observer] {
     fn before_frame(&mut self, pipeline: &mut Pipeline) -> Flow {
         let mut f = Flow::Continue;
         for o in self.iter_mut() {
@@ -297,7 +340,8 @@ impl Driver {
             None => return Ok(self.end(LoopEnd::SourceEnded)),
             Some(Err(e)) if e.stalled => {
                 // A camera that stalls or is unplugged: the car must not drive blind.
-                sink.send(Command::NEUTRAL, self.last_time_s.unwrap_or(0.0))?;
+                let sent = sink.send(Command::NEUTRAL, self.last_time_s.unwrap_or(0.0))?;
+                pipeline.note_sent(sent);
                 self.stats.stalls += 1;
                 self.last_cmd_clock = None;
                 // frames missing after a stall were never made: not dropped
@@ -329,7 +373,9 @@ impl Driver {
             (Some(o), None) => pipeline.step_stereo(&frame.image, &o.image, dt, timer),
             _ => pipeline.step_with(&frame.image, dt, timer, frame.given.as_deref()),
         };
-        sink.send(out.command, frame.time_s)?;
+        let sent_cmd = sink.send(out.command, frame.time_s)?;
+        // Dead reckoning integrates what the motors were told, not what the pipeline wanted.
+        pipeline.note_sent(sent_cmd);
         let sent = clock.now_s();
         // 6. The one telemetry record.
         let latency_ms = (sent - captured) * 1e3;
@@ -361,6 +407,10 @@ impl Driver {
         if self.stats.dropped > 0 {
             record.dropped = Some(self.stats.dropped);
         }
+        if sent_cmd != out.command {
+            record.sent = Some(sent_cmd);
+        }
+        sink.drain_events(&mut record.events);
         observer.decorate(&mut record);
         // 7. Observers.
         let flow = observer.on_frame(&FrameContext {
@@ -542,9 +592,9 @@ mod tests {
         let log = std::rc::Rc::new(std::cell::RefCell::new(Vec::new()));
         struct Shared(std::rc::Rc<std::cell::RefCell<Vec<Command>>>);
         impl CommandSink for Shared {
-            fn send(&mut self, c: Command, _: f64) -> Result<(), SinkError> {
+            fn send(&mut self, c: Command, _: f64) -> Result<Command, SinkError> {
                 self.0.borrow_mut().push(c);
-                Ok(())
+                Ok(c)
             }
         }
         let mut sink = Shared(log.clone());

@@ -26,6 +26,9 @@ impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
     fn len_hint(&self) -> Option<usize> {
         (**self).len_hint()
     }
+    fn fatal(&self) -> Option<String> {
+        (**self).fatal()
+    }
 }
 
 /// Two sources, left and right, as one source of reference frames carrying the other image.
@@ -52,7 +55,7 @@ impl<L: FrameSource, R: FrameSource> StereoFrames<L, R> {
 
     /// With `[stereo]`'s skew limit and reference.
     pub fn from_config(left: L, right: R, cfg: &Config) -> Self {
-        Self::new(left, right, cfg.stereo.max_skew_ms / 1e3, cfg.stereo.reference != "right")
+        Self::new(left, right, cfg.stereo.max_skew_ms / 1e3, cfg.stereo.reference.is_left())
     }
 
     /// Names the two sides in the errors of bad frames (e.g. the two folders of a replay).
@@ -68,6 +71,10 @@ impl<L: FrameSource, R: FrameSource> StereoFrames<L, R> {
 }
 
 impl<L: FrameSource, R: FrameSource> FrameSource for StereoFrames<L, R> {
+    fn fatal(&self) -> Option<String> {
+        self.pair.fatal()
+    }
+
     fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
         let p = match self.pair.next_pair()? {
             Ok(p) => p,
@@ -146,7 +153,7 @@ mod tests {
     fn the_pair_is_described() {
         let mut cfg = crate::config::Config::default();
         assert_eq!(calibration_line(&Pipeline::new(&cfg).unwrap(), &cfg), None);
-        cfg.ranging.method = "stereo".into();
+        cfg.ranging.method = crate::config::RangingMethod::Stereo;
         let line = calibration_line(&Pipeline::new(&cfg).unwrap(), &cfg).unwrap();
         assert!(line.contains("taken as ideal"), "{line}");
         cfg.stereo.calibration = "/nowhere/pair.json".into();

@@ -1,5 +1,6 @@
-//! The one stop signal shared by everything that can end a run: Ctrl-C (SIGINT), SIGTERM, a
-//! panic in any thread, a lost camera, the start/stop button, a dashboard's e-stop.
+//! The one stop signal shared by everything that can end a run: Ctrl-C (SIGINT), SIGTERM,
+//! SIGHUP, SIGQUIT, a panic in any thread, a fault (a camera or link lost for good), the
+//! deadline.
 //!
 //! It is a cloneable handle on one atomic: raising it from a signal handler or another thread
 //! is safe, and the loop checks it once per frame (see [`super::Driver::step`]). The first
@@ -17,9 +18,13 @@ pub enum StopReason {
     Interrupt,
     /// SIGTERM: exit code 143.
     Terminate,
+    /// SIGHUP (the terminal or SSH session went away): exit code 129.
+    Hangup,
+    /// SIGQUIT (Ctrl-\\): exit code 131.
+    Quit,
     /// A fault: a panic in a thread, the link lost for good, the camera gone for good.
     Fault,
-    /// The start/stop button, a dashboard, or the program itself asked.
+    /// The deadline, a dashboard, or the program itself asked.
     Requested,
 }
 
@@ -30,6 +35,8 @@ impl StopReason {
             StopReason::Terminate => 2,
             StopReason::Fault => 3,
             StopReason::Requested => 4,
+            StopReason::Hangup => 5,
+            StopReason::Quit => 6,
         }
     }
     fn from_code(c: u8) -> Option<Self> {
@@ -38,6 +45,8 @@ impl StopReason {
             2 => StopReason::Terminate,
             3 => StopReason::Fault,
             4 => StopReason::Requested,
+            5 => StopReason::Hangup,
+            6 => StopReason::Quit,
             _ => return None,
         })
     }
@@ -48,6 +57,8 @@ impl StopReason {
             StopReason::Terminate => 143,
             StopReason::Fault => 3,
             StopReason::Requested => 0,
+            StopReason::Hangup => 129,
+            StopReason::Quit => 131,
         }
     }
 }
@@ -62,7 +73,7 @@ impl StopSignal {
         Self::default()
     }
 
-    /// Raises the signal (the first reason wins). Async-signal-safe: one atomic operation.
+    /// Raises the signal (the first reason wins). One atomic operation: safe from any thread.
     pub fn request(&self, why: StopReason) {
         let _ = self.0.compare_exchange(0, why.code(), Ordering::SeqCst, Ordering::SeqCst);
     }
@@ -77,21 +88,11 @@ impl StopSignal {
         self.reason().is_some()
     }
 
-    /// The raw atomic, for a signal handler that can only store to a static.
-    pub fn raw(&self) -> &Arc<AtomicU8> {
-        &self.0
-    }
-
     /// Lowers the signal again (a car that was stopped by its button and is armed again).
     pub fn clear(&self) {
         self.0.store(0, Ordering::SeqCst);
     }
 }
-
-/// Codes for [`StopSignal::raw`] users (signal handlers).
-pub const CODE_INTERRUPT: u8 = 1;
-/// SIGTERM's code in [`StopSignal::raw`].
-pub const CODE_TERMINATE: u8 = 2;
 
 #[cfg(test)]
 mod tests {

@@ -53,6 +53,18 @@ impl LedState {
         }
     }
 
+    /// The blink code of the car's status (docs/pi.md): e-stopped and braking show as fault.
+    pub fn for_status(s: crate::health::CarStatus) -> Self {
+        use crate::health::CarStatus;
+        match s {
+            CarStatus::Fault | CarStatus::EStopped | CarStatus::Braking => LedState::Fault,
+            CarStatus::WaitingCamera => LedState::WaitingCamera,
+            CarStatus::WaitingLink => LedState::WaitingArduino,
+            CarStatus::Disarmed => LedState::Ready,
+            CarStatus::Driving => LedState::Driving,
+        }
+    }
+
     /// The repeating pattern, or `None` for steady on.
     fn pattern(self) -> Option<&'static [Segment]> {
         match self {
@@ -93,6 +105,17 @@ pub fn led_level(state: LedState, t: f64) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_car_status_has_its_blink_code() {
+        use crate::health::CarStatus;
+        assert_eq!(LedState::for_status(CarStatus::Driving), LedState::Driving);
+        assert_eq!(LedState::for_status(CarStatus::Disarmed), LedState::Ready);
+        assert_eq!(LedState::for_status(CarStatus::Fault), LedState::Fault);
+        assert_eq!(LedState::for_status(CarStatus::EStopped), LedState::Fault);
+        assert_eq!(LedState::for_status(CarStatus::WaitingCamera), LedState::WaitingCamera);
+        assert_eq!(LedState::for_status(CarStatus::WaitingLink), LedState::WaitingArduino);
+    }
 
     /// Rising edges and lit time over `secs` seconds, sampled every 1 ms.
     fn measure(state: LedState, secs: f64) -> (usize, f64) {

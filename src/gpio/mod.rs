@@ -10,7 +10,8 @@
 //!   temperature, plausibility, a median filter and the brake decision with hysteresis.
 //!
 //! [`GpioLogic`] joins them into what the drive loop needs, [`GpioEvents`], fed by raw button
-//! levels and echo readings. The rppal layer (`pi`, feature `gpio`) only moves levels and
+//! levels and echo readings; [`observer::GpioObserver`] feeds those events to the car's one
+//! arming state and health between frames. The rppal layer (`pi`, feature `gpio`) only moves levels and
 //! timestamps between the pins and a `GpioLogic`, in two threads:
 //!
 //! ```text
@@ -25,6 +26,7 @@
 
 pub mod button;
 pub mod led;
+pub mod observer;
 #[cfg(feature = "gpio")]
 pub mod pi;
 pub mod ultrasonic;
@@ -92,6 +94,8 @@ pub struct GpioEvents {
     pub sensor_ok: bool,
     /// Ultrasonic readings taken since the start (to see that the sensor thread runs).
     pub readings: u64,
+    /// False when the button/LED thread has died (the button no longer stops the car).
+    pub gpio_ok: bool,
 }
 
 /// The GPIO logic with no hardware: raw inputs in, [`GpioEvents`] out.
@@ -158,6 +162,7 @@ impl GpioLogic {
             brake: s.is_some_and(|s| s.brake),
             sensor_ok: s.is_none_or(|s| s.sensor_ok),
             readings: self.readings,
+            gpio_ok: true,
         };
         self.presses = 0;
         self.long_presses = 0;

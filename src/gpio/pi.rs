@@ -123,7 +123,11 @@ impl GpioDevices {
             l.set_led(led);
             l.take_events()
         };
-        if self.threads.iter().any(JoinHandle::is_finished) {
+        // Thread 0 runs the button and LED, thread 1 (when wired) the ultrasonic sensor.
+        if self.threads.first().is_some_and(JoinHandle::is_finished) {
+            ev.gpio_ok = false;
+        }
+        if self.threads.get(1).is_some_and(JoinHandle::is_finished) {
             ev.sensor_ok = false;
         }
         ev
@@ -134,6 +138,12 @@ impl GpioDevices {
         for t in self.threads.drain(..) {
             let _ = t.join();
         }
+    }
+}
+
+impl super::observer::GpioPoll for GpioDevices {
+    fn poll(&mut self, led: LedState) -> GpioEvents {
+        GpioDevices::poll(self, led)
     }
 }
 

@@ -16,9 +16,20 @@
 //!
 //! Units: bird's-eye pixels (columns), counts of pixels.
 
-pub use crate::config::PeakMode;
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
+
+/// How a line's column is read from its histogram peak (`lane.peak`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PeakMode {
+    /// Centroid of the run of columns around the highest that reach half its height
+    /// (sub-pixel; a wide bright blob next to the line drags it).
+    #[default]
+    Centroid,
+    /// The highest column (the paper's argmax; the middle of a flat top), whole pixels.
+    Argmax,
+}
 
 /// Options of the line finder, all in bird's-eye pixels unless stated.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -12,15 +12,32 @@ pub mod synth;
 pub mod threshold;
 pub mod warp;
 
-pub use lines::{LaneMeasurement, LaneStatus, LineOptions};
+pub use edges::CannyOptions;
+pub use lines::{LaneMeasurement, LaneStatus, LineOptions, PeakMode};
+pub use threshold::ThresholdMode;
 
-use crate::config::{Config, ThresholdMode};
 use crate::timing::{StageTimer, StageTimes};
-use edges::{CannyOptions, CannyScratch};
+use edges::CannyScratch;
 use image::{GrayImage, RgbImage};
 use warp::{WarpError, WarpMap};
 
-/// Options of the whole lane stage, from `[warp]` and `[lane]` of car.toml.
+/// The bird's-eye view the lane is measured in (`[warp]` of car.toml converts into it).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WarpOptions {
+    /// The ROI's corners in the camera frame, pixels: top-left, top-right, bottom-right,
+    /// bottom-left.
+    pub src: [[f64; 2]; 4],
+    /// Width of the bird's-eye image, pixels.
+    pub out_width: u32,
+    /// Height of the bird's-eye image, pixels.
+    pub out_height: u32,
+    /// Warp each colour channel, then convert to grey (OpenCV's exact order) instead of grey
+    /// first.
+    pub exact: bool,
+}
+
+/// Options of the lane measurement in the bird's-eye image (`[lane]` of car.toml converts
+/// into them).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LaneOptions {
     /// Fixed level or Otsu.
@@ -31,30 +48,6 @@ pub struct LaneOptions {
     pub canny: CannyOptions,
     /// Histogram band and line finding.
     pub lines: LineOptions,
-}
-
-impl LaneOptions {
-    /// The options configured in `cfg`.
-    pub fn from_config(cfg: &Config) -> Self {
-        let l = &cfg.lane;
-        Self {
-            threshold_mode: l.threshold_mode,
-            threshold: l.threshold,
-            canny: CannyOptions {
-                low: l.canny_low,
-                high: l.canny_high,
-                blur: l.blur,
-            },
-            lines: LineOptions {
-                band: l.band,
-                min_peak: l.min_peak,
-                peak: l.peak,
-                lane_width_px: l.lane_width_px,
-                width_tolerance: l.width_tolerance,
-                center_offset_px: l.center_offset_px,
-            },
-        }
-    }
 }
 
 /// The intermediate images of the last frame, for annotation and parity checks.
@@ -87,23 +80,18 @@ pub struct LaneDetector {
 }
 
 impl LaneDetector {
-    /// Precomputes the warp map for `frame_w × frame_h` frames and allocates the buffers.
-    pub fn new(
-        frame_w: u32,
-        frame_h: u32,
-        roi: &[[f64; 2]; 4],
-        out_w: u32,
-        out_h: u32,
-        opts: LaneOptions,
-    ) -> Result<Self, WarpError> {
-        let map = WarpMap::new(frame_w, frame_h, roi, out_w, out_h)?;
+    /// Precomputes the warp map for `frame_w × frame_h` frames and allocates the buffers
+    /// (`Config::lane_detector` builds the one of car.toml).
+    pub fn new(frame_w: u32, frame_h: u32, warp: &WarpOptions, opts: LaneOptions) -> Result<Self, WarpError> {
+        let (out_w, out_h) = (warp.out_width, warp.out_height);
+        let map = WarpMap::new(frame_w, frame_h, &warp.src, out_w, out_h)?;
         let band_rows = lines::band_rows(out_h, opts.lines.band);
         Ok(Self {
             map,
             opts,
             scratch: CannyScratch::new(out_w, out_h),
             gray_frame: GrayImage::new(frame_w, frame_h),
-            exact_warp: false,
+            exact_warp: warp.exact,
             images: LaneImages {
                 bird: GrayImage::new(out_w, out_h),
                 edges: GrayImage::new(out_w, out_h),
@@ -113,20 +101,6 @@ impl LaneDetector {
                 level: 0,
             },
         })
-    }
-
-    /// The detector configured in `cfg` (frames of `[camera]` size).
-    pub fn from_config(cfg: &Config) -> Result<Self, WarpError> {
-        let mut d = Self::new(
-            cfg.camera.width,
-            cfg.camera.height,
-            &cfg.warp.src,
-            cfg.warp.out_width,
-            cfg.warp.out_height,
-            LaneOptions::from_config(cfg),
-        )?;
-        d.exact_warp = cfg.warp.exact;
-        Ok(d)
     }
 
     /// Measures the lane in one frame (of the size given to [`LaneDetector::new`]).

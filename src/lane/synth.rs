@@ -277,13 +277,18 @@ pub fn sample_sequence() -> Vec<LaneScene> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::Config;
+
+    /// The shipped camera (`[camera]`) and its ROI (`[warp] src`: 0.40..1.00 m ahead, 0.25 m
+    /// either side).
+    fn camera_and_roi() -> (PinholeCamera, [[f64; 2]; 4]) {
+        let cam = PinholeCamera::new(320, 240, 62.2, 0.20, 20.0);
+        (cam, cam.roi_of_ground_rect(0.40, 1.00, 0.25).unwrap())
+    }
 
     #[test]
     fn straight_centred_lane_truth_is_the_image_centre() {
-        let cfg = Config::default();
-        let cam = PinholeCamera::from_config(&cfg.camera);
-        let h = Homography::from_quad_to_rect(&cfg.warp.src, 320, 240).unwrap();
+        let (cam, roi) = camera_and_roi();
+        let h = Homography::from_quad_to_rect(&roi, 320, 240).unwrap();
         let scene = LaneScene::default();
         let (l, r) = scene.truth(&cam, &h, 240, 0.4).unwrap();
         // 0.15 m either side at 638 px/m around the centre column 159.5.
@@ -293,12 +298,9 @@ mod tests {
 
     #[test]
     fn rendering_is_deterministic_for_a_seed() {
-        let cfg = Config::default();
-        let mut cam_cfg = cfg.camera.clone();
-        cam_cfg.width = 64;
-        cam_cfg.height = 48;
-        let cam = PinholeCamera::from_config(&cam_cfg);
-        let h = Homography::from_quad_to_rect(&cfg.warp.src, 320, 240).unwrap();
+        let (_, roi) = camera_and_roi();
+        let cam = PinholeCamera::new(64, 48, 62.2, 0.20, 20.0);
+        let h = Homography::from_quad_to_rect(&roi, 320, 240).unwrap();
         let a = LaneScene::default().render(&cam, &h, 240, 0.4);
         let b = LaneScene::default().render(&cam, &h, 240, 0.4);
         assert_eq!(a.image, b.image);

@@ -7,6 +7,17 @@
 //! between-class variance of the grey histogram, computed as OpenCV's `getThreshVal_Otsu_8u`.
 
 use image::GrayImage;
+use serde::{Deserialize, Serialize};
+
+/// How the binary image is thresholded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ThresholdMode {
+    /// Fixed grey level (`lane.threshold`).
+    Fixed,
+    /// Otsu's method picks the level per frame.
+    Otsu,
+}
 
 /// Otsu's threshold level for `img` (0..=255).
 pub fn otsu_level(img: &GrayImage) -> u8 {

@@ -235,6 +235,12 @@ impl Link {
         self.shared.lock().connected
     }
 
+    /// The last I/O error or timeout seen by the I/O thread (empty when none): why the link
+    /// is down.
+    pub fn last_error(&self) -> String {
+        self.shared.lock().last_error.clone()
+    }
+
     /// Sets the newest DRIVE (per-mille). It replaces any DRIVE not yet written.
     pub fn drive(&self, steer: i16, throttle: i16) {
         let mut g = self.shared.lock();
@@ -385,9 +391,9 @@ impl Link {
 }
 
 impl CommandSink for Link {
-    fn send(&mut self, cmd: Command, _now_s: f64) -> Result<(), SinkError> {
+    fn send(&mut self, cmd: Command, _now_s: f64) -> Result<Command, SinkError> {
         self.drive(protocol::to_permille(cmd.steer), protocol::to_permille(cmd.throttle));
-        Ok(())
+        Ok(cmd)
     }
 
     fn stop(&mut self) -> Result<(), SinkError> {

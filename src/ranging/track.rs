@@ -308,7 +308,6 @@ pub fn reproject(cam: &PinholeCamera, bbox: [f64; 4], d0: f64, d1: f64) -> [f64;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::CameraConfig;
     use crate::lane::synth::SplitMix;
 
     fn range(d: f64, s: f64) -> BoxRange {
@@ -321,8 +320,9 @@ mod tests {
         }
     }
 
+    /// The shipped camera (`[camera]`).
     fn cam() -> PinholeCamera {
-        PinholeCamera::from_config(&CameraConfig::default())
+        PinholeCamera::new(320, 240, 62.2, 0.20, 20.0)
     }
 
     /// The box of a 0.1 m square face centred 0.17 m up, 0.15 m right, `d` ahead.

@@ -10,9 +10,12 @@
 //! z up; headings counter-clockwise from +x.
 
 pub mod board;
+pub mod camera;
 pub mod glyphs;
 pub mod plot;
+pub mod pwm;
 pub mod render;
+pub mod report;
 pub mod rng;
 pub mod run;
 pub mod world;

@@ -606,7 +606,7 @@ mod tests {
         let track = Track::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("config/tracks/default.toml")).unwrap();
         let scene = Arc::new(Scene::new(&track));
         let mount = CameraMount {
-            camera: PinholeCamera::from_config(&CameraConfig::default()),
+            camera: PinholeCamera::from(&CameraConfig::default()),
             x_m: VehicleConfig::default().camera_x_m,
         };
         (Renderer::new(scene, mount, RenderOptions::clean()), track)
@@ -735,7 +735,7 @@ mod tests {
         let (_, track) = setup();
         let scene = Arc::new(Scene::new(&track));
         let mount = CameraMount {
-            camera: PinholeCamera::from_config(&CameraConfig::default()),
+            camera: PinholeCamera::from(&CameraConfig::default()),
             x_m: 0.24,
         };
         let opts = RenderOptions {

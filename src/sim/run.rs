@@ -1,7 +1,8 @@
-//! [`Simulation`]: the simulator's camera, vehicle and score ([`super::world`]) wired to the
-//! car's own loop ([`crate::drive::Driver`]) — one call of [`Simulation::step`] is one turn of
-//! that loop. Tests, benchmarks, sweeps and the labs step it frame by frame; `rccar sim` runs
-//! the same parts through the loop in `src/cli/sim.rs`.
+//! [`Simulation`]: the simulated car built by the library's session builder
+//! ([`crate::session::Session`]: the simulator's lock-step camera, its vehicle behind the one
+//! gate, the score) stepped frame by frame — one call of [`Simulation::step`] is one turn of
+//! the car's own loop. Tests, benchmarks, sweeps and the labs use it; `rccar sim` builds the
+//! same session with its telemetry, dashboard and report.
 //!
 //! Units: metres, seconds, radians.
 
@@ -11,12 +12,13 @@ use super::scene::Scene;
 use super::track::Track;
 use super::truth::FrameTruth;
 use super::vehicle::Vehicle;
-use super::world::{lock, SharedWorld, SimCamera, SimScore, SimVehicle, World};
+use super::world::{lock, SharedWorld};
 use crate::config::Config;
-use crate::drive::{Driver, NoClock, Parts, Step, StopSignal};
-use crate::pipeline::{FrameOutput, Pipeline, PipelineError};
+use crate::drive::{Flow, FrameContext, Level, LoopError, NoClock, NoObserver, Observer, Step, StopSignal};
+use crate::pipeline::{FrameOutput, PipelineError};
+use crate::session::{DetectorSpec, SceneSpec, Session, SessionEnv, SessionError, SessionSpec, SinkSpec, SourceSpec, Timing};
 use crate::telemetry::FrameRecord;
-use crate::timing::StageTimer;
+use crate::timing::NoTimer;
 use image::RgbImage;
 use std::sync::Arc;
 
@@ -29,6 +31,19 @@ pub enum SimError {
     /// The ROI gives no bird's-eye view.
     #[error("warp.src: {0}")]
     Warp(#[from] crate::lane::warp::WarpError),
+    /// The session cannot be built (anything else).
+    #[error(transparent)]
+    Session(Box<SessionError>),
+}
+
+impl From<SessionError> for SimError {
+    fn from(e: SessionError) -> Self {
+        match e {
+            SessionError::Pipeline(p) => SimError::Pipeline(p),
+            SessionError::Warp(w) => SimError::Warp(w),
+            e => SimError::Session(Box::new(e)),
+        }
+    }
 }
 
 /// What one step produced.
@@ -59,17 +74,31 @@ impl StepOutput {
     }
 }
 
-/// A running simulation: world, camera, vehicle, score, the pipeline and the loop.
+/// A running simulation: the session of a simulated car, stepped by the caller.
 pub struct Simulation {
+    session: Session,
     world: SharedWorld,
-    camera: SimCamera,
-    vehicle: SimVehicle,
-    score: SimScore,
-    pipeline: Pipeline,
-    driver: Driver,
-    stop: StopSignal,
+    cfg: Config,
     full_frames: bool,
     truth_boxes: bool,
+    detector: Option<Option<crate::detect::DetectStage>>,
+    /// The last frame (kept while `full_frames`: a partial frame is nobody's picture).
+    last: RgbImage,
+}
+
+/// Keeps a copy of each frame's image (one buffer, reused).
+struct KeepImage<'a>(&'a mut RgbImage);
+
+impl Observer for KeepImage<'_> {
+    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        let img = &ctx.frame.image;
+        if self.0.dimensions() == img.dimensions() {
+            self.0.copy_from_slice(img.as_raw());
+        } else {
+            *self.0 = img.clone();
+        }
+        Ok(Flow::Continue)
+    }
 }
 
 impl Simulation {
@@ -80,32 +109,59 @@ impl Simulation {
 
     /// Like [`Simulation::new`] with a scene built once and shared (gain sweeps).
     pub fn with_scene(cfg: &Config, scene: Arc<Scene>) -> Result<Simulation, SimError> {
-        let world = World::new(cfg, scene)?.shared();
-        let pipeline = Pipeline::new(cfg)?;
-        let mut s = Simulation {
-            camera: SimCamera::new(world.clone()).ending_with_world(false),
-            vehicle: SimVehicle::new(world.clone()),
-            score: SimScore::new(world.clone()).ending_the_run(false),
+        let session = Self::session(cfg, scene, true, false)?;
+        let world = session.world().expect("a simulation has a world").clone();
+        Ok(Simulation {
+            session,
             world,
-            pipeline,
-            driver: Driver::new(cfg.camera.fps),
-            stop: StopSignal::new(),
+            cfg: cfg.clone(),
             full_frames: true,
             truth_boxes: false,
-        };
-        s.update_rows();
-        Ok(s)
+            detector: None,
+            last: RgbImage::new(cfg.camera.width, cfg.camera.height),
+        })
     }
 
-    /// Renders all rows, or only those the pipeline reads on each frame when nobody looks at
-    /// the frames (the same decisions, faster).
-    fn update_rows(&mut self) {
-        if self.full_frames {
-            self.camera.set_rows(None);
-        } else {
-            // The lane's rows, and the detection rows on frames where detection runs.
-            self.camera.set_row_plan(Some(self.pipeline.row_plan()));
+    /// The session of a simulated car: lock-step, armed from the start, no detector (the
+    /// caller installs one), stepping on past the world's end (the caller decides when to
+    /// stop).
+    fn session(cfg: &Config, scene: Arc<Scene>, full_frames: bool, truth_boxes: bool) -> Result<Session, SessionError> {
+        let mut spec = SessionSpec::new(
+            SourceSpec::Sim {
+                scene: SceneSpec::Shared(scene),
+                timing: Timing::LockStep,
+                stall: None,
+                start_offset_m: None,
+            },
+            SinkSpec::DryRun,
+        );
+        spec.detector = DetectorSpec::Off;
+        spec.operator_ends_run = true;
+        spec.frames_viewed = full_frames;
+        spec.truth_boxes = truth_boxes;
+        Session::build(
+            cfg,
+            spec,
+            SessionEnv {
+                clock: Arc::new(NoClock),
+                stop: StopSignal::new(),
+                timer: Box::new(NoTimer),
+                say: Arc::new(|_: Level, _: &str| {}),
+            },
+        )
+    }
+
+    /// Builds the session again with the current settings (before the first step).
+    fn rebuild(&mut self) {
+        let scene = lock(&self.world).scene().clone();
+        // The settings were valid when the simulation was built: the same config again.
+        let mut s = Self::session(&self.cfg, scene, self.full_frames, self.truth_boxes)
+            .expect("a simulation's session builds again with the same configuration");
+        if let Some(d) = self.detector.clone() {
+            s.pipeline_mut().set_detector(d);
         }
+        self.world = s.world().expect("a simulation has a world").clone();
+        self.session = s;
     }
 
     /// The shared world (for a dashboard, a stereo camera, or tests).
@@ -121,35 +177,39 @@ impl Simulation {
 
     /// Renders only the image rows the pipeline reads on each frame when `false` (the lane
     /// ROI, plus the detectors' rows on detection frames, plus the blur's reach; see
-    /// [`SimCamera::set_row_plan`]); the pipeline then decides exactly as on full frames, at
-    /// a fraction of the cost. [`Simulation::image`] then shows only those rows. Default `true`.
+    /// [`super::camera::SimCamera::set_row_plan`]); the pipeline then decides exactly as on
+    /// full frames, at a fraction of the cost. [`Simulation::image`] then shows only those
+    /// rows. Default `true`. Set it before the first step.
     pub fn set_full_frames(&mut self, full: bool) {
-        self.full_frames = full;
-        self.update_rows();
+        if full != self.full_frames {
+            self.full_frames = full;
+            self.rebuild();
+        }
     }
 
-    /// Installs the pipeline's detector (see [`crate::pipeline::load_detector`]).
+    /// Installs the pipeline's detector (see [`crate::pipeline::load_detector`]). Set it
+    /// before the first step.
     pub fn set_detector(&mut self, detect: Option<crate::detect::DetectStage>) {
-        self.pipeline.set_detector(detect);
-        self.update_rows();
+        self.detector = Some(detect);
+        self.rebuild();
     }
 
     /// `true`: the pipeline gets the objects' true image boxes instead of its detector's
-    /// (see [`SimCamera::set_truth_boxes`]).
+    /// (see [`super::camera::SimCamera::set_truth_boxes`]). Set it before the first step.
     pub fn set_truth_boxes(&mut self, on: bool) {
         self.truth_boxes = on;
-        self.camera.set_truth_boxes(on);
-        self.update_rows();
+        self.rebuild();
     }
 
     /// The pipeline.
-    pub fn pipeline(&self) -> &Pipeline {
-        &self.pipeline
+    pub fn pipeline(&self) -> &crate::pipeline::Pipeline {
+        self.session.pipeline()
     }
 
-    /// The frame rendered by the last step.
+    /// The frame rendered by the last step (with [`Simulation::set_full_frames`] `false`, a
+    /// black frame: only the rows the pipeline reads are rendered, and nobody keeps them).
     pub fn image(&self) -> &RgbImage {
-        self.camera.image()
+        &self.last
     }
 
     /// A copy of the vehicle's state.
@@ -172,19 +232,14 @@ impl Simulation {
         lock(&self.world).ended()
     }
 
-    /// One turn of the car's loop (see [`crate::drive`]). `timer` measures the pipeline's
-    /// stages.
-    pub fn step(&mut self, timer: &mut dyn StageTimer) -> StepOutput {
+    /// One turn of the car's loop (see [`crate::drive`]).
+    pub fn step(&mut self) -> StepOutput {
         loop {
-            let r = self.driver.step(&mut Parts {
-                source: &mut self.camera,
-                pipeline: &mut self.pipeline,
-                sink: &mut self.vehicle,
-                stop: &self.stop,
-                clock: &NoClock,
-                timer,
-                observer: &mut self.score,
-            });
+            let r = if self.full_frames {
+                self.session.step(&mut KeepImage(&mut self.last))
+            } else {
+                self.session.step(&mut NoObserver)
+            };
             match r {
                 Ok(Step::Frame(b)) => {
                     let (out, record) = *b;
@@ -208,13 +263,9 @@ impl Simulation {
     }
 
     /// Steps until the run ends, handing every step to `each`.
-    pub fn run<E>(
-        &mut self,
-        timer: &mut dyn StageTimer,
-        mut each: impl FnMut(&Simulation, &StepOutput) -> Result<(), E>,
-    ) -> Result<Summary, E> {
+    pub fn run<E>(&mut self, mut each: impl FnMut(&Simulation, &StepOutput) -> Result<(), E>) -> Result<Summary, E> {
         while self.ended().is_none() {
-            let s = self.step(timer);
+            let s = self.step();
             each(self, &s)?;
         }
         Ok(self.summary())

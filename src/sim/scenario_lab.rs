@@ -13,7 +13,6 @@ use super::run::{SimError, Simulation};
 use super::track::Track;
 use crate::config::Config;
 use crate::ranging::Pair;
-use crate::timing::NoTimer;
 
 /// The loop both lab roads share: a 6 m straight, a half circle of 3 m radius, the straight
 /// back and the half circle home (TOML `[[segments]]`).
@@ -83,7 +82,7 @@ pub fn calibration_pairs(cfg: &Config, n: usize, tape_sigma_m: f64, seed: u64) -
         let mut sim = Simulation::new(cfg, &track)?;
         sim.set_full_frames(false);
         sim.place_at(marker.pos[0] - MARKER[0] / 2.0 - d - lens_ahead);
-        let step = sim.step(&mut NoTimer);
+        let step = sim.step();
         // 2. The marker's box bottom, snapped to a pixel edge.
         let Some(b) = step.truth.objects.first() else {
             continue;
@@ -169,7 +168,7 @@ pub fn stop_sign_picture(cfg: &Config) -> image::RgbImage {
     let pose = pose_before_object(cfg, &track, 0.35).expect("the road has its sign");
     let scene = std::sync::Arc::new(super::scene::Scene::new(&track));
     let mount = CameraMount {
-        camera: crate::camera::PinholeCamera::from_config(&cfg.camera),
+        camera: crate::camera::PinholeCamera::from(&cfg.camera),
         x_m: cfg.vehicle.camera_x_m,
     };
     let mut r = Renderer::new(scene, mount, RenderOptions::clean());

@@ -42,7 +42,7 @@ impl StereoRig {
     /// each camera's noise is seeded differently.
     pub fn new(cfg: &Config, scene: Arc<Scene>, base_m: f64, opts: RenderOptions) -> StereoRig {
         let mount = |lat: f64| {
-            let mut cam = PinholeCamera::from_config(&cfg.camera);
+            let mut cam = PinholeCamera::from(&cfg.camera);
             cam.lateral_m = lat;
             CameraMount {
                 camera: cam,
@@ -135,9 +135,9 @@ pub fn sign_face_box(r: &Renderer, pose: &Pose, ob: &super::track::Object) -> Op
 /// `sim.stereo_error_deg` / `sim.stereo_error_k1` turn and bend this camera ([`LensWarp`]),
 /// as two real webcams are.
 pub fn other_camera(cfg: &Config, scene: Arc<Scene>, opts: RenderOptions) -> OtherCamera {
-    let mut cam = PinholeCamera::from_config(&cfg.camera);
+    let mut cam = PinholeCamera::from(&cfg.camera);
     let base = cfg.stereo.base_m;
-    cam.lateral_m = if cfg.stereo.reference != "right" { -base } else { base };
+    cam.lateral_m = if cfg.stereo.reference.is_left() { -base } else { base };
     let mut o = opts;
     o.seed = o.seed.wrapping_add(0x5EED);
     let lens = LensWarp::from_config(cfg).map(|l| (l, RgbImage::new(0, 0)));
@@ -184,7 +184,7 @@ impl LensWarp {
         if [yaw, pitch, roll, k1].iter().all(|&v| v == 0.0) {
             return None;
         }
-        Some(Self::new(&PinholeCamera::from_config(&cfg.camera), [yaw, pitch, roll], k1))
+        Some(Self::new(&PinholeCamera::from(&cfg.camera), [yaw, pitch, roll], k1))
     }
 
     /// The warp of `cam` turned by `[yaw, pitch, roll]` degrees (about the camera's y, x and

@@ -1,11 +1,19 @@
 //! Gain sweeps over one or two configuration keys (`rccar sim --sweep KEY=LO:HI:N`, given
 //! once for a line, twice for a grid): parsing an axis, the grid of runs, the chatter
-//! measure of a run's steering, and the CSV table. The runs themselves are
-//! [`super::run::Simulation`]s, driven in parallel by `src/cli/sim.rs`.
+//! measure of a run's steering, the runs themselves ([`run_all`]: [`super::run::Simulation`]s
+//! on a few threads) and the CSV table.
+//!
+//! A sweep can be stopped (Ctrl-C): a run that had not started is [`RunOutcome::NotRun`] and
+//! gets no row (its figures would be zeros, the best-looking row of the table); a run cut
+//! short keeps its row with end `interrupted`, its figures covering what it drove.
 //!
 //! Units: whatever the swept key's unit is ([`key_unit`]); metres and seconds for the scores.
 
-use super::run::{EndReason, Summary};
+use super::run::{EndReason, Simulation, Summary};
+use super::scene::Scene;
+use crate::config::Config;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
 /// A `--sweep` that cannot be understood.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -223,6 +231,113 @@ impl SweepRun {
     }
 }
 
+/// How one run of a sweep went.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RunOutcome {
+    /// Ran to its end.
+    Finished(SweepRun),
+    /// Stopped part-way by the stop request: its summary ends `interrupted` and covers what
+    /// ran.
+    Interrupted(SweepRun),
+    /// Never started: the stop request came first.
+    NotRun,
+    /// Could not run: the simulation could not be built, or it panicked (the message).
+    Failed(String),
+}
+
+impl RunOutcome {
+    /// The run's figures, when it ran at all.
+    pub fn run(&self) -> Option<&SweepRun> {
+        match self {
+            RunOutcome::Finished(r) | RunOutcome::Interrupted(r) => Some(r),
+            _ => None,
+        }
+    }
+}
+
+/// Runs `cfgs` (one per point of the sweep, `points[i]` its swept values) on `jobs` threads
+/// over one shared scene. `stop` is asked before each run starts and after every frame: once
+/// it says yes, running runs end at their next frame (interrupted) and no new run starts.
+/// `done(i, outcome)` is called from the worker as each run ends, in the order they end
+/// (progress lines). Returns the outcomes in the order of `cfgs`.
+pub fn run_all(
+    cfgs: &[Config],
+    points: &[Vec<f64>],
+    scene: Arc<Scene>,
+    jobs: usize,
+    stop: &(dyn Fn() -> bool + Sync),
+    done: &(dyn Fn(usize, &RunOutcome) + Sync),
+) -> Vec<RunOutcome> {
+    let next = AtomicUsize::new(0);
+    let results: Vec<Mutex<RunOutcome>> = cfgs.iter().map(|_| Mutex::new(RunOutcome::NotRun)).collect();
+    let one = |i: usize| -> RunOutcome {
+        let mut sim = match Simulation::with_scene(&cfgs[i], scene.clone()) {
+            Ok(s) => s,
+            Err(e) => return RunOutcome::Failed(e.to_string()),
+        };
+        sim.set_full_frames(false);
+        let mut chatter = Chatter::default();
+        let r = sim.run(|_, st| {
+            chatter.push(st.out.command.steer);
+            if stop() {
+                Err(())
+            } else {
+                Ok(())
+            }
+        });
+        let values = points.get(i).cloned().unwrap_or_default();
+        match r {
+            Ok(summary) => RunOutcome::Finished(SweepRun {
+                values,
+                summary,
+                steer_diff_rms: chatter.rms(),
+            }),
+            Err(()) => {
+                super::world::lock(sim.world()).interrupt();
+                RunOutcome::Interrupted(SweepRun {
+                    values,
+                    summary: sim.summary(),
+                    steer_diff_rms: chatter.rms(),
+                })
+            }
+        }
+    };
+    std::thread::scope(|s| {
+        for _ in 0..jobs.clamp(1, cfgs.len().max(1)) {
+            s.spawn(|| loop {
+                if stop() {
+                    break;
+                }
+                let i = next.fetch_add(1, Ordering::SeqCst);
+                if i >= cfgs.len() {
+                    break;
+                }
+                let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| one(i))).unwrap_or_else(|p| {
+                    let msg = p
+                        .downcast_ref::<&str>()
+                        .map(|s| s.to_string())
+                        .or_else(|| p.downcast_ref::<String>().cloned())
+                        .unwrap_or_default();
+                    RunOutcome::Failed(format!("the run panicked: {msg}"))
+                });
+                done(i, &out);
+                *results[i].lock().unwrap_or_else(|e| e.into_inner()) = out;
+            });
+        }
+    });
+    results
+        .into_iter()
+        .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()))
+        .collect()
+}
+
+/// The sweep's table: a header naming the swept keys, then one row per run that ran (a run
+/// cut short ends `interrupted`; a run that never started has no row).
+pub fn csv_outcomes(keys: &[&str], outcomes: &[RunOutcome]) -> String {
+    let runs: Vec<SweepRun> = outcomes.iter().filter_map(|o| o.run().cloned()).collect();
+    csv(keys, &runs)
+}
+
 /// The sweep's table: a header naming the swept keys, then one row per run.
 pub fn csv(keys: &[&str], runs: &[SweepRun]) -> String {
     let mut s = keys.join(",");
@@ -301,6 +416,68 @@ mod tests {
         assert_eq!(axis_label("vehicle.max_speed_mps"), "vehicle.max_speed_mps (m/s)");
         assert_eq!(axis_label("vehicle.wheelbase_m"), "vehicle.wheelbase_m (m)");
         assert_eq!(axis_label("lane.min_peak"), "lane.min_peak");
+    }
+
+    #[test]
+    fn a_stopped_sweep_has_no_rows_for_runs_that_never_started() {
+        use crate::sim::track::Track;
+        let track = Track::load(std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/config/tracks/default.toml"
+        )))
+        .unwrap();
+        let scene = Arc::new(Scene::new(&track));
+        let mut base = Config::default();
+        base.detect.enabled = false;
+        base.sim.laps = 0;
+        base.sim.max_seconds = 2.0;
+        let axes = parse_axes(&["steering.kp=0.5:2:6".into()]).unwrap();
+        let points = grid(&axes);
+        let cfgs: Vec<Config> = points
+            .iter()
+            .map(|p| base.with_override(&format!("steering.kp={}", p[0])).unwrap())
+            .collect();
+        // One thread: stop() is asked once before each run and once per frame, so answering
+        // yes from its 67th call on lets run 0 finish (calls 1..61) and cuts run 1 after 5
+        // frames (calls 62..66); runs 2.. never start.
+        let calls = AtomicUsize::new(0);
+        let order = Mutex::new(Vec::new());
+        let out = run_all(
+            &cfgs,
+            &points,
+            scene.clone(),
+            1,
+            &|| calls.fetch_add(1, Ordering::SeqCst) >= 66,
+            &|i, o| order.lock().unwrap().push((i, matches!(o, RunOutcome::Finished(_)))),
+        );
+        assert_eq!(
+            *order.lock().unwrap(),
+            [(0, true), (1, false)],
+            "progress as the runs ended"
+        );
+        let RunOutcome::Finished(first) = &out[0] else {
+            panic!("{:?}", out[0])
+        };
+        assert_eq!(first.summary.frames, 60);
+        assert_eq!(first.summary.end, EndReason::TimeUp);
+        let RunOutcome::Interrupted(cut) = &out[1] else {
+            panic!("{:?}", out[1])
+        };
+        assert_eq!(cut.summary.end, EndReason::Interrupted);
+        assert_eq!(cut.summary.frames, 5);
+        assert!(out[2..].iter().all(|o| *o == RunOutcome::NotRun), "{out:?}");
+        let table = csv_outcomes(&["steering.kp"], &out);
+        let rows: Vec<&str> = table.lines().skip(1).collect();
+        assert_eq!(rows.len(), 2, "{table}");
+        assert!(
+            rows[0].starts_with("0.5,0,,") && rows[0].ends_with(",time_up"),
+            "{table}"
+        );
+        assert!(rows[1].ends_with(",interrupted"), "{table}");
+        // Not stopped: every run, in order, the same figures as run alone.
+        let all = run_all(&cfgs[..2], &points[..2], scene, 2, &|| false, &|_, _| {});
+        assert_eq!(all[0], out[0]);
+        assert!(matches!(&all[1], RunOutcome::Finished(r) if r.values == [0.8]));
     }
 
     #[test]

@@ -247,7 +247,7 @@ mod tests {
         let cfg = Config::default();
         let track = Track::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("config/tracks/default.toml")).unwrap();
         let mount = CameraMount {
-            camera: PinholeCamera::from_config(&cfg.camera),
+            camera: PinholeCamera::from(&cfg.camera),
             x_m: cfg.vehicle.camera_x_m,
         };
         let tm = TruthModel::new(&cfg, mount).unwrap();

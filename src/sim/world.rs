@@ -21,6 +21,7 @@
 //!
 //! Units: metres, seconds, radians.
 
+pub use super::camera::SimCamera;
 use super::render::ObjectBox;
 use super::render::{CameraMount, RenderOptions, Renderer};
 use super::scene::Scene;
@@ -32,10 +33,9 @@ use crate::config::Config;
 use crate::control::behaviour::LightColor;
 use crate::control::Command;
 use crate::drive::{Flow, FrameContext, LoopError, Observer};
-use crate::pipeline::{FrameOutput, GivenBox, RowPlan};
+use crate::pipeline::{FrameOutput, GivenBox};
 use crate::ranging::ObjectClass;
 use crate::sink::{CommandSink, SinkError};
-use crate::source::{Frame, FrameError, FrameSource};
 use image::RgbImage;
 use serde::Serialize;
 use std::ops::Range;
@@ -152,7 +152,7 @@ impl World {
     /// A car at rest at the start of the scene's track, centred in its lane, under `cfg`.
     pub fn new(cfg: &Config, scene: Arc<Scene>) -> Result<World, crate::lane::warp::WarpError> {
         let mount = CameraMount {
-            camera: PinholeCamera::from_config(&cfg.camera),
+            camera: PinholeCamera::from(&cfg.camera),
             x_m: cfg.vehicle.camera_x_m,
         };
         let renderer = Renderer::new(scene.clone(), mount, RenderOptions::from_config(&cfg.sim));
@@ -480,135 +480,6 @@ impl World {
 
 }
 
-/// The simulated car's camera, lock-step: frame k at `k / fps`, rendered from the car's pose.
-pub struct SimCamera {
-    world: SharedWorld,
-    image: RgbImage,
-    frame: u64,
-    fps: f64,
-    /// Rows to render: `None` = all (recording, viewing, detection).
-    rows: Option<Range<usize>>,
-    /// Rows to render per frame, from the pipeline (overrides `rows`), and the camera frame
-    /// at which the plan was made.
-    plan: Option<(RowPlan, u64)>,
-    truth_boxes: bool,
-    end_with_world: bool,
-    /// A stereo pair's other camera and its image (src/sim/stereo.rs `other_camera`).
-    other: Option<(super::stereo::OtherCamera, RgbImage)>,
-}
-
-impl SimCamera {
-    /// The camera of `world`.
-    pub fn new(world: SharedWorld) -> SimCamera {
-        let (w, h, fps) = {
-            let g = lock(&world);
-            (g.cfg.camera.width, g.cfg.camera.height, g.fps)
-        };
-        SimCamera {
-            world,
-            image: RgbImage::new(w, h),
-            frame: 0,
-            fps,
-            rows: None,
-            plan: None,
-            truth_boxes: false,
-            end_with_world: true,
-            other: None,
-        }
-    }
-
-    /// A second camera (`sim::stereo::other_camera`): each frame then carries its view of
-    /// the same moment in [`Frame::other`] (rendered over the same rows as the reference),
-    /// for stereo ranging in the drive loop. `None`: one camera (the default).
-    pub fn set_other(&mut self, other: Option<super::stereo::OtherCamera>) {
-        self.other = other.map(|r| {
-            let (w, h) = (self.image.width(), self.image.height());
-            (r, RgbImage::new(w, h))
-        });
-    }
-
-    /// `false`: keep rendering after the world's run has ended (a caller stepping frame by
-    /// frame decides when to stop). Default `true`: the source ends with the run.
-    pub fn ending_with_world(mut self, on: bool) -> Self {
-        self.end_with_world = on;
-        self
-    }
-
-    /// Renders only `rows` (the rows the pipeline reads, see [`roi_rows`]) or every row
-    /// (`None`, the default). The pipeline decides exactly as on full frames when it reads
-    /// nothing else.
-    pub fn set_rows(&mut self, rows: Option<Range<usize>>) {
-        self.rows = rows;
-        self.plan = None;
-    }
-
-    /// Renders, frame by frame, only the rows the pipeline reads on that frame
-    /// ([`crate::pipeline::Pipeline::row_plan`], made just before the pipeline's next step,
-    /// which gets this camera's next frame): the lane's rows, plus the detection rows on
-    /// frames where detection runs. The pipeline decides exactly as on full frames. `None`:
-    /// back to [`SimCamera::set_rows`]'s all rows.
-    pub fn set_row_plan(&mut self, plan: Option<RowPlan>) {
-        self.rows = None;
-        self.plan = plan.map(|p| (p, self.frame));
-    }
-
-    /// `true`: each frame carries the objects' true image boxes (a sign's face, a light's
-    /// housing, an obstacle's box; bottom-clipped boxes left out) with the true light colour,
-    /// for the pipeline to use instead of its detector's.
-    pub fn set_truth_boxes(&mut self, on: bool) {
-        self.truth_boxes = on;
-    }
-
-    /// The last rendered image.
-    pub fn image(&self) -> &RgbImage {
-        &self.image
-    }
-}
-
-impl FrameSource for SimCamera {
-    fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
-        let mut w = lock(&self.world);
-        if self.end_with_world && w.ended().is_some() {
-            return None;
-        }
-        let t = self.frame as f64 / self.fps;
-        let truth = match &self.plan {
-            Some((plan, base)) => w.render_spans(self.frame, t, &mut self.image, plan.rows(self.frame - base)),
-            None => w.render(self.frame, t, &mut self.image, self.rows.clone()),
-        };
-        let given = self.truth_boxes.then(|| w.given_boxes(&truth, t));
-        let other = match &mut self.other {
-            Some((r, img)) => {
-                let spans = match &self.plan {
-                    Some((plan, base)) => plan.rows(self.frame - base).to_vec(),
-                    None => vec![self.rows.clone().unwrap_or(0..img.height() as usize)],
-                };
-                let pose = w.vehicle.pose;
-                super::stereo::render_spans(r, &pose, t, self.frame, img, &spans, w.cfg.sim.blur_px);
-                Some(img.clone())
-            }
-            None => None,
-        };
-        drop(w);
-        let mut f = Frame::new(
-            self.frame,
-            t,
-            format!("frame_{:06}.png", self.frame),
-            self.image.clone(),
-        );
-        f.truth = serde_json::to_value(&truth).ok();
-        f.given = given;
-        f.other = other.map(|image| crate::source::OtherView {
-            image,
-            name: f.name.clone(),
-            skew_s: 0.0,
-            pairs_dropped: 0,
-        });
-        self.frame += 1;
-        Some(Ok(f))
-    }
-}
-
 /// The simulated car's actuators, lock-step: each command drives the car for one frame period.
 pub struct SimVehicle {
     world: SharedWorld,
@@ -622,9 +493,9 @@ impl SimVehicle {
 }
 
 impl CommandSink for SimVehicle {
-    fn send(&mut self, cmd: Command, _now_s: f64) -> Result<(), SinkError> {
+    fn send(&mut self, cmd: Command, _now_s: f64) -> Result<Command, SinkError> {
         lock(&self.world).step_frame(cmd);
-        Ok(())
+        Ok(cmd)
     }
 
     /// Neutral without moving time on: the lock-step car only moves when a frame's command
@@ -633,6 +504,9 @@ impl CommandSink for SimVehicle {
         Ok(())
     }
 }
+
+/// Nothing to arm: the simulated car moves whenever a command arrives.
+impl crate::sink::Actuators for SimVehicle {}
 
 /// The score of a run, as an observer of the loop: it ends the run when the world says so.
 pub struct SimScore {

@@ -254,10 +254,10 @@ impl StereoGeometry {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::CameraConfig;
 
+    /// The shipped camera (`[camera]`) with the shipped base.
     fn geo() -> StereoGeometry {
-        StereoGeometry::ideal(&PinholeCamera::from_config(&CameraConfig::default()), 0.06)
+        StereoGeometry::ideal(&PinholeCamera::new(320, 240, 62.2, 0.20, 20.0), 0.06)
     }
 
     /// A point at depth Z and lateral X projects to x = c + f·X/Z in the left camera and

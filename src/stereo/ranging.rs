@@ -21,7 +21,6 @@
 
 use super::matching::{opponent_from_rgb_rows, Matcher, StereoMatch};
 use super::{MatchOptions, NoRange, StereoGeometry};
-use crate::config::Config;
 use crate::detect::Rect;
 use crate::lane::warp::rgb_to_gray_rows;
 use crate::ranging::{BoxRange, ObjectClass};
@@ -140,24 +139,13 @@ pub struct StereoRanging {
 }
 
 impl StereoRanging {
-    /// For an ideal, rectified pair of `cfg`'s camera with `[stereo]`'s base and reference.
-    pub fn from_config(cfg: &Config) -> Self {
-        let cam = crate::camera::PinholeCamera::from_config(&cfg.camera);
-        Self::with_geometry(cfg, StereoGeometry::ideal(&cam, cfg.stereo.base_m))
-    }
-
-    /// With the geometry of a calibration (`StereoGeometry::from_calibration`).
-    pub fn with_geometry(cfg: &Config, geometry: StereoGeometry) -> Self {
-        let left = cfg.stereo.reference != "right";
+    /// For a pair of `geometry` (e.g. `StereoGeometry::ideal`, taken as rectified), matched
+    /// with `options`, whose `reference_left` says which camera is the reference
+    /// (`Config::stereo_ranging` builds the one of car.toml).
+    pub fn new(geometry: StereoGeometry, options: MatchOptions) -> Self {
+        let left = options.reference_left;
         Self {
-            options: MatchOptions {
-                max_disparity: cfg.stereo.max_disparity_px,
-                min_score: cfg.stereo.min_ncc,
-                near_peak_ratio: cfg.stereo.near_peak_ratio,
-                reject_repeats: cfg.stereo.reject_repeats,
-                reference_left: left,
-                ..MatchOptions::default()
-            },
+            options,
             disparity_sigma_px: 0.25,
             reference_lateral_m: if left { 1.0 } else { -1.0 } * geometry.base_m / 2.0,
             geometry,
@@ -171,11 +159,12 @@ impl StereoRanging {
 
     /// For a calibrated pair: the geometry of the rectified camera and the rectification of
     /// every pair ([`super::rectify::PairRectifier`]), from the file `rccar calibrate stereo`
-    /// wrote (loaded by the caller, e.g. [`crate::pipeline::Pipeline::new`]).
-    pub fn with_calibration(cfg: &Config, st: &crate::calib::file::StereoCalibration) -> Self {
-        let left = cfg.stereo.reference != "right";
-        let geometry = StereoGeometry::from_calibration(st, cfg.camera.tilt_deg.to_radians(), left);
-        let mut s = Self::with_geometry(cfg, geometry);
+    /// wrote (loaded by the caller, e.g. [`crate::pipeline::Pipeline::new`]); the cameras are
+    /// tilted down by `tilt_rad`, and matched with `options`.
+    pub fn with_calibration(st: &crate::calib::file::StereoCalibration, tilt_rad: f64, options: MatchOptions) -> Self {
+        let left = options.reference_left;
+        let geometry = StereoGeometry::from_calibration(st, tilt_rad, left);
+        let mut s = Self::new(geometry, options);
         s.rectifier = Some(super::rectify::PairRectifier::new(st, left));
         s
     }

@@ -252,12 +252,15 @@ mod tests {
             (ObjectClass::TrafficLight, Rect { x: 140, y: 30, width: 20, height: 30 }),
         ];
         let rects: Vec<Rect> = boxes.iter().map(|b| b.1).collect();
-        let cfg = crate::config::Config::default();
+        // The shipped camera (`[camera]`: 62.2° across 320 px, tilted 20°) and `[stereo]`.
+        let (opts, tilt) = (crate::stereo::MatchOptions::default(), 20f64.to_radians());
+        let camera = crate::camera::PinholeCamera::new(320, 240, 62.2, 0.20, 20.0);
+        let ideal = crate::stereo::StereoGeometry::ideal(&camera, 0.06);
         let mut ranged = 0;
         for calibrated in [false, true] {
             let new = || match calibrated {
-                true => StereoRanging::with_calibration(&cfg, &st),
-                false => StereoRanging::from_config(&cfg),
+                true => StereoRanging::with_calibration(&st, tilt, opts),
+                false => StereoRanging::new(ideal, opts),
             };
             let (mut whole, mut rows) = (new(), new());
             whole.set_pair(&left, &right);

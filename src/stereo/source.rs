@@ -61,6 +61,13 @@ impl<L: FrameSource, R: FrameSource> StereoSource<L, R> {
         self.dropped
     }
 
+    /// Why either side cannot be used at all (see [`FrameSource::fatal`]).
+    pub fn fatal(&self) -> Option<String> {
+        self.left.fatal().map(|e| format!("{}: {e}", self.labels[0])).or_else(|| {
+            self.right.fatal().map(|e| format!("{}: {e}", self.labels[1]))
+        })
+    }
+
     /// The next pair, an error for one unusable frame, or `None` when either side ends.
     pub fn next_pair(&mut self) -> Option<Result<StereoFrame, FrameError>> {
         let mut l = match self.left.next_frame()? {

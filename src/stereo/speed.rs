@@ -95,11 +95,10 @@ impl RelativeSpeed {
 mod tests {
     use super::*;
     use crate::camera::PinholeCamera;
-    use crate::config::Config;
 
     #[test]
     fn constant_approach_gives_its_speed() {
-        let cam = PinholeCamera::from_config(&Config::default().camera);
+        let cam = PinholeCamera::new(320, 240, 62.2, 0.20, 20.0);
         let geo = StereoGeometry::ideal(&cam, 0.06);
         let (u, v) = (geo.cx, geo.cy);
         let mut s = RelativeSpeed::new(5, 5);

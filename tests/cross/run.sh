@@ -48,13 +48,9 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 echo "toolchain: $(/usr/bin/rustc --version), $(aarch64-linux-gnu-gcc --version | head -1), $(qemu-aarch64 --version | head -1)"
 
-# ---- features: serial always; gpio once Cargo.toml declares it -----------------------
-FEATURES=serial
-if awk '/^\[features\]/{f=1;next} /^\[/{f=0} f && /^gpio[ \t]*=/{found=1} END{exit !found}' Cargo.toml; then
-  FEATURES=serial,gpio
-else
-  echo "note: Cargo.toml declares no 'gpio' feature yet: building without it"
-fi
+# ---- features: the car's (serial, gpio, the dashboard's axum/hyper/tokio server) -----
+# `camera` is built apart below (libclang); jpeg-turbo is not needed on the car.
+FEATURES=serial,gpio,dashboard
 CAMERA=${RCCAR_CROSS_CAMERA:-1}
 if [ "$CAMERA" != 0 ] && ! ls /usr/lib/llvm-*/lib/libclang*.so* >/dev/null 2>&1; then
   fail "missing: libclang-dev (bindgen, for --features camera)"; CAMERA=0

@@ -12,7 +12,15 @@ package), and checks what a student would see and do:
 3. EMERGENCY STOP clicked while armed: the throttle the simulated car gets is 0 within
    100 ms of the click (wall and simulated time reported), and the space bar does the same;
 4. pause / step / resume act on the loop (one step = exactly one frame);
-5. "save" writes exactly that key into the temp local.toml and keeps its comment.
+5. "save" writes exactly that key into the temp local.toml and keeps its comment;
+6. (issue 24) a page served from a second local origin (python's http.server on another
+   port of 127.0.0.1) tries fetch() POSTs (a text/plain no-cors one, a JSON one that needs a
+   CORS preflight, a form) to release, arm, set kp = 20 and save, and to read the page's
+   secret: the car stays disarmed, kp and local.toml are unchanged, and the server logged
+   every refusal with the attacking origin on stderr and counts them in /api/state.
+
+The cross-origin part (6), the page loading and an e-stop click are also run against
+`rccar drive --camera sim --dry-run --dashboard` (the car's own loop).
 
 Screenshots go to the output folder (not committed); `--screenshot PATH` also writes one
 there (docs/img/dashboard.png). Prints "N passed, N failed"; exit 1 on any failure.
@@ -185,6 +193,7 @@ def main():
         wd.go(base + "/")
         shown = wait(lambda: wd.js("return document.getElementById('s-steering.kp') !== null"), 20, 0.1)
         check("page loads and builds the sliders", bool(shown))
+        cross_origin(wd, base, local, os.path.join(tmp, "sim.log"), tmp, "sim")
 
         # 1. Frames arrive in the <img> (the only viewer).
         s0 = _state(base)
@@ -311,6 +320,8 @@ def main():
             wd.screenshot(a.screenshot)
         print(f"screenshots in {tmp}")
         check("the sim is still running", sim.poll() is None)
+        sim.terminate()
+        drive_suite(a, wd, cfgdir, tmp, procs)
     finally:
         if wd:
             wd.quit()
@@ -325,6 +336,112 @@ def main():
         else:
             print(f"kept {tmp}")
     print(f"{passed} passed, {failed} failed")
+
+
+ATTACK_PAGE = """<!doctype html><meta charset="utf-8"><title>another local origin</title>
+<form id="f" method="post" action="TARGET/api/arm" target="sink" enctype="text/plain">
+<input name="x" value="y"></form><iframe name="sink"></iframe>
+<script>
+const T = "TARGET", out = {};
+async function go() {
+  for (const [path, body] of [["/api/release", ""], ["/api/arm", ""],
+                              ["/api/set", '{"key":"steering.kp","value":20}'], ["/api/save", ""]]) {
+    // A "simple" request: sent without a preflight, the answer unreadable (no-cors).
+    try { await fetch(T + path, {method: "POST", mode: "no-cors", body,
+                                 headers: {"Content-Type": "text/plain"}}); out[path + " no-cors"] = "sent"; }
+    catch (e) { out[path + " no-cors"] = "error " + e; }
+    // JSON with a guessed secret: the browser must ask first (CORS preflight).
+    try { const r = await fetch(T + path, {method: "POST", body,
+                                 headers: {"Content-Type": "application/json", "X-Rccar-Secret": "0123456789abcdef0123456789abcdef"}});
+          out[path + " cors"] = "status " + r.status; }
+    catch (e) { out[path + " cors"] = "blocked"; }
+  }
+  // The page's secret: a cross-origin read must fail.
+  try { const r = await fetch(T + "/"); out["read page"] = "read " + (await r.text()).length + " bytes"; }
+  catch (e) { out["read page"] = "blocked"; }
+  document.getElementById("f").submit();
+  await new Promise(r => setTimeout(r, 500));
+  window.done = out;
+}
+go();
+</script>
+"""
+
+
+def cross_origin(wd, base, local, log_path, tmp, label):
+    """A page from a second local origin tries to arm, set and save: nothing changes, and the
+    server logs every refusal with that origin."""
+    site = os.path.join(tmp, f"attacker-{label}")
+    os.makedirs(site, exist_ok=True)
+    with open(os.path.join(site, "index.html"), "w") as f:
+        f.write(ATTACK_PAGE.replace("TARGET", base))
+    aport = free_port()
+    srv = subprocess.Popen([sys.executable, "-m", "http.server", str(aport), "--bind", "127.0.0.1",
+                            "--directory", site], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        wait(lambda: _ok(f"http://127.0.0.1:{aport}/index.html"), 10, 0.1)
+        before = _state(base)
+        toml_before = open(local).read()
+        refused0 = before["refused"]["count"] if before and "refused" in before else 0
+        origin = f"http://127.0.0.1:{aport}"
+        wd.go(origin + "/index.html")
+        done = wait(lambda: wd.js("return window.done || null"), 20, 0.1)
+        check(f"[{label}] the second origin's page ran its requests", bool(done), json.dumps(done))
+        time.sleep(0.5)
+        st = _state(base)
+        changed = {k: v for k, v in st["values"].items() if before["values"].get(k) != v}
+        check(f"[{label}] cross-origin: the car stays disarmed, nothing set or saved",
+              not st["armed"] and not changed and st["changed"] == {} and open(local).read() == toml_before,
+              f"armed {st['armed']}, values changed {changed}, changed keys {st['changed']}, "
+              f"local.toml {'unchanged' if open(local).read() == toml_before else 'WRITTEN'}")
+        check(f"[{label}] cross-origin: the page's secret could not be read",
+              bool(done) and done.get("read page") == "blocked", str(done and done.get("read page")))
+        n = st.get("refused", {}).get("count", 0) - refused0
+        log = open(log_path, errors="replace").read()
+        lines = [l for l in log.splitlines() if "refused" in l and f"Origin {origin}" in l]
+        paths = {p for p in ("/api/arm", "/api/set", "/api/save", "/api/release") if any(f" {p} " in l for l in lines)}
+        check(f"[{label}] cross-origin: every request refused and logged with its origin",
+              n >= 9 and len(paths) == 4 and any("refused OPTIONS" in l for l in lines),
+              f"{n} refused (4 simple POSTs, 4 preflights, 1 form); {len(lines)} stderr lines name {origin}, "
+              f"e.g. {lines[0] if lines else '-'}")
+    finally:
+        srv.terminate()
+        srv.wait(10)
+        # Back to the dashboard for the checks that follow.
+        wd.go(base + "/")
+        wait(lambda: wd.js("return document.getElementById('s-steering.kp') !== null"), 20, 0.1)
+
+
+def drive_suite(a, wd, cfgdir, tmp, procs):
+    """`rccar drive --camera sim --dry-run --dashboard`: page, cross-origin refusals, e-stop."""
+    port = free_port()
+    local = os.path.join(cfgdir, "local.toml")
+    log = os.path.join(tmp, "drive.log")
+    drive = subprocess.Popen(
+        [a.rccar, "drive", "--camera", "sim", "--dry-run", "--dashboard", "--listen", f"127.0.0.1:{port}",
+         "--config", os.path.join(cfgdir, "car.toml"), "--local", local, "--seconds", "120",
+         "-o", os.path.join(tmp, "drive-out")],
+        cwd=ROOT, stdout=open(log, "w"), stderr=subprocess.STDOUT)
+    procs.append(drive)
+    base = f"http://127.0.0.1:{port}"
+    up = wait(lambda: _state(base), 30, 0.1)
+    check("drive --camera sim --dry-run --dashboard serves /api/state", bool(up), f"port {port}")
+    if not up:
+        print(open(log).read()[-2000:])
+        return
+    wd.go(base + "/")
+    shown = wait(lambda: wd.js("return document.getElementById('s-steering.kp') !== null"), 20, 0.1)
+    check("[drive] page loads and builds the sliders", bool(shown))
+    cross_origin(wd, base, local, log, tmp, "drive")
+    wd.click(wd.find("#arm"))
+    armed = wait(lambda: (_state(base) or {}).get("armed"), 5)
+    wd.click(wd.find("#estop"))
+    stopped = wait(lambda: (lambda s: s and s["estop"] and not s["armed"])(_state(base)), 5)
+    check("[drive] the page arms, then its EMERGENCY STOP stops", bool(armed) and bool(stopped),
+          f"armed {bool(armed)}, e-stop {bool(stopped)}")
+    ended = drive.poll()
+    check("[drive] still running after the checks", ended is None,
+          "ended by itself: " + open(log).read()[-300:] if ended is not None else "")
 
 
 def link_config(dst):

@@ -7,8 +7,8 @@ windows of the same run:
 
   A. no viewers, no requests            (--seconds each, default 60)
   B. 20 MJPEG viewers + 50 API requests/s, half of them bad (malformed JSON, NaN, unknown
-     keys, out-of-range values, unknown paths, oversized bodies) and half good (state,
-     heartbeat, valid gains)
+     keys, out-of-range values, unknown paths, oversized bodies, a cross-origin arm) and half
+     good (state, heartbeat, valid gains)
 
 and prints the medians and their change, the sim process's RSS over time, the frames every
 viewer received and the status codes the requests got.
@@ -57,7 +57,7 @@ def rss_kb(pid):
 def viewer(host, port, stop, counts, i):
     try:
         s = socket.create_connection((host, port), timeout=10)
-        s.sendall(b"GET /stream.mjpg HTTP/1.1\r\nHost: x\r\n\r\n")
+        s.sendall(b"GET /stream.mjpg HTTP/1.1\r\nHost: " + f"{host}:{port}".encode() + b"\r\n\r\n")
         tail = b""
         while not stop.is_set():
             d = s.recv(65536)
@@ -75,6 +75,9 @@ def viewer(host, port, stop, counts, i):
 
 
 def raw(host, port, data):
+    # One request per connection (the server keeps connections alive otherwise).
+    line, rest = data.split(b"\r\n", 1)
+    data = line + b"\r\nConnection: close\r\n" + rest
     s = socket.create_connection((host, port), timeout=5)
     s.sendall(data)
     buf = b""
@@ -93,24 +96,36 @@ def raw(host, port, data):
         return 0
 
 
+# The page's secret (read from the page in main): controls need it, JSON and the right Host.
+SECRET = ""
+
+
 def post(host, port, path, body):
     b = body.encode()
-    return raw(host, port, b"POST " + path.encode() + b" HTTP/1.1\r\nHost: x\r\nContent-Length: "
-               + str(len(b)).encode() + b"\r\n\r\n" + b)
+    head = (f"POST {path} HTTP/1.1\r\nHost: {host}:{port}\r\nContent-Type: application/json\r\n"
+            f"X-Rccar-Secret: {SECRET}\r\nContent-Length: {len(b)}\r\n\r\n")
+    return raw(host, port, head.encode() + b)
+
+
+def get(host, port, path):
+    return raw(host, port, f"GET {path} HTTP/1.1\r\nHost: {host}:{port}\r\n\r\n".encode())
 
 
 REQUESTS = [
-    ("good state", lambda h, p: raw(h, p, b"GET /api/state?since=1e300 HTTP/1.1\r\n\r\n")),
+    ("good state", lambda h, p: get(h, p, "/api/state?since=1e300")),
     ("good heartbeat", lambda h, p: post(h, p, "/api/heartbeat", "")),
     ("good kd", lambda h, p: post(h, p, "/api/set", '{"key":"steering.kd","value":0.05}')),
-    ("good state", lambda h, p: raw(h, p, b"GET /api/state HTTP/1.1\r\n\r\n")),
+    ("good state", lambda h, p: get(h, p, "/api/state")),
     ("good heartbeat", lambda h, p: post(h, p, "/api/heartbeat", "")),
     ("bad json", lambda h, p: post(h, p, "/api/set", '{"key":"steering.kp","value":')),
     ("bad nan", lambda h, p: post(h, p, "/api/set", '{"key":"steering.kp","value":NaN}')),
     ("bad key", lambda h, p: post(h, p, "/api/set", '{"key":"camera.fps","value":5}')),
     ("bad range", lambda h, p: post(h, p, "/api/set", '{"key":"steering.kp","value":99}')),
-    ("bad path", lambda h, p: raw(h, p, b"GET /../../etc/passwd HTTP/1.1\r\n\r\n")),
-    ("bad huge", lambda h, p: raw(h, p, b"POST /api/set HTTP/1.1\r\nContent-Length: 99999999\r\n\r\n")),
+    ("bad path", lambda h, p: get(h, p, "/../../etc/passwd")),
+    ("bad huge", lambda h, p: raw(h, p, f"POST /api/set HTTP/1.1\r\nHost: {h}:{p}\r\nContent-Type: application/json\r\n"
+                                        f"X-Rccar-Secret: {SECRET}\r\nContent-Length: 99999999\r\n\r\n".encode())),
+    ("bad origin", lambda h, p: raw(h, p, f"POST /api/arm HTTP/1.1\r\nHost: {h}:{p}\r\nOrigin: http://evil.example\r\n"
+                                          "Content-Type: text/plain\r\nContent-Length: 0\r\n\r\n".encode())),
 ]
 
 
@@ -158,6 +173,8 @@ def main():
     for name in os.listdir(src):  # tracks, cascades: resolved relative to the config file
         if name not in ("car.toml", "local.toml") and not name.endswith(".local.toml"):
             os.symlink(os.path.join(src, name), os.path.join(tmp, name))
+    with open(os.path.join(tmp, "local.toml"), "w") as f:  # --local must exist
+        f.write("# load bench\n")
     port = free_port()
     host = "127.0.0.1"
     base = f"http://{host}:{port}"
@@ -174,6 +191,10 @@ def main():
                 break
             except (OSError, ValueError, urllib.error.URLError):
                 time.sleep(0.1)
+        global SECRET
+        with urllib.request.urlopen(base + "/", timeout=5) as r:
+            page = r.read().decode()
+        SECRET = page.split('name="rccar-secret" content="')[1].split('"')[0]
         # Arm, with a heartbeat thread in phase A too (phase B's load sends them as well).
         post(host, port, "/api/arm", "")
         hb_stop = threading.Event()

@@ -1,7 +1,13 @@
 //! Test support: starts the simavr harness (`firmware/build/rccar_sim`) on the real firmware
 //! .elf, each instance on its own pty link path, and collects what it reports (pulse widths on
-//! D9/D10 and host frames at the UART, in simulated µs). Shared by tests/link_hil.rs and
-//! benches/link_bench.rs.
+//! D9/D10 and host frames at the UART, in simulated µs). Shared by tests/link_hil.rs,
+//! tests/drive_fil.rs and benches/link_bench.rs.
+//!
+//! Waiting: the emulator runs at about wall-clock speed, slower on a busy machine. A test
+//! never sleeps a fixed wall-clock time to let the firmware do something: it waits for the
+//! report to show it ([`Sim::wait_until`]) or for the firmware's own clock to pass a time
+//! ([`Sim::now_us`], [`Sim::wait_sim_us`]: the harness's `mark` command), each with a generous
+//! wall-clock deadline.
 #![allow(dead_code)]
 
 use std::io::{BufRead, BufReader, Write};
@@ -21,7 +27,12 @@ pub enum Event {
     Reset { t_us: f64 },
     /// The CPU was sent into a `cli; rjmp .` loop at time µs (a hung firmware).
     Hang { t_us: f64 },
+    /// The simulated time µs when the harness handled a `mark` from stdin.
+    Mark { t_us: f64 },
 }
+
+/// How long a wait for the emulator may take on a busy machine before the test fails.
+pub const SIM_DEADLINE: Duration = Duration::from_secs(60);
 
 /// Builds the firmware and the harness once per test binary (`make -C firmware all sim`).
 pub fn build_firmware() -> PathBuf {
@@ -48,7 +59,7 @@ pub fn build_firmware() -> PathBuf {
 /// A running emulator. Killed on drop.
 pub struct Sim {
     child: Child,
-    stdin: ChildStdin,
+    stdin: Mutex<ChildStdin>,
     /// The pty path to open (a symlink of our own).
     pub tty: String,
     events: Arc<Mutex<Vec<Event>>>,
@@ -112,17 +123,18 @@ impl Sim {
                     ["HANG", at] => Event::Hang {
                         t_us: at.parse().unwrap_or(f64::NAN),
                     },
+                    ["MARK", at] => Event::Mark {
+                        t_us: at.parse().unwrap_or(f64::NAN),
+                    },
                     _ => continue,
                 };
                 ev.lock().unwrap().push(e);
             }
         });
-        let tty = rx
-            .recv_timeout(Duration::from_secs(10))
-            .expect("harness printed no PTY line");
+        let tty = rx.recv_timeout(SIM_DEADLINE).expect("harness printed no PTY line");
         Sim {
             child,
-            stdin,
+            stdin: Mutex::new(stdin),
             tty,
             events,
         }
@@ -180,8 +192,61 @@ impl Sim {
 
     /// Hangs the firmware (interrupts off, endless loop): only the watchdog can save it.
     pub fn hang(&mut self) {
-        let _ = writeln!(self.stdin, "hang");
-        let _ = self.stdin.flush();
+        self.command("hang");
+    }
+
+    fn command(&self, line: &str) {
+        let mut s = self.stdin.lock().unwrap();
+        let _ = writeln!(s, "{line}");
+        let _ = s.flush();
+    }
+
+    /// The MARK times reported so far (simulated µs).
+    fn marks(&self) -> Vec<f64> {
+        self.events()
+            .into_iter()
+            .filter_map(|e| match e {
+                Event::Mark { t_us } => Some(t_us),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The firmware's clock now (simulated µs): asks the harness (`mark`) and waits for its
+    /// answer. Called right after something the test did (a kill, a write), it bounds in the
+    /// firmware's time when that happened: no earlier than the answer.
+    pub fn now_us(&self) -> f64 {
+        let n = self.marks().len();
+        self.command("mark");
+        let end = Instant::now() + SIM_DEADLINE;
+        loop {
+            if let Some(&t) = self.marks().get(n) {
+                return t;
+            }
+            assert!(
+                Instant::now() < end,
+                "the harness did not answer `mark` in {SIM_DEADLINE:?}"
+            );
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    /// Waits until the firmware's clock has passed `t_us` (simulated µs), however slowly the
+    /// emulator runs on a busy machine (fails after [`SIM_DEADLINE`] of wall-clock time).
+    /// Returns the simulated time reached.
+    pub fn wait_sim_us(&self, t_us: f64) -> f64 {
+        let end = Instant::now() + SIM_DEADLINE;
+        loop {
+            let now = self.now_us();
+            if now >= t_us {
+                return now;
+            }
+            assert!(
+                Instant::now() < end,
+                "the emulator did not reach {t_us:.0} µs in {SIM_DEADLINE:?} (at {now:.0} µs)"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
     }
 
     /// The harness's process id (to kill it as a pulled plug would).
@@ -202,8 +267,7 @@ impl Sim {
 
     /// Resets the emulated AVR (as a reset button would).
     pub fn reset(&mut self) {
-        let _ = writeln!(self.stdin, "reset");
-        let _ = self.stdin.flush();
+        self.command("reset");
     }
 }
 

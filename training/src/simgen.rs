@@ -266,7 +266,7 @@ impl SimGen {
     pub fn new(track_file: &Path, cfg: Config) -> Result<SimGen, GenError> {
         let track = Track::load(track_file).map_err(|e| GenError::Track(e.to_string()))?;
         let mount = CameraMount {
-            camera: PinholeCamera::from_config(&cfg.camera),
+            camera: PinholeCamera::from(&cfg.camera),
             x_m: cfg.vehicle.camera_x_m,
         };
         Ok(SimGen {

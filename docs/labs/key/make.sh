@@ -1,22 +1,39 @@
 #!/usr/bin/env bash
-# The teacher's key of the labs (docs/labs/*.md): reruns a short version of each lab's
-# experiment and writes the expected figures, each with the command that produced it and the
-# tolerance within which a rerun must agree, to OUT/key.json and OUT/key.md.
+# The teacher's key of the labs (docs/labs/*.md): reruns every experiment whose result a lab
+# page quotes, with the page's own command (plus --no-local, so a student's config/local.toml
+# cannot change it), and writes each figure with that command and the tolerance within which a
+# rerun must agree, to OUT/key.json and OUT/key.md.
 #
 #   bash docs/labs/key/make.sh [OUT]      OUT defaults to docs/labs/key (the committed key)
+#   LABS=01,11 bash docs/labs/key/make.sh /tmp/k    only those labs (to work on a page)
 #
-# Needs: rccar and rccar-train on PATH, or built in target/release (cargo build --release &&
-# cargo build --release -p rccar-train); jq; the firmware toolchain and simavr for lab 11
-# (make -C firmware all sim). Every run is seeded and uses --no-local and --no-timing, so the
-# figures are the same on every machine up to floating point; the tolerances allow for that
-# and, for lab 11, for the emulator's wall-clock pacing. tests/labs.rs (key_matches_committed)
-# regenerates the key into a temporary folder and compares it with the committed one.
+# Needs: rccar built with the serial link (cargo build --release --features serial; lab 11
+# talks to the firmware) and rccar-train (cargo build --release -p rccar-train) on PATH or in
+# target/release; jq; the firmware toolchain and simavr (make -C firmware all sim); opencv-doc's
+# stereo photos (lab 10). About 4 min of CPU on 2 cores.
+#
+# Every run is seeded; the simulator runs use --no-timing. Figures are the same on every
+# machine up to floating point, and the tolerances allow for that. Figures marked "timing" are
+# wall-clock times of the machine that generated the key (a training's duration, a round trip
+# to the emulator): they vary with the machine and its load, so a rerun only checks that they
+# are produced. tests/labs.rs: `key_matches_committed` regenerates the key into a temporary
+# folder and compares it with the committed one and with the figures quoted on the lab pages;
+# `pages_quote_the_committed_key` compares the pages with the committed key.
+#
+# The pages mark what they quote (docs/labs/README.md, "For the teacher"): `<!-- key: NAME -->`
+# right after a number names the figure NAME of the page's lab (`NAME (lab NN)` for another
+# lab's), and `<!-- key-table: PREFIX -->` before a table makes each cell the figure
+# PREFIX/ROW/COLUMN (row and column labels lower-cased, runs of other characters as `_`,
+# numbers as numbers: `2.0` is `2`).
+#
+# No step waits a fixed time for another process: every wait is for a condition (a file, a
+# line in a report), with a generous deadline.
 set -euo pipefail
 REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/../../.." && pwd)
 OUT=$(mkdir -p "${1:-$REPO/docs/labs/key}" && cd "${1:-$REPO/docs/labs/key}" && pwd)
 export PATH="$REPO/target/release:$PATH"
 export RCCAR_CONFIG=$REPO/config/car.toml
-command -v rccar >/dev/null || { echo "make.sh: rccar not found (cargo build --release)" >&2; exit 2; }
+command -v rccar >/dev/null || { echo "make.sh: rccar not found (cargo build --release --features serial)" >&2; exit 2; }
 command -v rccar-train >/dev/null || { echo "make.sh: rccar-train not found (cargo build --release -p rccar-train)" >&2; exit 2; }
 command -v jq >/dev/null || { echo "make.sh: needs jq (apt-get install jq)" >&2; exit 2; }
 W=$(mktemp -d -t rccar-key-XXXXXX)
@@ -24,129 +41,396 @@ trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$W"' EXIT
 cd "$W"
 FIGS=$W/figs.jsonl
 : > "$FIGS"
-# fig LAB NAME VALUE TOL UNIT COMMAND  — one figure of the key
+want() { [ -z "${LABS:-}" ] || [[ ",$LABS," == *",$1,"* ]]; }
+
+# fig LAB NAME VALUE TOL UNIT COMMAND — one figure of the key (a number)
 fig() {
+  [[ "$3" =~ ^-?[0-9]+(\.[0-9]+)?([eE][-+]?[0-9]+)?$ ]] || { echo "make.sh: lab $1 $2: not a number: '$3' ($6)" >&2; exit 1; }
   jq -cn --arg lab "$1" --arg name "$2" --argjson value "$3" --argjson tol "$4" --arg unit "$5" --arg cmd "$6" \
     '{lab: $lab, name: $name, value: $value, tol: $tol, unit: $unit, command: $cmd}' >> "$FIGS"
-  printf '%-4s %-34s %12s  (±%s %s)\n' "$1" "$2" "$3" "$4" "$5"
+  printf '%-4s %-40s %14s  (±%s %s)\n' "$1" "$2" "$3" "$4" "$5"
 }
-# csv_at FILE VALUE COLUMN — the COLUMN of the sweep.csv row whose value is VALUE
-csv_at() { awk -F, -v v="$2" -v c="$3" 'NR==1 {for (i=1;i<=NF;i++) h[$i]=i; next} ($1+0)==(v+0) {print $h[c]}' "$1"; }
+# word LAB NAME WORD COMMAND — a figure that is a word (how a run ended); compared exactly,
+# ignoring case and `_` (laps_done = LapsDone)
+word() {
+  [ -n "$3" ] || { echo "make.sh: lab $1 $2: empty ($4)" >&2; exit 1; }
+  jq -cn --arg lab "$1" --arg name "$2" --arg value "$3" --arg cmd "$4" \
+    '{lab: $lab, name: $name, value: $value, tol: 0, unit: "", command: $cmd}' >> "$FIGS"
+  printf '%-4s %-40s %14s\n' "$1" "$2" "$3"
+}
+# timing LAB NAME VALUE TOL UNIT COMMAND — a wall-clock time of this machine (see the top)
+timing() {
+  fig "$@"
+  jq -c 'if .name == $n and .lab == $l then .timing = true else . end' --arg n "$2" --arg l "$1" "$FIGS" > "$FIGS.t" && mv "$FIGS.t" "$FIGS"
+}
+# sweep LAB PREFIX DIR COMMAND — every run of DIR/sweep.csv as figures PREFIX/VALUE/QUANTITY
+# (VALUE: the swept value, VALUE1/VALUE2 for a grid; QUANTITY: laps, lap_time_s, rms_m, max_m,
+# departures, reversals_s, steer_diff_rms, lost_frames, end)
+sweep() {
+  local lab=$1 prefix=$2 csv=$3/sweep.csv cmd=$4 label col val
+  awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) { h[i] = $i; if ($i == "laps") nk = i - 1 }; next }
+           { label = sprintf("%.6g", $1); for (i = 2; i <= nk; i++) label = label "/" sprintf("%.6g", $i)
+             for (i = nk + 1; i <= NF; i++) print label "\t" h[i] "\t" $i }' "$csv" |
+  while IFS=$'\t' read -r label col val; do
+    case $col in
+      laps) fig "$lab" "$prefix/$label/laps" "$val" 0 laps "$cmd" ;;
+      lap_time_s) [ -z "$val" ] || fig "$lab" "$prefix/$label/lap_time_s" "$val" 0.1 s "$cmd" ;;
+      xte_rms_m) fig "$lab" "$prefix/$label/rms_m" "$val" 0.001 m "$cmd" ;;
+      xte_max_m) fig "$lab" "$prefix/$label/max_m" "$val" 0.002 m "$cmd" ;;
+      departures) fig "$lab" "$prefix/$label/departures" "$val" 1 departures "$cmd" ;;
+      reversals_per_s) fig "$lab" "$prefix/$label/reversals_s" "$val" 0.05 1/s "$cmd" ;;
+      steer_diff_rms) fig "$lab" "$prefix/$label/steer_diff_rms" "$val" 0.005 1 "$cmd" ;;
+      lost_frames) fig "$lab" "$prefix/$label/lost_frames" "$val" 5 frames "$cmd" ;;
+      end) word "$lab" "$prefix/$label/end" "$val" "$cmd" ;;
+    esac
+  done
+}
+# num STRING PATTERN — the number after PATTERN (a regex) in STRING
+num() { grep -oE "$2 *-?[0-9.]+" <<< "$1" | head -1 | grep -oE -- '-?[0-9.]+$'; }
+# until_ok COMMAND... — retry COMMAND every 0.1 s until it succeeds (at most 60 s)
+until_ok() { for _ in $(seq 600); do "$@" 2>/dev/null && return 0; sleep 0.1; done; echo "make.sh: timed out: $*" >&2; return 1; }
 SIM="rccar sim --no-local --no-timing --set detect.enabled=false"
 
-# ---- lab 1: P steering, Kp sweep (kd = 0), 40 s: the first two curves -------------------
-C="$SIM --laps 0 --seconds 40 --set steering.kd=0 --sweep steering.kp=0.5:3.5:3"
-$C -o l01 >/dev/null
-for kp in 0.5 2 3.5; do
-  fig 01 "xte_rms_kp_$kp" "$(csv_at l01/sweep.csv $kp xte_rms_m)" 0.001 m "$C"
-done
-fig 01 "lost_frames_kp_0.5" "$(csv_at l01/sweep.csv 0.5 lost_frames)" 5 frames "$C"
+# ---- lab 1: P steering ---------------------------------------------------------------------
+if want 01; then
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set steering.kd=0 --sweep steering.kp=0.5:8:6"
+  $SIM --laps 1 --set steering.kd=0 --sweep steering.kp=0.5:8:6 -o l01 >/dev/null
+  sweep 01 kp l01 "$C"
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false (the shipped gains)"
+  $SIM --laps 1 -o l01_shipped >/dev/null
+  fig 01 shipped_rms_m "$(jq .xte_rms_m l01_shipped/summary.json)" 0.0005 m "$C"
+  fig 01 shipped_lap_time_s "$(jq '.lap_times_s[0]' l01_shipped/summary.json)" 0.2 s "$C"
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set steering.kd=0 --set steering.kp=5"
+  $SIM --laps 1 --set steering.kd=0 --set steering.kp=5 -o l01_kp5 >/dev/null || [ $? -eq 1 ]
+  fig 01 kp5_offset_max_m "$(jq -s 'map(.truth.offset_m) | max' l01_kp5/telemetry.jsonl)" 0.005 m "$C; the largest truth.offset_m (left curves)"
+  fig 01 kp5_offset_min_m "$(jq -s 'map(.truth.offset_m) | min' l01_kp5/telemetry.jsonl)" 0.005 m "$C; the smallest truth.offset_m (the right curve)"
+  fig 01 kp5_departures "$(jq .lane_departures l01_kp5/summary.json)" 1 departures "$C"
+  fig 01 kp5_time_outside_s "$(jq .time_outside_s l01_kp5/summary.json)" 1 s "$C"
+fi
 
-# ---- lab 2: derivative chatter with and without the low-pass, 30 s (the first curve) -----
-for tau in 0 0.2; do
-  C="$SIM --laps 0 --seconds 30 --set steering.kd=0.1 --set steering.derivative_tau=$tau"
-  $C -o l02_$tau >/dev/null
-  fig 02 "reversals_per_s_kd0.1_tau$tau" "$(jq '.steer_reversals_per_s' l02_$tau/summary.json)" 0.05 1/s "$C"
-  fig 02 "xte_rms_kd0.1_tau$tau" "$(jq '.xte_rms_m' l02_$tau/summary.json)" 0.001 m "$C"
-done
+# ---- lab 2: PD ---------------------------------------------------------------------------------
+if want 02; then
+  C="rccar sim --laps 0 --seconds 40 --no-timing --set detect.enabled=false --set vehicle.servo_delay_s=0.3 --set vehicle.servo_rate_dps=60 --set steering.kp=4 --sweep steering.kd=0:0.6:4"
+  $SIM --laps 0 --seconds 40 --set vehicle.servo_delay_s=0.3 --set vehicle.servo_rate_dps=60 --set steering.kp=4 \
+    --sweep steering.kd=0:0.6:4 -o l02_slow >/dev/null
+  sweep 02 slow_servo l02_slow "$C"
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --sweep steering.kd=0:0.3:4 --sweep steering.derivative_tau=0:0.2:3"
+  $SIM --laps 1 --sweep steering.kd=0:0.3:4 --sweep steering.derivative_tau=0:0.2:3 -o l02_grid >/dev/null
+  sweep 02 grid l02_grid "$C"
+fi
 
-# ---- lab 5: step response from a 5 cm start offset ---------------------------------------
-C="$SIM --laps 0 --seconds 10 --start-offset 0.05"
-$C -o l05 >/dev/null
-fig 05 offset_rise_time_s "$(jq '.step.rise_time_s' l05/summary.json)" 0.1 s "$C"
-fig 05 offset_overshoot_pct "$(jq '.step.overshoot_pct' l05/summary.json)" 1 % "$C"
-fig 05 offset_settling_time_s "$(jq '.step.settling_time_s' l05/summary.json)" 0.2 s "$C"
+# ---- lab 3: PID ---------------------------------------------------------------------------------
+if want 03; then
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --sweep steering.ki=0:0.6:4"
+  $SIM --laps 1 --sweep steering.ki=0:0.6:4 -o l03_ki >/dev/null
+  sweep 03 ki l03_ki "$C"
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set steering.ki=0.6 --sweep steering.integral_limit=0.05:1:3"
+  $SIM --laps 1 --set steering.ki=0.6 --sweep steering.integral_limit=0.05:1:3 -o l03_limit >/dev/null
+  sweep 03 limit l03_limit "$C"
+fi
 
-# ---- lab 6: camera model ------------------------------------------------------------------
-C="rccar config roi --no-local --near 0.3 --far 0.8 --half-width 0.25"
-fig 06 roi_near03_bottom_left_x "$($C | grep -o '\[-\?[0-9.]*, [0-9.]*\]\]' | grep -o '^\[-\?[0-9.]*' | tr -d '[')" 0.01 px "$C"
-C="$SIM --laps 0 --seconds 40 --sweep lane.band=0.3:0.7:2"
-$C -o l06 >/dev/null
-fig 06 band_0.3_lost_frames "$(csv_at l06/sweep.csv 0.3 lost_frames)" 5 frames "$C"
-fig 06 band_0.7_lost_frames "$(csv_at l06/sweep.csv 0.7 lost_frames)" 5 frames "$C"
-fig 06 band_0.3_xte_rms "$(csv_at l06/sweep.csv 0.3 xte_rms_m)" 0.001 m "$C"
+# ---- lab 4: speed ---------------------------------------------------------------------------------
+if want 04; then
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --sweep throttle.base=0.4:1:4"
+  $SIM --laps 1 --sweep throttle.base=0.4:1:4 -o l04_base >/dev/null
+  sweep 04 base l04_base "$C"
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set vehicle.max_speed_mps=4 --sweep throttle.base=0.25:1:4"
+  $SIM --laps 1 --set vehicle.max_speed_mps=4 --sweep throttle.base=0.25:1:4 -o l04_fast >/dev/null
+  sweep 04 fast l04_fast "$C"
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set vehicle.max_speed_mps=4 --set throttle.base=1"
+  $SIM --laps 1 --set vehicle.max_speed_mps=4 --set throttle.base=1 -o l04_fastest >/dev/null
+  fig 04 fastest_lap_time_s "$(jq '.lap_times_s[0]' l04_fastest/summary.json)" 0.1 s "$C"
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set vehicle.max_speed_mps=4 --set camera.fps=10 --set vehicle.servo_delay_s=0.1 --sweep throttle.base=0.25:1:4"
+  $SIM --laps 1 --set vehicle.max_speed_mps=4 --set camera.fps=10 --set vehicle.servo_delay_s=0.1 \
+    --sweep throttle.base=0.25:1:4 -o l04_slow >/dev/null
+  sweep 04 slow_camera l04_slow "$C"
+fi
 
-# ---- lab 7: vision under changing light ---------------------------------------------------
-C="$SIM --laps 0 --seconds 8 --set sim.light_variation=0.6 --record frames; rccar stages --no-local frames/frame_000225.png --set lane.threshold_mode=otsu"
-$SIM --laps 0 --seconds 8 --set sim.light_variation=0.6 --record l07f -o l07 >/dev/null
-rccar stages --no-local l07f/frame_000225.png --set lane.threshold_mode=otsu -o l07s >/dev/null
-fig 07 otsu_level_dark_frame "$(jq '.level' l07s/stages.jsonl)" 2 grey "$C"
-for m in fixed otsu; do
-  C="$SIM --laps 0 --seconds 30 --set sim.light_variation=0.6 --set lane.threshold_mode=$m"
-  $C -o l07$m >/dev/null || true
-  fig 07 "lost_frames_${m}_30s" "$(jq '.lane_lost_frames' l07$m/summary.json)" 10 frames "$C"
-done
+# ---- lab 5: step response -------------------------------------------------------------------------
+if want 05; then
+  for kp in 1 2.5; do
+    C="rccar sim --laps 0 --seconds 10 --no-timing --set detect.enabled=false --start-offset 0.05 --set steering.kp=$kp"
+    $SIM --laps 0 --seconds 10 --start-offset 0.05 --set steering.kp=$kp -o l05_$kp >/dev/null
+    fig 05 "step/$kp/rise_time_10_90" "$(jq .step.rise_time_s l05_$kp/summary.json)" 0.1 s "$C"
+    fig 05 "step/$kp/overshoot" "$(jq .step.overshoot_pct l05_$kp/summary.json)" 1 % "$C"
+    fig 05 "step/$kp/settling_2_5_mm" "$(jq .step.settling_time_s l05_$kp/summary.json)" 0.2 s "$C"
+    fig 05 "kp_${kp}_peak_steer" "$(jq -s 'map(select(.time_s < 0.5) | .steer) | max' l05_$kp/telemetry.jsonl)" 0.02 1 "$C; the largest steer of the first 0.5 s"
+    fig 05 "kp_${kp}_half_offset_s" "$(jq -s 'map(select(.truth.offset_m <= 0.025)) | .[0].time_s' l05_$kp/telemetry.jsonl)" 0.1 s "$C; first time the true offset is half the start's"
+  done
+  fig 05 kp_1_overshoot_mm "$(jq '.step.overshoot_pct * .step.initial_offset_m * 10' l05_1/summary.json)" 0.3 mm \
+    "rccar sim --laps 0 --seconds 10 --no-timing --set detect.enabled=false --start-offset 0.05 --set steering.kp=1"
+  C="rccar sim --laps 0 --seconds 12 --no-timing --set detect.enabled=false --kick 5:0.05"
+  $SIM --laps 0 --seconds 12 --kick 5:0.05 -o l05_kick >/dev/null
+  fig 05 kick_rise_time_s "$(jq .step.rise_time_s l05_kick/summary.json)" 0.1 s "$C"
+  fig 05 kick_overshoot_pct "$(jq .step.overshoot_pct l05_kick/summary.json)" 1 % "$C"
+  fig 05 kick_settling_time_s "$(jq .step.settling_time_s l05_kick/summary.json)" 0.2 s "$C"
+fi
 
-# ---- lab 8: detection -----------------------------------------------------------------------
-T=$REPO/config/tracks/default.toml
-rccar-train gen --kind stop_sign --split positives --count 60 --seed 1 --track "$T" --out pos >/dev/null
-rccar-train gen --kind stop_sign --split negatives --count 20 --seed 2 --track "$T" --out neg >/dev/null
-rccar-train gen --kind stop_sign --split eval --count 12 --seed 3 --track "$T" --out eval >/dev/null
-C="rccar-train evaluate --cascade config/cascades/stop_sign.xml --info eval/info.dat (12 frames of gen --split eval --seed 3)"
-rccar-train evaluate --cascade "$REPO/config/cascades/stop_sign.xml" --info eval/info.dat --out ev_shipped >/dev/null
-fig 08 shipped_recall_mn3 "$(jq '.points[] | select(.min_neighbors==3) | .recall' ev_shipped/report.json)" 0.0001 1 "$C"
-fig 08 shipped_fp_per_frame_mn3 "$(jq '.points[] | select(.min_neighbors==3) | .fp_per_frame' ev_shipped/report.json)" 0.0001 1/frame "$C"
-rccar-train evaluate --cascade "$REPO/config/cascades/stop_sign.xml" --info eval/info.dat --scale-factor 1.3 --out ev_13 >/dev/null
-fig 08 shipped_recall_mn3_sf1.3 "$(jq '.points[] | select(.min_neighbors==3) | .recall' ev_13/report.json)" 0.0001 1 "$C --scale-factor 1.3"
-C="rccar-train train --pos pos/info.dat (60, seed 1) --bg neg/bg.txt (20, seed 2) --num-stages 2 --num-neg 60 --threads 1; evaluate as above"
-rccar-train train --pos pos/info.dat --bg neg/bg.txt --num-stages 2 --num-neg 60 --threads 1 --out model >/dev/null 2>&1
-rccar-train evaluate --cascade model/cascade.xml --info eval/info.dat --out ev_mine >/dev/null
-fig 08 trained_2stage_recall_mn3 "$(jq '.points[] | select(.min_neighbors==3) | .recall' ev_mine/report.json)" 0.0001 1 "$C"
-fig 08 trained_2stage_fp_per_frame_mn0 "$(jq '.points[] | select(.min_neighbors==0) | .fp_per_frame' ev_mine/report.json)" 0.5 1/frame "$C"
+# ---- lab 6: the camera model ------------------------------------------------------------------------
+if want 06; then
+  roi() { rccar config roi --no-local "$@"; }
+  corners() { grep -oE -- '-?[0-9]+\.[0-9]+' <<< "$1" | sed -n "$2p"; }
+  C="rccar config roi --near 0.4 --far 1.0 --half-width 0.25"
+  R0=$(roi --near 0.4 --far 1.0 --half-width 0.25)
+  R=$R0
+  for i in 1 2 3 4 5 6 7 8; do fig 06 "roi_shipped_$i" "$(corners "$R" $i)" 0.01 px "$C; the i-th number of src"; done
+  fig 06 px_per_m_across "$(num "$R" 'scale:')" 0.1 px/m "$C"
+  fig 06 px_per_m_along "$(num "$R" 'across,')" 0.1 px/m "$C"
+  C="rccar config roi --near 0.3 --far 0.8 --half-width 0.25"
+  R=$(roi --near 0.3 --far 0.8 --half-width 0.25)
+  for i in 1 2 3 4 5 6 7 8; do fig 06 "roi_near_$i" "$(corners "$R" $i)" 0.01 px "$C; the i-th number of src"; done
+  C="rccar config roi --near 0.4 --far 1.0 --half-width 0.25 --set camera.tilt_deg=25"
+  R25=$(roi --near 0.4 --far 1.0 --half-width 0.25 --set camera.tilt_deg=25)
+  fig 06 roi_up_at_tilt25_px "$(awk -v a="$(corners "$R0" 2)" -v b="$(corners "$R25" 2)" 'BEGIN {print a - b}')" 0.5 px "$C; top edge, against the shipped ROI"
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --sweep lane.band=0.1:0.9:5"
+  $SIM --laps 1 --sweep lane.band=0.1:0.9:5 -o l06_band >/dev/null
+  sweep 06 band l06_band "$C"
+fi
 
-# ---- lab 9: monocular ranging ----------------------------------------------------------------
-C="rccar calibrate ranging --no-local --from-sim 10 --sim-tilt-error-deg 2 --dry-run"
-$C > l09.txt
-fig 09 fitted_tilt_deg "$(grep -o 'fit: tilt [0-9.]*' l09.txt | grep -o '[0-9.]*$')" 0.005 deg "$C"
-fig 09 rms_row_error_px "$(grep -o 'rms row error [0-9.]*' l09.txt | grep -o '[0-9.]*$')" 0.02 px "$C"
+# ---- lab 7: vision under changing light -----------------------------------------------------------------
+if want 07; then
+  C="rccar sim --seconds 8 --laps 0 --set detect.enabled=false --set sim.light_variation=0.6 --record frames; rccar stages frames/frame_000075.png frames/frame_000225.png [--set lane.threshold_mode=otsu]"
+  rccar sim --no-local --seconds 8 --laps 0 --set detect.enabled=false --set sim.light_variation=0.6 --record l07f -o l07r >/dev/null
+  rccar stages --no-local l07f/frame_000075.png l07f/frame_000225.png -o l07fixed >/dev/null
+  rccar stages --no-local l07f/frame_000075.png l07f/frame_000225.png -o l07otsu --set lane.threshold_mode=otsu >/dev/null
+  for m in fixed otsu; do
+    fig 07 "${m}_level_bright" "$(sed -n 1p l07$m/stages.jsonl | jq .level)" 2 grey "$C"
+    fig 07 "${m}_level_dark" "$(sed -n 2p l07$m/stages.jsonl | jq .level)" 2 grey "$C"
+    word 07 "${m}_status_bright" "$(sed -n 1p l07$m/stages.jsonl | jq -r .lane.status)" "$C"
+    word 07 "${m}_status_dark" "$(sed -n 2p l07$m/stages.jsonl | jq -r .lane.status)" "$C"
+  done
+  for m in fixed otsu; do
+    C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set sim.light_variation=0.6 --set lane.threshold_mode=$m"
+    $SIM --laps 1 --set sim.light_variation=0.6 --set lane.threshold_mode=$m -o l07$m-lap >/dev/null || [ $? -eq 1 ]
+    fig 07 "drive_${m}_lost_frames" "$(jq .lane_lost_frames l07$m-lap/summary.json)" 10 frames "$C"
+    fig 07 "drive_${m}_frames" "$(jq .frames l07$m-lap/summary.json)" 10 frames "$C"
+    fig 07 "drive_${m}_seconds" "$(jq .seconds l07$m-lap/summary.json)" 0.5 s "$C"
+    word 07 "drive_${m}_end" "$(jq -r .end l07$m-lap/summary.json)" "$C"
+  done
+  fig 07 drive_otsu_rms_m "$(jq .xte_rms_m l07otsu-lap/summary.json)" 0.0005 m "$C"
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --sweep sim.exposure=0.4:1.8:8"
+  $SIM --laps 1 --sweep sim.exposure=0.4:1.8:8 -o l07_exposure >/dev/null
+  sweep 07 exposure l07_exposure "$C"
+fi
 
-# ---- lab 10: stereo ----------------------------------------------------------------------------
-D=/usr/share/doc/opencv-doc/examples/data
-C="rccar calibrate stereo --board 9x6 --square 0.025 --left $D/left[0-9]*.jpg --right $D/right[0-9]*.jpg"
-rccar calibrate stereo --board 9x6 --square 0.025 --left $D/left[0-9]*.jpg --right $D/right[0-9]*.jpg -o stereo.json >/dev/null
-fig 10 baseline_m "$(jq '.stereo.baseline_m' stereo.json)" 0.0002 m "$C"
-fig 10 stereo_rms_px "$(jq '.stereo.rms_px' stereo.json)" 0.002 px "$C"
-C="rccar stereo --no-local $D/left01.jpg $D/right01.jpg --box 240,80,280,190 --set stereo.calibration=stereo.json"
-rccar stereo --no-local $D/left01.jpg $D/right01.jpg --box 240,80,280,190 --set stereo.calibration="$PWD/stereo.json" > l10.json
-fig 10 board_depth_bfd_m "$(jq '.depth_m.bfd' l10.json)" 0.002 m "$C"
-fig 10 board_depth_eq16_m "$(jq '.depth_m.eq16' l10.json)" 0.002 m "$C"
-fig 10 disparity_px "$(jq '.disparity_px' l10.json)" 0.2 px "$C"
+# ---- lab 8: detection -----------------------------------------------------------------------------------
+if want 08; then
+  T=$REPO/config/tracks/default.toml
+  rccar-train gen --kind stop_sign --split positives --count 300 --seed 1 --track "$T" --out pos >/dev/null
+  rccar-train gen --kind stop_sign --split negatives --count 100 --seed 2 --track "$T" --out neg >/dev/null
+  rccar-train gen --kind stop_sign --split eval --count 40 --seed 3 --track "$T" --out eval >/dev/null
+  C="rccar-train train --pos pos/info.dat (300, seed 1) --bg neg/bg.txt (100, seed 2) --num-stages 6 --num-neg 300; rccar-train evaluate --cascade model/cascade.xml --info eval/info.dat (40, seed 3)"
+  t0=$(date +%s.%N)
+  rccar-train train --pos pos/info.dat --bg neg/bg.txt --num-stages 6 --num-neg 300 --out model >/dev/null 2>&1
+  timing 08 training_s "$(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN {printf "%.0f", b - a}')" 60 s "$C (wall-clock)"
+  rccar-train evaluate --cascade model/cascade.xml --info eval/info.dat --out ev_mine >/dev/null
+  for mn in 0 1 3 5 8; do
+    fig 08 "mn/$mn/recall_40_signs" "$(jq ".points[] | select(.min_neighbors==$mn) | .recall" ev_mine/report.json)" 0.0001 1 "$C"
+    fig 08 "mn/$mn/fp_per_frame_mine" "$(jq ".points[] | select(.min_neighbors==$mn) | .fp_per_frame" ev_mine/report.json)" 0.05 1/frame "$C"
+  done
+  C="rccar-train evaluate --cascade config/cascades/stop_sign.xml --info eval/info.dat"
+  rccar-train evaluate --cascade "$REPO/config/cascades/stop_sign.xml" --info eval/info.dat --out ev_shipped >/dev/null
+  fig 08 shipped_recall_mn3 "$(jq '.points[] | select(.min_neighbors==3) | .recall' ev_shipped/report.json)" 0.0001 1 "$C"
+  fig 08 shipped_fp_mn3 "$(jq '.points[] | select(.min_neighbors==3) | .false_positives' ev_shipped/report.json)" 0 boxes "$C"
+  for sf in 1.05 1.3; do
+    C="rccar-train evaluate --cascade config/cascades/stop_sign.xml --info eval/info.dat --scale-factor $sf"
+    rccar-train evaluate --cascade "$REPO/config/cascades/stop_sign.xml" --info eval/info.dat --scale-factor $sf --out ev_$sf >/dev/null
+    fig 08 "sf${sf}_recall_mn3" "$(jq '.points[] | select(.min_neighbors==3) | .recall' ev_$sf/report.json)" 0.0001 1 "$C"
+    fig 08 "sf${sf}_misses_mn3" "$(jq '.points[] | select(.min_neighbors==3) | .misses' ev_$sf/report.json)" 0 signs "$C"
+    timing 08 "sf${sf}_ms_median" "$(jq .ms_median ev_$sf/report.json)" "$([ $sf = 1.3 ] && echo 3 || echo 20)" ms "$C (wall-clock, median per frame)"
+  done
+fi
 
-# ---- lab 11: the firmware's failsafe (the emulator, raw frames; no serial feature needed) ------
-make -s -C "$REPO/firmware" all sim >/dev/null
-"$REPO/firmware/build/rccar_sim" "$REPO/firmware/build/rccar_fw.elf" --link "$W/tty" --sniff --no-stdin > pins.log 2>/dev/null &
-for _ in $(seq 50); do [ -e "$W/tty" ] && break; sleep 0.1; done
-exec 3<>"$W/tty"
-printf '\xa5\x01\x01\x00\x01\x65\xd5' >&3               # HELLO v1, seq 0
-sleep 0.2; printf '\xa5\x00\x03\x01\xee\x89' >&3        # ARM, seq 1
-sleep 0.2; printf '\xa5\x04\x02\x02\x00\x00\xf4\x01\xef\x30' >&3  # DRIVE steer 0, throttle +500 per mille
-sleep 1
-exec 3>&-
-kill %1 2>/dev/null || true
-C="rccar_sim --sniff; HELLO, ARM, one DRIVE (throttle 0.5) by printf; time from the DRIVE to the ESC's neutral pulse"
-fig 11 esc_us_throttle_0.5 "$(awk '$1=="PULSE" && $2=="esc" && $3>1600 {print $3; exit}' pins.log)" 1 us "$C"
-fig 11 failsafe_ms "$(awk '$1=="RX" && $2==2 {t=$4} $1=="PULSE" && $2=="esc" && $3<1510 && t {printf "%.1f", ($4-t)/1000; exit}' pins.log)" 25 ms "$C"
+# ---- lab 9: monocular ranging ------------------------------------------------------------------------------
+if want 09; then
+  C="rccar calibrate ranging --from-sim 10 --sim-tilt-error-deg 2 --sim-pairs-out pairs.csv --dry-run"
+  rccar calibrate ranging --no-local --from-sim 10 --sim-tilt-error-deg 2 --sim-pairs-out pairs.csv --dry-run > l09.txt
+  fig 09 fitted_tilt_deg "$(num "$(cat l09.txt)" 'fit: tilt')" 0.005 deg "$C"
+  fig 09 fitted_v0_px "$(num "$(cat l09.txt)" 'v0')" 0.05 px "$C"
+  fig 09 rms_row_error_px "$(num "$(cat l09.txt)" 'rms row error')" 0.02 px "$C"
+  # the residuals: the largest |resid %| of the pairs nearer than 1.3 m, and the one at ~1.36 m
+  fig 09 resid_max_pct_below_1_3_m "$(awk '$1 ~ /^[0-9.]+$/ && $2 < 1.3 {r = $5 < 0 ? -$5 : $5 + 0; if (r > m) m = r} END {print m + 0}' l09.txt)" 0.1 % "$C"
+  fig 09 resid_near_1_3_m "$(awk '$1 ~ /^[0-9.]+$/ && $2 < 1.3 {d = $2} END {print d}' l09.txt)" 0.01 m "$C; the farthest pair nearer than 1.3 m"
+  fig 09 resid_pct_at_1_36_m "$(awk '$1 ~ /^[0-9.]+$/ && $2 > 1.3 && $2 < 1.4 {print $5 + 0}' l09.txt)" 0.1 % "$C"
+  fig 09 resid_far_pair_m "$(awk '$1 ~ /^[0-9.]+$/ && $2 > 1.3 && $2 < 1.4 {print $2 + 0}' l09.txt)" 0.01 m "$C; the pair between 1.3 and 1.4 m"
+  # part 2: the pairs' rows in Eq. 5 with the configured camera (tilt 20 deg, h 0.2 m, a_y, v0)
+  C="Eq. 5 on pairs.csv with the configured tilt, v0 = 119.5, a_y = 265.235 px, h = 0.2 m"
+  while IFS=, read -r row d _; do
+    case $row in 198.5|113.5|81.5|65.5|51.5) ;; *) continue ;; esac
+    eq5=$(awk -v v="$row" 'BEGIN {pi = atan2(0, -1); a = 20 * pi / 180 + atan2(v - 119.5, 265.235); print 0.2 * cos(a) / sin(a)}')
+    fig 09 "eq5/$row/true_m" "$d" 0.001 m "$C"
+    fig 09 "eq5/$row/eq_5_at_20" "$eq5" 0.001 m "$C"
+    fig 09 "eq5/$row/error" "$(awk -v e="$eq5" -v d="$d" 'BEGIN {print (e / d - 1) * 100}')" 0.2 % "$C"
+  done < <(tail -n +2 pairs.csv)
+  C="rccar calibrate ranging --from-sim 10 --sim-tilt-error-deg 2 --sim-tape-sigma-m 0.03 --sim-seed 2 --dry-run"
+  O=$(rccar calibrate ranging --no-local --from-sim 10 --sim-tilt-error-deg 2 --sim-tape-sigma-m 0.03 --sim-seed 2 --dry-run)
+  fig 09 tape3cm_tilt_deg "$(num "$O" 'fit: tilt')" 0.005 deg "$C"
+  fig 09 tape3cm_rms_px "$(num "$O" 'rms row error')" 0.02 px "$C"
+  fig 09 tape3cm_tilt_error_deg "$(awk -v t="$(num "$O" 'fit: tilt')" 'BEGIN {print 22 - t}')" 0.005 deg "$C; 22 deg (the truth) minus the fit"
+  C="rccar calibrate ranging --from-sim 4 --sim-tilt-error-deg 2 --dry-run"
+  O=$(rccar calibrate ranging --no-local --from-sim 4 --sim-tilt-error-deg 2 --dry-run)
+  fig 09 pairs4_tilt_deg "$(num "$O" 'fit: tilt')" 0.005 deg "$C"
+  fig 09 pairs4_rms_px "$(num "$O" 'rms row error')" 0.02 px "$C"
+  C="rccar calibrate ranging pairs.csv --fit-ay --dry-run"
+  O=$(rccar calibrate ranging --no-local pairs.csv --fit-ay --dry-run)
+  fig 09 fit_ay_tilt_deg "$(num "$O" 'fit: tilt')" 0.005 deg "$C"
+  fig 09 fit_ay_scale "$(num "$O" '\(scale')" 0.0005 1 "$C"
+fi
 
-# ---- lab 12: behaviours --------------------------------------------------------------------------
-C="rccar sim --no-local --no-timing --track config/tracks/scenarios.toml --laps 0 --seconds 16 --truth-boxes"
-rccar sim --no-local --no-timing --track "$REPO/config/tracks/scenarios.toml" --laps 0 --seconds 16 --truth-boxes -o l12 >/dev/null
-STOP=$(jq -c 'select(.transition.to=="stop_sign") | [.time_s, (.transition.reason | capture("(?<d>[0-9.]+) m").d | tonumber)]' l12/telemetry.jsonl | head -1)
-fig 12 stop_sign_stop_begins_s "$(echo "$STOP" | jq '.[0]')" 0.07 s "$C"
-fig 12 stop_sign_distance_m "$(echo "$STOP" | jq '.[1]')" 0.02 m "$C"
-RESUME=$(jq -c 'select(.transition.from=="stop_sign") | .time_s' l12/telemetry.jsonl | head -1)
-fig 12 stop_sign_resume_s "$RESUME" 0.07 s "$C"
+# ---- lab 10: stereo ---------------------------------------------------------------------------------------
+if want 10; then
+  D=/usr/share/doc/opencv-doc/examples/data
+  C="rccar calibrate stereo --board 9x6 --square 0.025 --left \$D/left[0-9]*.jpg --right \$D/right[0-9]*.jpg --corners-out corners.json"
+  O=$(rccar calibrate stereo --board 9x6 --square 0.025 --left $D/left[0-9]*.jpg --right $D/right[0-9]*.jpg \
+    --corners-out corners.json -o stereo.json)
+  T=$(grep -oE 'T = \[[^]]*\]' <<< "$O" | grep -oE -- '-?[0-9.]+')
+  for i in 1 2 3; do fig 10 "t_$i" "$(sed -n ${i}p <<< "$T")" 0.0002 m "$C; T = [x, y, z]"; done
+  fig 10 baseline_m "$(jq '.stereo.baseline_m' stereo.json)" 0.0002 m "$C"
+  fig 10 stereo_rms_px "$(jq '.stereo.rms_px' stereo.json)" 0.002 px "$C"
+  fig 10 rectified_f_px "$(num "$O" 'rectified f')" 0.05 px "$C"
+  fig 10 left_fx_px "$(jq '.stereo.left.intrinsics.fx' stereo.json)" 0.05 px "$C"
+  SPACING=$(jq --arg k "$D/left01.jpg" '.[$k] as $c
+      | [range(0; 6) as $r | range(0; 8) as $i | [$c[$r*9+$i], $c[$r*9+$i+1]]]
+      + [range(0; 5) as $r | range(0; 9) as $i | [$c[$r*9+$i], $c[($r+1)*9+$i]]]
+      | map(((.[1][0] - .[0][0]) | . * .) + ((.[1][1] - .[0][1]) | . * .) | sqrt) | sort | .[length / 2 | floor]' corners.json)
+  fig 10 left01_corner_spacing_px "$SPACING" 0.05 px "$C; the median distance between neighbouring corners in left01"
+  fig 10 left01_mono_depth_m "$(jq -n --argjson f "$(jq '.stereo.left.intrinsics.fx' stereo.json)" --argjson s "$SPACING" '$f * 0.025 / $s')" \
+    0.002 m "$C; the left camera's fx * 0.025 m / the corner spacing"
+  C="rccar stereo \$D/left01.jpg \$D/right01.jpg --box 240,80,280,190 --set stereo.calibration=stereo_calib.json"
+  rccar stereo --no-local $D/left01.jpg $D/right01.jpg --box 240,80,280,190 --set stereo.calibration="$PWD/stereo.json" > l10.json
+  fig 10 disparity_px "$(jq '.disparity_px' l10.json)" 0.2 px "$C"
+  fig 10 ncc "$(jq '.ncc' l10.json)" 0.005 1 "$C"
+  fig 10 board_depth_bfd_m "$(jq '.depth_m.bfd' l10.json)" 0.002 m "$C"
+  fig 10 board_depth_exact_m "$(jq '.depth_m.exact' l10.json)" 0.002 m "$C"
+  fig 10 board_depth_eq16_m "$(jq '.depth_m.eq16' l10.json)" 0.002 m "$C"
+  fig 10 eq16_long_pct "$(jq '(.depth_m.eq16 / .depth_m.bfd - 1) * 100' l10.json)" 0.2 % "$C"
+  C="$C --set stereo.min_ncc=0.9"
+  rccar stereo --no-local $D/left01.jpg $D/right01.jpg --box 240,80,280,190 --set stereo.calibration="$PWD/stereo.json" \
+    --set stereo.min_ncc=0.9 > l10b.json
+  fig 10 best_ncc "$(jq -r '.no_range' l10b.json | grep -oE 'best match [0-9.]+' | grep -oE '[0-9.]+$')" 0.005 1 "$C"
+  # part 3: the simulator, one camera and a pair, up to the stop sign (x = 4.5 m on the track;
+  # the lens vehicle.camera_x_m = 0.24 m ahead of the rear axle)
+  setting() { rccar config check --no-local 2>/dev/null | awk -v k="$1" '$1 == k {print $3; exit}'; }
+  CAMX=$(setting camera_x_m)
+  STILL=$(setting standstill_mps)
+  for m in mono stereo; do
+    if [ $m = mono ]; then
+      C="rccar sim --seconds 10 --no-timing"
+      rccar sim --no-local --seconds 10 --no-timing -o sim_$m >/dev/null
+    else
+      C="rccar sim --seconds 10 --no-timing --set ranging.method=stereo --record L --record-right R"
+      rccar sim --no-local --seconds 10 --no-timing --set ranging.method=stereo --record L --record-right R -o sim_$m > sim_$m.txt
+    fi
+    S=$(jq -c --argjson cx "$CAMX" 'select(.transition.to == "stop_sign")
+          | {t: .time_s, d: (.objects[] | select(.class == "stop_sign") | .distance_m), truth: (4.5 - .truth.pose[0] - $cx)}' \
+          sim_$m/telemetry.jsonl | head -1)
+    fig 10 "sim_${m}_decides_s" "$(jq .t <<< "$S")" 0.07 s "$C"
+    fig 10 "sim_${m}_range_m" "$(jq .d <<< "$S")" 0.005 m "$C"
+    fig 10 "sim_${m}_true_m" "$(jq .truth <<< "$S")" 0.005 m "$C; 4.5 - x - camera_x_m"
+    fig 10 "sim_${m}_error_pct" "$(jq '(.d / .truth - 1) * 100' <<< "$S")" 0.3 % "$C"
+    E=$(jq -s --argjson cx "$CAMX" '[.[] | (4.5 - .truth.pose[0] - $cx) as $d | select($d >= 0.3 and $d <= 1.5)
+          | .objects[]? | select(.class == "stop_sign" and .measured_m != null) | ((.measured_m / $d - 1) | fabs * 100)] | sort' \
+          sim_$m/telemetry.jsonl)
+    fig 10 "sim_${m}_single_median_pct" "$(jq '.[length / 2 | floor]' <<< "$E")" 0.1 % "$C; single-box ranges 0.3-1.5 m"
+    fig 10 "sim_${m}_single_max_pct" "$(jq '.[-1]' <<< "$E")" 0.3 % "$C; single-box ranges 0.3-1.5 m"
+    fig 10 "sim_${m}_rest_m" "$(jq -s --argjson cx "$CAMX" --argjson still "$STILL" '
+          [foreach .[] as $r ({moved: false}; .moved = (.moved or $r.truth.speed_mps > 0.2);
+             if .moved and ($r.truth.speed_mps | fabs) < $still then 4.5 - $r.truth.pose[0] - $cx else empty end)] | .[0]' \
+          sim_$m/telemetry.jsonl)" 0.005 m "$C; true distance when the car first stands still"
+  done
+  fig 10 sim_stereo_boxes_ranged "$(num "$(cat sim_stereo.txt)" 'ranged by stereo')" 3 boxes "$C"
+  fig 10 sim_stereo_boxes_unmatched "$(num "$(cat sim_stereo.txt)" 'without a match')" 0 boxes "$C"
+fi
 
-# ---- write the key ---------------------------------------------------------------------------------
-jq -s '{generated_by: "bash docs/labs/key/make.sh", figures: .}' "$FIGS" > "$OUT/key.json"
+# ---- lab 11: the serial link, with the real firmware in the emulator --------------------------------------
+if want 11; then
+  if grep -q "built without the serial link" <<< "$(rccar link --port /nonexistent 2>&1 || true)"; then
+    echo "make.sh: lab 11 needs rccar with the serial link: cargo build --release --features serial" >&2; exit 2
+  fi
+  make -s -C "$REPO/firmware" all sim >/dev/null
+  EMU_CMD=("$REPO/firmware/build/rccar_sim" "$REPO/firmware/build/rccar_fw.elf" --no-stdin)
+  "${EMU_CMD[@]}" --link "$W/tty" --sniff > pins.log 2>/dev/null &
+  EMU=$!
+  until_ok grep -q '^PULSE esc' pins.log            # the firmware runs: its first ESC pulse
+  C="rccar link --port tty --latency 50"
+  O=$(rccar link --port "$W/tty" --latency 50)
+  timing 11 rtt_median_ms "$(num "$O" 'median')" 2 ms "$C (wall-clock)"
+  timing 11 rtt_max_ms "$(num "$O" 'max')" 20 ms "$C (wall-clock)"
+  # part 2: a PING with a bad CRC and a header with length 33, while rccar link shows telemetry
+  C="rccar link --port tty (live) + printf a bad PING and a too-long header into the pty"
+  rccar link --port "$W/tty" --seconds 60 > live.txt 2>/dev/null &
+  LINK=$!
+  until_ok grep -q '^#' live.txt
+  printf '\xa5\x00\x05\x07\x00\x00' > "$W/tty"
+  printf '\xa5\x21\x05\x07' > "$W/tty"
+  until_ok grep -q 'framing [1-9]' live.txt
+  kill -INT $LINK; wait $LINK || true
+  L=$(grep '^#' live.txt | tail -1)
+  for k in crc framing overrun lost failsafe; do fig 11 "corrupt_$k" "$(num "$L" "$k")" 0 frames "$C"; done
+  # part 3: rccar drive through the firmware, killed with SIGKILL after 90 DRIVE frames
+  C="rccar drive --camera sim --port tty --pwm-log pins.log --arm --set detect.enabled=false; kill -9 after 90 DRIVEs"
+  rccar drive --no-local --camera sim --port "$W/tty" --pwm-log pins.log --arm --set detect.enabled=false -o crash > crash.txt &
+  DRIVE=$!
+  until_ok awk '$1 == "RX" && $2 == 2 {n++} END {exit n < 90}' pins.log
+  { kill -9 $DRIVE; wait $DRIVE; } 2>/dev/null || true
+  until_ok awk '$1 == "RX" && $2 == 2 {t = $4} $1 == "PULSE" && $2 == "esc" && $3 < 1510 && t {f = 1} END {exit !f}' pins.log
+  fig 11 esc_driving_us "$(awk '$1 == "PULSE" && $2 == "esc" && $3 > 1600 {print $3; exit}' pins.log)" 1 us "$C; the first ESC width above 1600 µs"
+  fig 11 failsafe_ms "$(awk '$1 == "RX" && $2 == 2 {t = $4} $1 == "PULSE" && $2 == "esc" && $3 < 1510 && t {printf "%.1f", ($4 - t) / 1000; exit}' pins.log)" 21 ms "$C; from the last DRIVE to the ESC's neutral pulse, firmware clock: failsafe_ms 250 + up to one 20 ms PWM period"
+  fig 11 drives_per_s "$(awk '$1 == "RX" && $2 == 2 {n++; if (!a) a = $4; b = $4} END {printf "%.1f", (n - 1) / (b - a) * 1e6}' pins.log)" 2 1/s "$C; DRIVE frames per second of the firmware's clock"
+  L=$(rccar link --port "$W/tty" --seconds 1 | grep '^#' | tail -1)
+  word 11 state_after_kill "$(awk '{print $2}' <<< "$L")" "rccar link --port tty --seconds 1 (after the kill)"
+  fig 11 failsafe_trips_after_kill "$(num "$L" 'failsafe')" 0 trips "rccar link --port tty --seconds 1 (after the kill)"
+  kill $EMU; wait $EMU 2>/dev/null || true
+  # part 4: a fresh emulator, drive 4 s (the page's --laps 1 takes two minutes of wall clock)
+  C="rccar drive --camera sim --port tty2 --pwm-log pins2.log --arm --laps 0 --seconds 4 --set detect.enabled=false"
+  "${EMU_CMD[@]}" --link "$W/tty2" > pins2.log 2>/dev/null &
+  EMU=$!
+  until_ok grep -q '^PULSE esc' pins2.log
+  O=$(rccar drive --no-local --camera sim --port "$W/tty2" --pwm-log pins2.log --arm --laps 0 --seconds 4 --set detect.enabled=false -o lap)
+  timing 11 drive_latency_median_ms "$(num "$(grep 'capture->command' <<< "$O")" 'median')" 5 ms "$C (wall-clock)"
+  timing 11 drive_latency_max_ms "$(num "$(grep 'capture->command' <<< "$O")" 'max')" 20 ms "$C (wall-clock)"
+  kill $EMU; wait $EMU 2>/dev/null || true
+fi
+
+# ---- lab 12: behaviours ---------------------------------------------------------------------------------------
+if want 12; then
+  TR=$REPO/config/tracks/scenarios.toml
+  C="rccar sim --track config/tracks/scenarios.toml --laps 1 --truth-boxes --no-timing --set behaviour.pass_enabled=true"
+  rccar sim --no-local --track "$TR" --laps 1 --truth-boxes --no-timing --set behaviour.pass_enabled=true -o l12 >/dev/null
+  fig 12 lap_s "$(jq '.lap_times_s[0]' l12/summary.json)" 0.2 s "$C"
+  fig 12 lap_departures "$(jq .lane_departures l12/summary.json)" 0 departures "$C"
+  while IFS=$'\t' read -r k t d; do
+    fig 12 "lap/$k/t_s" "$t" 0.07 s "$C"
+    [ -z "$d" ] || fig 12 "lap/$k/reason" "$d" 0.02 "m or s" "$C; the number in the transition's reason"
+  done < <(jq -r 'select(.transition) | [(.transition.from + "_" + .transition.to), .time_s,
+      (.transition.reason | (capture("(?<d>[0-9]+(\\.[0-9]+)?)").d // ""))] | @tsv' l12/telemetry.jsonl)
+  C="rccar sim --track config/tracks/scenarios.toml --laps 0 --seconds 16 --truth-boxes --no-timing --set behaviour.stop_trigger_m=0.6"
+  rccar sim --no-local --track "$TR" --laps 0 --seconds 16 --truth-boxes --no-timing --set behaviour.stop_trigger_m=0.6 -o l12late >/dev/null
+  S=$(jq -c 'select(.transition.to == "stop_sign") | [.time_s, (.transition.reason | capture("(?<d>[0-9.]+) m").d | tonumber)]' l12late/telemetry.jsonl | head -1)
+  fig 12 late_stop_begins_s "$(jq '.[0]' <<< "$S")" 0.07 s "$C"
+  fig 12 late_stop_distance_m "$(jq '.[1]' <<< "$S")" 0.02 m "$C"
+  fig 12 late_stop_resume_s "$(jq -c 'select(.transition.from == "stop_sign") | .time_s' l12late/telemetry.jsonl | head -1)" 0.07 s "$C"
+fi
+
+# ---- write the key ------------------------------------------------------------------------------------------------
+# one figure per line, so that a regenerated key diffs figure by figure
+{
+  echo '{"generated_by": "bash docs/labs/key/make.sh", "figures": ['
+  jq -c . "$FIGS" | sed '$!s/$/,/'
+  echo ']}'
+} > "$OUT/key.json"
+jq -e '.figures | length > 0' "$OUT/key.json" >/dev/null
 {
   echo "# The labs' key (generated by \`bash docs/labs/key/make.sh\`; do not edit)"
   echo
-  echo "Each figure is rerun by \`cargo test --release --test car labs::key_matches_committed\` and must"
-  echo "agree with this table within its tolerance. The labs' own pages quote longer runs (whole"
-  echo "laps, more samples); these are the short versions."
+  echo "Every figure a lab page quotes, with the command that produced it and the tolerance within"
+  echo "which a rerun must agree (\`cargo test --release --features serial --test car labs::key_matches_committed\`"
+  echo "regenerates the key and compares; \`labs::pages_quote_the_committed_key\` checks the pages against"
+  echo "this table). Figures marked *timing* are wall-clock times of the machine that made the key: a"
+  echo "rerun only checks that they are produced."
   echo
   echo "| lab | figure | value | tolerance | command |"
   echo "|---|---|---|---|---|"
-  jq -r '.figures[] | "| \(.lab) | \(.name) | \(.value) \(.unit) | ±\(.tol) | `\(.command)` |"' "$OUT/key.json"
+  jq -r '.figures[] | "| \(.lab) | \(.name) | \(.value) \(.unit)\(if .timing then " *timing*" else "" end) | ±\(.tol) | `\(.command)` |"' "$OUT/key.json"
 } > "$OUT/key.md"
 echo "wrote $OUT/key.json and $OUT/key.md ($(jq '.figures | length' "$OUT/key.json") figures)"

@@ -21,17 +21,21 @@
 //! deleted). If that is not enough, the frame is not written and is counted in
 //! [`RecordStats::frames_over_budget`]; so a budget should hold several segments.
 //!
-//! Failures: [`Recorder::create`] makes the folder, refuses one that already holds a
-//! recording, and proves it can write there (a 256 KiB probe file, fsynced, then deleted), so
+//! Failures: [`Recorder::create`] makes the folder, refuses one that is not empty (it would
+//! mix two runs: a new or empty folder only), and proves it can write there (a 256 KiB probe file, fsynced, then deleted), so
 //! a read-only or full folder is one clear error naming the path before the car moves. A
 //! card that fills up before the budget is reached (ENOSPC) makes the recorder delete the
 //! oldest closed segment and try again, as if over budget. A write that still fails (card
 //! full with nothing left to delete, card pulled) is counted in [`RecordStats`] and returned,
-//! and the next frame tries again: a recording problem never ends the run.
+//! and the next frame tries again: a recording problem never ends the run. A recorder dropped
+//! before anything was recorded (the run failed to start) removes what `create` made, so the
+//! same folder can be used again at once.
 //!
 //! Frames are encoded with the `image` crate's baseline JPEG encoder at
 //! `jpeg_quality` (1..=100); JPEG changes pixel values slightly, so a replay of a recording
 //! sees frames that differ from the live ones by a few grey levels.
+
+pub mod observer;
 
 use image::codecs::jpeg::JpegEncoder;
 use image::RgbImage;
@@ -69,32 +73,141 @@ pub fn frame_index(file_name: &str) -> Option<u64> {
     stem.parse().ok()
 }
 
+/// The longest telemetry line read back, bytes (a longer one is treated as cut).
+pub const MAX_TELEMETRY_LINE: usize = 1 << 20;
+
 /// The time of each recorded frame, read back from a recording's telemetry.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RecordedTimes {
-    /// Frame index → `time_s`, from every line that has a numeric `frame` and `time_s`.
+    /// Frame number → `time_s`. Empty when the telemetry has no `time_s` at all (frames are
+    /// then replayed 1/fps apart).
     pub times: std::collections::BTreeMap<u64, f64>,
-    /// Lines that are not JSON or lack those fields (a torn last line after a crash).
-    pub bad_lines: usize,
+    /// Line numbers (1-based) that are not JSON: cut by a crash or a full card (the recorder
+    /// may leave a line torn). Skipped; their frames have no time and are not replayed.
+    pub cut_lines: Vec<usize>,
 }
 
 /// Reads `DIR/telemetry.jsonl` of a recording for the frames' times, so a replay can use the
 /// recorded time steps (the car skips late frames, so they are not always 1/fps apart).
 /// The drive loop must pass [`Recorder::write_frame`] the same index as the line's `frame`.
+///
+/// A line that is not JSON (cut) is skipped and listed in [`RecordedTimes::cut_lines`]: a
+/// crash or a full card leaves such lines, and the rest of the recording is good. A line that
+/// reads but contradicts the others refuses the whole recording with
+/// [`RecordError::BadTelemetry`] naming the file and line, because then it is not known which
+/// lines to trust (two runs in one folder, an edited file): a frame number that is missing,
+/// repeated or not above the previous one; a `time_s` that is missing (when other lines have
+/// one), not a finite number (a NaN is written as `null`), negative, or not after the
+/// previous line's.
 pub fn recorded_times(dir: &Path) -> Result<RecordedTimes, RecordError> {
+    use std::io::BufRead;
     let path = dir.join(TELEMETRY_FILE);
-    let text = std::fs::read_to_string(&path).map_err(|source| RecordError::Read { path, source })?;
+    let file = File::open(&path).map_err(|source| RecordError::Read {
+        path: path.clone(),
+        source,
+    })?;
+    let mut r = std::io::BufReader::new(file);
+    let bad = |line: usize, reason: String| RecordError::BadTelemetry {
+        path: path.clone(),
+        line,
+        reason,
+    };
     let mut out = RecordedTimes::default();
-    for line in text.lines().filter(|l| !l.trim().is_empty()) {
-        let v: Option<(u64, f64)> = serde_json::from_str::<serde_json::Value>(line)
-            .ok()
-            .and_then(|v| Some((v.get("frame")?.as_u64()?, v.get("time_s")?.as_f64()?)));
-        match v {
-            Some((frame, t)) => {
-                out.times.insert(frame, t);
+    // (frame, line) and (time, line) of the last good line; whether lines have times.
+    let mut last_frame: Option<(u64, usize)> = None;
+    let mut last_time: Option<(f64, usize)> = None;
+    let mut with_time: Option<(bool, usize)> = None;
+    let mut buf = Vec::with_capacity(4096);
+    let mut line_no = 0;
+    loop {
+        // 1. One line, at most MAX_TELEMETRY_LINE bytes kept (a longer one counts as cut).
+        buf.clear();
+        let mut too_long = false;
+        let mut any = false;
+        loop {
+            let chunk = r.fill_buf().map_err(|source| RecordError::Read {
+                path: path.clone(),
+                source,
+            })?;
+            if chunk.is_empty() {
+                break;
             }
-            None => out.bad_lines += 1,
+            any = true;
+            let (take, done) = match chunk.iter().position(|&b| b == b'\n') {
+                Some(k) => (k + 1, true),
+                None => (chunk.len(), false),
+            };
+            if buf.len() + take <= MAX_TELEMETRY_LINE {
+                buf.extend_from_slice(&chunk[..take]);
+            } else {
+                too_long = true;
+            }
+            r.consume(take);
+            if done {
+                break;
+            }
         }
+        if !any {
+            break;
+        }
+        line_no += 1;
+        if buf.iter().all(u8::is_ascii_whitespace) && !too_long {
+            continue;
+        }
+        // 2. Not JSON: a cut line, skipped.
+        let v: serde_json::Value = match (too_long, serde_json::from_slice(&buf)) {
+            (false, Ok(v)) => v,
+            _ => {
+                out.cut_lines.push(line_no);
+                continue;
+            }
+        };
+        // 3. The frame number: present, above the last one.
+        let frame = v
+            .get("frame")
+            .and_then(serde_json::Value::as_u64)
+            .ok_or_else(|| bad(line_no, "no frame number (`frame`)".into()))?;
+        if let Some((f, l)) = last_frame {
+            if frame == f {
+                return Err(bad(line_no, format!("frame {frame} again (line {l} had it)")));
+            }
+            if frame < f {
+                return Err(bad(
+                    line_no,
+                    format!("frame {frame} after frame {f} (line {l}): frame numbers must increase"),
+                ));
+            }
+        }
+        last_frame = Some((frame, line_no));
+        // 4. Its time: on every line or none, finite, not negative, after the last one.
+        let t = v.get("time_s");
+        match (with_time, t.is_some()) {
+            (Some((true, l)), false) => {
+                return Err(bad(line_no, format!("no time_s (line {l} has one)")));
+            }
+            (Some((false, l)), true) => {
+                return Err(bad(line_no, format!("a time_s, but line {l} has none")));
+            }
+            _ => with_time = Some((t.is_some(), line_no)),
+        }
+        let Some(t) = t else { continue };
+        let t = t
+            .as_f64()
+            .filter(|t| t.is_finite())
+            .ok_or_else(|| bad(line_no, format!("time_s {t} is not a finite number of seconds")))?;
+        if t < 0.0 {
+            return Err(bad(line_no, format!("time_s {t} is negative")));
+        }
+        if let Some((p, l)) = last_time {
+            if t <= p {
+                return Err(bad(
+                    line_no,
+                    format!("time_s {t} is not after line {l}'s {p}: times must increase"),
+                ));
+            }
+        }
+        last_time = Some((t, line_no));
+        out.times.insert(frame, t);
     }
     Ok(out)
 }
@@ -139,12 +252,14 @@ pub enum RecordError {
         /// Underlying error.
         source: std::io::Error,
     },
-    /// The folder already holds a recording (it would mix two runs).
-    #[error("{path}: already holds a recording ({found}); choose a new folder or delete it")]
+    /// The folder is not empty (a recording on top of another would mix two runs).
+    #[error(
+        "{path}: not empty (holds {found}); a recording goes into a new or empty folder: choose another, or remove it"
+    )]
     NotEmpty {
         /// The folder.
         path: PathBuf,
-        /// The entry that shows it.
+        /// An entry in it.
         found: String,
     },
     /// A write during the run failed (counted; the run goes on).
@@ -154,6 +269,16 @@ pub enum RecordError {
         path: PathBuf,
         /// Underlying error.
         source: std::io::Error,
+    },
+    /// A recording's telemetry contradicts itself (see [`recorded_times`]).
+    #[error("{path}:{line}: {reason}; this recording's telemetry is damaged or holds two runs (record again, or replay a copy without the bad lines)")]
+    BadTelemetry {
+        /// The telemetry file.
+        path: PathBuf,
+        /// Line number, 1-based.
+        line: usize,
+        /// What is wrong.
+        reason: String,
     },
     /// A recording's telemetry cannot be read back.
     #[error("{path}: cannot read: {source}")]
@@ -220,6 +345,10 @@ pub struct Recorder {
     current: Option<Segment>,
     next_segment: u64,
     stats: RecordStats,
+    /// `create` made the folder (it did not exist).
+    made_dir: bool,
+    /// `finish` was called.
+    finished: bool,
 }
 
 /// ENOSPC: the filesystem is full.
@@ -232,28 +361,31 @@ fn blocks(bytes: u64) -> u64 {
 }
 
 impl Recorder {
-    /// Makes `dir` (and its parents), checks that it holds no recording yet and that a file
-    /// can be written and synced there, and opens the telemetry file. Call it before the car
-    /// moves: its error is the one line to show.
+    /// Makes `dir` (and its parents), checks that it is empty and that a file can be written
+    /// and synced there, and opens the telemetry file. Call it before the car moves: its error
+    /// is the one line to show.
     pub fn create(dir: &Path, opts: RecordOptions) -> Result<Self, RecordError> {
         // 1. The folder.
+        let made_dir = !dir.exists();
         std::fs::create_dir_all(dir).map_err(|source| RecordError::CreateDir {
             path: dir.into(),
             source,
         })?;
-        // 2. Not a second recording on top of a first.
+        // 2. Empty: not a second recording on top of a first, nor beside other files.
         let entries = std::fs::read_dir(dir).map_err(|source| RecordError::CreateDir {
             path: dir.into(),
             source,
         })?;
-        for e in entries.flatten() {
-            let name = e.file_name().to_string_lossy().to_string();
-            if name == TELEMETRY_FILE || name.starts_with(SEGMENT_PREFIX) {
-                return Err(RecordError::NotEmpty {
-                    path: dir.into(),
-                    found: name,
-                });
-            }
+        let mut names: Vec<String> = entries
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().to_string())
+            .collect();
+        names.sort();
+        if let Some(found) = names.into_iter().find(|n| n != PROBE_FILE) {
+            return Err(RecordError::NotEmpty {
+                path: dir.into(),
+                found,
+            });
         }
         // 3. A real write, synced so that a full card fails now and not at the first frame.
         let probe = dir.join(PROBE_FILE);
@@ -263,15 +395,27 @@ impl Recorder {
             f.sync_all()
         })();
         let _ = std::fs::remove_file(&probe);
-        probe_result.map_err(|source| RecordError::NotWritable {
-            path: probe.clone(),
-            source,
+        // A folder made here is taken back when the checks fail.
+        let unmake = || {
+            if made_dir {
+                let _ = std::fs::remove_dir(dir);
+            }
+        };
+        probe_result.map_err(|source| {
+            unmake();
+            RecordError::NotWritable {
+                path: probe.clone(),
+                source,
+            }
         })?;
         // 4. The telemetry file.
         let telemetry_path = dir.join(TELEMETRY_FILE);
-        let telemetry = File::create(&telemetry_path).map_err(|source| RecordError::NotWritable {
-            path: telemetry_path.clone(),
-            source,
+        let telemetry = File::create(&telemetry_path).map_err(|source| {
+            unmake();
+            RecordError::NotWritable {
+                path: telemetry_path.clone(),
+                source,
+            }
         })?;
         Ok(Self {
             dir: dir.into(),
@@ -289,6 +433,8 @@ impl Recorder {
             current: None,
             next_segment: 0,
             stats: RecordStats::default(),
+            made_dir,
+            finished: false,
         })
     }
 
@@ -441,6 +587,7 @@ impl Recorder {
     /// Syncs the telemetry to the card and returns the counters. Dropping a recorder without
     /// `finish` loses nothing that was written (every line went to the OS), only the fsync.
     pub fn finish(mut self) -> Result<RecordStats, RecordError> {
+        self.finished = true;
         self.telemetry
             .flush()
             .and_then(|_| self.telemetry.sync_all())
@@ -475,6 +622,23 @@ impl Recorder {
         self.stats.frames_failed += 1;
         self.stats.last_error = Some(e.to_string());
         e
+    }
+}
+
+impl Drop for Recorder {
+    /// Dropped without `finish` before anything was tried (the run failed to start): takes
+    /// back the empty telemetry file and the folder `create` made, so a retry can use it.
+    fn drop(&mut self) {
+        let s = &self.stats;
+        let nothing =
+            s.frames_written + s.frames_failed + s.frames_over_budget + s.telemetry_lines + s.telemetry_failed == 0;
+        if self.finished || !nothing || self.current.is_some() {
+            return;
+        }
+        let _ = std::fs::remove_file(&self.telemetry_path);
+        if self.made_dir {
+            let _ = std::fs::remove_dir(&self.dir);
+        }
     }
 }
 
@@ -563,9 +727,99 @@ mod tests {
         let t = recorded_times(&dir).unwrap();
         assert_eq!(t.times.len(), 3);
         assert_eq!(t.times[&3], 0.1002);
-        assert_eq!(t.bad_lines, 1);
+        assert_eq!(t.cut_lines, [4]);
         let e = recorded_times(tmp.path()).unwrap_err().to_string();
         assert!(e.contains("telemetry.jsonl") && e.contains("cannot read"), "{e}");
+    }
+
+    /// The times of a telemetry file with these lines.
+    fn times_of(lines: &[&str]) -> Result<RecordedTimes, RecordError> {
+        let tmp = tempfile::tempdir().unwrap();
+        std::fs::write(tmp.path().join(TELEMETRY_FILE), lines.join("\n") + "\n").unwrap();
+        recorded_times(tmp.path())
+    }
+
+    #[test]
+    fn recorded_times_refuse_lines_that_contradict_the_others() {
+        let ok = times_of(&[
+            r#"{"frame":0,"time_s":0.0}"#,
+            r#"{"frame":2,"ti"#,
+            r#"{"frame":3,"time_s":0.1}"#,
+            "",
+        ])
+        .unwrap();
+        assert_eq!(ok.times.len(), 2);
+        assert_eq!(ok.cut_lines, [2]);
+        // No times at all: none (frames 1/fps apart); frame numbers are still checked.
+        assert!(times_of(&[r#"{"frame":0}"#, r#"{"frame":1}"#])
+            .unwrap()
+            .times
+            .is_empty());
+        for (lines, want) in [
+            (
+                &[r#"{"frame":0,"time_s":0}"#, r#"{"frame":0,"time_s":1}"#][..],
+                ":2: frame 0 again (line 1 had it)",
+            ),
+            (
+                &[r#"{"frame":5,"time_s":0}"#, r#"{"frame":4,"time_s":1}"#],
+                ":2: frame 4 after frame 5 (line 1)",
+            ),
+            (&[r#"{"time_s":0}"#], ":1: no frame number"),
+            (&[r#"{"frame":1,"time_s":-100}"#], ":1: time_s -100 is negative"),
+            (
+                &[r#"{"frame":1,"time_s":null}"#],
+                ":1: time_s null is not a finite number",
+            ),
+            (
+                &[r#"{"frame":1,"time_s":"1"}"#],
+                ":1: time_s \"1\" is not a finite number",
+            ),
+            (
+                &[r#"{"frame":1,"time_s":0.5}"#, r#"{"frame":2,"time_s":0.5}"#],
+                ":2: time_s 0.5 is not after line 1's 0.5",
+            ),
+            (
+                &[r#"{"frame":1,"time_s":0.5}"#, r#"{"frame":2}"#],
+                ":2: no time_s (line 1 has one)",
+            ),
+            (
+                &[r#"{"frame":1}"#, r#"{"frame":2,"time_s":0.5}"#],
+                ":2: a time_s, but line 1 has none",
+            ),
+        ] {
+            let e = times_of(lines).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("telemetry.jsonl{want}")) && e.contains("damaged or holds two runs"),
+                "{lines:?}: {e}"
+            );
+        }
+        // A line longer than the bound is a cut line, never held whole.
+        let long = format!(r#"{{"frame":1,"time_s":0.5,"x":"{}"}}"#, "y".repeat(MAX_TELEMETRY_LINE));
+        let t = times_of(&[r#"{"frame":0,"time_s":0}"#, &long, r#"{"frame":2,"time_s":1}"#]).unwrap();
+        assert_eq!((t.times.len(), t.cut_lines.as_slice()), (2, &[2][..]));
+    }
+
+    #[test]
+    fn a_recorder_dropped_before_recording_takes_back_its_folder() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("run");
+        drop(Recorder::create(&dir, RecordOptions::default()).unwrap());
+        assert!(!dir.exists(), "a failed start leaves nothing");
+        // An empty folder that was there stays, empty.
+        std::fs::create_dir(&dir).unwrap();
+        drop(Recorder::create(&dir, RecordOptions::default()).unwrap());
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+        // Once something was recorded, or after finish, everything stays.
+        let mut r = Recorder::create(&dir, RecordOptions::default()).unwrap();
+        r.write_telemetry_line("{}").unwrap();
+        drop(r);
+        assert!(dir.join(TELEMETRY_FILE).is_file());
+        let other = tmp.path().join("other");
+        Recorder::create(&other, RecordOptions::default())
+            .unwrap()
+            .finish()
+            .unwrap();
+        assert!(other.join(TELEMETRY_FILE).is_file());
     }
 
     #[test]
@@ -702,13 +956,18 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains(&dir.display().to_string()) && e.contains("already holds a recording"),
+            e.contains(&dir.display().to_string()) && e.contains("not empty (holds seg_000000)"),
             "{e}"
         );
-        // Other files (notes, an empty folder) are fine.
+        // Other files too (a recording goes into a new or empty folder); an empty one is fine.
         let other = tmp.path().join("notes");
         std::fs::create_dir(&other).unwrap();
         std::fs::write(other.join("README.txt"), "car 3").unwrap();
+        let e = Recorder::create(&other, RecordOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not empty (holds README.txt)"), "{e}");
+        std::fs::remove_file(other.join("README.txt")).unwrap();
         Recorder::create(&other, RecordOptions::default()).unwrap();
     }
 

@@ -1,0 +1,472 @@
+//! Routes and handlers. [`handle`] sees every request first: the e-stop is answered there
+//! before anything else is looked at; every other request passes the checks of
+//! [`super::access`] before it reaches the axum router.
+
+use super::access::{self, refuse};
+use super::conn::{ConnCtl, HEAD_DEADLINE};
+use super::hub::{self, now_ms, Msg};
+use super::Shared;
+use axum::body::{Body, Bytes};
+use axum::extract::State;
+use axum::http::{header, HeaderMap, HeaderValue, Method, Request, Response, StatusCode, Uri};
+use axum::routing::{get, post};
+use axum::{Extension, Router};
+use rccar::dashboard::{self, Control, PlaceRequest, PlotPoint, SetRequest};
+use rccar::drive::Actor;
+use serde_json::{json, Value};
+use std::convert::Infallible;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::Instant;
+use tower_service::Service;
+
+const PAGE: &str = include_str!("../page.html");
+
+/// Who sent the request (an extension of every request the router sees).
+#[derive(Clone)]
+pub struct Caller {
+    /// The connection.
+    pub ctl: Arc<ConnCtl>,
+    /// When its head was read (the body must follow within the head deadline).
+    pub at: Instant,
+    /// Logged in (always on loopback).
+    pub session: bool,
+}
+
+/// A JSON response.
+pub fn reply(code: StatusCode, v: &Value) -> Response<Body> {
+    let mut r = Response::new(Body::from(v.to_string()));
+    *r.status_mut() = code;
+    r.headers_mut()
+        .insert(header::CONTENT_TYPE, HeaderValue::from_static("application/json"));
+    r
+}
+
+/// `{"error": msg}` with `code`.
+pub fn error(code: StatusCode, msg: &str) -> Response<Body> {
+    reply(code, &json!({ "error": msg }))
+}
+
+/// Every route; the checks before them are in [`handle`].
+pub fn router(sh: Arc<Shared>) -> Router {
+    Router::new()
+        .route("/", get(page))
+        .route("/index.html", get(page))
+        .route("/login", post(login))
+        .route("/api/state", get(state))
+        .route("/stream.mjpg", get(hub::stream))
+        .route("/api/release", post(release))
+        .route("/api/arm", post(arm))
+        .route("/api/disarm", post(disarm))
+        .route("/api/heartbeat", post(heartbeat))
+        .route("/api/set", post(set))
+        .route("/api/save", post(save))
+        .route("/api/sim/pause", post(sim))
+        .route("/api/sim/resume", post(sim))
+        .route("/api/sim/step", post(sim))
+        .route("/api/sim/reset", post(sim))
+        .route("/api/sim/place", post(sim))
+        // Only exact routes exist: `..`, `%2e`, `//` and the like are simply not found.
+        .fallback(|| async { error(StatusCode::NOT_FOUND, "no such page") })
+        .method_not_allowed_fallback(|| async { error(StatusCode::METHOD_NOT_ALLOWED, "wrong method") })
+        .with_state(sh)
+}
+
+/// One request of a connection: the e-stop first, then the access checks, then the router.
+pub async fn handle(
+    req: Request<hyper::body::Incoming>,
+    ctl: Arc<ConnCtl>,
+    mut router: Router,
+    sh: Arc<Shared>,
+) -> Result<Response<Body>, Infallible> {
+    ctl.handling();
+    let mut resp = if req.method() == Method::POST && req.uri().path() == "/api/estop" {
+        estop(&sh, &ctl, req.headers())
+    } else {
+        match check(&req, &ctl, &sh) {
+            Err(r) => *r,
+            Ok(session) => {
+                let (mut parts, body) = req.into_parts();
+                parts.extensions.insert(Caller {
+                    ctl: ctl.clone(),
+                    at: Instant::now(),
+                    session,
+                });
+                let req = Request::from_parts(parts, Body::new(body));
+                match router.call(req).await {
+                    Ok(r) => r,
+                    Err(e) => match e {},
+                }
+            }
+        }
+    };
+    ctl.waiting();
+    let h = resp.headers_mut();
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    h.insert(header::X_CONTENT_TYPE_OPTIONS, HeaderValue::from_static("nosniff"));
+    // No other page may frame this one (a framed page's clicks would pass every check).
+    h.insert(header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));
+    h.insert(
+        header::CONTENT_SECURITY_POLICY,
+        HeaderValue::from_static("frame-ancestors 'none'"),
+    );
+    h.insert(header::REFERRER_POLICY, HeaderValue::from_static("no-referrer"));
+    Ok(resp)
+}
+
+/// The access checks of [`super::access`]; `Ok(logged in)` or the refusal.
+fn check(req: &Request<hyper::body::Incoming>, ctl: &ConnCtl, sh: &Shared) -> Result<bool, Box<Response<Body>>> {
+    let (m, path, h) = (req.method(), req.uri().path(), req.headers());
+    let no = |why: &str| Box::new(refuse(sh, m, path, h, ctl.peer, why));
+    if ctl.reserve {
+        return Err(Box::new(error(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the server is at its connection bound: this connection serves the e-stop only",
+        )));
+    }
+    let a = &sh.access;
+    a.host_ok(h).map_err(|w| no(&w))?;
+    if m == Method::OPTIONS {
+        return Err(no("cross-origin requests are not allowed (CORS preflight refused)"));
+    }
+    let session = a.has_session(h);
+    if m == Method::POST && path == "/login" {
+        a.origin_ok(h).map_err(|w| no(&w))?;
+    } else if m != Method::GET && m != Method::HEAD {
+        a.control_ok(h).map_err(|w| no(&w))?;
+    } else if path == "/stream.mjpg" && !session {
+        return Err(no("not logged in (enter the token printed at start on the page)"));
+    }
+    Ok(session)
+}
+
+/// `POST /api/estop`: atomics only, no lock that the loop, the hub or another request holds;
+/// from anyone who can reach the server. Its log line and telemetry note go through a queue.
+fn estop(sh: &Shared, ctl: &ConnCtl, h: &HeaderMap) -> Response<Body> {
+    sh.sent.mark_estop();
+    sh.arm.estop(Actor::Page);
+    sh.armed_by_page.store(false, Ordering::SeqCst);
+    let who = format!(
+        "{} (Origin {}, Host {})",
+        ctl.peer,
+        access::shown(h.get(header::ORIGIN)),
+        access::shown(h.get("host"))
+    );
+    sh.log.send(Msg::Out(format!("dashboard: EMERGENCY STOP from {who}")));
+    sh.log.send(Msg::Note(format!(
+        "EMERGENCY STOP from dashboard {who} at wall {:.3} s",
+        sh.sent.estop_clock_s.get()
+    )));
+    reply(StatusCode::OK, &json!({"estop": true}))
+}
+
+/// Reads a control body: Content-Length only (no chunks), at most `MAX_BODY`, complete
+/// within the head deadline of the request's arrival.
+async fn body(h: &HeaderMap, b: Body, c: &Caller) -> Result<Bytes, Response<Body>> {
+    if h.contains_key(header::TRANSFER_ENCODING) {
+        return Err(error(
+            StatusCode::LENGTH_REQUIRED,
+            "chunked bodies are not accepted; send Content-Length",
+        ));
+    }
+    let len: usize = match h
+        .get(header::CONTENT_LENGTH)
+        .map(|v| v.to_str().ok().and_then(|s| s.parse().ok()))
+    {
+        None => 0,
+        Some(Some(n)) => n,
+        Some(None) => return Err(error(StatusCode::BAD_REQUEST, "bad Content-Length")),
+    };
+    if len > dashboard::MAX_BODY {
+        return Err(error(StatusCode::PAYLOAD_TOO_LARGE, "body larger than 4096 bytes"));
+    }
+    let left = HEAD_DEADLINE.saturating_sub(c.at.elapsed());
+    match tokio::time::timeout(left, axum::body::to_bytes(b, dashboard::MAX_BODY)).await {
+        Err(_) => Err(error(StatusCode::REQUEST_TIMEOUT, "body not complete within 3 s")),
+        Ok(Err(_)) => Err(error(StatusCode::BAD_REQUEST, "body shorter than Content-Length")),
+        Ok(Ok(b)) => Ok(b),
+    }
+}
+
+async fn page(State(sh): State<Arc<Shared>>, h: HeaderMap) -> Response<Body> {
+    let mut r = Response::new(Body::from(sh.access.page(PAGE, &h)));
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("text/html; charset=utf-8"),
+    );
+    r
+}
+
+/// `POST /login` (off loopback): the printed token, once, for the session cookie.
+async fn login(
+    State(sh): State<Arc<Shared>>,
+    Extension(c): Extension<Caller>,
+    h: HeaderMap,
+    b: Body,
+) -> Response<Body> {
+    if sh.access.loopback() {
+        return error(StatusCode::NOT_FOUND, "no login on loopback: the page needs none");
+    }
+    let bytes = match body(&h, b, &c).await {
+        Ok(b) => b,
+        Err(r) => return r,
+    };
+    match sh.access.login(&bytes) {
+        Some(cookie) => {
+            let mut r = Response::new(Body::empty());
+            *r.status_mut() = StatusCode::SEE_OTHER;
+            r.headers_mut().insert(header::LOCATION, HeaderValue::from_static("/"));
+            if let Ok(v) = HeaderValue::from_str(&cookie) {
+                r.headers_mut().insert(header::SET_COOKIE, v);
+            }
+            r
+        }
+        None => refuse(&sh, &Method::POST, "/login", &h, c.ctl.peer, "wrong token"),
+    }
+}
+
+fn note(sh: &Shared, c: &Caller, what: &str) -> String {
+    format!(
+        "{what} from dashboard {} at wall {:.3} s",
+        c.ctl.peer.ip(),
+        sh.sent.now()
+    )
+}
+
+async fn release(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> Response<Body> {
+    sh.arm.release(Actor::Page);
+    sh.tx.send(Control::Note(note(&sh, &c, "e-stop released")));
+    reply(StatusCode::OK, &json!({"estop": false}))
+}
+
+async fn arm(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> Response<Body> {
+    sh.last_heartbeat_ms.store(now_ms(&sh), Ordering::SeqCst);
+    if let Err(why) = sh.arm.arm(Actor::Page) {
+        return error(StatusCode::CONFLICT, &why.to_string());
+    }
+    sh.armed_by_page.store(true, Ordering::SeqCst);
+    sh.tx.send(Control::Note(note(&sh, &c, "armed")));
+    reply(StatusCode::OK, &json!({"armed": true}))
+}
+
+async fn disarm(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> Response<Body> {
+    sh.arm.disarm(Actor::Page);
+    sh.armed_by_page.store(false, Ordering::SeqCst);
+    sh.tx.send(Control::Note(note(&sh, &c, "disarmed")));
+    reply(StatusCode::OK, &json!({"armed": false}))
+}
+
+async fn heartbeat(State(sh): State<Arc<Shared>>) -> Response<Body> {
+    sh.last_heartbeat_ms.store(now_ms(&sh), Ordering::SeqCst);
+    reply(StatusCode::OK, &json!({"armed": sh.arm.is_armed()}))
+}
+
+async fn set(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h: HeaderMap, b: Body) -> Response<Body> {
+    let bytes = match body(&h, b, &c).await {
+        Ok(b) => b,
+        Err(r) => return r,
+    };
+    let req: SetRequest = match dashboard::parse_body(&bytes) {
+        Ok(q) => q,
+        Err(e) => return error(StatusCode::BAD_REQUEST, &e.to_string()),
+    };
+    let mut cfg = sh.cfg.lock().unwrap_or_else(|e| e.into_inner());
+    let new = match dashboard::validate_set(&cfg, &req.key, req.value) {
+        Ok(n) => n,
+        Err(e) => return error(StatusCode::BAD_REQUEST, &e.to_string()),
+    };
+    let queued = sh.tx.send(Control::Set {
+        key: req.key.clone(),
+        value: req.value,
+        note: format!("dashboard {} at wall {:.3} s", c.ctl.peer.ip(), sh.sent.now()),
+    });
+    if !queued {
+        return error(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the loop is not taking changes (inbox full)",
+        );
+    }
+    *cfg = new;
+    drop(cfg);
+    sh.changed
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .insert(req.key.clone(), req.value);
+    reply(StatusCode::OK, &json!({"key": req.key, "value": req.value}))
+}
+
+async fn save(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h: HeaderMap, b: Body) -> Response<Body> {
+    let bytes = match body(&h, b, &c).await {
+        Ok(b) => b,
+        Err(r) => return r,
+    };
+    // No parameters: the file is the one given at start (--local), never the client's.
+    if bytes.iter().any(|b| !b.is_ascii_whitespace())
+        && serde_json::from_slice::<serde_json::Map<String, Value>>(&bytes).map_or(true, |m| !m.is_empty())
+    {
+        return error(StatusCode::BAD_REQUEST, "save takes no parameters");
+    }
+    let keys: Vec<(String, f64)> = sh
+        .changed
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .map(|(k, v)| (k.clone(), *v))
+        .collect();
+    let (sh2, keys2) = (sh.clone(), keys.clone());
+    let r = tokio::task::spawn_blocking(move || dashboard::local_toml::save(&sh2.local, &keys2)).await;
+    match r {
+        Ok(Ok(())) => {
+            let list = keys
+                .iter()
+                .map(|(k, v)| format!("{k}={v}"))
+                .collect::<Vec<_>>()
+                .join(", ");
+            let what = format!("saved {list} to {}", sh.local.display());
+            sh.tx.send(Control::Note(note(&sh, &c, &what)));
+            let saved: Vec<&String> = keys.iter().map(|(k, _)| k).collect();
+            reply(
+                StatusCode::OK,
+                &json!({"saved": saved, "file": sh.local.display().to_string()}),
+            )
+        }
+        Ok(Err(e)) => error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
+        Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
+    }
+}
+
+async fn sim(
+    State(sh): State<Arc<Shared>>,
+    Extension(c): Extension<Caller>,
+    uri: Uri,
+    h: HeaderMap,
+    b: Body,
+) -> Response<Body> {
+    let Some(len) = sh.track_length else {
+        return error(StatusCode::NOT_FOUND, "not a simulation");
+    };
+    let ctl = match uri.path() {
+        "/api/sim/pause" => Control::Pause,
+        "/api/sim/resume" => Control::Resume,
+        "/api/sim/step" => Control::Step,
+        "/api/sim/reset" => Control::Reset,
+        _ => {
+            let bytes = match body(&h, b, &c).await {
+                Ok(b) => b,
+                Err(r) => return r,
+            };
+            let q: PlaceRequest = match dashboard::parse_body(&bytes) {
+                Ok(q) => q,
+                Err(e) => return error(StatusCode::BAD_REQUEST, &e.to_string()),
+            };
+            if !(q.s.is_finite() && q.s >= 0.0 && q.s <= len) {
+                let msg = format!(
+                    "s = {} is out of range (allowed: 0 ..= {len:.3}, the track's length in metres)",
+                    q.s
+                );
+                return error(StatusCode::BAD_REQUEST, &msg);
+            }
+            Control::PlaceAt(q.s)
+        }
+    };
+    if sh.tx.send(ctl) {
+        reply(StatusCode::OK, &json!({"ok": true}))
+    } else {
+        error(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the loop is not taking commands (inbox full)",
+        )
+    }
+}
+
+fn opt(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+/// `GET /api/state?since=T`.
+async fn state(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, uri: Uri) -> Response<Body> {
+    let since = uri.query().unwrap_or("").split('&').find_map(|kv| {
+        let (k, v) = kv.split_once('=').unwrap_or((kv, ""));
+        (k == "since").then_some(v)
+    });
+    let since = match since.map(|s| s.parse::<f64>()) {
+        None => f64::NEG_INFINITY,
+        Some(Ok(t)) if t.is_finite() => t,
+        Some(_) => return error(StatusCode::BAD_REQUEST, "since: expected a finite number of seconds"),
+    };
+    reply(StatusCode::OK, &state_json(&sh, since, c.session))
+}
+
+fn state_json(sh: &Shared, since: f64, session: bool) -> Value {
+    let (snap, points) = {
+        let v = sh.view.lock().unwrap_or_else(|e| e.into_inner());
+        let pts: Vec<PlotPoint> = v.history.iter().filter(|p| p.t > since).copied().collect();
+        (v.snap.clone(), pts)
+    };
+    let s = &sh.sent;
+    let lim = sh.conns.limits();
+    let a = &sh.access;
+    let mut o = json!({
+        "read_only": !session,
+        "sim": sh.track_length.is_some(),
+        "track_length": sh.track_length,
+        "armed": sh.arm.is_armed(),
+        "estop": sh.arm.is_estopped(),
+        "viewers": sh.viewers.load(Ordering::SeqCst),
+        "stream_frames": sh.frames_sent.load(Ordering::SeqCst),
+        "wall_s": s.now(),
+        "epoch_ms": std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64() * 1e3),
+        "sent": {"throttle": opt(s.throttle.get()), "steer": opt(s.steer.get()), "wall_s": opt(s.clock_s.get()), "sim_s": opt(s.frame_s.get())},
+        "estop_timing": {
+            "pressed_wall_s": opt(s.estop_clock_s.get()), "pressed_sim_s": opt(s.estop_frame_s.get()),
+            "neutral_wall_s": opt(s.neutral_clock_s.get()), "neutral_sim_s": opt(s.neutral_frame_s.get()),
+        },
+        "connections": {
+            "open": sh.conns.open(), "max": lim.max, "reserve": lim.reserve,
+            "peak": sh.conns.peak.load(Ordering::Relaxed),
+            "evicted": sh.conns.evicted.load(Ordering::Relaxed),
+            "reserve_used": sh.conns.reserve_used.load(Ordering::Relaxed),
+            "refused": sh.conns.refused.load(Ordering::Relaxed),
+            "timed_out": sh.conns.timed_out.load(Ordering::Relaxed),
+        },
+        "refused": {
+            "count": a.refused.load(Ordering::SeqCst),
+            "last": a.last.lock().unwrap_or_else(|e| e.into_inner()).clone(),
+        },
+        "log_lines_dropped": sh.log.dropped.load(Ordering::Relaxed),
+        "points": points,
+        "changed": *sh.changed.lock().unwrap_or_else(|e| e.into_inner()),
+        "ranges": {
+            "steering.kp": [0.0, 20.0], "steering.ki": [0.0, 20.0], "steering.kd": [0.0, 5.0],
+            "throttle.base": [0.0, 1.0], "throttle.min": [0.0, 1.0],
+        },
+    });
+    if let Some(sn) = snap {
+        let r = &sn.record;
+        // Exact between snapshots: the loop's own counters.
+        o["frame"] = json!(sh.live.frame.load(Ordering::SeqCst));
+        o["t"] = json!(sh.live.time_s());
+        o["snapshot_frame"] = json!(r.frame);
+        o["error"] = json!(r.error);
+        o["steer"] = json!(r.steer);
+        o["throttle"] = json!(r.throttle);
+        o["speed"] = json!(r.speed_est_mps);
+        o["status"] = json!(r.status);
+        o["behaviour"] = json!(r.behaviour);
+        o["latency_ms"] = json!(r.latency_ms);
+        o["period_ms"] = json!(r.period_ms);
+        o["paused"] = json!(sh.live.paused.load(Ordering::SeqCst));
+        o["dropped_snapshots"] = json!(sn.dropped);
+        o["objects"] = json!(sn.objects);
+        o["transition"] = match &sn.last_transition {
+            Some((t, tr)) => json!({"t": t, "from": tr.from, "to": tr.to, "reason": tr.reason}),
+            None => Value::Null,
+        };
+        o["values"] = Value::Object(sn.values.iter().map(|(k, v)| (k.clone(), json!(v))).collect());
+    }
+    o
+}

@@ -1,0 +1,213 @@
+//! The dashboard's HTTP server: axum routes on hyper's HTTP/1, in a small tokio runtime on
+//! threads of its own, so the control loop never waits on it (the loop's side,
+//! `rccar::dashboard`, is a newest-only slot and a bounded inbox).
+//!
+//! - `GET /` the page (the run's secret embedded); `GET /stream.mjpg` the annotated camera
+//!   view and the bird's-eye view as MJPEG (`multipart/x-mixed-replace`): each viewer is sent
+//!   the newest JPEG when it is ready for one, older ones are skipped (never queued); a viewer
+//!   whose socket takes nothing for 2 s is dropped; at most `dashboard.max_viewers` viewers.
+//! - `GET /api/state?since=T` the newest state and the plot samples after frame time `T`.
+//! - `POST /api/estop`: stops the car, from anyone who can reach the server (the safe way).
+//! - `POST /api/{release,arm,disarm,heartbeat,set,save}`, and in the simulator
+//!   `POST /api/sim/{pause,resume,step,reset,place}`: need the same-origin proof of
+//!   [`access`] (Host, Origin, `Content-Type: application/json`, the page's secret and, off
+//!   loopback, the login cookie); refusals answer 403 and are logged.
+//! - `POST /login` (not on loopback): the printed token once, for an HttpOnly,
+//!   SameSite=Strict session cookie.
+//!
+//! Limits ([`conn`]): request head 8 KiB (431) within 3 s of waiting for it (408 and closed),
+//! bodies 4 KiB (413) within 3 s, 1,024 connections (fewer under a low open-file limit) plus
+//! 64 kept for the e-stop; at the bound the connection that has waited longest for a request
+//! head is closed for the new one. One hub thread takes the loop's snapshots, annotates and
+//! encodes them once for every viewer.
+//!
+//! The e-stop handler touches only atomics (no lock the loop, the hub or another request
+//! holds) and its log line goes through a queue, so it works while everything else is stuck.
+
+mod access;
+mod api;
+mod conn;
+mod hub;
+
+use super::Sent;
+use anyhow::{Context, Result};
+use rccar::config::Config;
+use rccar::dashboard::{ControlSender, Live, PlotPoint, Snapshot};
+use rccar::drive::{Arming, Latest, StopSignal};
+use rccar::sim::world::{lock, SharedWorld};
+use std::collections::{BTreeMap, VecDeque};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+
+/// Plot history kept for the page, seconds of frame time.
+const HISTORY_S: f64 = 30.0;
+
+/// What the server needs from the run.
+pub struct Options {
+    /// Address to listen on.
+    pub listen: String,
+    /// The run's configuration (the starting values and their ranges).
+    pub cfg: Config,
+    /// `config/local.toml` (or `--local`): where "save" writes.
+    pub local: PathBuf,
+    /// The loop's snapshots.
+    pub slot: Arc<Latest<Arc<Snapshot>>>,
+    /// The loop's per-frame counters.
+    pub live: Arc<Live>,
+    /// The loop's inbox.
+    pub tx: ControlSender,
+    /// Arming and e-stop.
+    pub arm: Arc<Arming>,
+    /// What the sink sent.
+    pub sent: Arc<Sent>,
+    /// The simulator's world (sim controls), `None` on the car.
+    pub world: Option<SharedWorld>,
+    /// The run's stop signal (the server's threads end with it).
+    pub stop: StopSignal,
+}
+
+/// The newest state for `GET /api/state`.
+#[derive(Default)]
+struct View {
+    snap: Option<Arc<Snapshot>>,
+    history: VecDeque<PlotPoint>,
+}
+
+/// Everything the handlers, the hub and the watchdog share.
+struct Shared {
+    cfg: Mutex<Config>,
+    changed: Mutex<BTreeMap<String, f64>>,
+    local: PathBuf,
+    tx: ControlSender,
+    arm: Arc<Arming>,
+    sent: Arc<Sent>,
+    track_length: Option<f64>,
+    access: access::Access,
+    view: Mutex<View>,
+    /// The newest JPEG of the stream (newest only: a viewer that was busy skips the rest).
+    jpeg: tokio::sync::watch::Sender<Arc<Vec<u8>>>,
+    heartbeat_ms: u64,
+    last_heartbeat_ms: AtomicU64,
+    armed_by_page: AtomicBool,
+    viewers: AtomicUsize,
+    max_viewers: usize,
+    frames_sent: AtomicU64,
+    closed: AtomicBool,
+    /// `true` once the server is closing: every connection and stream ends.
+    shutdown: tokio::sync::watch::Sender<bool>,
+    live: Arc<Live>,
+    log: hub::Log,
+    conns: conn::Conns,
+}
+
+impl Shared {
+    fn close(&self) {
+        self.closed.store(true, Ordering::SeqCst);
+        self.shutdown.send_replace(true);
+    }
+}
+
+/// The running server; its threads end when the run's stop signal is set or it is dropped.
+pub struct Server {
+    shared: Arc<Shared>,
+    slot: Arc<Latest<Arc<Snapshot>>>,
+    web: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.shared.close();
+        self.slot.close();
+        if let Some(t) = self.web.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Server {
+    /// Binds, then starts the web runtime's thread, the hub, the watchdog and the logger.
+    pub fn start(o: Options) -> Result<Server> {
+        let addr: SocketAddr = o
+            .listen
+            .parse()
+            .with_context(|| format!("--listen `{}`: expected IP:PORT, e.g. 127.0.0.1:8080", o.listen))?;
+        let nofile = conn::raise_nofile_limit();
+        let limits = conn::Limits::for_nofile(nofile);
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .max_blocking_threads(4)
+            .thread_name("dash-web")
+            .enable_io()
+            .enable_time()
+            .build()
+            .context("dashboard: cannot start the web runtime")?;
+        let listener = rt
+            .block_on(async { conn::listen(addr) })
+            .with_context(|| format!("dashboard: cannot listen on {addr}"))?;
+        let bound = listener.local_addr()?;
+        let access = access::Access::new(bound, &o.cfg.dashboard.token);
+        let (log, log_rx) = hub::Log::new();
+        let track_length = o.world.as_ref().map(|w| lock(w).scene().track.length);
+        let shared = Arc::new(Shared {
+            heartbeat_ms: o.cfg.dashboard.heartbeat_ms,
+            max_viewers: o.cfg.dashboard.max_viewers as usize,
+            cfg: Mutex::new(o.cfg),
+            changed: Mutex::new(BTreeMap::new()),
+            local: o.local,
+            tx: o.tx.clone(),
+            arm: o.arm,
+            sent: o.sent,
+            track_length,
+            access,
+            view: Mutex::new(View::default()),
+            jpeg: tokio::sync::watch::Sender::new(Arc::new(Vec::new())),
+            last_heartbeat_ms: AtomicU64::new(0),
+            armed_by_page: AtomicBool::new(false),
+            viewers: AtomicUsize::new(0),
+            frames_sent: AtomicU64::new(0),
+            closed: AtomicBool::new(false),
+            shutdown: tokio::sync::watch::Sender::new(false),
+            live: o.live,
+            log,
+            conns: conn::Conns::new(limits),
+        });
+        shared.access.print_start_up(bound);
+        if let Some(n) = nofile.filter(|_| limits.reduced) {
+            println!(
+                "dashboard: open-file limit {n}: at most {} connections (+{} for the e-stop)",
+                limits.max, limits.reserve
+            );
+        }
+        hub::start_logger(log_rx, o.tx)?;
+        {
+            let sh = shared.clone();
+            let slot = o.slot.clone();
+            std::thread::Builder::new()
+                .name("dash-hub".into())
+                .spawn(move || hub::hub(slot, sh))?;
+        }
+        {
+            let sh = shared.clone();
+            let stop = o.stop.clone();
+            std::thread::Builder::new()
+                .name("dash-watchdog".into())
+                .spawn(move || hub::watchdog(sh, stop))?;
+        }
+        let web = {
+            let sh = shared.clone();
+            let router = api::router(shared.clone());
+            std::thread::Builder::new().name("dash-accept".into()).spawn(move || {
+                rt.block_on(conn::accept_loop(listener, router, sh));
+                // Connections still open end with the runtime (no waiting for slow clients).
+                rt.shutdown_timeout(std::time::Duration::from_millis(200));
+            })?
+        };
+        Ok(Server {
+            shared,
+            slot: o.slot,
+            web: Some(web),
+        })
+    }
+}

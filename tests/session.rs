@@ -1,0 +1,134 @@
+//! The car built in-process by the library's session builder (`rccar::session`, issue 25):
+//! the same parts `rccar drive` wires, run from a test, and the faults that end a run (issue
+//! 24): a camera of the wrong size is a camera fault the exit code reads, not a quiet end.
+
+use rccar::capture::{CaptureSource, Grabber};
+use rccar::config::Config;
+use rccar::drive::{Level, LoopEnd, NoObserver, StopSignal};
+use rccar::health::Part;
+use rccar::session::{CameraSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
+use rccar::timing::{Clock, NoTimer};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+struct Wall(Instant);
+impl Clock for Wall {
+    fn now_s(&self) -> f64 {
+        self.0.elapsed().as_secs_f64()
+    }
+    fn sleep_s(&self, s: f64) {
+        std::thread::sleep(Duration::from_secs_f64(s.max(0.0)));
+    }
+}
+
+fn env() -> SessionEnv {
+    SessionEnv {
+        clock: Arc::new(Wall(Instant::now())),
+        stop: StopSignal::new(),
+        timer: Box::new(NoTimer),
+        say: Arc::new(|_: Level, _: &str| {}),
+    }
+}
+
+fn sample() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/lane_sample")
+}
+
+fn config() -> Config {
+    let mut cfg = Config::default();
+    cfg.detect.enabled = false;
+    cfg
+}
+
+/// A camera that delivers 640×480 frames while the car is configured for 320×240.
+struct WrongSize;
+impl Grabber for WrongSize {
+    fn open(&mut self) -> Result<(), String> {
+        Ok(())
+    }
+    fn grab(&mut self) -> Result<image::RgbImage, String> {
+        std::thread::sleep(Duration::from_millis(10));
+        Ok(image::RgbImage::new(640, 480))
+    }
+    fn label(&self) -> String {
+        "/dev/video9".into()
+    }
+}
+
+/// Issue 24: a wrong-size camera ended `rccar drive` with exit 0 and no reason (the error sat
+/// in `CaptureSource::fatal()`, read only by a unit test). The session now makes it the run's
+/// fatal camera fault, which `drive` prints and turns into exit 3.
+#[test]
+fn a_camera_of_the_wrong_size_is_a_camera_fault() {
+    let cfg = config();
+    let spec = SessionSpec::new(
+        SourceSpec::Cameras {
+            left: CameraSpec::Folder(sample()),
+            right: None,
+            timing: Timing::WallClock,
+        },
+        SinkSpec::DryRun,
+    );
+    let e = env();
+    let clock = e.clock.clone();
+    let mut s = Session::build(&cfg, spec, e).unwrap();
+    let cam = CaptureSource::start(
+        || Box::new(WrongSize),
+        "/dev/video9".into(),
+        (cfg.camera.width, cfg.camera.height),
+        clock,
+        Duration::from_millis(500),
+        Duration::from_millis(50),
+    );
+    s.set_source(Box::new(cam), true);
+    let end = s.run(&mut NoObserver).unwrap();
+    let out = s.finish().unwrap();
+    let f = out.fault.expect("a camera fault");
+    println!("ended {end:?}: fault {f}");
+    assert_eq!(end, LoopEnd::SourceEnded);
+    assert_eq!(f.part, Part::Camera);
+    assert!(f.message.contains("640x480") || f.message.contains("640×480"), "{f}");
+}
+
+/// The car, in-process, from a folder of frames: one record per frame, the same commands as
+/// the replay golden file's (tests/data/lane_sample.golden.jsonl), neutral at the end.
+#[test]
+fn a_folder_replays_in_process_like_the_golden_file() {
+    let cfg = Config::load(&PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/car.toml"), &[], &[]).unwrap();
+    let dir = std::env::temp_dir().join(format!("rccar-session-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut spec = SessionSpec::new(
+        SourceSpec::Cameras {
+            left: CameraSpec::Folder(sample()),
+            right: None,
+            timing: Timing::LockStep,
+        },
+        SinkSpec::DryRun,
+    );
+    spec.telemetry = Some(dir.join("telemetry.jsonl"));
+    let mut e = env();
+    e.clock = Arc::new(rccar::drive::NoClock);
+    let mut s = Session::build(&cfg, spec, e).unwrap();
+    assert_eq!(s.run(&mut NoObserver).unwrap(), LoopEnd::SourceEnded);
+    let out = s.finish().unwrap();
+    assert!(out.fault.is_none());
+    let got = std::fs::read_to_string(dir.join("telemetry.jsonl")).unwrap();
+    let want = std::fs::read_to_string(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/lane_sample.golden.jsonl")).unwrap();
+    let (g, w): (Vec<serde_json::Value>, Vec<serde_json::Value>) = (
+        got.lines().map(|l| serde_json::from_str(l).unwrap()).collect(),
+        want.lines().map(|l| serde_json::from_str(l).unwrap()).collect(),
+    );
+    assert_eq!(g.len(), w.len());
+    for (a, b) in g.iter().zip(&w) {
+        for k in ["frame", "status"] {
+            assert_eq!(a[k], b[k], "{k}");
+        }
+        for k in ["steer", "throttle", "error"] {
+            let (x, y) = (a[k].as_f64().unwrap_or(0.0), b[k].as_f64().unwrap_or(0.0));
+            assert!((x - y).abs() < 1e-9, "{k}: {x} vs {y}");
+        }
+    }
+    println!("{} frames in-process, the same commands as the golden file", g.len());
+}
