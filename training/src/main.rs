@@ -170,9 +170,15 @@ fn expand_images(specs: &[String]) -> anyhow::Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     for s in specs {
         let p = PathBuf::from(s);
-        let name = p.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+        let name = p
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
         if name.contains('*') || name.contains('?') {
-            let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+            let dir = p
+                .parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(std::path::Path::new("."));
             let mut m: Vec<PathBuf> = std::fs::read_dir(dir)
                 .with_context(|| format!("{s}: cannot list {}", dir.display()))?
                 .filter_map(|e| e.ok())
@@ -226,8 +232,20 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
     within("--count", a.count, 1, MAX_SAMPLES, "")?;
     within("--max-angle-deg", a.max_angle_deg, 0.0, 180.0, " degrees")?;
     within("--max-skew", a.max_skew, 0.0, 0.5, " (fraction of the object size)")?;
-    within("--min-scale", a.min_scale, 1.0, 20.0, " (multiple of the window: the object is at least the window)")?;
-    within("--max-scale", a.max_scale, a.min_scale.max(1.0), 20.0, " (multiple of the window, at least --min-scale)")?;
+    within(
+        "--min-scale",
+        a.min_scale,
+        1.0,
+        20.0,
+        " (multiple of the window: the object is at least the window)",
+    )?;
+    within(
+        "--max-scale",
+        a.max_scale,
+        a.min_scale.max(1.0),
+        20.0,
+        " (multiple of the window, at least --min-scale)",
+    )?;
     if let Some(w) = &a.window {
         check_window("--window", parse_wh(w)?)?;
     }
@@ -253,7 +271,10 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
             eprintln!("{s}");
         }
         for l in &lines {
-            let img = match samples::checked_dimensions(&l.path).map_err(|e| e.to_string()).and_then(|_| image::open(&l.path).map_err(|e| e.to_string())) {
+            let img = match samples::checked_dimensions(&l.path)
+                .map_err(|e| e.to_string())
+                .and_then(|_| image::open(&l.path).map_err(|e| e.to_string()))
+            {
                 Ok(i) => i.to_rgba8(),
                 Err(e) => {
                     eprintln!("{}:{}: skipped: {}: {e}", f.display(), l.line, l.path.display());
@@ -261,10 +282,20 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
                 }
             };
             for b in &l.boxes {
-                if b.x < 0 || b.y < 0 || b.width <= 0 || b.height <= 0
-                    || (b.x as i64 + b.width as i64) > img.width() as i64 || (b.y as i64 + b.height as i64) > img.height() as i64
+                if b.x < 0
+                    || b.y < 0
+                    || b.width <= 0
+                    || b.height <= 0
+                    || (b.x as i64 + b.width as i64) > img.width() as i64
+                    || (b.y as i64 + b.height as i64) > img.height() as i64
                 {
-                    eprintln!("{}:{}: skipped: box {:?} is outside {}", f.display(), l.line, b, l.path.display());
+                    eprintln!(
+                        "{}:{}: skipped: box {:?} is outside {}",
+                        f.display(),
+                        l.line,
+                        b,
+                        l.path.display()
+                    );
                     continue;
                 }
                 if templates.len() >= MAX_TEMPLATES {
@@ -381,7 +412,11 @@ fn run_boxes(a: BoxesArgs) -> anyhow::Result<ExitCode> {
     }
     if let Some(dir) = &a.preview {
         let files = rccar_train::annotate::previews(&labels, dir, 64).map_err(anyhow::Error::msg)?;
-        println!("{}: {} preview pictures (crops.png shows every box)", dir.display(), files.len());
+        println!(
+            "{}: {} preview pictures (crops.png shows every box)",
+            dir.display(),
+            files.len()
+        );
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -425,7 +460,11 @@ fn run_photoset(a: PhotosetArgs) -> anyhow::Result<ExitCode> {
     if !(4..=1024).contains(&lo) || !(lo..=1024).contains(&hi) {
         bail!("--sign-px {lo}x{hi}: each must be 4..=1024 px, MIN <= MAX");
     }
-    let dirs = if a.photos.is_empty() { photogen::system_photo_dirs() } else { a.photos.clone() };
+    let dirs = if a.photos.is_empty() {
+        photogen::system_photo_dirs()
+    } else {
+        a.photos.clone()
+    };
     let all = photogen::list_photos(&dirs);
     let Some(photos) = photogen::part(&all, &a.half) else {
         bail!("--half `{}`: expected 0, 1, 0-train, 0-val or all", a.half)
@@ -437,7 +476,9 @@ fn run_photoset(a: PhotosetArgs) -> anyhow::Result<ExitCode> {
     let track = if a.track.exists() {
         a.track.clone()
     } else {
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(&a.track)
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("..")
+            .join(&a.track)
     };
     let t = photogen::stop_sign_template(&track, 96).map_err(anyhow::Error::msg)?;
     let o = photogen::PhotoSetOptions {
@@ -497,7 +538,12 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
     within("--iou", a.iou, 0.01, 1.0, "")?;
     let cascade = rccar::detect::Cascade::from_file(&a.cascade)?;
     let frames = load_frames(&a.info)?;
-    let info_name = a.info.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" + ");
+    let info_name = a
+        .info
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(" + ");
     if frames.is_empty() {
         bail!("{info_name}: no readable frames");
     }
@@ -603,7 +649,10 @@ fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
     if s.contains('x') {
         parse_wh(s)
     } else {
-        let n: u32 = s.trim().parse().with_context(|| format!("`{s}`: expected N or WxH pixels"))?;
+        let n: u32 = s
+            .trim()
+            .parse()
+            .with_context(|| format!("`{s}`: expected N or WxH pixels"))?;
         Ok((n, n))
     }
 }
@@ -804,15 +853,10 @@ fn load_frames(files: &[PathBuf]) -> anyhow::Result<Vec<(String, image::GrayImag
     Ok(frames)
 }
 
-fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
+/// The training window and why: `-W/-H`, the window `distort` wrote into the --pos files, or
+/// one chosen from their boxes; each side 3..=256 px.
+fn train_window(a: &TrainArgs) -> anyhow::Result<(i32, i32, String)> {
     use rccar_train::plan;
-    use std::io::IsTerminal;
-    let holdout_min_size = check_train_args(&a)?;
-    if let Some(t) = a.threads {
-        rayon::ThreadPoolBuilder::new().num_threads(t).build_global().ok();
-    }
-    let t = std::time::Instant::now();
-    // 1. The window: given, written by distort, or chosen from the boxes.
     let mut lines = Vec::new();
     let mut hint = None;
     for f in &a.pos {
@@ -825,7 +869,11 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
         (Some(w), None) => (w, w, "given (-H = -W)".to_string()),
         (None, Some(h)) => (h, h, "given (-W = -H)".to_string()),
         (None, None) => match hint {
-            Some((w, h)) => (w as i32, h as i32, "the window distort made the positives for".to_string()),
+            Some((w, h)) => (
+                w as i32,
+                h as i32,
+                "the window distort made the positives for".to_string(),
+            ),
             None => {
                 let c = plan::choose_window(&lines).context("no boxes in the --pos files")?;
                 (c.size.0 as i32, c.size.1 as i32, c.why)
@@ -835,6 +883,81 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
     if !(3..=256).contains(&width) || !(3..=256).contains(&height) {
         bail!("-W/-H window {width}x{height} ({why}): each side must be 3..=256 px");
     }
+    Ok((width, height, why))
+}
+
+/// The held-out frames of `--holdout` and the detector settings they are checked with
+/// (`None` without `--holdout`); an error when none of the frames can be read.
+fn load_holdout(a: &TrainArgs, min_size: (u32, u32)) -> anyhow::Result<Option<train::Holdout>> {
+    if a.holdout.is_empty() {
+        return Ok(None);
+    }
+    let frames = load_frames(&a.holdout)?;
+    if frames.is_empty() {
+        bail!("no readable held-out frame in {:?}", a.holdout);
+    }
+    eprintln!(
+        "{} held-out frames ({} boxes): training stops at {} false positives per frame",
+        frames.len(),
+        frames.iter().map(|f| f.2.len()).sum::<usize>(),
+        a.target_fp_per_frame
+    );
+    Ok(Some(train::Holdout {
+        frames,
+        min_neighbors: a.holdout_min_neighbors,
+        min_size,
+        scale_factor: a.scale_factor,
+        iou: 0.5,
+        target_fp_per_frame: a.target_fp_per_frame,
+    }))
+}
+
+/// What `train` prints at the end besides the outcome.
+struct Summary<'a> {
+    window: (i32, i32, &'a str),
+    num_pos: usize,
+    usable: usize,
+    backgrounds: usize,
+    seconds: f64,
+    note: Option<String>,
+}
+
+/// The summary of a finished training, on stdout.
+fn print_summary(a: &TrainArgs, out: &train::TrainOutcome, s: &Summary) {
+    let (width, height, why) = s.window;
+    println!("cascade      {}", out.xml.display());
+    println!("stages       {} ({})", out.stages, out.reason);
+    println!("window       {width}x{height} ({why})");
+    println!("positives    {} per stage of {} usable", s.num_pos, s.usable);
+    println!(
+        "negatives    {} per stage from {} backgrounds",
+        a.num_neg, s.backgrounds
+    );
+    if let Some(c) = &out.holdout {
+        println!(
+            "held-out     {} false positives per frame (target {}){} at minNeighbors {}",
+            format_args!("{:.4}", c.fp_per_frame),
+            a.target_fp_per_frame,
+            c.recall.map(|r| format!(", recall {r:.4}")).unwrap_or_default(),
+            a.holdout_min_neighbors
+        );
+    }
+    println!("time         {:.1} s", s.seconds);
+    if let Some(n) = &s.note {
+        println!("note         {n}");
+    }
+}
+
+fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
+    use rccar_train::plan;
+    use std::io::IsTerminal;
+    let holdout_min_size = check_train_args(&a)?;
+    if let Some(t) = a.threads {
+        rayon::ThreadPoolBuilder::new().num_threads(t).build_global().ok();
+    }
+    let t = std::time::Instant::now();
+    // 1. The window: given, written by distort, or chosen from the boxes.
+    let (width, height, why) = train_window(&a)?;
     eprintln!("window {width}x{height}: {why}");
     let (w, h) = (width as usize, height as usize);
     // 2. Positives and backgrounds.
@@ -858,28 +981,7 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
         eprintln!("{s}");
     }
     eprintln!("{} background images", bgs.len());
-    let holdout = if a.holdout.is_empty() {
-        None
-    } else {
-        let frames = load_frames(&a.holdout)?;
-        if frames.is_empty() {
-            bail!("no readable held-out frame in {:?}", a.holdout);
-        }
-        eprintln!(
-            "{} held-out frames ({} boxes): training stops at {} false positives per frame",
-            frames.len(),
-            frames.iter().map(|f| f.2.len()).sum::<usize>(),
-            a.target_fp_per_frame
-        );
-        Some(train::Holdout {
-            frames,
-            min_neighbors: a.holdout_min_neighbors,
-            min_size: holdout_min_size,
-            scale_factor: a.scale_factor,
-            iou: 0.5,
-            target_fp_per_frame: a.target_fp_per_frame,
-        })
-    };
+    let holdout = load_holdout(&a, holdout_min_size)?;
     let opts = TrainOptions {
         params: ModelParams {
             width,
@@ -907,24 +1009,15 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
     let out = train::train_with_holdout(&opts, &pos, &bgs, holdout.as_ref(), &a.out, a.resume, &mut bars)
         .with_context(|| format!("training into {}", a.out.display()))?;
     // 3. The summary, on stdout.
-    println!("cascade      {}", out.xml.display());
-    println!("stages       {} ({})", out.stages, out.reason);
-    println!("window       {width}x{height} ({why})");
-    println!("positives    {num_pos} per stage of {} usable", pos.len());
-    println!("negatives    {} per stage from {} backgrounds", a.num_neg, bgs.len());
-    if let Some(c) = out.holdout {
-        println!(
-            "held-out     {} false positives per frame (target {}){} at minNeighbors {}",
-            format_args!("{:.4}", c.fp_per_frame),
-            a.target_fp_per_frame,
-            c.recall.map(|r| format!(", recall {r:.4}")).unwrap_or_default(),
-            a.holdout_min_neighbors
-        );
-    }
-    println!("time         {:.1} s", t.elapsed().as_secs_f64());
-    if let Some(n) = note {
-        println!("note         {n}");
-    }
+    let summary = Summary {
+        window: (width, height, &why),
+        num_pos,
+        usable: pos.len(),
+        backgrounds: bgs.len(),
+        seconds: t.elapsed().as_secs_f64(),
+        note,
+    };
+    print_summary(&a, &out, &summary);
     Ok(ExitCode::SUCCESS)
 }
 
