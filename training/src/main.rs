@@ -228,7 +228,8 @@ fn glob_match(pat: &str, s: &str) -> bool {
     pi == p.len()
 }
 
-fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
+/// `distort`'s counts, angles, scales and window, each refused by flag and bound.
+fn check_distort_args(a: &DistortArgs) -> anyhow::Result<()> {
     within("--count", a.count, 1, MAX_SAMPLES, "")?;
     within("--max-angle-deg", a.max_angle_deg, 0.0, 180.0, " degrees")?;
     within("--max-skew", a.max_skew, 0.0, 0.5, " (fraction of the object size)")?;
@@ -249,23 +250,17 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
     if let Some(w) = &a.window {
         check_window("--window", parse_wh(w)?)?;
     }
-    let mut templates = Vec::new();
-    let files = expand_images(&a.templates)?;
-    if files.len() > MAX_TEMPLATES {
-        bail!("{} templates: at most {MAX_TEMPLATES}", files.len());
-    }
-    for t in files {
-        if let Err(e) = samples::checked_dimensions(&t) {
-            bail!("{e}");
-        }
-        templates.push(
-            image::open(&t)
-                .with_context(|| format!("{}: cannot read template", t.display()))?
-                .to_rgba8(),
-        );
-    }
+    Ok(())
+}
+
+/// Every box of these info.dat files cut out of its photo as a template (at most
+/// [`MAX_TEMPLATES`] in all); boxes outside their photo and unreadable photos are skipped, named.
+fn templates_from_info(
+    files: &[PathBuf],
+    templates: &mut Vec<image::RgbaImage>,
+) -> anyhow::Result<Vec<samples::InfoLine>> {
     let mut info_lines = Vec::new();
-    for f in &a.templates_from_info {
+    for f in files {
         let (lines, skipped) = samples::read_info(f)?;
         for s in &skipped {
             eprintln!("{s}");
@@ -308,6 +303,27 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
         }
         info_lines.extend(lines);
     }
+    Ok(info_lines)
+}
+
+fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
+    check_distort_args(&a)?;
+    let mut templates = Vec::new();
+    let files = expand_images(&a.templates)?;
+    if files.len() > MAX_TEMPLATES {
+        bail!("{} templates: at most {MAX_TEMPLATES}", files.len());
+    }
+    for t in files {
+        if let Err(e) = samples::checked_dimensions(&t) {
+            bail!("{e}");
+        }
+        templates.push(
+            image::open(&t)
+                .with_context(|| format!("{}: cannot read template", t.display()))?
+                .to_rgba8(),
+        );
+    }
+    let info_lines = templates_from_info(&a.templates_from_info, &mut templates)?;
     if templates.is_empty() {
         bail!("no templates: give --template FILE|FOLDER|GLOB or --templates-from-info info.dat");
     }
