@@ -28,6 +28,12 @@ pub fn run_sweep(
 ) -> Result<ExitCode> {
     let axes = sweep::parse_axes(args)?;
     let keys: Vec<&str> = axes.iter().map(|x| x.key.as_str()).collect();
+    // A parameter of another steering method would change nothing: every row the same.
+    for k in &keys {
+        if let Some(why) = rccar::control::steering::unused_by(cfg.steering.method, k) {
+            anyhow::bail!("--sweep {k}: {why}");
+        }
+    }
     let points = sweep::grid(&axes);
     // Check every value before spending minutes.
     let cfgs: Vec<Config> = points
