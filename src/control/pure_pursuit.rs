@@ -98,11 +98,14 @@ impl PurePursuit {
         };
         let (near, far) = pp.view_m();
         let (l, b) = (pp.opts.lookahead_m, pp.opts.lookahead_band_m);
-        if !(l - b >= near - 1e-9 && l + b <= far + 1e-9) {
-            return Err(SteeringError::PurePursuit(format!(
-                "steering.lookahead_m = {l} ± steering.lookahead_band_m = {b} reaches outside the bird's-eye view, \
-                 {near:.3} ..= {far:.3} m ahead of the rear axle with this [camera], [warp] and vehicle.camera_x_m"
-            )));
+        // 1 µm of slack: the view's edges come through a homography and its inverse.
+        if !(l - b >= near - 1e-6 && l + b <= far + 1e-6) {
+            return Err(SteeringError::OutsideView {
+                lookahead_m: l,
+                band_m: b,
+                near_m: near,
+                far_m: far,
+            });
         }
         Ok(pp)
     }
@@ -209,7 +212,7 @@ impl Params for PurePursuit {
                 key: "steering.lookahead_m",
                 unit: "m",
                 range: [0.1, 5.0],
-                slider: [0.7, 1.18, 0.01],
+                slider: [0.71, 1.18, 0.01],
                 doc: "look-ahead distance L_d ahead of the rear axle: longer is smoother but cuts curves",
             },
             get: |p| p.opts.lookahead_m,

@@ -112,10 +112,25 @@ pub fn unused_by(method: SteeringMethod, key: &str) -> Option<String> {
 /// Why a steering method cannot be built from a configuration.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SteeringError {
-    /// Pure pursuit needs the bird's-eye image on the floor (camera model + ROI) and its
-    /// look-ahead band inside it.
+    /// Pure pursuit needs the bird's-eye image on the floor (camera model + ROI).
     #[error("steering.method = pure_pursuit: {0}")]
     PurePursuit(String),
+    /// Pure pursuit's look-ahead band lies (partly) outside the bird's-eye view.
+    #[error(
+        "steering.method = pure_pursuit: steering.lookahead_m = {lookahead_m} ± steering.lookahead_band_m = \
+         {band_m} reaches outside the bird's-eye view, {near_m:.3} ..= {far_m:.3} m ahead of the rear axle \
+         with this [camera], [warp] and vehicle.camera_x_m"
+    )]
+    OutsideView {
+        /// `steering.lookahead_m`.
+        lookahead_m: f64,
+        /// `steering.lookahead_band_m`.
+        band_m: f64,
+        /// Nearest floor the view shows, metres ahead of the rear axle.
+        near_m: f64,
+        /// Farthest.
+        far_m: f64,
+    },
 }
 
 #[cfg(test)]
