@@ -475,6 +475,25 @@ mod tests {
         assert!(matches!(validate_set(&cfg, "camera.fps", 10.0), Err(ControlError::UnknownKey { .. })));
     }
 
+    /// The settable keys are the run's steering method's table and the throttle's: another
+    /// method's key is refused with its owner named.
+    #[test]
+    fn settable_keys_follow_the_steering_method() {
+        let keys = |c: &Config| settable(c).iter().map(|p| p.key).collect::<Vec<_>>();
+        let pid = Config::default();
+        assert!(keys(&pid).contains(&"steering.kd") && !keys(&pid).contains(&"steering.lookahead_m"));
+        assert!(keys(&pid).contains(&"throttle.base"));
+        let pp = pid.with_override("steering.method=pure_pursuit").unwrap();
+        assert!(keys(&pp).contains(&"steering.lookahead_m") && !keys(&pp).contains(&"steering.kp"));
+        assert_eq!(validate_set(&pp, "steering.lookahead_m", 1.0).unwrap().steering.lookahead_m, 1.0);
+        let e = validate_set(&pp, "steering.kp", 1.0).unwrap_err().to_string();
+        assert!(e.contains("steering.method = pid") && e.contains("cannot change while the car runs"), "{e}");
+        let e = validate_set(&pp, "camera.fps", 1.0).unwrap_err().to_string();
+        assert!(e.contains("settable: steering.lookahead_m, steering.lookahead_band_m"), "{e}");
+        assert_eq!(get_value(&pp, "steering.lookahead_m"), Some(0.9));
+        assert_eq!(get_value(&pp, "steering.kp"), None);
+    }
+
     #[test]
     fn bodies_refuse_unknown_fields_nan_and_size() {
         assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp","value":0.5}"#).is_ok());
