@@ -151,7 +151,7 @@ fn print_table(keys: &[&str], points: &[Vec<f64>], outcomes: &[RunOutcome]) {
         "dsteer",
         "lost"
     );
-    for (p, o) in points.iter().zip(&outcomes) {
+    for (p, o) in points.iter().zip(outcomes) {
         let vals: Vec<String> = p.iter().map(|v| format!("{v:>12.4}")).collect();
         let vals = vals.join(" ");
         match o {
