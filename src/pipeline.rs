@@ -22,6 +22,7 @@
 
 use crate::config::{Config, DetectConfig};
 use crate::control::behaviour::{Behaviour, DeadReckoning, Decision, LightColor, Mode, Observations, Ranged};
+use crate::control::steering::SteeringInput;
 use crate::control::{Command, Controller};
 use crate::detect::cascade::CascadeError;
 use crate::detect::detector::DetectParams;
@@ -50,6 +51,9 @@ pub enum PipelineError {
     /// was made for another image size.
     #[error("stereo.calibration: {0}")]
     StereoCalibration(crate::calib::file::FileError),
+    /// The steering method `steering.method` picks cannot be built from this configuration.
+    #[error("{0}")]
+    Steering(#[from] crate::control::steering::SteeringError),
 }
 
 // By hand, not `#[from]`: a `source` would print the file's error a second time.
@@ -363,7 +367,7 @@ impl Pipeline {
         let ranging = cfg.ranging.box_ranging(&cfg.camera);
         Ok(Self {
             lane: cfg.lane_detector()?,
-            control: Controller::new((&cfg.steering).into(), (&cfg.throttle).into()),
+            control: cfg.controller()?,
             width: cfg.camera.width,
             height: cfg.camera.height,
             detect: None,
@@ -631,11 +635,16 @@ impl Pipeline {
         let decision = self.behaviour.step(&obs, self.time_s);
         let detect_us = timer.lap_us();
         // 6. Control, then the behaviour's overrides.
-        let mut command = self.control.step(&lane, dt_s);
+        let input = SteeringInput {
+            lane: &lane,
+            lane_detector: &self.lane,
+            frame,
+        };
+        let mut command = self.control.step(&input, dt_s);
         command = apply(command, &decision);
         if decision.steer.is_some() {
             // The lane error means nothing during a lane change: start afresh afterwards.
-            self.control.pid.reset();
+            self.control.steering_mut().reset();
         }
         self.last_throttle = command.throttle;
         stage_us.control_us = timer.lap_us();
@@ -708,7 +717,7 @@ impl Pipeline {
         &self.control
     }
 
-    /// The controller, to change gains between frames (a dashboard, a lab); see
+    /// The controller, to change its parameters between frames (a dashboard, a lab); see
     /// [`crate::drive::Observer::before_frame`].
     pub fn controller_mut(&mut self) -> &mut Controller {
         &mut self.control

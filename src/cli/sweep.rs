@@ -29,19 +29,7 @@ pub fn run_sweep(
     let axes = sweep::parse_axes(args)?;
     let keys: Vec<&str> = axes.iter().map(|x| x.key.as_str()).collect();
     let points = sweep::grid(&axes);
-    // Check every value before spending minutes.
-    let cfgs: Vec<Config> = points
-        .iter()
-        .map(|p| {
-            let mut c = cfg.clone();
-            for (k, v) in keys.iter().zip(p) {
-                c = c
-                    .with_override(&format!("{k}={v}"))
-                    .with_context(|| format!("--sweep {k}={v}"))?;
-            }
-            Ok(c)
-        })
-        .collect::<Result<_>>()?;
+    let cfgs = sweep_configs(cfg, &keys, &points)?;
     let scene = Arc::new(Scene::new(track));
     let jobs = jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
@@ -86,40 +74,7 @@ pub fn run_sweep(
             t0.elapsed().as_secs_f64()
         );
     });
-    let head: Vec<String> = keys.iter().map(|k| format!("{k:>12}")).collect();
-    println!(
-        "{} {:>5} {:>10} {:>10} {:>6} {:>10} {:>9} {:>8}  end",
-        head.join(" "),
-        "laps",
-        "rms_m",
-        "max_m",
-        "dep",
-        "rev/s",
-        "dsteer",
-        "lost"
-    );
-    for (p, o) in points.iter().zip(&outcomes) {
-        let vals: Vec<String> = p.iter().map(|v| format!("{v:>12.4}")).collect();
-        let vals = vals.join(" ");
-        match o {
-            RunOutcome::Finished(r) | RunOutcome::Interrupted(r) => {
-                let s = &r.summary;
-                println!(
-                    "{vals} {:>5} {:>10.4} {:>10.4} {:>6} {:>10.2} {:>9.4} {:>8}  {:?}",
-                    s.laps,
-                    s.xte_rms_m,
-                    s.xte_max_m,
-                    s.lane_departures,
-                    s.steer_reversals_per_s,
-                    r.steer_diff_rms,
-                    s.lane_lost_frames,
-                    s.end
-                );
-            }
-            RunOutcome::Failed(e) => println!("{vals} error: {e}"),
-            RunOutcome::NotRun => println!("{vals} not run"),
-        }
-    }
+    print_table(&keys, &points, &outcomes);
     let csv_path = run.write("sweep.csv", sweep::csv_outcomes(&keys, &outcomes).as_bytes())?;
     if let Some(why) = stop.reason() {
         let count = |f: fn(&RunOutcome) -> bool| outcomes.iter().filter(|o| f(o)).count();
@@ -156,6 +111,68 @@ pub fn run_sweep(
     }
     outdir::finish(&mut run, RunState::Finished, None)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// One configuration per point of the grid, every value checked before minutes are spent; a
+/// key of another steering method than `cfg`'s is refused.
+fn sweep_configs(cfg: &Config, keys: &[&str], points: &[Vec<f64>]) -> Result<Vec<Config>> {
+    // A parameter of another steering method would change nothing: every row the same.
+    for k in keys {
+        if let Some(why) = rccar::control::steering::unused_by(cfg.steering.method, k) {
+            anyhow::bail!("--sweep {k}: {why}");
+        }
+    }
+    // Check every value before spending minutes.
+    points
+        .iter()
+        .map(|p| {
+            let mut c = cfg.clone();
+            for (k, v) in keys.iter().zip(p) {
+                c = c
+                    .with_override(&format!("{k}={v}"))
+                    .with_context(|| format!("--sweep {k}={v}"))?;
+            }
+            Ok(c)
+        })
+        .collect()
+}
+
+/// The table of the runs on stdout (one row per point, in grid order).
+fn print_table(keys: &[&str], points: &[Vec<f64>], outcomes: &[RunOutcome]) {
+    let head: Vec<String> = keys.iter().map(|k| format!("{k:>12}")).collect();
+    println!(
+        "{} {:>5} {:>10} {:>10} {:>6} {:>10} {:>9} {:>8}  end",
+        head.join(" "),
+        "laps",
+        "rms_m",
+        "max_m",
+        "dep",
+        "rev/s",
+        "dsteer",
+        "lost"
+    );
+    for (p, o) in points.iter().zip(outcomes) {
+        let vals: Vec<String> = p.iter().map(|v| format!("{v:>12.4}")).collect();
+        let vals = vals.join(" ");
+        match o {
+            RunOutcome::Finished(r) | RunOutcome::Interrupted(r) => {
+                let s = &r.summary;
+                println!(
+                    "{vals} {:>5} {:>10.4} {:>10.4} {:>6} {:>10.2} {:>9.4} {:>8}  {:?}",
+                    s.laps,
+                    s.xte_rms_m,
+                    s.xte_max_m,
+                    s.lane_departures,
+                    s.steer_reversals_per_s,
+                    r.steer_diff_rms,
+                    s.lane_lost_frames,
+                    s.end
+                );
+            }
+            RunOutcome::Failed(e) => println!("{vals} error: {e}"),
+            RunOutcome::NotRun => println!("{vals} not run"),
+        }
+    }
 }
 
 /// The end reason as in sweep.csv (`time_up`, `interrupted`, …).

@@ -137,21 +137,14 @@ pub fn grid(axes: &[Axis]) -> Vec<Vec<f64>> {
     out
 }
 
-/// The unit of a config key for axis labels: from its name's suffix (`_m`, `_s`, `_deg`, …)
-/// or, for the steering gains, from `config/car.toml`'s comments. Empty when unitless or
-/// unknown.
+/// The unit of a config key for axis labels: a tunable parameter's from its table
+/// ([`crate::control::params`]), else from its name's suffix (`_m`, `_s`, `_deg`, …). Empty
+/// when unitless or unknown.
 pub fn key_unit(key: &str) -> &'static str {
-    let last = key.rsplit('.').next().unwrap_or(key);
-    match key {
-        "steering.kp" => return "steer per unit error",
-        "steering.ki" => return "steer per error·s",
-        "steering.kd" => return "steer per error/s",
-        "steering.slew_rate" => return "1/s",
-        "steering.derivative_tau" => return "s",
-        "steering.max_steer" | "steering.integral_limit" => return "steer",
-        "throttle.base" | "throttle.min" => return "throttle 0..1",
-        _ => {}
+    if let Some(p) = crate::control::params::find(key) {
+        return p.unit;
     }
+    let last = key.rsplit('.').next().unwrap_or(key);
     for (suffix, unit) in [
         ("_mps", "m/s"),
         ("_dps", "deg/s"),
