@@ -131,9 +131,14 @@ fn start(ip: &str, pi_nofile: bool) -> Server {
     let mut start_lines = Vec::new();
     let mut line = Vec::new();
     let mut b = [0u8; 1];
-    // The URL line, and off loopback the token line (or the first line that is neither).
-    let want = if ip == "127.0.0.1" { 1 } else { 2 };
-    while start_lines.len() < want && out.read(&mut b).unwrap_or(0) == 1 {
+    // Up to the URL line, and off loopback the token line after it (at most 8 lines: other
+    // start-up notes, such as --truth-boxes's, may come first).
+    let remote = ip != "127.0.0.1";
+    let last = if remote { "dashboard token: " } else { "dashboard: http" };
+    while start_lines.len() < 8
+        && !start_lines.last().is_some_and(|l: &String| l.starts_with(last))
+        && out.read(&mut b).unwrap_or(0) == 1
+    {
         if b[0] == b'\n' {
             start_lines.push(String::from_utf8_lossy(&line).to_string());
             line.clear();
@@ -141,7 +146,7 @@ fn start(ip: &str, pi_nofile: bool) -> Server {
             line.push(b[0]);
         }
     }
-    let token = (want == 2).then(|| {
+    let token = remote.then(|| {
         start_lines
             .iter()
             .find_map(|l| l.strip_prefix("dashboard token: "))
@@ -321,7 +326,11 @@ fn remote_without_login_every_control_and_the_stream_are_refused_403() {
 fn remote_login_gives_an_httponly_samesite_strict_cookie_and_the_token_is_never_in_a_url() {
     let s = remote();
     let token = s.token.clone().unwrap();
-    let url_line = &s.start_lines[0];
+    let url_line = s
+        .start_lines
+        .iter()
+        .find(|l| l.starts_with("dashboard: "))
+        .expect("a dashboard URL line");
     assert!(
         url_line.starts_with("dashboard: http://") && !url_line.contains(&token),
         "{url_line}"

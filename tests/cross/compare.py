@@ -21,6 +21,8 @@ import sys
 
 TRUTH_TOL = 1e-9
 TIMING_KEY = re.compile(r"(_us|_ms)$|latency|wall", re.IGNORECASE)
+# Which run it was (the run folder's id, a time stamp): differs between any two runs.
+IDENTITY_KEYS = {"run_id"}
 
 
 class Diff:
@@ -42,7 +44,7 @@ def walk(a, b, path, in_truth, d):
     if isinstance(a, dict) and isinstance(b, dict):
         keys = set(a) | set(b)
         for k in sorted(keys):
-            if TIMING_KEY.search(k):
+            if TIMING_KEY.search(k) or k in IDENTITY_KEYS:
                 continue
             if k not in a or k not in b:
                 d.add(f"{path}.{k}", a.get(k, "<missing>"), b.get(k, "<missing>"))
