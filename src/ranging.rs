@@ -286,29 +286,9 @@ pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, 
     })
 }
 
-/// The kinds of objects the pipeline ranges, each with its own box-bottom height.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ObjectClass {
-    /// A stop sign (box = the face).
-    StopSign,
-    /// A traffic light (box = the housing).
-    TrafficLight,
-    /// An obstacle standing on the floor.
-    Obstacle,
-}
-
-impl ObjectClass {
-    /// The class of a detector label (`stop_sign`, `traffic_light`, `obstacle`).
-    pub fn from_label(label: &str) -> Option<ObjectClass> {
-        match label {
-            "stop_sign" | "stop" => Some(ObjectClass::StopSign),
-            "traffic_light" | "light" => Some(ObjectClass::TrafficLight),
-            "obstacle" => Some(ObjectClass::Obstacle),
-            _ => None,
-        }
-    }
-}
+use crate::classes::ColourCue;
+/// The object classes (the one registry, src/classes.rs), re-exported where ranging uses them.
+pub use crate::classes::ObjectClass;
 
 /// What a detector's box of one class frames (`[ranging]`): the object's face, where it
 /// hangs, and how much looser than the face the trained boxes are.
@@ -356,7 +336,7 @@ pub struct BoxRanging {
     /// The camera with the same calibration (for the lateral position).
     pub camera: PinholeCamera,
     /// What each class's box frames: stop sign, traffic light, obstacle.
-    pub classes: [ClassBox; 3],
+    pub classes: [ClassBox; ObjectClass::COUNT],
     /// σ of a detector box's centre row, pixels.
     pub centre_sigma_px: f64,
     /// σ of a detector box's size, relative (0.04 = 4%).
@@ -370,7 +350,7 @@ pub struct BoxRanging {
 impl BoxRanging {
     /// The contact height of a class's box bottom, metres.
     pub fn bottom_of(&self, class: ObjectClass) -> f64 {
-        self.classes[class as usize].bottom_m
+        self.classes[class.index()].bottom_m
     }
 
     /// Forward distance and lateral offset (left positive) from the lens of an object of
@@ -421,7 +401,7 @@ impl BoxRanging {
     /// (rows by Eq. 5, width `f·W/Z` at its top edge), widened to the aspect, times the margin.
     /// The centre row is `None` when the face's height is unknown.
     pub fn predicted_box(&self, class: ObjectClass, d: f64, aspect: f64) -> (f64, Option<f64>) {
-        let cb = &self.classes[class as usize];
+        let cb = &self.classes[class.index()];
         let z_top = cb.bottom_m + cb.height_m;
         let v_bottom = self.tilt.row(d, cb.bottom_m);
         let (mut h, mut centre) = (0.0f64, None);
@@ -451,7 +431,7 @@ impl BoxRanging {
     ///    `v_c + h/(2·margin)` at the contact height, σ from the row's σ (centre and size).
     /// 3. Inverse-variance fusion: `d = Σ d_i/σ_i² / Σ 1/σ_i²`, `σ² = 1 / Σ 1/σ_i²`.
     pub fn range_detector(&self, class: ObjectClass, bbox: [f64; 4]) -> Option<BoxRange> {
-        let cb = self.classes[class as usize];
+        let cb = self.classes[class.index()];
         let (hb, wb) = (bbox[3] - bbox[1], bbox[2] - bbox[0]);
         if !(hb > 0.0 && wb > 0.0) {
             return None;
@@ -519,7 +499,9 @@ impl BoxRanging {
         }
         let fine = refine::outline(img, class, bbox).and_then(|o| self.range_refined(class, o));
         match (coarse, fine) {
-            (Some(c), Some(f)) if (f.distance_m - c.distance_m).abs() <= (3.0 * c.sigma_m).max(0.25 * c.distance_m) => Some(f),
+            (Some(c), Some(f)) if (f.distance_m - c.distance_m).abs() <= (3.0 * c.sigma_m).max(0.25 * c.distance_m) => {
+                Some(f)
+            }
             (None, Some(f)) => Some(f),
             (c, _) => c,
         }
@@ -535,13 +517,17 @@ impl BoxRanging {
     /// 3. bottom row: Eq. 5 at z_b.
     pub fn range_refined(&self, class: ObjectClass, o: [f64; 4]) -> Option<BoxRange> {
         const SIGMA_EDGE: f64 = 0.5;
-        let cb = self.classes[class as usize];
+        let cb = self.classes[class.index()];
         let (w_px, h_px) = (o[2] - o[0], o[3] - o[1]);
         if !(w_px > 0.0 && h_px > 0.0) || cb.height_m <= 0.0 {
             return None;
         }
         // The coloured part: the red area of a sign (centred on the face), a light's housing.
-        let k = if class == ObjectClass::StopSign { self.red_fraction } else { 1.0 };
+        let k = if class.info().colour_cue == ColourCue::RedFace {
+            self.red_fraction
+        } else {
+            1.0
+        };
         let (hh, zc) = (cb.height_m * k, cb.bottom_m + cb.height_m / 2.0);
         let (zb, zt) = (zc - hh / 2.0, zc + hh / 2.0);
         let (s, c) = self.tilt.alpha.sin_cos();
@@ -549,7 +535,7 @@ impl BoxRanging {
         let mut cues: [Option<(f64, f64)>; 3] = [None; 3];
         let sw = SIGMA_EDGE * std::f64::consts::SQRT_2;
         // 1. Width.
-        if class == ObjectClass::StopSign && cb.width_m > 0.0 {
+        if class.info().colour_cue == ColourCue::RedFace && cb.width_m > 0.0 {
             let z = f * cb.width_m * k / w_px;
             let d = (z - (self.tilt.h - zc) * s) / c;
             if d > 0.0 {
@@ -809,7 +795,7 @@ mod tests {
         for class in [ObjectClass::StopSign, ObjectClass::TrafficLight, ObjectClass::Obstacle] {
             for &d in &[0.3, 0.8, 1.5] {
                 let aspect = if class == ObjectClass::TrafficLight { 0.4 } else { 1.25 };
-                let cb = b.classes[class as usize];
+                let cb = b.classes[class.index()];
                 let (h, c) = b.predicted_box(class, d, aspect);
                 // An obstacle (size unknown, so no predicted height): any box whose outline
                 // bottom is on Eq. 5's row.
@@ -821,7 +807,11 @@ mod tests {
                 assert!((r.distance_m - d).abs() < 1e-6 * d, "{class:?} at {d}: {r:?}");
                 assert!(r.sigma_m > 0.0 && r.sigma_m < 0.2 * d);
                 // Fusion never gives more weight than the better cue deserves.
-                let best = [r.by_size, r.by_row].into_iter().flatten().map(|c| c.1).fold(f64::INFINITY, f64::min);
+                let best = [r.by_size, r.by_row]
+                    .into_iter()
+                    .flatten()
+                    .map(|c| c.1)
+                    .fold(f64::INFINITY, f64::min);
                 assert!(r.sigma_m <= best + 1e-12);
             }
         }

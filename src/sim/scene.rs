@@ -17,7 +17,8 @@
 
 use super::glyphs;
 use super::rng::{mix, SplitMix64};
-use super::track::{Object, ObjectKind, Piece, Track};
+use super::track::{Object, Piece, Track};
+use crate::classes::SimShape;
 
 /// Side of one cell of the grid that tells which centre-line piece is near, metres.
 const CELL_M: f64 = 0.02;
@@ -529,8 +530,8 @@ impl Scene {
     pub fn object_prims(&self, o: &Object, t_s: f64, out: &mut Vec<Prim>) {
         let [x, y] = o.pos;
         let (s, c) = o.yaw.sin_cos();
-        match o.kind {
-            ObjectKind::StopSign => {
+        match o.kind.info().shape {
+            SimShape::Octagon => {
                 let w = o.size[0];
                 out.push(Prim::Box {
                     center: [x, y, (o.height - w / 2.0) / 2.0],
@@ -544,7 +545,7 @@ impl Scene {
                     kind: PanelKind::StopFace { width: w },
                 });
             }
-            ObjectKind::TrafficLight => {
+            SimShape::LightHousing => {
                 let h = o.size[0];
                 let (hw, hd) = (h * 0.38, h * 0.33);
                 out.push(Prim::Box {
@@ -577,7 +578,7 @@ impl Scene {
                     });
                 }
             }
-            ObjectKind::Obstacle => {
+            SimShape::Box => {
                 let [l, w, h] = o.size;
                 let rgb = [o.color[0] as f32, o.color[1] as f32, o.color[2] as f32];
                 out.push(Prim::Box {
@@ -594,10 +595,10 @@ impl Scene {
     /// world metres: screen bounds for rendering and ground-truth image boxes.
     pub fn object_bounds(o: &Object) -> [[f64; 3]; 8] {
         // Half extents along the facing direction and across it, and the top.
-        let (hx, hy, top) = match o.kind {
-            ObjectKind::StopSign => (0.015, o.size[0] / 2.0, o.height + o.size[0] / 2.0),
-            ObjectKind::TrafficLight => (o.size[0] * 0.17, o.size[0] * 0.19, o.height + o.size[0] / 2.0),
-            ObjectKind::Obstacle => (o.size[0] / 2.0, o.size[1] / 2.0, o.size[2]),
+        let (hx, hy, top) = match o.kind.info().shape {
+            SimShape::Octagon => (0.015, o.size[0] / 2.0, o.height + o.size[0] / 2.0),
+            SimShape::LightHousing => (o.size[0] * 0.17, o.size[0] * 0.19, o.height + o.size[0] / 2.0),
+            SimShape::Box => (o.size[0] / 2.0, o.size[1] / 2.0, o.size[2]),
         };
         let (s, c) = o.yaw.sin_cos();
         let mut out = [[0.0; 3]; 8];

@@ -14,6 +14,7 @@
 //! headings counter-clockwise from +x. Lateral offsets are positive to the left of the
 //! direction of travel.
 
+use crate::classes::ObjectClass;
 use serde::Deserialize;
 use std::f64::consts::{PI, TAU};
 use std::path::{Path, PathBuf};
@@ -254,7 +255,7 @@ pub enum SegmentSpec {
 pub struct ObjectSpec {
     /// `stop_sign`, `traffic_light` or `obstacle`.
     #[serde(rename = "type")]
-    pub kind: ObjectKind,
+    pub kind: ObjectClass,
     /// Position on the floor, metres.
     pub x: f64,
     /// Position on the floor, metres.
@@ -291,29 +292,6 @@ fn box_color() -> Rgb {
 }
 fn cycle() -> [f64; 3] {
     [4.0, 1.0, 4.0]
-}
-
-/// The kinds of placed objects.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ObjectKind {
-    /// Red octagon with STOP on a post.
-    StopSign,
-    /// Housing with red, amber and green lamps on a post.
-    TrafficLight,
-    /// A box standing on the floor.
-    Obstacle,
-}
-
-impl ObjectKind {
-    /// The name used in track files and telemetry.
-    pub fn name(self) -> &'static str {
-        match self {
-            ObjectKind::StopSign => "stop_sign",
-            ObjectKind::TrafficLight => "traffic_light",
-            ObjectKind::Obstacle => "obstacle",
-        }
-    }
 }
 
 /// A piece of the centre line, placed in the world.
@@ -458,7 +436,7 @@ pub fn wrap_pi(a: f64) -> f64 {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Object {
     /// What it is.
-    pub kind: ObjectKind,
+    pub kind: ObjectClass,
     /// Index in the file's `[[objects]]` list (enabled or not), for messages and telemetry.
     pub index: usize,
     /// Position on the floor, metres.
@@ -825,20 +803,23 @@ impl Track {
                     y1: floor_rect[3],
                 });
             }
-            let size = match (o.kind, o.size_m.len()) {
-                (ObjectKind::StopSign, 0) => [0.10, 0.0, 0.0],
-                (ObjectKind::TrafficLight, 0) => [0.12, 0.0, 0.0],
-                (ObjectKind::Obstacle, 0) => [0.15, 0.12, 0.10],
-                (ObjectKind::Obstacle, 3) => [o.size_m[0], o.size_m[1], o.size_m[2]],
-                (ObjectKind::StopSign | ObjectKind::TrafficLight, 1) => [o.size_m[0], 0.0, 0.0],
-                (kind, n) => {
+            let info = o.kind.info();
+            let used = info.shape.size_numbers();
+            let size = match o.size_m.len() {
+                0 => info.sim_size_m,
+                n if n == used => {
+                    let mut size = [0.0; 3];
+                    size[..n].copy_from_slice(&o.size_m);
+                    size
+                }
+                n => {
                     return Err(bad(
                         key("size_m"),
                         format!("{:?}", o.size_m),
                         &format!(
                             "a {} takes {} (got {n} numbers)",
-                            kind.name(),
-                            if kind == ObjectKind::Obstacle {
+                            o.kind.name(),
+                            if used == 3 {
                                 "[length, width, height]"
                             } else {
                                 "one number"
@@ -847,7 +828,6 @@ impl Track {
                     ))
                 }
             };
-            let used = if o.kind == ObjectKind::Obstacle { 3 } else { 1 };
             if size[..used].iter().any(|v| !(*v > 0.005 && *v <= 3.0)) {
                 return Err(bad(
                     key("size_m"),
@@ -855,15 +835,11 @@ impl Track {
                     "sizes must be 0.005..=3 m",
                 ));
             }
-            let height = o.height_m.unwrap_or(match o.kind {
-                ObjectKind::StopSign => 0.17,
-                ObjectKind::TrafficLight => 0.16,
-                ObjectKind::Obstacle => size[2] / 2.0,
-            });
+            let height = o.height_m.unwrap_or(info.sim_height_m.unwrap_or(size[2] / 2.0));
             if !(height > 0.0 && height <= 3.0) {
                 return Err(bad(key("height_m"), height.to_string(), "must be > 0 and <= 3 m"));
             }
-            if o.kind == ObjectKind::TrafficLight && o.cycle_s.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+            if o.kind == ObjectClass::TrafficLight && o.cycle_s.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
                 return Err(bad(
                     key("cycle_s"),
                     format!("{:?}", o.cycle_s),
@@ -1035,8 +1011,8 @@ angle_deg = 180
         let t = Track::load(&path).unwrap();
         let curv: Vec<f64> = t.pieces.iter().map(|p| p.curvature()).collect();
         assert!(curv.iter().any(|&c| c > 0.0) && curv.iter().any(|&c| c < 0.0));
-        let kinds: Vec<ObjectKind> = t.enabled_objects().map(|o| o.kind).collect();
-        for k in [ObjectKind::StopSign, ObjectKind::TrafficLight, ObjectKind::Obstacle] {
+        let kinds: Vec<ObjectClass> = t.enabled_objects().map(|o| o.kind).collect();
+        for k in [ObjectClass::StopSign, ObjectClass::TrafficLight, ObjectClass::Obstacle] {
             assert!(kinds.contains(&k), "{k:?} missing");
         }
         assert!(t.tightest_lane_radius() >= 2.8, "{}", t.tightest_lane_radius());

@@ -21,11 +21,12 @@
 
 use image::{GrayImage, RgbImage};
 use rccar::camera::PinholeCamera;
+use rccar::classes::{ObjectClass, SimShape};
 use rccar::config::Config;
 use rccar::sim::render::{CameraMount, RenderOptions, Renderer};
 use rccar::sim::rng::{mix, SplitMix64};
 use rccar::sim::scene::Scene;
-use rccar::sim::track::{Object, ObjectKind, ObjectSpec, Track, TrackFile};
+use rccar::sim::track::{Object, ObjectSpec, Track, TrackFile};
 use rccar::sim::vehicle::Pose;
 use std::f64::consts::PI;
 use std::io::Write;
@@ -64,22 +65,13 @@ fn grey(c: [u8; 3]) -> f64 {
 }
 
 /// Window aspect (width / height) the target box is widened to.
-pub fn default_window(kind: ObjectKind) -> (u32, u32) {
-    match kind {
-        ObjectKind::StopSign => (16, 16),
-        ObjectKind::TrafficLight => (8, 20),
-        ObjectKind::Obstacle => (20, 16),
-    }
+pub fn default_window(kind: ObjectClass) -> (u32, u32) {
+    kind.info().train_window
 }
 
 /// Parses `stop_sign`, `traffic_light`, `obstacle` (and short forms).
-pub fn parse_kind(s: &str) -> Option<ObjectKind> {
-    match s {
-        "stop_sign" | "stop" => Some(ObjectKind::StopSign),
-        "traffic_light" | "light" => Some(ObjectKind::TrafficLight),
-        "obstacle" => Some(ObjectKind::Obstacle),
-        _ => None,
-    }
+pub fn parse_kind(s: &str) -> Option<ObjectClass> {
+    ObjectClass::from_label(s)
 }
 
 /// The image box [x0, y0, x1, y1] of the part of `ob` a cascade window covers, widened to
@@ -88,15 +80,15 @@ pub fn target_box(mount: &CameraMount, pose: &Pose, ob: &Object, aspect: f64) ->
     let (s, c) = ob.yaw.sin_cos();
     let [x, y] = ob.pos;
     let mut pts: Vec<[f64; 3]> = Vec::with_capacity(8);
-    match ob.kind {
-        ObjectKind::StopSign => {
+    match ob.kind.info().shape {
+        SimShape::Octagon => {
             let half = ob.size[0] / 2.0;
             let (fx, fy) = (x + 0.007 * c, y + 0.007 * s);
             for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
                 pts.push([fx - a * half * s, fy + a * half * c, ob.height + b * half]);
             }
         }
-        ObjectKind::TrafficLight => {
+        SimShape::LightHousing => {
             let h = ob.size[0];
             let (hw, hd) = (h * 0.38 / 2.0, h * 0.33 / 2.0);
             for k in 0..8 {
@@ -106,7 +98,7 @@ pub fn target_box(mount: &CameraMount, pose: &Pose, ob: &Object, aspect: f64) ->
                 pts.push([x + c * lx - s * ly, y + s * lx + c * ly, z]);
             }
         }
-        ObjectKind::Obstacle => pts.extend(Scene::object_bounds(ob)),
+        SimShape::Box => pts.extend(Scene::object_bounds(ob)),
     }
     let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
     for p in pts {
@@ -115,7 +107,7 @@ pub fn target_box(mount: &CameraMount, pose: &Pose, ob: &Object, aspect: f64) ->
     }
     let (cx, cy) = ((bb[0] + bb[2]) / 2.0, (bb[1] + bb[3]) / 2.0);
     let (mut w, mut h) = (bb[2] - bb[0], bb[3] - bb[1]);
-    if ob.kind == ObjectKind::Obstacle {
+    if ob.kind.info().shape == SimShape::Box {
         // A margin of floor around the box: its outline is what the features see.
         w *= OBSTACLE_MARGIN;
         h *= OBSTACLE_MARGIN;
@@ -143,7 +135,7 @@ pub enum Split {
 #[derive(Debug, Clone)]
 pub struct GenOptions {
     /// Object kind.
-    pub kind: ObjectKind,
+    pub kind: ObjectClass,
     /// Which data.
     pub split: Split,
     /// How many samples (positives) or frames.
@@ -169,7 +161,7 @@ fn uniform(r: &mut SplitMix64, lo: f64, hi: f64) -> f64 {
     lo + (hi - lo) * r.next_f64()
 }
 
-fn spec(kind: ObjectKind, x: f64, y: f64, yaw: f64) -> ObjectSpec {
+fn spec(kind: ObjectClass, x: f64, y: f64, yaw: f64) -> ObjectSpec {
     ObjectSpec {
         kind,
         x,
@@ -211,7 +203,7 @@ impl SimGen {
     }
 
     /// A scene with one target of `kind` beside the road and distractors of the other kinds.
-    fn place(&self, kind: ObjectKind, rng: &mut SplitMix64) -> Result<Placed, GenError> {
+    fn place(&self, kind: ObjectClass, rng: &mut SplitMix64) -> Result<Placed, GenError> {
         let base = Track::from_spec(self.base.clone(), "base").map_err(|e| GenError::Track(e.to_string()))?;
         let mut spec_file = self.base.clone();
         spec_file.objects.clear();
@@ -220,10 +212,10 @@ impl SimGen {
         spec_file.floor.color = self.base.floor.color.map(|c| (c as f64 * fl).clamp(0.0, 255.0) as u8);
         let spec_file_floor = spec_file.floor.color;
         let half_road = base.spec.road.lane_width_m * base.spec.road.lanes as f64 / 2.0;
-        let verge = |rng: &mut SplitMix64, s: f64, kind: ObjectKind| -> ObjectSpec {
+        let verge = |rng: &mut SplitMix64, s: f64, kind: ObjectClass| -> ObjectSpec {
             let (p, hd) = base.pose_at(s);
             let side = if rng.next_f64() < 0.75 { -1.0 } else { 1.0 };
-            let off = if kind == ObjectKind::Obstacle && rng.next_f64() < 0.5 {
+            let off = if kind.info().shape == SimShape::Box && rng.next_f64() < 0.5 {
                 // In the lane.
                 uniform(rng, -half_road * 0.8, half_road * 0.8)
             } else {
@@ -232,14 +224,14 @@ impl SimGen {
             let (x, y) = (p[0] - off * hd.sin(), p[1] + off * hd.cos());
             // Facing the oncoming car (right side) or the other way, ± 25°.
             let facing = if side < 0.0 { hd + PI } else { hd } + uniform(rng, -0.45, 0.45);
-            let yaw = if kind == ObjectKind::Obstacle {
+            let yaw = if kind.info().shape == SimShape::Box {
                 uniform(rng, -PI, PI)
             } else {
                 facing
             };
             let mut o = spec(kind, x, y, yaw);
-            match kind {
-                ObjectKind::Obstacle => {
+            match kind.info().shape {
+                SimShape::Box => {
                     o.size_m = vec![
                         uniform(rng, 0.12, 0.22),
                         uniform(rng, 0.10, 0.18),
@@ -255,8 +247,8 @@ impl SimGen {
                         }
                     }
                 }
-                ObjectKind::StopSign => o.size_m = vec![uniform(rng, 0.095, 0.105)],
-                ObjectKind::TrafficLight => {
+                SimShape::Octagon => o.size_m = vec![uniform(rng, 0.095, 0.105)],
+                SimShape::LightHousing => {
                     o.size_m = vec![uniform(rng, 0.115, 0.125)];
                     o.phase_s = uniform(rng, 0.0, 9.0);
                 }
@@ -265,10 +257,7 @@ impl SimGen {
         };
         let s_t = uniform(rng, 0.0, base.length);
         spec_file.objects.push(verge(rng, s_t, kind));
-        let others: Vec<ObjectKind> = [ObjectKind::StopSign, ObjectKind::TrafficLight, ObjectKind::Obstacle]
-            .into_iter()
-            .filter(|k| *k != kind)
-            .collect();
+        let others: Vec<ObjectClass> = ObjectClass::ALL.into_iter().filter(|k| *k != kind).collect();
         for i in 0..8 {
             let k = others[i % others.len()];
             // Two near the target (views that hide it are not used), the rest anywhere.
@@ -344,7 +333,7 @@ impl SimGen {
         let floor = placed.scene.track.floor_rect;
         for _ in 0..50 {
             let d = uniform(rng, o.distance_m.0, o.distance_m.1);
-            let view = if t.kind == ObjectKind::Obstacle {
+            let view = if t.kind.info().shape == SimShape::Box {
                 uniform(rng, -PI, PI)
             } else {
                 uniform(rng, -0.8, 0.8)
@@ -387,7 +376,7 @@ impl SimGen {
             if !inside || b[2] - b[0] < o.window.0 as f64 || b[3] - b[1] < o.window.1 as f64 {
                 continue;
             }
-            let time = if t.kind == ObjectKind::TrafficLight {
+            let time = if t.kind.info().shape == SimShape::LightHousing {
                 Self::light_time(t, rng)
             } else {
                 0.0
