@@ -46,6 +46,7 @@
 //! Units: metres, radians, pixels.
 
 use crate::camera::PinholeCamera;
+use crate::classes::ColourCue;
 
 pub mod refine;
 pub mod track;
@@ -173,19 +174,7 @@ impl Default for FitOptions {
 /// kept). Minimises the squared row error plus the prior on v0.
 pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, FitError> {
     let fit_ay = opts.fit_ay;
-    let n_par = if fit_ay { 3 } else { 2 };
-    if pairs.len() < n_par + 1 {
-        return Err(FitError::TooFewPairs {
-            need: n_par + 1,
-            unknowns: if fit_ay { "tilt, v0 and a_y" } else { "tilt and v0" },
-            got: pairs.len(),
-        });
-    }
-    for (index, p) in pairs.iter().enumerate() {
-        if !(p.d.is_finite() && p.v.is_finite() && p.d > 0.0 && p.z.is_finite()) {
-            return Err(FitError::BadPair { index, d: p.d, v: p.v });
-        }
-    }
+    let n_par = check_pairs(pairs, fit_ay)?;
     // Residual r_i = row(d_i) − v_i, plus the prior (v0 − v0_start)·σ_row/σ_v0;
     // parameters x = (α, v0, a_y).
     let prior_w = if opts.v0_sigma_px.is_finite() && opts.v0_sigma_px > 0.0 {
@@ -216,29 +205,7 @@ pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, 
     for _ in 0..200 {
         // 1. Jacobian by central differences (the model is smooth and cheap).
         let res = residuals(&cur);
-        let mut jac = nalgebra::DMatrix::<f64>::zeros(pairs.len() + 1, n_par);
-        for k in 0..n_par {
-            let step = [1e-7, 1e-5, 1e-5][k];
-            let (mut a, mut b) = (cur, cur);
-            match k {
-                0 => {
-                    a.alpha += step;
-                    b.alpha -= step
-                }
-                1 => {
-                    a.v0 += step;
-                    b.v0 -= step
-                }
-                _ => {
-                    a.a_y += step;
-                    b.a_y -= step
-                }
-            }
-            let (ra, rb) = (residuals(&a), residuals(&b));
-            for i in 0..=pairs.len() {
-                jac[(i, k)] = (ra[i] - rb[i]) / (2.0 * step);
-            }
-        }
+        let jac = jacobian(&residuals, cur, n_par, pairs.len() + 1);
         // 2. Damped normal equations (JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr.
         let r = nalgebra::DVector::from_vec(res);
         let jtj = jac.transpose() * &jac;
@@ -286,7 +253,59 @@ pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, 
     })
 }
 
-use crate::classes::ColourCue;
+/// The number of unknowns of [`fit`] (2, or 3 with `a_y`), or why `pairs` cannot be fitted
+/// (too few, or a pair not finite / at a distance ≤ 0).
+fn check_pairs(pairs: &[Pair], fit_ay: bool) -> Result<usize, FitError> {
+    let n_par = if fit_ay { 3 } else { 2 };
+    if pairs.len() < n_par + 1 {
+        return Err(FitError::TooFewPairs {
+            need: n_par + 1,
+            unknowns: if fit_ay { "tilt, v0 and a_y" } else { "tilt and v0" },
+            got: pairs.len(),
+        });
+    }
+    for (index, p) in pairs.iter().enumerate() {
+        if !(p.d.is_finite() && p.v.is_finite() && p.d > 0.0 && p.z.is_finite()) {
+            return Err(FitError::BadPair { index, d: p.d, v: p.v });
+        }
+    }
+    Ok(n_par)
+}
+
+/// Step 1 of [`fit`]: the `n_rows` × `n_par` Jacobian of `residuals` at `cur` by central
+/// differences over (α, v0, a_y) (the model is smooth and cheap).
+fn jacobian(
+    residuals: &dyn Fn(&TiltRanging) -> Vec<f64>,
+    cur: TiltRanging,
+    n_par: usize,
+    n_rows: usize,
+) -> nalgebra::DMatrix<f64> {
+    let mut jac = nalgebra::DMatrix::<f64>::zeros(n_rows, n_par);
+    for k in 0..n_par {
+        let step = [1e-7, 1e-5, 1e-5][k];
+        let (mut a, mut b) = (cur, cur);
+        match k {
+            0 => {
+                a.alpha += step;
+                b.alpha -= step
+            }
+            1 => {
+                a.v0 += step;
+                b.v0 -= step
+            }
+            _ => {
+                a.a_y += step;
+                b.a_y -= step
+            }
+        }
+        let (ra, rb) = (residuals(&a), residuals(&b));
+        for i in 0..n_rows {
+            jac[(i, k)] = (ra[i] - rb[i]) / (2.0 * step);
+        }
+    }
+    jac
+}
+
 /// The object classes (the one registry, src/classes.rs), re-exported where ranging uses them.
 pub use crate::classes::ObjectClass;
 

@@ -426,94 +426,23 @@ impl SimGen {
                             let r = round_box(b);
                             format!("{name} 1 {} {} {} {}", r[0], r[1], r[2], r[3])
                         } else {
-                            // Jitter: ±6% shift, ±7% size (the detector's grid: 2 px steps, 1.1× scales); then a crop 1.5× the box.
-                            let (w, h) = (b[2] - b[0], b[3] - b[1]);
-                            let k = uniform(&mut rng, 0.93, 1.07);
-                            let (cx, cy) = (
-                                (b[0] + b[2]) / 2.0 + uniform(&mut rng, -0.06, 0.06) * w,
-                                (b[1] + b[3]) / 2.0 + uniform(&mut rng, -0.06, 0.06) * h,
-                            );
-                            let (w, h) = (w * k, h * k);
-                            let jb = [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0];
-                            let r = round_box(jb);
-                            let (iw, ih) = (gray.width() as i64, gray.height() as i64);
-                            if r[0] < 0
-                                || r[1] < 0
-                                || r[0] + r[2] > iw
-                                || r[1] + r[3] > ih
-                                || r[2] < o.window.0 as i64
-                                || r[3] < o.window.1 as i64
-                            {
-                                misses += 1;
-                                continue;
+                            match self.positive_crop(&gray, b, o, &mut rng, &path, &name)? {
+                                Some(l) => l,
+                                None => {
+                                    misses += 1;
+                                    continue;
+                                }
                             }
-                            let cx0 = (r[0] - r[2] / 4).max(0);
-                            let cy0 = (r[1] - r[3] / 4).max(0);
-                            let cx1 = (r[0] + r[2] + r[2] / 4).min(iw);
-                            let cy1 = (r[1] + r[3] + r[3] / 4).min(ih);
-                            let crop = image::imageops::crop_imm(
-                                &gray,
-                                cx0 as u32,
-                                cy0 as u32,
-                                (cx1 - cx0) as u32,
-                                (cy1 - cy0) as u32,
-                            )
-                            .to_image();
-                            crop.save(&path).map_err(|e| io_err(&path, e))?;
-                            format!("{name} 1 {} {} {} {}", r[0] - cx0, r[1] - cy0, r[2], r[3])
                         }
                     }
                     Split::Negatives => {
-                        // Driving along the lane (40%), looking at the target (40%: its
-                        // surroundings are the hardest negatives) or at some other object.
-                        let track = &placed.scene.track;
-                        let r = rng.next_f64();
-                        let near_target = if (0.4..0.8).contains(&r) {
-                            self.view_of_target(&placed, o, &mut rng).map(|v| v.0)
-                        } else {
-                            None
-                        };
-                        let pose = if let Some(p) = near_target {
-                            p
-                        } else if r < 0.4 {
-                            let s = uniform(&mut rng, 0.0, track.length);
-                            let (p, hd) = track.lane_pose_at(s);
-                            let lat = uniform(&mut rng, -0.12, 0.12);
-                            Pose {
-                                x: p[0] - lat * hd.sin(),
-                                y: p[1] + lat * hd.cos(),
-                                yaw: hd + uniform(&mut rng, -0.3, 0.3),
+                        match self.negative_frame(&placed, o, &mut rng, &mut gray, aspect, &path, &name, n)? {
+                            Some(l) => l,
+                            None => {
+                                misses += 1;
+                                continue;
                             }
-                        } else {
-                            let objs: Vec<&Object> = track.enabled_objects().collect();
-                            let ob = objs[(rng.next_u64() % objs.len() as u64) as usize];
-                            let view = uniform(&mut rng, -1.2, 1.2);
-                            self.pose_looking_at(ob, uniform(&mut rng, 0.2, 2.0), view, uniform(&mut rng, -0.5, 0.5))
-                        };
-                        let lens = self.mount.origin(&pose);
-                        let fr = track.floor_rect;
-                        if lens[0] < fr[0] || lens[0] > fr[2] || lens[1] < fr[1] || lens[1] > fr[3] {
-                            misses += 1;
-                            continue;
                         }
-                        let t = uniform(&mut rng, 0.0, 9.0);
-                        let ro = self.options(&mut rng);
-                        let img = self.render(&placed, &pose, t, ro, n as u64);
-                        rccar::detect::gray_from_rgb(&img, &mut gray);
-                        gray.save(&path).map_err(|e| io_err(&path, e))?;
-                        // Keep the target out of the negatives where it is in view.
-                        let boxes: Vec<[i64; 4]> = target_box(&self.mount, &pose, &placed.target, aspect)
-                            .filter(|b| {
-                                b[2] > 0.0 && b[3] > 0.0 && b[0] < gray.width() as f64 && b[1] < gray.height() as f64
-                            })
-                            .map(round_box)
-                            .into_iter()
-                            .collect();
-                        let mut l = format!("{name} {}", boxes.len());
-                        for r in boxes {
-                            l += &format!(" {} {} {} {}", r[0], r[1], r[2], r[3]);
-                        }
-                        l
                     }
                 };
                 writeln!(out, "{line}").map_err(|e| io_err(&list, e))?;
@@ -524,6 +453,119 @@ impl SimGen {
         }
         out.flush().map_err(|e| io_err(&list, e))?;
         Ok(list)
+    }
+
+    /// A positive sample from the frame `gray` whose target box is `b`: the box jittered
+    /// (±6% shift, ±7% size) and a crop 1.5× the box saved to `path`; its info.dat line, or
+    /// `None` when the jittered box leaves the frame or is below the window.
+    fn positive_crop(
+        &self,
+        gray: &GrayImage,
+        b: [f64; 4],
+        o: &GenOptions,
+        rng: &mut SplitMix64,
+        path: &Path,
+        name: &str,
+    ) -> Result<Option<String>, GenError> {
+        // Jitter: ±6% shift, ±7% size (the detector's grid: 2 px steps, 1.1× scales); then a crop 1.5× the box.
+        let (w, h) = (b[2] - b[0], b[3] - b[1]);
+        let k = uniform(rng, 0.93, 1.07);
+        let (cx, cy) = (
+            (b[0] + b[2]) / 2.0 + uniform(rng, -0.06, 0.06) * w,
+            (b[1] + b[3]) / 2.0 + uniform(rng, -0.06, 0.06) * h,
+        );
+        let (w, h) = (w * k, h * k);
+        let jb = [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0];
+        let r = round_box(jb);
+        let (iw, ih) = (gray.width() as i64, gray.height() as i64);
+        if r[0] < 0
+            || r[1] < 0
+            || r[0] + r[2] > iw
+            || r[1] + r[3] > ih
+            || r[2] < o.window.0 as i64
+            || r[3] < o.window.1 as i64
+        {
+            return Ok(None);
+        }
+        let cx0 = (r[0] - r[2] / 4).max(0);
+        let cy0 = (r[1] - r[3] / 4).max(0);
+        let cx1 = (r[0] + r[2] + r[2] / 4).min(iw);
+        let cy1 = (r[1] + r[3] + r[3] / 4).min(ih);
+        let crop =
+            image::imageops::crop_imm(gray, cx0 as u32, cy0 as u32, (cx1 - cx0) as u32, (cy1 - cy0) as u32).to_image();
+        crop.save(path).map_err(|e| io_err(path, e))?;
+        Ok(Some(format!(
+            "{name} 1 {} {} {} {}",
+            r[0] - cx0,
+            r[1] - cy0,
+            r[2],
+            r[3]
+        )))
+    }
+
+    /// A negative frame of the scene `placed` saved to `path`: driving along the lane (40%),
+    /// looking at the target (40%: its surroundings are the hardest negatives) or at some other
+    /// object, with the target's box listed where it is in view; its bg.txt line, or `None`
+    /// when the lens is off the floor.
+    #[allow(clippy::too_many_arguments)]
+    fn negative_frame(
+        &self,
+        placed: &Placed,
+        o: &GenOptions,
+        rng: &mut SplitMix64,
+        gray: &mut GrayImage,
+        aspect: f64,
+        path: &Path,
+        name: &str,
+        n: usize,
+    ) -> Result<Option<String>, GenError> {
+        // Driving along the lane (40%), looking at the target (40%: its
+        // surroundings are the hardest negatives) or at some other object.
+        let track = &placed.scene.track;
+        let r = rng.next_f64();
+        let near_target = if (0.4..0.8).contains(&r) {
+            self.view_of_target(placed, o, rng).map(|v| v.0)
+        } else {
+            None
+        };
+        let pose = if let Some(p) = near_target {
+            p
+        } else if r < 0.4 {
+            let s = uniform(rng, 0.0, track.length);
+            let (p, hd) = track.lane_pose_at(s);
+            let lat = uniform(rng, -0.12, 0.12);
+            Pose {
+                x: p[0] - lat * hd.sin(),
+                y: p[1] + lat * hd.cos(),
+                yaw: hd + uniform(rng, -0.3, 0.3),
+            }
+        } else {
+            let objs: Vec<&Object> = track.enabled_objects().collect();
+            let ob = objs[(rng.next_u64() % objs.len() as u64) as usize];
+            let view = uniform(rng, -1.2, 1.2);
+            self.pose_looking_at(ob, uniform(rng, 0.2, 2.0), view, uniform(rng, -0.5, 0.5))
+        };
+        let lens = self.mount.origin(&pose);
+        let fr = track.floor_rect;
+        if lens[0] < fr[0] || lens[0] > fr[2] || lens[1] < fr[1] || lens[1] > fr[3] {
+            return Ok(None);
+        }
+        let t = uniform(rng, 0.0, 9.0);
+        let ro = self.options(rng);
+        let img = self.render(placed, &pose, t, ro, n as u64);
+        rccar::detect::gray_from_rgb(&img, gray);
+        gray.save(path).map_err(|e| io_err(path, e))?;
+        // Keep the target out of the negatives where it is in view.
+        let boxes: Vec<[i64; 4]> = target_box(&self.mount, &pose, &placed.target, aspect)
+            .filter(|b| b[2] > 0.0 && b[3] > 0.0 && b[0] < gray.width() as f64 && b[1] < gray.height() as f64)
+            .map(round_box)
+            .into_iter()
+            .collect();
+        let mut l = format!("{name} {}", boxes.len());
+        for r in boxes {
+            l += &format!(" {} {} {} {}", r[0], r[1], r[2], r[3]);
+        }
+        Ok(Some(l))
     }
 
     /// The configuration the camera came from.
