@@ -79,6 +79,8 @@ pub struct ClassInfo {
     pub aliases: &'static [&'static str],
     /// The model file `detect.<name>` defaults to (relative to the config's folder).
     pub model_file: &'static str,
+    /// The config key naming its model file (`detect.<name>`), for messages.
+    pub model_key: &'static str,
     /// The detect stage reads the lamp colour inside its boxes.
     pub reads_light: bool,
     /// The colour cue that refines its boxes before ranging.
@@ -103,6 +105,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         name: "stop_sign",
         aliases: &["stop"],
         model_file: "cascades/stop_sign.xml",
+        model_key: "detect.stop_sign",
         reads_light: false,
         colour_cue: ColourCue::RedFace,
         reaction: Reaction::StopThenGo,
@@ -116,6 +119,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         name: "traffic_light",
         aliases: &["light"],
         model_file: "cascades/traffic_light.xml",
+        model_key: "detect.traffic_light",
         reads_light: true,
         colour_cue: ColourCue::LitHousing,
         reaction: Reaction::WaitForGreen,
@@ -129,6 +133,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         name: "obstacle",
         aliases: &[],
         model_file: "cascades/obstacle.xml",
+        model_key: "detect.obstacle",
         reads_light: false,
         colour_cue: ColourCue::None,
         reaction: Reaction::StopOrPass,
@@ -186,6 +191,7 @@ mod tests {
             assert_eq!(CLASSES[i].class, *c);
             assert_eq!(c.index(), i);
             assert_eq!(ObjectClass::from_label(c.name()), Some(*c));
+            assert_eq!(c.info().model_key, format!("detect.{}", c.name()));
             let json = serde_json::to_string(c).unwrap();
             assert_eq!(json, format!("\"{}\"", c.name()));
         }

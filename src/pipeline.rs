@@ -116,10 +116,37 @@ pub struct RangedObject {
     pub predicted: bool,
 }
 
-/// Loads the `[detect]` cascades that exist (paths relative to `base`). Returns the stage
-/// (`None` when no file exists or detection is off) and the files that were missing.
-/// This is the pipeline's only filesystem access; callers report the missing files once.
-pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectStage>, Vec<PathBuf>), CascadeError> {
+/// A `[detect]` cascade that is configured (a non-empty path) but not a file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MissingCascade {
+    /// The config key (`detect.stop_sign`, `detect.traffic_light`, `detect.obstacle`).
+    pub key: &'static str,
+    /// The path that was looked for.
+    pub path: PathBuf,
+}
+
+impl std::fmt::Display for MissingCascade {
+    /// The key, the file and the fix, as the binary and the session report it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} = {:?}: no such cascade file; give the cascade's path (a relative path is read from the config file's folder), set {} = \"\" to run without that detector, or detect.enabled = false for lane keeping only",
+            self.key,
+            self.path.display().to_string(),
+            self.key
+        )
+    }
+}
+
+/// Loads the `[detect]` cascades that exist (paths relative to `base`; an empty path switches
+/// that class off). Returns the stage (`None` when no file exists or detection is off) and the
+/// configured files that were missing, which the binary refuses (a configured model that is
+/// not there is an error, not a silently weaker car). This is the pipeline's only filesystem
+/// access.
+pub fn load_detector(
+    cfg: &DetectConfig,
+    base: &Path,
+) -> Result<(Option<DetectStage>, Vec<MissingCascade>), CascadeError> {
     if !cfg.enabled {
         return Ok((None, Vec::new()));
     }
@@ -127,7 +154,11 @@ pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectSt
     let mut specs = Vec::new();
     let mut missing = Vec::new();
     for class in ObjectClass::ALL {
-        let path = base.join(cfg.class(class).model);
+        let file = cfg.class(class).model;
+        if file.is_empty() {
+            continue;
+        }
+        let path = base.join(file);
         if path.is_file() {
             specs.push(CascadeSpec {
                 label: class.name().into(),
@@ -136,7 +167,10 @@ pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectSt
                 params,
             });
         } else {
-            missing.push(path);
+            missing.push(MissingCascade {
+                key: class.info().model_key,
+                path,
+            });
         }
     }
     if specs.is_empty() {

@@ -8,7 +8,10 @@
 //! It never writes a value it cannot stand behind: degenerate pairs (too few distinct rows,
 //! rows outside the image, heights at or above the camera, NaN/inf anywhere) are refused
 //! before the fit; a fit with an undefined residual or an rms row error above `--max-rms-px`
-//! is refused after it; the merged configuration is validated before anything is written;
+//! is refused after it; so is a fit decided by where it started (the prior on v0 sits at the
+//! image centre, never at the last calibration's v0, and the fit started from the configured
+//! values must land on the same answer); the merged configuration is validated before
+//! anything is written;
 //! `--dry-run` prints the diff of the override file instead of writing it.
 
 use super::common::ConfigArgs;
@@ -36,7 +39,8 @@ pub enum CalibrateCmd {
 /// `rccar calibrate ranging` flags.
 #[derive(Args, Debug)]
 pub struct RangingArgs {
-    /// CSV of `row_px,distance_m[,height_m]` lines (header and `#` comments allowed).
+    /// CSV of `row_px,distance_m[,height_m]` lines (header and `#` comments allowed; at most
+    /// 10,000 pairs, 1 MiB).
     pub pairs: Option<PathBuf>,
     /// Also fit a_y (needs pairs spread over many rows).
     #[arg(long)]
@@ -49,7 +53,7 @@ pub struct RangingArgs {
     #[arg(long)]
     pub dry_run: bool,
     /// Refuse a fit whose rms row error is above this, pixels (a good tape-measure
-    /// calibration is below 1 px).
+    /// calibration is below 1 px); 0 < N <= 100.
     #[arg(long, default_value_t = 2.0)]
     pub max_rms_px: f64,
     /// Make N pairs in the simulator's lab instead of reading a CSV.
@@ -67,7 +71,8 @@ pub struct RangingArgs {
     /// Lab: also write the pairs to this CSV (a lab hand-out).
     #[arg(long)]
     pub sim_pairs_out: Option<PathBuf>,
-    /// How far v0 may plausibly move from the image centre, pixels (a prior; 0 = free).
+    /// How far v0 may plausibly move from the image centre, pixels (a prior centred on the
+    /// image's middle row, never on the configured v0_offset_px; 0 = free); 0..=1000.
     #[arg(long, default_value_t = 3.0)]
     pub v0_sigma_px: f64,
     #[command(flatten)]
@@ -83,18 +88,47 @@ pub fn run(c: CalibrateCmd) -> Result<ExitCode> {
     }
 }
 
-/// Largest `--from-sim` pair count (the lab renders one frame per pair).
+/// Largest `--from-sim` pair count (the lab renders one frame per pair), and of a CSV.
 const MAX_SIM_PAIRS: usize = 10_000;
+/// Largest pairs CSV, bytes (10,000 pairs of ~25 bytes fit 25 times over).
+const MAX_CSV_BYTES: u64 = 1 << 20;
+/// Largest override file edited in place, bytes.
+const MAX_OVERRIDE_BYTES: u64 = 1 << 20;
+/// Largest `--max-rms-px`, pixels.
+const MAX_RMS_PX: f64 = 100.0;
+/// Largest `--v0-sigma-px`, pixels (4× the largest image side is no prior at all).
+const MAX_V0_SIGMA_PX: f64 = 1000.0;
+
+/// Reads a text file of at most `max` bytes; the error names the file and the bound.
+fn read_small(path: &Path, max: u64) -> Result<String> {
+    use std::io::Read;
+    let f = std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let mut text = String::new();
+    f.take(max + 1)
+        .read_to_string(&mut text)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    if text.len() as u64 > max {
+        bail!("{}: larger than {max} bytes; not a file this command reads", path.display());
+    }
+    Ok(text)
+}
+/// Two fits of the same pairs, one started from the image centre and one from the configured
+/// values, must agree within this tilt, degrees, ...
+const START_TOL_DEG: f64 = 0.01;
+/// ... this v0, pixels ...
+const START_TOL_PX: f64 = 0.05;
+/// ... and this fraction of a_y; otherwise the start decided the answer and it is refused.
+const START_TOL_AY: f64 = 1e-3;
 
 fn ranging(a: RangingArgs) -> Result<ExitCode> {
     let loaded = a.config.load_full()?;
     let cfg = loaded.cfg.clone();
-    if !(a.max_rms_px.is_finite() && a.max_rms_px > 0.0) {
-        bail!("--max-rms-px {}: must be a finite number of pixels > 0", a.max_rms_px);
+    if !(a.max_rms_px > 0.0 && a.max_rms_px <= MAX_RMS_PX) {
+        bail!("--max-rms-px {}: must be > 0 and <= {MAX_RMS_PX} pixels", a.max_rms_px);
     }
-    if !(a.v0_sigma_px.is_finite() && a.v0_sigma_px >= 0.0) {
+    if !(a.v0_sigma_px >= 0.0 && a.v0_sigma_px <= MAX_V0_SIGMA_PX) {
         bail!(
-            "--v0-sigma-px {}: must be a finite number of pixels >= 0 (0 = free)",
+            "--v0-sigma-px {}: must be 0..={MAX_V0_SIGMA_PX} pixels (0 = free)",
             a.v0_sigma_px
         );
     }
@@ -133,8 +167,12 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
             p
         }
         (Some(path), None) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-            parse_pairs_csv(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?
+            let text = read_small(path, MAX_CSV_BYTES)?;
+            let p = parse_pairs_csv(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?;
+            if p.len() > MAX_SIM_PAIRS {
+                bail!("{}: {} pairs; at most {MAX_SIM_PAIRS}", path.display(), p.len());
+            }
+            p
         }
         (None, None) => bail!("give a PAIRS.csv or --from-sim N"),
     };
@@ -144,11 +182,18 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     };
     // 2. Refuse data that cannot determine the unknowns.
     check_pairs(&pairs, &cfg, a.fit_ay).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
-    // 3. Fit from the configured (nominal) camera.
+    // 3. Fit. The prior on v0 sits at the image centre (a property of the image, not of the
+    // last calibration: tilt and v0 trade off, so a prior at an earlier fit's v0 returns that
+    // fit whatever the pairs say). Without --fit-ay, a_y is held at the configured scale.
     let cam = PinholeCamera::from(&cfg.camera);
-    let mut start = TiltRanging::from_camera(&cam);
-    start.v0 += cfg.ranging.v0_offset_px;
-    start.a_y *= cfg.ranging.a_y_scale;
+    let centre = cam.v0;
+    let mut from_image = TiltRanging::from_camera(&cam);
+    if !a.fit_ay {
+        from_image.a_y *= cfg.ranging.a_y_scale;
+    }
+    let mut from_config = TiltRanging::from_camera(&cam);
+    from_config.v0 += cfg.ranging.v0_offset_px;
+    from_config.a_y *= cfg.ranging.a_y_scale;
     let opts = FitOptions {
         fit_ay: a.fit_ay,
         v0_sigma_px: if a.v0_sigma_px > 0.0 {
@@ -156,9 +201,10 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         } else {
             f64::INFINITY
         },
+        v0_prior_px: Some(centre),
         ..Default::default()
     };
-    let f = fit(&pairs, start, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
+    let f = fit(&pairs, from_image, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 4. Report.
     println!(
         "{:>8} {:>9} {:>10} {:>10} {:>7}",
@@ -202,12 +248,49 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
             bail!("{origin}: the fitted {what} is {v}; nothing written");
         }
     }
+    if !(0.0..cfg.camera.height as f64).contains(&f.ranging.v0) {
+        bail!(
+            "{origin}: the fitted principal point row v0 = {:.1} px is outside the image (rows 0..{}): the pairs do not pin tilt and v0 apart; measure at more distances spread over the image, or keep v0 near the centre (--v0-sigma-px 3); nothing written",
+            f.ranging.v0,
+            cfg.camera.height - 1
+        );
+    }
+    // 5b. A fit that lands elsewhere when started from the configured values (the last
+    // calibration) is decided by its start, not by the pairs: refused.
+    let g = fit(&pairs, from_config, opts);
+    let disagree = match &g {
+        Ok(g) => {
+            (g.ranging.alpha - f.ranging.alpha).abs().to_degrees() > START_TOL_DEG
+                || (g.ranging.v0 - f.ranging.v0).abs() > START_TOL_PX
+                || (g.ranging.a_y - f.ranging.a_y).abs() > START_TOL_AY * f.ranging.a_y
+        }
+        Err(_) => true,
+    };
+    if disagree {
+        let other = match &g {
+            Ok(g) => format!(
+                "tilt {:.3} deg, v0 {:.2} px, a_y {:.1} px",
+                g.ranging.alpha.to_degrees(),
+                g.ranging.v0,
+                g.ranging.a_y
+            ),
+            Err(e) => format!("no fit ({e})"),
+        };
+        bail!(
+            "{origin}: the fit depends on where it starts: from the image centre it gives tilt {:.3} deg, v0 {:.2} px, a_y {:.1} px; from the configured values (ranging.v0_offset_px = {}, ranging.a_y_scale = {}) {other}; the pairs do not pin the camera down: measure at more distances spread over the image{}; nothing written",
+            f.ranging.alpha.to_degrees(),
+            f.ranging.v0,
+            f.ranging.a_y,
+            cfg.ranging.v0_offset_px,
+            cfg.ranging.a_y_scale,
+            if a.v0_sigma_px > 0.0 { "" } else { ", or keep v0 near the image centre (--v0-sigma-px 3)" }
+        );
+    }
     // 6. The new override file, validated merged with the configuration before writing.
     let target = a.write.clone().unwrap_or_else(|| loaded.dir.join("local.toml"));
-    let old = match std::fs::read_to_string(&target) {
-        Ok(t) => Some(t),
+    let old = match std::fs::metadata(&target) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-        Err(e) => bail!("{}: cannot read: {e}", target.display()),
+        _ => Some(read_small(&target, MAX_OVERRIDE_BYTES)?),
     };
     let round = |v: f64| (v * 1e4).round() / 1e4;
     let new = edit_override(

@@ -6,6 +6,10 @@
 //! Aliases: `t` = `time_s`, `xte` = `truth.xte` = `truth.offset_m` (the true cross-track error,
 //! metres). `null` (e.g. `error` while the lane is lost) leaves a gap. Units are those of the
 //! telemetry (docs/sim.md, docs/lane.md).
+//!
+//! Bounded: at most [`MAX_FIELDS`] panels (the image is 1000 × (40 + 260·fields) pixels),
+//! [`MAX_FILES`] runs (one colour each), [`MAX_POINTS`] points over all of them, lines of at
+//! most [`MAX_LINE_BYTES`]; the files are read line by line, keeping only the plotted numbers.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -18,11 +22,12 @@ use std::process::ExitCode;
 /// Flags of `rccar plot`.
 #[derive(Args, Debug)]
 pub struct PlotArgs {
-    /// Telemetry files (JSONL, one record per frame), e.g. out/sim/telemetry.jsonl.
+    /// Telemetry files (JSONL, one record per frame), e.g. out/sim/telemetry.jsonl; at most 8
+    /// (one colour each).
     #[arg(required = true, value_name = "FILE.jsonl")]
     pub files: Vec<PathBuf>,
     /// Fields to plot, comma-separated; dotted paths reach into nested records
-    /// (`truth.offset_m`). One panel each.
+    /// (`truth.offset_m`). One panel each, at most 16.
     #[arg(long, short, value_delimiter = ',', required = true)]
     pub y: Vec<String>,
     /// The x axis field.
@@ -66,25 +71,58 @@ fn numeric_paths(v: &Value, prefix: &str, out: &mut BTreeSet<String>) {
     }
 }
 
-/// A telemetry file's records, with their line numbers.
-fn read_jsonl(path: &Path) -> Result<Vec<(usize, Value)>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        if line.trim().is_empty() {
+/// Most panels (`--y` fields): the image is 1000 × (40 + 260·16) = 1000 × 4200 pixels.
+pub const MAX_FIELDS: usize = 16;
+/// Most telemetry files: one colour each (`plot::RUN_COLOURS`).
+pub const MAX_FILES: usize = plot::RUN_COLOURS.len();
+/// Most points over all files and fields (16 bytes each: 160 MB), e.g. 8 runs × 3 fields of
+/// a 2-hour drive at 30 fps (216,000 records each) is 5.2 million.
+pub const MAX_POINTS: usize = 10_000_000;
+/// Longest telemetry line, bytes (a record is about 1 kB).
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+/// Most distinct numeric fields listed when a field is not found.
+const MAX_LISTED: usize = 400;
+
+/// Reads a telemetry file line by line and calls `each(line number, record)` for every record;
+/// only what `each` keeps stays in memory. Errors name the file and line.
+fn read_jsonl(path: &Path, mut each: impl FnMut(usize, &Value) -> Result<()>) -> Result<usize> {
+    use std::io::{BufRead, Read};
+    let f = std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let mut r = std::io::BufReader::new(f);
+    let mut buf = Vec::new();
+    let (mut line, mut records) = (0usize, 0usize);
+    loop {
+        buf.clear();
+        let n = r
+            .by_ref()
+            .take(MAX_LINE_BYTES as u64 + 1)
+            .read_until(b'\n', &mut buf)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        if n == 0 {
+            break;
+        }
+        line += 1;
+        if buf.len() > MAX_LINE_BYTES {
+            bail!(
+                "{}:{line}: line longer than {MAX_LINE_BYTES} bytes (a telemetry record is about 1 kB): not a telemetry file",
+                path.display()
+            );
+        }
+        if buf.iter().all(u8::is_ascii_whitespace) {
             continue;
         }
-        let v: Value = serde_json::from_str(line)
-            .with_context(|| format!("{}:{}: not a JSON record", path.display(), i + 1))?;
+        let v: Value = serde_json::from_slice(&buf)
+            .with_context(|| format!("{}:{line}: not a JSON record", path.display()))?;
         if !v.is_object() {
-            bail!("{}:{}: not a JSON object (a telemetry record is one)", path.display(), i + 1);
+            bail!("{}:{line}: not a JSON object (a telemetry record is one)", path.display());
         }
-        out.push((i + 1, v));
+        records += 1;
+        each(line, &v)?;
     }
-    if out.is_empty() {
+    if records == 0 {
         bail!("{}: no records", path.display());
     }
-    Ok(out)
+    Ok(records)
 }
 
 /// The number at `path` in `rec`: `None` when absent, NaN for `null`; an error for a string.
@@ -123,18 +161,49 @@ pub fn run(a: PlotArgs) -> Result<ExitCode> {
     if fields.is_empty() {
         bail!("--y: name at least one field, e.g. --y error,steer");
     }
+    if fields.len() > MAX_FIELDS {
+        bail!(
+            "--y: {} fields; at most {MAX_FIELDS} (one panel each, 260 px tall): plot them in several images",
+            fields.len()
+        );
+    }
+    if a.files.len() > MAX_FILES {
+        bail!(
+            "{} telemetry files; at most {MAX_FILES} in one plot (one colour each): plot them in groups",
+            a.files.len()
+        );
+    }
     let x = resolve(a.x.trim()).to_string();
     let mut traces = Vec::new();
+    let mut points = 0usize;
     for (k, file) in a.files.iter().enumerate() {
-        let recs = read_jsonl(file)?;
         let mut avail = BTreeSet::new();
-        for (_, r) in &recs {
-            numeric_paths(r, "", &mut avail);
-        }
-        let has = |f: &str| recs.iter().any(|(_, r)| lookup(r, f).is_some());
-        for f in std::iter::once(&a.x).chain(&fields) {
-            let r = resolve(f.trim());
-            if !has(r) {
+        let wanted: Vec<&str> = std::iter::once(x.as_str()).chain(fields.iter().map(|f| resolve(f))).collect();
+        let mut seen = vec![false; wanted.len()];
+        let mut panels = vec![Vec::new(); fields.len()];
+        let records = read_jsonl(file, |line, r| {
+            if avail.len() < MAX_LISTED {
+                numeric_paths(r, "", &mut avail);
+            }
+            for (s, w) in seen.iter_mut().zip(&wanted) {
+                *s |= lookup(r, w).is_some();
+            }
+            let Some(xv) = number(r, &x, file, line, &a.x)? else { return Ok(()) };
+            points += fields.len();
+            if points > MAX_POINTS {
+                bail!(
+                    "{}:{line}: more than {MAX_POINTS} points to plot over all files and fields: plot fewer fields or a shorter run",
+                    file.display()
+                );
+            }
+            for (p, f) in panels.iter_mut().zip(&fields) {
+                let y = number(r, resolve(f), file, line, f)?.unwrap_or(f64::NAN);
+                p.push((xv, y));
+            }
+            Ok(())
+        })?;
+        for (f, s) in std::iter::once(&a.x).chain(&fields).zip(&seen) {
+            if !s {
                 let list: Vec<&str> = avail.iter().map(String::as_str).collect();
                 bail!(
                     "{}: no field `{}` in the telemetry; numeric fields: {} (aliases: t, xte)",
@@ -144,16 +213,8 @@ pub fn run(a: PlotArgs) -> Result<ExitCode> {
                 );
             }
         }
-        let mut panels = vec![Vec::new(); fields.len()];
-        for (line, r) in &recs {
-            let Some(xv) = number(r, &x, file, *line, &a.x)? else { continue };
-            for (p, f) in panels.iter_mut().zip(&fields) {
-                let y = number(r, resolve(f), file, *line, f)?.unwrap_or(f64::NAN);
-                p.push((xv, y));
-            }
-        }
         let label = a.label.get(k).cloned().unwrap_or_else(|| default_label(file));
-        println!("plot: {} ({} records) as `{label}`", file.display(), recs.len());
+        println!("plot: {} ({records} records) as `{label}`", file.display());
         traces.push(Trace { label, panels });
     }
     let font = super::sim::load_font()

@@ -62,7 +62,7 @@ pub struct SimArgs {
     /// e.g. `--kick 5:0.05`; then measure as with --start-offset.
     #[arg(long, value_name = "T:DY")]
     pub kick: Option<String>,
-    /// Parallel runs in a sweep (default: the number of cores).
+    /// Parallel runs in a sweep (default: the number of cores; 1..=256).
     #[arg(long)]
     pub jobs: Option<usize>,
     /// Write zeros instead of measured stage times (reproducible telemetry).
@@ -80,6 +80,9 @@ pub struct SimArgs {
 /// Runs `rccar sim`.
 pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut cfg = a.config.load()?;
+    if let Some(j) = a.jobs.filter(|j| !(1..=256).contains(j)) {
+        bail!("--jobs {j}: must be 1..=256 parallel runs");
+    }
     let mut sets = Vec::new();
     if let Some(l) = a.laps {
         sets.push(format!("sim.laps={l}"));
@@ -357,9 +360,9 @@ fn parse_step(offset: Option<f64>, kick: Option<&str>, lane_width: f64) -> Resul
             Ok(Some(StepReq { kick: false, t: 0.0, dy: m }))
         }
         (None, Some(k)) => {
-            let form = || format!("--kick `{k}`: expected T:DY (seconds:metres), e.g. 5:0.05");
+            let form = || format!("--kick `{k}`: expected T:DY (seconds 0..=36000 : metres), e.g. 5:0.05");
             let (t, dy) = k.split_once(':').with_context(form)?;
-            let t: f64 = t.trim().parse().ok().filter(|t: &f64| t.is_finite() && *t >= 0.0).with_context(form)?;
+            let t: f64 = t.trim().parse().ok().filter(|t: &f64| (0.0..=36_000.0).contains(t)).with_context(form)?;
             let dy: f64 = dy.trim().parse().ok().filter(|d: &f64| d.is_finite()).with_context(form)?;
             check("--kick", dy)?;
             Ok(Some(StepReq { kick: true, t, dy }))
