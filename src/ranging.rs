@@ -181,7 +181,7 @@ impl Default for FitOptions {
 /// else on `start.v0`).
 pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, FitError> {
     let fit_ay = opts.fit_ay;
-    let n_par = check_pairs(pairs, fit_ay)?;
+    check_pairs(pairs, fit_ay)?;
     // Residual r_i = row(d_i) − v_i, plus the prior (v0 − v0_prior)·σ_row/σ_v0;
     // parameters x = (α, v0, a_y).
     let v0_prior = opts.v0_prior_px.unwrap_or(start.v0);
