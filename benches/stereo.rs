@@ -23,6 +23,7 @@
 #[path = "support/opencv.rs"]
 mod opencv;
 
+use rccar::classes::ObjectClass;
 use rccar::config::Config;
 use rccar::detect::gray_from_rgb;
 use rccar::sim::render::RenderOptions;
@@ -87,7 +88,7 @@ fn main() {
     let truth = rig.truth(&pose, true);
     let b = truth
         .iter()
-        .find(|t| t.bbox.kind == rccar::sim::track::ObjectKind::StopSign)
+        .find(|t| t.bbox.kind == ObjectClass::StopSign)
         .expect("stop sign in view")
         .bbox
         .bbox;

@@ -7,6 +7,7 @@
 //!
 //! `cargo run --release --example detect_limits`
 
+use rccar::classes::ObjectClass;
 use rccar::config::Config;
 use rccar::detect::Rect;
 use rccar::sim::run::Simulation;
@@ -29,8 +30,7 @@ fn main() {
     let len = track.length;
     // per class: (min x0, min y0, max x1, max y1) of matched boxes, ratios, count; truth extent
     type ClassStats = (Vec<[f64; 4]>, Vec<(f64, f64)>, Vec<[f64; 4]>);
-    let mut stats: std::collections::BTreeMap<String, ClassStats> =
-        Default::default();
+    let mut stats: std::collections::BTreeMap<String, ClassStats> = Default::default();
     let mut s = 0.0;
     while s < len {
         sim.place_at(s);
@@ -58,12 +58,10 @@ fn main() {
             );
             let e = stats.entry(label.clone()).or_default();
             e.2.push([t[0] / w, t[1] / h, t[2] / w, t[3] / h]);
-            let want = match o.kind {
-                rccar::sim::track::ObjectKind::StopSign => "stop_sign",
-                rccar::sim::track::ObjectKind::TrafficLight => "traffic_light",
-                rccar::sim::track::ObjectKind::Obstacle => "obstacle",
-            };
-            for b in found.iter().filter(|b| b.label == want) {
+            for b in found
+                .iter()
+                .filter(|b| ObjectClass::from_label(&b.label) == Some(o.kind))
+            {
                 if b.rect.iou(&tr) >= 0.3 {
                     let r = b.rect;
                     e.0.push([

@@ -18,9 +18,10 @@
 pub mod annotate;
 pub mod calib;
 pub mod camera;
-pub mod capture;
 #[cfg(feature = "camera")]
 pub mod camera_source;
+pub mod capture;
+pub mod classes;
 pub mod config;
 pub mod control;
 pub mod dashboard;

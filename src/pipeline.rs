@@ -20,7 +20,8 @@
 //! Without a detector (none loaded, or the cascade files missing) steps 2–3 find nothing and
 //! the car keeps its lane; the behaviour machine still handles a lost lane.
 
-use crate::config::{Config, DetectConfig};
+use crate::classes::{ColourCue, Reaction};
+use crate::config::{Config, DetectClass, DetectConfig};
 use crate::control::behaviour::{Behaviour, DeadReckoning, Decision, LightColor, Mode, Observations, Ranged};
 use crate::control::steering::SteeringInput;
 use crate::control::{Command, Controller};
@@ -156,24 +157,24 @@ pub fn load_detector(
     let params = DetectParams::from(cfg);
     let mut specs = Vec::new();
     let mut missing = Vec::new();
-    for (label, key, file, light) in [
-        ("stop_sign", "detect.stop_sign", &cfg.stop_sign, false),
-        ("traffic_light", "detect.traffic_light", &cfg.traffic_light, true),
-        ("obstacle", "detect.obstacle", &cfg.obstacle, false),
-    ] {
+    for class in ObjectClass::ALL {
+        let file = cfg.class(class).model;
         if file.is_empty() {
             continue;
         }
         let path = base.join(file);
         if path.is_file() {
             specs.push(CascadeSpec {
-                label: label.into(),
+                label: class.name().into(),
                 path,
-                traffic_light: light,
+                traffic_light: class.info().reads_light,
                 params,
             });
         } else {
-            missing.push(MissingCascade { key, path });
+            missing.push(MissingCascade {
+                key: class.info().model_key,
+                path,
+            });
         }
     }
     if specs.is_empty() {
@@ -185,8 +186,8 @@ pub fn load_detector(
 /// Where and at which sizes one class is searched (from `[detect]` and the camera).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DetectLimits {
-    /// The cascade's label (`stop_sign`, `traffic_light`, `obstacle`).
-    pub label: &'static str,
+    /// The class (its name is the cascade's label).
+    pub class: ObjectClass,
     /// Boxes must lie inside this rectangle, frame pixels.
     pub region: Rect,
     /// Smallest window (width, height), pixels.
@@ -200,27 +201,25 @@ pub struct DetectLimits {
 /// box of width `[W_min, W_max]` seen within `range_m = [near, far]` is at least
 /// `⌊f·W_min/far⌋` and at most `⌈f·W_max/near⌉` pixels wide; `min_size_px` still applies.
 /// Only widths are limited (the window's aspect is the cascade's).
-pub fn detect_limits(cfg: &Config) -> [DetectLimits; 3] {
+pub fn detect_limits(cfg: &Config) -> [DetectLimits; ObjectClass::COUNT] {
     let d = &cfg.detect;
     let f = crate::camera::PinholeCamera::from(&cfg.camera).f_px;
     let (w, h) = (cfg.camera.width as f64, cfg.camera.height as f64);
-    let lim = |label, r: [f64; 4], b: [f64; 2]| {
+    ObjectClass::ALL.map(|class| {
+        let DetectClass {
+            region: r, box_m: b, ..
+        } = d.class(class);
         let (x0, y0) = ((r[0] * w).floor() as i32, (r[1] * h).floor() as i32);
         let (x1, y1) = ((r[2] * w).ceil() as i32, (r[3] * h).ceil() as i32);
         let min_w = ((f * b[0] / d.range_m[1]).floor() as u32).max(d.min_size_px);
         let max_w = ((f * b[1] / d.range_m[0]).ceil().min(1e6) as u32).max(min_w).max(1);
         DetectLimits {
-            label,
+            class,
             region: Rect::new(x0, y0, x1 - x0, y1 - y0),
             min_size: (min_w, d.min_size_px),
             max_size: (max_w, u32::MAX),
         }
-    };
-    [
-        lim("stop_sign", d.stop_sign_region, d.stop_sign_box_m),
-        lim("traffic_light", d.traffic_light_region, d.traffic_light_box_m),
-        lim("obstacle", d.obstacle_region, d.obstacle_box_m),
-    ]
+    })
 }
 
 /// Slack of the ground-plane band ([`detect_bands`]): a box's bottom edge may lie this
@@ -244,9 +243,9 @@ pub const BAND_SIZE_SLACK: f64 = 1.25;
 /// Andaluz Eq. 5 read backwards). For every box width the band is the span of those rows,
 /// widened by [`BAND_SLACK`] of the window height plus [`BAND_SLACK_PX`]; windows whose box
 /// bottom lies outside are not scanned. Units: pixels, metres.
-pub fn detect_bands(cfg: &Config) -> [Option<crate::detect::RowBand>; 3] {
+pub fn detect_bands(cfg: &Config) -> [Option<crate::detect::RowBand>; ObjectClass::COUNT] {
     if !cfg.detect.ground_band {
-        return [None, None, None];
+        return std::array::from_fn(|_| None);
     }
     let d = &cfg.detect;
     let r = &cfg.ranging;
@@ -277,7 +276,13 @@ pub fn detect_bands(cfg: &Config) -> [Option<crate::detect::RowBand>; 3] {
         }
         let by_width = rows
             .iter()
-            .map(|&(lo, hi)| if lo > hi { (1, 0) } else { (lo.floor() as i32, hi.ceil() as i32) })
+            .map(|&(lo, hi)| {
+                if lo > hi {
+                    (1, 0)
+                } else {
+                    (lo.floor() as i32, hi.ceil() as i32)
+                }
+            })
             .collect();
         crate::detect::RowBand {
             by_width,
@@ -285,11 +290,7 @@ pub fn detect_bands(cfg: &Config) -> [Option<crate::detect::RowBand>; 3] {
             slack_px: BAND_SLACK_PX,
         }
     };
-    [
-        Some(band(d.stop_sign_box_m, r.stop_sign_bottom_m)),
-        Some(band(d.traffic_light_box_m, r.traffic_light_bottom_m)),
-        Some(band(d.obstacle_box_m, r.obstacle_bottom_m)),
-    ]
+    ObjectClass::ALL.map(|c| Some(band(d.class(c).box_m, r.class_box(c).bottom_m)))
 }
 
 /// The frame rows a [`Pipeline`] reads step by step ([`Pipeline::row_plan`]): the lane
@@ -332,9 +333,9 @@ pub struct Pipeline {
     time_s: f64,
     last_throttle: f64,
     objects: Vec<RangedObject>,
-    detect_limits: [DetectLimits; 3],
+    detect_limits: [DetectLimits; ObjectClass::COUNT],
     /// The ground-plane band of each class ([`detect_bands`]).
-    detect_bands: [Option<crate::detect::RowBand>; 3],
+    detect_bands: [Option<crate::detect::RowBand>; ObjectClass::COUNT],
     /// Frame rows detection reads (set with the detector).
     detect_rows: Vec<std::ops::Range<usize>>,
     tracker: Tracker<Option<LightColor>>,
@@ -396,8 +397,8 @@ impl Pipeline {
         self.detect_rows.clear();
         if let Some(d) = &mut self.detect {
             for (l, b) in self.detect_limits.iter().zip(self.detect_bands.iter()) {
-                d.set_limits(l.label, Some(l.region), l.min_size, l.max_size);
-                d.set_band(l.label, b.clone());
+                d.set_limits(l.class.name(), Some(l.region), l.min_size, l.max_size);
+                d.set_band(l.class.name(), b.clone());
             }
             self.detect_rows = d.rows_needed(self.width, self.height);
         }
@@ -460,7 +461,8 @@ impl Pipeline {
             // by `refine::GROW` of their height, so up to that share of the region beyond it.
             let h = self.height as i32;
             for l in &self.detect_limits {
-                let refined = self.ranging.refine && l.label != "obstacle";
+                let info = l.class.info();
+                let refined = self.ranging.refine && info.colour_cue != ColourCue::None;
                 let grow = if refined {
                     (crate::ranging::refine::GROW * l.region.height as f64).ceil() as i32 + 1
                 } else {
@@ -470,7 +472,7 @@ impl Pipeline {
                     (l.region.y - grow).clamp(0, h),
                     (l.region.y + l.region.height + grow).clamp(0, h),
                 );
-                if (l.label == "traffic_light" || refined) && y1 > y0 {
+                if (info.reads_light || refined) && y1 > y0 {
                     spans.push(y0 as usize..y1 as usize);
                 }
             }
@@ -680,14 +682,14 @@ impl Pipeline {
                 distance_m: d,
                 lateral_m: l,
             };
-            match ob.class {
-                ObjectClass::StopSign => o.stop_sign = nearer(o.stop_sign, r),
-                ObjectClass::TrafficLight => {
+            match ob.class.info().reaction {
+                Reaction::StopThenGo => o.stop_sign = nearer(o.stop_sign, r),
+                Reaction::WaitForGreen => {
                     if o.light.is_none_or(|(c, _)| c.distance_m > d) {
                         o.light = Some((r, ob.light.unwrap_or(LightColor::Unknown)));
                     }
                 }
-                ObjectClass::Obstacle => {
+                Reaction::StopOrPass => {
                     if l.abs() <= self.obstacle_lane_half_m {
                         o.obstacle = nearer(o.obstacle, r);
                     }

@@ -46,6 +46,7 @@
 //! Units: metres, radians, pixels.
 
 use crate::camera::PinholeCamera;
+use crate::classes::ColourCue;
 
 pub mod refine;
 pub mod track;
@@ -180,19 +181,7 @@ impl Default for FitOptions {
 /// else on `start.v0`).
 pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, FitError> {
     let fit_ay = opts.fit_ay;
-    let n_par = if fit_ay { 3 } else { 2 };
-    if pairs.len() < n_par + 1 {
-        return Err(FitError::TooFewPairs {
-            need: n_par + 1,
-            unknowns: if fit_ay { "tilt, v0 and a_y" } else { "tilt and v0" },
-            got: pairs.len(),
-        });
-    }
-    for (index, p) in pairs.iter().enumerate() {
-        if !(p.d.is_finite() && p.v.is_finite() && p.d > 0.0 && p.z.is_finite()) {
-            return Err(FitError::BadPair { index, d: p.d, v: p.v });
-        }
-    }
+    check_pairs(pairs, fit_ay)?;
     // Residual r_i = row(d_i) − v_i, plus the prior (v0 − v0_prior)·σ_row/σ_v0;
     // parameters x = (α, v0, a_y).
     let v0_prior = opts.v0_prior_px.unwrap_or(start.v0);
@@ -263,29 +252,7 @@ fn solve_weighted(
     for _ in 0..200 {
         // 1. Jacobian by central differences (the model is smooth and cheap).
         let res = residuals(&cur);
-        let mut jac = nalgebra::DMatrix::<f64>::zeros(pairs.len() + 1, n_par);
-        for k in 0..n_par {
-            let step = [1e-7, 1e-5, 1e-5][k];
-            let (mut a, mut b) = (cur, cur);
-            match k {
-                0 => {
-                    a.alpha += step;
-                    b.alpha -= step
-                }
-                1 => {
-                    a.v0 += step;
-                    b.v0 -= step
-                }
-                _ => {
-                    a.a_y += step;
-                    b.a_y -= step
-                }
-            }
-            let (ra, rb) = (residuals(&a), residuals(&b));
-            for i in 0..=pairs.len() {
-                jac[(i, k)] = (ra[i] - rb[i]) / (2.0 * step);
-            }
-        }
+        let jac = jacobian(&residuals, cur, n_par, pairs.len() + 1);
         // 2. Damped normal equations (JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr.
         let r = nalgebra::DVector::from_vec(res);
         let jtj = jac.transpose() * &jac;
@@ -324,29 +291,61 @@ fn solve_weighted(
     Ok(cur)
 }
 
-/// The kinds of objects the pipeline ranges, each with its own box-bottom height.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ObjectClass {
-    /// A stop sign (box = the face).
-    StopSign,
-    /// A traffic light (box = the housing).
-    TrafficLight,
-    /// An obstacle standing on the floor.
-    Obstacle,
-}
-
-impl ObjectClass {
-    /// The class of a detector label (`stop_sign`, `traffic_light`, `obstacle`).
-    pub fn from_label(label: &str) -> Option<ObjectClass> {
-        match label {
-            "stop_sign" | "stop" => Some(ObjectClass::StopSign),
-            "traffic_light" | "light" => Some(ObjectClass::TrafficLight),
-            "obstacle" => Some(ObjectClass::Obstacle),
-            _ => None,
+/// The number of unknowns of [`fit`] (2, or 3 with `a_y`), or why `pairs` cannot be fitted
+/// (too few, or a pair not finite / at a distance ≤ 0).
+fn check_pairs(pairs: &[Pair], fit_ay: bool) -> Result<usize, FitError> {
+    let n_par = if fit_ay { 3 } else { 2 };
+    if pairs.len() < n_par + 1 {
+        return Err(FitError::TooFewPairs {
+            need: n_par + 1,
+            unknowns: if fit_ay { "tilt, v0 and a_y" } else { "tilt and v0" },
+            got: pairs.len(),
+        });
+    }
+    for (index, p) in pairs.iter().enumerate() {
+        if !(p.d.is_finite() && p.v.is_finite() && p.d > 0.0 && p.z.is_finite()) {
+            return Err(FitError::BadPair { index, d: p.d, v: p.v });
         }
     }
+    Ok(n_par)
 }
+
+/// Step 1 of [`fit`]: the `n_rows` × `n_par` Jacobian of `residuals` at `cur` by central
+/// differences over (α, v0, a_y) (the model is smooth and cheap).
+fn jacobian(
+    residuals: &dyn Fn(&TiltRanging) -> Vec<f64>,
+    cur: TiltRanging,
+    n_par: usize,
+    n_rows: usize,
+) -> nalgebra::DMatrix<f64> {
+    let mut jac = nalgebra::DMatrix::<f64>::zeros(n_rows, n_par);
+    for k in 0..n_par {
+        let step = [1e-7, 1e-5, 1e-5][k];
+        let (mut a, mut b) = (cur, cur);
+        match k {
+            0 => {
+                a.alpha += step;
+                b.alpha -= step
+            }
+            1 => {
+                a.v0 += step;
+                b.v0 -= step
+            }
+            _ => {
+                a.a_y += step;
+                b.a_y -= step
+            }
+        }
+        let (ra, rb) = (residuals(&a), residuals(&b));
+        for i in 0..n_rows {
+            jac[(i, k)] = (ra[i] - rb[i]) / (2.0 * step);
+        }
+    }
+    jac
+}
+
+/// The object classes (the one registry, src/classes.rs), re-exported where ranging uses them.
+pub use crate::classes::ObjectClass;
 
 /// What a detector's box of one class frames (`[ranging]`): the object's face, where it
 /// hangs, and how much looser than the face the trained boxes are.
@@ -394,7 +393,7 @@ pub struct BoxRanging {
     /// The camera with the same calibration (for the lateral position).
     pub camera: PinholeCamera,
     /// What each class's box frames: stop sign, traffic light, obstacle.
-    pub classes: [ClassBox; 3],
+    pub classes: [ClassBox; ObjectClass::COUNT],
     /// σ of a detector box's centre row, pixels.
     pub centre_sigma_px: f64,
     /// σ of a detector box's size, relative (0.04 = 4%).
@@ -408,7 +407,7 @@ pub struct BoxRanging {
 impl BoxRanging {
     /// The contact height of a class's box bottom, metres.
     pub fn bottom_of(&self, class: ObjectClass) -> f64 {
-        self.classes[class as usize].bottom_m
+        self.classes[class.index()].bottom_m
     }
 
     /// Forward distance and lateral offset (left positive) from the lens of an object of
@@ -459,7 +458,7 @@ impl BoxRanging {
     /// (rows by Eq. 5, width `f·W/Z` at its top edge), widened to the aspect, times the margin.
     /// The centre row is `None` when the face's height is unknown.
     pub fn predicted_box(&self, class: ObjectClass, d: f64, aspect: f64) -> (f64, Option<f64>) {
-        let cb = &self.classes[class as usize];
+        let cb = &self.classes[class.index()];
         let z_top = cb.bottom_m + cb.height_m;
         let v_bottom = self.tilt.row(d, cb.bottom_m);
         let (mut h, mut centre) = (0.0f64, None);
@@ -489,7 +488,7 @@ impl BoxRanging {
     ///    `v_c + h/(2·margin)` at the contact height, σ from the row's σ (centre and size).
     /// 3. Inverse-variance fusion: `d = Σ d_i/σ_i² / Σ 1/σ_i²`, `σ² = 1 / Σ 1/σ_i²`.
     pub fn range_detector(&self, class: ObjectClass, bbox: [f64; 4]) -> Option<BoxRange> {
-        let cb = self.classes[class as usize];
+        let cb = self.classes[class.index()];
         let (hb, wb) = (bbox[3] - bbox[1], bbox[2] - bbox[0]);
         if !(hb > 0.0 && wb > 0.0) {
             return None;
@@ -557,7 +556,9 @@ impl BoxRanging {
         }
         let fine = refine::outline(img, class, bbox).and_then(|o| self.range_refined(class, o));
         match (coarse, fine) {
-            (Some(c), Some(f)) if (f.distance_m - c.distance_m).abs() <= (3.0 * c.sigma_m).max(0.25 * c.distance_m) => Some(f),
+            (Some(c), Some(f)) if (f.distance_m - c.distance_m).abs() <= (3.0 * c.sigma_m).max(0.25 * c.distance_m) => {
+                Some(f)
+            }
             (None, Some(f)) => Some(f),
             (c, _) => c,
         }
@@ -573,13 +574,17 @@ impl BoxRanging {
     /// 3. bottom row: Eq. 5 at z_b.
     pub fn range_refined(&self, class: ObjectClass, o: [f64; 4]) -> Option<BoxRange> {
         const SIGMA_EDGE: f64 = 0.5;
-        let cb = self.classes[class as usize];
+        let cb = self.classes[class.index()];
         let (w_px, h_px) = (o[2] - o[0], o[3] - o[1]);
         if !(w_px > 0.0 && h_px > 0.0) || cb.height_m <= 0.0 {
             return None;
         }
         // The coloured part: the red area of a sign (centred on the face), a light's housing.
-        let k = if class == ObjectClass::StopSign { self.red_fraction } else { 1.0 };
+        let k = if class.info().colour_cue == ColourCue::RedFace {
+            self.red_fraction
+        } else {
+            1.0
+        };
         let (hh, zc) = (cb.height_m * k, cb.bottom_m + cb.height_m / 2.0);
         let (zb, zt) = (zc - hh / 2.0, zc + hh / 2.0);
         let (s, c) = self.tilt.alpha.sin_cos();
@@ -587,7 +592,7 @@ impl BoxRanging {
         let mut cues: [Option<(f64, f64)>; 3] = [None; 3];
         let sw = SIGMA_EDGE * std::f64::consts::SQRT_2;
         // 1. Width.
-        if class == ObjectClass::StopSign && cb.width_m > 0.0 {
+        if class.info().colour_cue == ColourCue::RedFace && cb.width_m > 0.0 {
             let z = f * cb.width_m * k / w_px;
             let d = (z - (self.tilt.h - zc) * s) / c;
             if d > 0.0 {
@@ -847,7 +852,7 @@ mod tests {
         for class in [ObjectClass::StopSign, ObjectClass::TrafficLight, ObjectClass::Obstacle] {
             for &d in &[0.3, 0.8, 1.5] {
                 let aspect = if class == ObjectClass::TrafficLight { 0.4 } else { 1.25 };
-                let cb = b.classes[class as usize];
+                let cb = b.classes[class.index()];
                 let (h, c) = b.predicted_box(class, d, aspect);
                 // An obstacle (size unknown, so no predicted height): any box whose outline
                 // bottom is on Eq. 5's row.
@@ -859,7 +864,11 @@ mod tests {
                 assert!((r.distance_m - d).abs() < 1e-6 * d, "{class:?} at {d}: {r:?}");
                 assert!(r.sigma_m > 0.0 && r.sigma_m < 0.2 * d);
                 // Fusion never gives more weight than the better cue deserves.
-                let best = [r.by_size, r.by_row].into_iter().flatten().map(|c| c.1).fold(f64::INFINITY, f64::min);
+                let best = [r.by_size, r.by_row]
+                    .into_iter()
+                    .flatten()
+                    .map(|c| c.1)
+                    .fold(f64::INFINITY, f64::min);
                 assert!(r.sigma_m <= best + 1e-12);
             }
         }

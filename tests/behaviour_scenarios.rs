@@ -13,10 +13,11 @@
 //! All runs use `steering.ki = 0` (see tests/sim_loop.rs: the shipped ki winds up in long
 //! curves); everything else is the shipped configuration unless a test says otherwise.
 
+use rccar::classes::ObjectClass;
 use rccar::config::Config;
 use rccar::control::behaviour::Mode;
 use rccar::sim::run::{Simulation, StepOutput, Summary};
-use rccar::sim::track::{LightState, ObjectKind, Track};
+use rccar::sim::track::{LightState, Track};
 use std::path::Path;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
@@ -110,7 +111,7 @@ fn stops(steps: &[StepOutput], standstill: f64) -> Vec<(usize, usize)> {
 }
 
 /// True distance from the lens to the object of `kind` (nearest), if in view.
-fn truth_distance(s: &StepOutput, kind: ObjectKind) -> Option<f64> {
+fn truth_distance(s: &StepOutput, kind: ObjectClass) -> Option<f64> {
     s.truth
         .objects
         .iter()
@@ -135,7 +136,7 @@ fn stop_sign_stop_hold_five_seconds_resume_once() {
     assert_eq!(st.len(), 1, "exactly one stop: {st:?}");
     let (a, z) = st[0];
     let held = steps[z].time_s - steps[a].time_s + 1.0 / cfg.camera.fps;
-    let d = truth_distance(&steps[a], ObjectKind::StopSign).expect("sign in view when stopped");
+    let d = truth_distance(&steps[a], ObjectClass::StopSign).expect("sign in view when stopped");
     println!(
         "stop sign: at rest {d:.3} m from the sign (window {:?}), held {held:.3} s",
         b.stop_window_m
@@ -150,7 +151,7 @@ fn stop_sign_stop_hold_five_seconds_resume_once() {
     assert!(later.iter().any(|s| s.truth.speed_mps > 0.3), "resumed");
     let gone = later
         .iter()
-        .position(|s| truth_distance(s, ObjectKind::StopSign).is_none());
+        .position(|s| truth_distance(s, ObjectClass::StopSign).is_none());
     assert!(gone.is_some(), "drove past the sign");
     assert_eq!(sum.lane_departures, 0, "{sum:?}");
 }
@@ -171,7 +172,7 @@ fn red_light_stop_and_go_within_half_a_second_of_green() {
     });
     let light = t
         .enabled_objects()
-        .find(|o| o.kind == ObjectKind::TrafficLight)
+        .find(|o| o.kind == ObjectClass::TrafficLight)
         .unwrap()
         .clone();
     let (sum, steps, sim) = run(&cfg, &t, 34.0, 16.0);
@@ -192,7 +193,7 @@ fn red_light_stop_and_go_within_half_a_second_of_green() {
     assert_eq!(st.len(), 1, "one stop: {st:?}");
     let (a, z) = st[0];
     assert_eq!(light.light_state(steps[a].time_s), LightState::Red, "stopped on red");
-    let d = truth_distance(&steps[a], ObjectKind::TrafficLight).expect("light in view");
+    let d = truth_distance(&steps[a], ObjectClass::TrafficLight).expect("light in view");
     let green_at = steps[a..]
         .iter()
         .find(|s| light.light_state(s.time_s) == LightState::Green)
@@ -252,7 +253,7 @@ fn obstacle_stop_without_contact() {
     });
     let ob = t
         .enabled_objects()
-        .find(|o| o.kind == ObjectKind::Obstacle && o.index == 3)
+        .find(|o| o.kind == ObjectClass::Obstacle && o.index == 3)
         .unwrap()
         .clone();
     let (_, steps, _) = run(&cfg, &t, 35.0, 12.0);
@@ -276,7 +277,7 @@ fn obstacle_passed_and_back_in_lane_within_the_configured_distance() {
     });
     let ob = t
         .enabled_objects()
-        .find(|o| o.kind == ObjectKind::Obstacle && o.index == 3)
+        .find(|o| o.kind == ObjectClass::Obstacle && o.index == 3)
         .unwrap()
         .clone();
     let (sum, steps, _) = run(&cfg, &t, 35.0, 20.0);
@@ -294,7 +295,7 @@ fn obstacle_passed_and_back_in_lane_within_the_configured_distance() {
     let max_after = steps[back..].iter().map(|s| s.truth.offset_m.abs()).fold(0.0, f64::max);
     let passed = steps[back..]
         .iter()
-        .any(|s| truth_distance(s, ObjectKind::Obstacle).is_none());
+        .any(|s| truth_distance(s, ObjectClass::Obstacle).is_none());
     println!(
         "pass: closest gap {gap:.3} m, back in lane {back_dist:.2} m after the pass began (limit {} m), then |offset| <= {max_after:.3} m",
         cfg.behaviour.pass_return_m

@@ -43,15 +43,19 @@ fn the_band_keeps_every_object_box_in_range() {
     let mut plain: DetectStage = stage.clone();
     let mut banded: DetectStage = stage;
     for (l, b) in limits.iter().zip(bands.iter()) {
-        plain.set_limits(l.label, Some(l.region), l.min_size, l.max_size);
-        banded.set_limits(l.label, Some(l.region), l.min_size, l.max_size);
+        plain.set_limits(l.class.name(), Some(l.region), l.min_size, l.max_size);
+        banded.set_limits(l.class.name(), Some(l.region), l.min_size, l.max_size);
         assert!(b.is_some());
-        banded.set_band(l.label, b.clone());
+        banded.set_band(l.class.name(), b.clone());
     }
     let lens_ahead = cfg.vehicle.camera_x_m - cfg.vehicle.wheelbase_m / 2.0;
     let (mut t_plain, mut t_band) = (0.0, 0.0);
     let mut failed = vec![];
-    for (kind, label) in [("stop_sign", "stop_sign"), ("traffic_light", "traffic_light"), ("obstacle", "obstacle")] {
+    for (kind, label) in [
+        ("stop_sign", "stop_sign"),
+        ("traffic_light", "traffic_light"),
+        ("obstacle", "obstacle"),
+    ] {
         let t = track(kind);
         let (mut frames, mut found) = (0, 0);
         for k in 0..=24 {

@@ -19,7 +19,7 @@
 use rccar::config::Config;
 use rccar::ranging::{fit, FitOptions, ObjectClass, Pair, TiltRanging};
 use rccar::sim::run::Simulation;
-use rccar::sim::track::{ObjectKind, Track};
+use rccar::sim::track::Track;
 use std::path::{Path, PathBuf};
 
 /// A straight with one object of `kind` on the driven lane's centre, 3 m ahead of the start.
@@ -35,7 +35,7 @@ fn measure(kind: &str, class: ObjectClass, ds: &[f64]) -> Vec<(f64, f64, f64, f6
     let ob = t.enabled_objects().next().unwrap().clone();
     let ranging = cfg.ranging.box_ranging(&cfg.camera);
     // The point the box bottom stands for: the obstacle's near face, else the object itself.
-    let near = if ob.kind == ObjectKind::Obstacle {
+    let near = if ob.kind == ObjectClass::Obstacle {
         ob.size[0] / 2.0
     } else {
         0.0
@@ -136,9 +136,9 @@ fn sim_lab_calibration_recovers_tilt_within_half_a_degree() {
 /// post), a light housing's front.
 fn face_distance(cfg: &Config, ob: &rccar::sim::track::Object, pose: [f64; 3]) -> f64 {
     let near = match ob.kind {
-        ObjectKind::Obstacle => ob.size[0] / 2.0,
-        ObjectKind::StopSign => 0.007,
-        ObjectKind::TrafficLight => ob.size[0] * 0.33 / 2.0,
+        ObjectClass::Obstacle => ob.size[0] / 2.0,
+        ObjectClass::StopSign => 0.007,
+        ObjectClass::TrafficLight => ob.size[0] * 0.33 / 2.0,
     };
     let [x, y, yaw] = pose;
     let (s, c) = yaw.sin_cos();
@@ -222,9 +222,9 @@ fn approach(kind: &str, stage: &mut rccar::detect::DetectStage, from: f64, to: f
     sim.set_full_frames(true);
     let lens_ahead = cfg.vehicle.camera_x_m - cfg.vehicle.wheelbase_m / 2.0;
     let near = match ob.kind {
-        ObjectKind::Obstacle => ob.size[0] / 2.0,
-        ObjectKind::StopSign => 0.007,
-        ObjectKind::TrafficLight => ob.size[0] * 0.33 / 2.0,
+        ObjectClass::Obstacle => ob.size[0] / 2.0,
+        ObjectClass::StopSign => 0.007,
+        ObjectClass::TrafficLight => ob.size[0] * 0.33 / 2.0,
     };
     let step_m = speed / cfg.camera.fps;
     let mut out = vec![];

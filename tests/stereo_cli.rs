@@ -6,12 +6,13 @@
 
 use rccar::calib::corners::BoardSize;
 use rccar::camera::PinholeCamera;
+use rccar::classes::ObjectClass;
 use rccar::config::Config;
 use rccar::sim::board::Board;
 use rccar::sim::render::RenderOptions;
 use rccar::sim::scene::Scene;
 use rccar::sim::stereo::StereoRig;
-use rccar::sim::track::{ObjectKind, Track};
+use rccar::sim::track::Track;
 use rccar::sim::vehicle::Pose;
 use std::path::Path;
 use std::process::Command;
@@ -56,7 +57,7 @@ fn stereo_command_ranges_a_rendered_pair_with_and_without_calibration() {
     let t = rig
         .truth(&pose, true)
         .into_iter()
-        .find(|t| t.bbox.kind == ObjectKind::StopSign)
+        .find(|t| t.bbox.kind == ObjectClass::StopSign)
         .unwrap();
     let b = t.bbox.bbox;
     let bx = format!(

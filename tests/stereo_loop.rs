@@ -11,6 +11,7 @@
 //!
 //!     cargo test --release --test it stereo_loop:: -- --nocapture
 
+use rccar::classes::ObjectClass;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -69,7 +70,7 @@ fn stop_of(recs: &[serde_json::Value], cfg: &serde_json::Value) -> Stop {
         .objects
         .iter()
         .map(|o| &o.0)
-        .find(|o| o.kind == rccar::sim::track::ObjectKind::StopSign)
+        .find(|o| o.kind == ObjectClass::StopSign)
         .unwrap()
         .pos;
     let camera_x = cfg["vehicle"]["camera_x_m"].as_f64().unwrap();

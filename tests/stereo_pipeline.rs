@@ -9,13 +9,14 @@
 //!
 //!     cargo test --release --test it stereo_pipeline:: -- --nocapture
 
+use rccar::classes::ObjectClass;
 use rccar::config::{Config, RangingMethod};
 use rccar::control::behaviour::Mode;
 use rccar::pipeline::Pipeline;
 use rccar::sim::render::RenderOptions;
 use rccar::sim::scene::Scene;
 use rccar::sim::stereo::StereoRig;
-use rccar::sim::track::{ObjectKind, Track};
+use rccar::sim::track::Track;
 use rccar::sim::vehicle::{Pose, Vehicle};
 use rccar::timing::NoTimer;
 use std::path::Path;
@@ -90,7 +91,7 @@ fn run(method: RangingMethod) -> Run {
                     .left
                     .object_boxes(&car.pose)
                     .iter()
-                    .filter(|b| b.kind == ObjectKind::StopSign)
+                    .filter(|b| b.kind == ObjectClass::StopSign)
                     .map(|b| b.distance_m)
                     .reduce(f64::min);
                 println!(
@@ -105,7 +106,7 @@ fn run(method: RangingMethod) -> Run {
                 .left
                 .object_boxes(&car.pose)
                 .iter()
-                .filter(|b| b.kind == ObjectKind::StopSign)
+                .filter(|b| b.kind == ObjectClass::StopSign)
                 .map(|b| b.distance_m)
                 .reduce(f64::min);
             // Hold a second, then stop the run.

@@ -3,6 +3,7 @@
 //! metres), and how often (frames).
 
 use super::check::Checker;
+use crate::classes::ObjectClass;
 use crate::detect::detector::DetectParams;
 use serde::{Deserialize, Serialize};
 
@@ -56,9 +57,9 @@ impl Default for DetectConfig {
     fn default() -> Self {
         Self {
             enabled: true,
-            stop_sign: "cascades/stop_sign.xml".into(),
-            traffic_light: "cascades/traffic_light.xml".into(),
-            obstacle: "cascades/obstacle.xml".into(),
+            stop_sign: ObjectClass::StopSign.info().model_file.into(),
+            traffic_light: ObjectClass::TrafficLight.info().model_file.into(),
+            obstacle: ObjectClass::Obstacle.info().model_file.into(),
             scale_factor: 1.1,
             min_neighbors: 3,
             min_size_px: 0,
@@ -75,7 +76,28 @@ impl Default for DetectConfig {
     }
 }
 
+/// One class's part of `[detect]` (`detect.<name>`, `<name>_region`, `<name>_box_m`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DetectClass<'a> {
+    /// Its model file (a cascade), as written in the config.
+    pub model: &'a str,
+    /// Where it is searched, [left, top, right, bottom] fractions of the frame.
+    pub region: [f64; 4],
+    /// Width of its box, [min, max] metres.
+    pub box_m: [f64; 2],
+}
+
 impl DetectConfig {
+    /// The keys of `class` (the one place that maps a class to its `[detect]` fields).
+    pub fn class(&self, class: ObjectClass) -> DetectClass<'_> {
+        let (model, region, box_m) = match class {
+            ObjectClass::StopSign => (&self.stop_sign, self.stop_sign_region, self.stop_sign_box_m),
+            ObjectClass::TrafficLight => (&self.traffic_light, self.traffic_light_region, self.traffic_light_box_m),
+            ObjectClass::Obstacle => (&self.obstacle, self.obstacle_region, self.obstacle_box_m),
+        };
+        DetectClass { model, region, box_m }
+    }
+
     /// Checks of `[detect]`: scan parameters, regions inside the frame, ordered size ranges.
     pub(super) fn check(&self, c: &mut Checker) {
         let d = self;

@@ -36,7 +36,7 @@ mod warp;
 pub use behaviour::BehaviourConfig;
 pub use camera::CameraConfig;
 pub use dashboard::DashboardConfig;
-pub use detect::DetectConfig;
+pub use detect::{DetectClass, DetectConfig};
 pub use gpio::GpioConfig;
 pub use lane::{LaneConfig, PeakMode, ThresholdMode};
 pub use layers::{find_config, LoadedConfig, PATH_KEYS};

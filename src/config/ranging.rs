@@ -6,6 +6,7 @@
 use super::check::Checker;
 use super::CameraConfig;
 use crate::camera::PinholeCamera;
+use crate::classes::ObjectClass;
 use crate::ranging::track::TrackerOptions;
 use crate::ranging::{BoxRanging, ClassBox, TiltRanging};
 use serde::{Deserialize, Serialize};
@@ -112,6 +113,30 @@ impl Default for RangingConfig {
 }
 
 impl RangingConfig {
+    /// What a detector box of `class` frames (`ranging.<name>_size_m`, `_bottom_m`,
+    /// `_box_margin`; the one place that maps a class to its `[ranging]` fields).
+    pub fn class_box(&self, class: ObjectClass) -> ClassBox {
+        let (size, bottom_m, margin) = match class {
+            ObjectClass::StopSign => (
+                self.stop_sign_size_m,
+                self.stop_sign_bottom_m,
+                self.stop_sign_box_margin,
+            ),
+            ObjectClass::TrafficLight => (
+                self.traffic_light_size_m,
+                self.traffic_light_bottom_m,
+                self.traffic_light_box_margin,
+            ),
+            ObjectClass::Obstacle => (self.obstacle_size_m, self.obstacle_bottom_m, self.obstacle_box_margin),
+        };
+        ClassBox {
+            width_m: size[0],
+            height_m: size[1],
+            bottom_m,
+            margin,
+        }
+    }
+
     /// Range checks of `[ranging]` (the box bottoms against the camera height are checked in
     /// `check.rs`).
     pub(super) fn check(&self, c: &mut Checker) {
@@ -148,24 +173,10 @@ impl RangingConfig {
         let mut camera = PinholeCamera::from(camera);
         camera.v0 += self.v0_offset_px;
         camera.f_px *= self.a_y_scale;
-        let class = |size: [f64; 2], bottom_m: f64, margin: f64| ClassBox {
-            width_m: size[0],
-            height_m: size[1],
-            bottom_m,
-            margin,
-        };
         BoxRanging {
             tilt: TiltRanging::from_camera(&camera),
             camera,
-            classes: [
-                class(self.stop_sign_size_m, self.stop_sign_bottom_m, self.stop_sign_box_margin),
-                class(
-                    self.traffic_light_size_m,
-                    self.traffic_light_bottom_m,
-                    self.traffic_light_box_margin,
-                ),
-                class(self.obstacle_size_m, self.obstacle_bottom_m, self.obstacle_box_margin),
-            ],
+            classes: ObjectClass::ALL.map(|c| self.class_box(c)),
             centre_sigma_px: self.box_centre_sigma_px,
             size_sigma: self.box_size_sigma,
             refine: self.refine_by_colour,

@@ -333,10 +333,20 @@ impl Behaviour {
     /// One step at time `now` (seconds, any origin, non-decreasing) with this frame's
     /// observations. Returns what the controller should do.
     pub fn step(&mut self, obs: &Observations, now: f64) -> Decision {
-        let c = &self.cfg;
         self.last = None;
-        let odo = obs.odometry_m;
         // 1. Per-frame evidence into the confirmation windows.
+        let e = self.evidence(obs, now);
+        // 2. Transitions: the obstacle first (safety), then each state's own exits.
+        self.transition(obs, now, e);
+        // 3. What the new state asks for.
+        self.decision(now, obs.odometry_m)
+    }
+
+    /// Step 1 of [`Behaviour::step`]: this frame's evidence into the confirmation windows,
+    /// the standstill and lane-lost clocks; what is confirmed.
+    fn evidence(&mut self, obs: &Observations, now: f64) -> Evidence {
+        let c = &self.cfg;
+        let odo = obs.odometry_m;
         let ignoring = now < self.ignore_until_s || odo < self.ignore_until_odo;
         let stop_near = obs.stop_sign.is_some_and(|s| s.distance_m < c.stop_trigger_m);
         self.stop_w.push(stop_near && !ignoring);
@@ -383,8 +393,29 @@ impl Behaviour {
         if in_pass && stop_ok {
             self.pending_stop = true;
         }
+        Evidence {
+            stop_ok,
+            red_ok,
+            green_ok,
+            obstacle_ok,
+            obstacle_gone,
+            in_pass,
+        }
+    }
 
-        // 2. Transitions: the obstacle first (safety), then each state's own exits.
+    /// Step 2 of [`Behaviour::step`]: the transitions, the obstacle first (safety), then each
+    /// state's own exits.
+    fn transition(&mut self, obs: &Observations, now: f64, e: Evidence) {
+        let c = &self.cfg;
+        let odo = obs.odometry_m;
+        let Evidence {
+            stop_ok,
+            red_ok,
+            green_ok,
+            obstacle_ok,
+            obstacle_gone,
+            in_pass,
+        } = e;
         if obstacle_ok && !in_pass && self.mode != Mode::Obstacle {
             let d = obs.obstacle.map_or(f64::NAN, |o| o.distance_m);
             self.go(Mode::Obstacle, now, odo, format!("obstacle in lane at {d:.2} m"));
@@ -460,8 +491,10 @@ impl Behaviour {
                 }
             }
         }
+    }
 
-        // 3. What the new state asks for.
+    /// Step 3 of [`Behaviour::step`]: what the new state asks for at `now`, odometry `odo`.
+    fn decision(&self, now: f64, odo: f64) -> Decision {
         let c = &self.cfg;
         let driven = odo - self.since_odo;
         let mut throttle_cap = 1.0;
@@ -500,6 +533,17 @@ impl Behaviour {
             throttle_cap,
         }
     }
+}
+
+/// What one frame confirmed (step 1 of [`Behaviour::step`]).
+#[derive(Debug, Clone, Copy)]
+struct Evidence {
+    stop_ok: bool,
+    red_ok: bool,
+    green_ok: bool,
+    obstacle_ok: bool,
+    obstacle_gone: bool,
+    in_pass: bool,
 }
 
 #[cfg(test)]

@@ -22,6 +22,7 @@ pub mod integral;
 pub mod light;
 pub mod pyramid;
 pub mod resize;
+pub mod scan;
 pub mod stage;
 
 pub use cascade::{Cascade, CascadeError, FeatureType};

@@ -10,14 +10,14 @@
 //!
 //! 1. **Plan** (once per frame size / parameter set): every cascade's scale list (step 1 of
 //!    `detector.rs`, with its own min/max size), and per scale the window positions whose boxes
-//!    lie in the cascade's *region* of the frame ([`Detector::window_range`]). The level is
+//!    lie in the cascade's *region* of the frame ([`Scanner::window_range`]). The level is
 //!    needed only in the rows those windows cover (`row0..row1`) and only left of the last
 //!    window's right edge (`0..cols`).
 //! 2. **Build** each needed level once: that part of the bit-exact resize
 //!    ([`Resizer::resize_part`]) and its integral images (sum, squared sum, tilted when any
 //!    cascade has tilted features), all levels in one row stride so every cascade's feature
 //!    offsets are compiled once.
-//! 3. **Scan** every cascade's windows on it ([`Detector::scan`]); raw hits per cascade stay in
+//! 3. **Scan** every cascade's windows on it ([`Scanner::scan`]); raw hits per cascade stay in
 //!    ascending scale order, as OpenCV produces them, so grouping gives OpenCV's boxes.
 //!
 //! With no region (the whole frame) a cascade's raw hits are exactly those of its own
@@ -25,7 +25,7 @@
 //! reproduces OpenCV's skip-after-a-failed-first-stage chain at the region's left edge).
 //! Units: pixels.
 
-use super::detector::{DetectError, DetectParams, Detector, Level, WinRange};
+use super::scan::{DetectError, DetectParams, Level, Scanner, WinRange};
 use super::group::Rect;
 use super::integral::Integrals;
 use super::resize::Resizer;
@@ -139,7 +139,7 @@ impl Pyramid {
         &mut self,
         width: usize,
         height: usize,
-        dets: &[Detector],
+        dets: &[Scanner],
         params: &[DetectParams],
         regions: &[Option<Rect>],
     ) -> Result<(), DetectError> {
@@ -153,7 +153,7 @@ impl Pyramid {
                 && k.height == height
                 && k.params == params
                 && k.regions == regions
-                && k.windows.iter().copied().eq(dets.iter().map(Detector::window))
+                && k.windows.iter().copied().eq(dets.iter().map(Scanner::window))
         });
         if same {
             return Ok(());
@@ -225,7 +225,7 @@ impl Pyramid {
             height,
             params: params.to_vec(),
             regions: regions.to_vec(),
-            windows: dets.iter().map(Detector::window).collect(),
+            windows: dets.iter().map(Scanner::window).collect(),
             bands: self.bands.clone(),
         });
         Ok(())
@@ -256,14 +256,14 @@ impl Pyramid {
 
     /// Steps 1–3 for every detector on the row-major `width` × `height` image `img`, with
     /// detector `i`'s options `params[i]` and region `regions[i]` (input pixels; `None` = the
-    /// whole image). Each detector's raw hits are left in [`Detector::raw_hits`].
+    /// whole image). Each detector's raw hits are left in [`Scanner::raw_hits`].
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn run(
         &mut self,
         img: &[u8],
         width: usize,
         height: usize,
-        dets: &mut [Detector],
+        dets: &mut [Scanner],
         params: &[DetectParams],
         regions: &[Option<Rect>],
         parallel: bool,
@@ -316,7 +316,7 @@ impl Pyramid {
     /// Levels spread over rayon's threads, largest first to the least loaded worker; raw hits
     /// are then put back in level order.
     #[cfg(feature = "parallel")]
-    fn run_parallel(&mut self, ctx: &Ctx<'_>, dets: &mut [Detector]) {
+    fn run_parallel(&mut self, ctx: &Ctx<'_>, dets: &mut [Scanner]) {
         use rayon::prelude::*;
         let t = rayon::current_num_threads().min(self.plans.len()).min(64);
         if self.pool.len() < t {
@@ -330,7 +330,7 @@ impl Pyramid {
             self.assign.push(g);
         }
         let (plans, assign) = (&self.plans, &self.assign);
-        let shared: &[Detector] = dets;
+        let shared: &[Scanner] = dets;
         self.pool[..t].par_iter_mut().enumerate().for_each(|(g, s)| {
             s.hits.clear();
             s.counts.clear();

@@ -8,7 +8,7 @@
 //! ([`DetectStage::set_region`]). Units: pixels of the frame.
 
 use super::cascade::{Cascade, CascadeError};
-use super::detector::{DetectError, DetectParams, Detector};
+use super::scan::{DetectError, DetectParams, Scanner};
 use super::group::Rect;
 use super::light::{light_state, LightReading};
 use super::pyramid::{Pyramid, RowBand};
@@ -46,7 +46,7 @@ pub struct DetectedObject {
 #[derive(Debug, Clone)]
 pub struct DetectStage {
     specs: Vec<CascadeSpec>,
-    dets: Vec<Detector>,
+    dets: Vec<Scanner>,
     /// Per cascade: where in the frame its boxes may lie (`None` = anywhere).
     regions: Vec<Option<Rect>>,
     /// Per cascade: its options (the spec's, with the size limits set by the pipeline).
@@ -82,7 +82,7 @@ impl DetectStage {
     /// A stage from cascades already in memory (tests, the simulator).
     pub fn from_cascades(entries: Vec<(CascadeSpec, Cascade)>) -> Self {
         let n = entries.len();
-        let (specs, dets): (Vec<_>, Vec<_>) = entries.into_iter().map(|(s, c)| (s, Detector::new(c))).unzip();
+        let (specs, dets): (Vec<_>, Vec<_>) = entries.into_iter().map(|(s, c)| (s, Scanner::new(c))).unzip();
         Self {
             params: specs.iter().map(|s| s.params).collect(),
             specs,

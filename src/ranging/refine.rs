@@ -19,6 +19,7 @@
 //! `None` when fewer than `min_pixels` pixels qualify. Units: pixels.
 
 use super::ObjectClass;
+use crate::classes::ColourCue;
 use image::RgbImage;
 
 /// How much the search region exceeds the box on each side, as a fraction of its size.
@@ -39,12 +40,13 @@ pub fn outline(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<[f6
     let (nx, ny) = ((x1 - x0) as usize, (y1 - y0) as usize);
     let luma = |p: [u8; 3]| (299 * p[0] as u32 + 587 * p[1] as u32 + 114 * p[2] as u32) / 1000;
     // 1. The pixel test.
-    let test: Box<dyn Fn([u8; 3]) -> bool> = match class {
-        ObjectClass::StopSign => Box::new(|p: [u8; 3]| {
+    let cue = class.info().colour_cue;
+    let test: Box<dyn Fn([u8; 3]) -> bool> = match cue {
+        ColourCue::RedFace => Box::new(|p: [u8; 3]| {
             let (r, g, b) = (p[0] as u32, p[1] as u32, p[2] as u32);
             r >= 50 && 10 * r >= 18 * g && 10 * r >= 16 * b
         }),
-        ObjectClass::TrafficLight => {
+        ColourCue::LitHousing => {
             let mut hist = [0u32; 256];
             for y in y0..y1 {
                 for x in x0..x1 {
@@ -63,7 +65,7 @@ pub fn outline(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<[f6
             let t = 2 * p10 + 8;
             Box::new(move |p: [u8; 3]| luma(p) <= t)
         }
-        ObjectClass::Obstacle => return None,
+        ColourCue::None => return None,
     };
     // 2. Profiles.
     let (mut rows, mut cols) = (vec![0u32; ny], vec![0u32; nx]);
@@ -77,8 +79,8 @@ pub fn outline(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<[f6
             }
         }
     }
-    let frac = match class {
-        ObjectClass::StopSign => 0.2,
+    let frac = match cue {
+        ColourCue::RedFace => 0.2,
         _ => 0.5,
     };
     if n < 12 {

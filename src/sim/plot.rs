@@ -7,6 +7,7 @@
 //! The font is the system's DejaVu Sans, handed over as bytes by the binary
 //! ([`register_font`]); the library reads no files. Units: metres, seconds.
 
+use crate::classes::ObjectClass;
 use super::run::{StepOutput, Summary};
 use super::scene::Scene;
 use super::step::StepMetrics;
@@ -140,9 +141,9 @@ pub fn path_plot(s: &Series, scene: &Scene) -> Result<RgbImage, PlotError> {
         }
         for o in track.enabled_objects() {
             let col = match o.kind {
-                super::track::ObjectKind::StopSign => RED,
-                super::track::ObjectKind::TrafficLight => GREEN,
-                super::track::ObjectKind::Obstacle => BLUE,
+                ObjectClass::StopSign => RED,
+                ObjectClass::TrafficLight => GREEN,
+                ObjectClass::Obstacle => BLUE,
             };
             c.draw_series(std::iter::once(Circle::new((o.pos[0], o.pos[1]), 5, col.filled())))
                 .map_err(err)?;

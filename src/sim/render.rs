@@ -18,9 +18,10 @@
 
 use super::rng::{mix, SplitMix64};
 use super::scene::{Footprint, Prim, Scene};
-use super::track::{Object, ObjectKind};
+use super::track::Object;
 use super::vehicle::Pose;
 use crate::camera::PinholeCamera;
+use crate::classes::ObjectClass;
 use crate::config::SimConfig;
 use image::RgbImage;
 use std::ops::Range;
@@ -131,7 +132,7 @@ pub struct ObjectBox {
     /// Index of the object in the track file.
     pub index: usize,
     /// What it is.
-    pub kind: ObjectKind,
+    pub kind: ObjectClass,
     /// Horizontal distance from the lens to the object's base, metres.
     pub distance_m: f64,
     /// Image box [left, top, right, bottom], pixels, clipped to the image.
@@ -399,7 +400,12 @@ impl Renderer {
                     }
                 }
                 let r = if all && r.iter().all(|x| x.is_finite()) {
-                    [r[0].floor() - 1.0, r[1].floor() - 1.0, r[2].ceil() + 1.0, r[3].ceil() + 1.0]
+                    [
+                        r[0].floor() - 1.0,
+                        r[1].floor() - 1.0,
+                        r[2].ceil() + 1.0,
+                        r[3].ceil() + 1.0,
+                    ]
                 } else {
                     [f64::NEG_INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::INFINITY]
                 };
@@ -699,7 +705,7 @@ mod tests {
         let with = r.render_new(&pose, 0.0, 0);
         let mut bare_track = track.clone();
         for o in &mut bare_track.objects {
-            if o.0.kind == ObjectKind::StopSign {
+            if o.0.kind == ObjectClass::StopSign {
                 o.1 = false;
             }
         }
@@ -708,7 +714,7 @@ mod tests {
         let boxes = r.object_boxes(&pose);
         let sign = boxes
             .iter()
-            .find(|b| b.kind == ObjectKind::StopSign)
+            .find(|b| b.kind == ObjectClass::StopSign)
             .expect("sign in view");
         let mut diff = [u32::MAX, u32::MAX, 0, 0];
         for (x, y, p) in with.enumerate_pixels() {

@@ -17,7 +17,8 @@
 
 use super::glyphs;
 use super::rng::{mix, SplitMix64};
-use super::track::{Object, ObjectKind, Piece, Track};
+use super::track::{FloorSpec, Object, Piece, Track};
+use crate::classes::SimShape;
 
 /// Side of one cell of the grid that tells which centre-line piece is near, metres.
 const CELL_M: f64 = 0.02;
@@ -180,66 +181,8 @@ impl Scene {
     pub fn new(track: &Track) -> Scene {
         let spec = &track.spec;
         let f = |c: [u8; 3]| [c[0] as f32, c[1] as f32, c[2] as f32];
-        // 1. The texture tile: value noise, octaves from `texture_scale_m` down to 2 texels.
-        let seed = spec.floor.seed;
-        let mut texture = vec![0f32; TEX_N * TEX_N];
-        let mut period = ((spec.floor.texture_scale_m / TEX_M).round() as usize).clamp(2, TEX_N);
-        period = period.next_power_of_two().min(TEX_N);
-        let mut amp = 1.0f32;
-        let mut total = 0.0f32;
-        let mut octave = 0u64;
-        while period >= 2 {
-            let n = TEX_N / period;
-            let lattice: Vec<f32> = (0..n * n)
-                .map(|i| (mix(seed ^ (octave << 40) ^ i as u64) >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0)
-                .collect();
-            for y in 0..TEX_N {
-                let (gy, fy) = (y / period, (y % period) as f32 / period as f32);
-                let sy = fy * fy * (3.0 - 2.0 * fy);
-                for x in 0..TEX_N {
-                    let (gx, fx) = (x / period, (x % period) as f32 / period as f32);
-                    let sx = fx * fx * (3.0 - 2.0 * fx);
-                    let at = |i: usize, j: usize| lattice[(j % n) * n + (i % n)];
-                    let top = at(gx, gy) * (1.0 - sx) + at(gx + 1, gy) * sx;
-                    let bot = at(gx, gy + 1) * (1.0 - sx) + at(gx + 1, gy + 1) * sx;
-                    texture[y * TEX_N + x] += amp * (top * (1.0 - sy) + bot * sy);
-                }
-            }
-            total += amp;
-            amp *= 0.6;
-            period /= 2;
-            octave += 1;
-        }
-        let texture: Vec<i8> = texture
-            .iter()
-            .map(|t| (t / total * 127.0).round().clamp(-127.0, 127.0) as i8)
-            .collect();
-
-        // 2. Illumination: ambient plus a few soft lamps over the floor.
-        let [x0, y0, x1, y1] = track.floor_rect;
-        let illum_w = ((x1 - x0) / ILLUM_M).ceil() as usize + 2;
-        let illum_h = ((y1 - y0) / ILLUM_M).ceil() as usize + 2;
-        let mut rng = SplitMix64::new(seed ^ 0x11u64);
-        let lamps: Vec<([f64; 2], f64)> = (0..4)
-            .map(|_| {
-                (
-                    [x0 + (x1 - x0) * rng.next_f64(), y0 + (y1 - y0) * rng.next_f64()],
-                    1.2 + 1.5 * rng.next_f64(),
-                )
-            })
-            .collect();
-        let mut illum = vec![0f32; illum_w * illum_h];
-        for j in 0..illum_h {
-            for i in 0..illum_w {
-                let p = [x0 + i as f64 * ILLUM_M, y0 + j as f64 * ILLUM_M];
-                let mut l = 0.86;
-                for (c, s) in &lamps {
-                    let r2 = (p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2);
-                    l += 0.16 * (-r2 / (2.0 * s * s)).exp();
-                }
-                illum[j * illum_w + i] = l as f32;
-            }
-        }
+        let texture = floor_texture(&spec.floor);
+        let (illum, illum_w, illum_h) = illumination(track.floor_rect, spec.floor.seed);
 
         // 3. Lines, and the grid of nearest pieces where any line is near.
         let r = &spec.road;
@@ -258,34 +201,7 @@ impl Scene {
                 }),
             })
             .collect();
-        let reach = lines.iter().map(|l| l.offset.abs() + l.half_width).fold(0.0, f64::max);
-        let grid_w = ((x1 - x0) / CELL_M).ceil() as usize + 1;
-        let grid_h = ((y1 - y0) / CELL_M).ceil() as usize + 1;
-        let near = reach + CELL_M + 0.05;
-        let mut grid = vec![(u16::MAX, u16::MAX); grid_w * grid_h];
-        let half_diag = CELL_M * std::f64::consts::FRAC_1_SQRT_2;
-        for j in 0..grid_h {
-            for i in 0..grid_w {
-                let p = [x0 + (i as f64 + 0.5) * CELL_M, y0 + (j as f64 + 0.5) * CELL_M];
-                let mut best = (f64::INFINITY, u16::MAX);
-                for (k, piece) in track.pieces.iter().enumerate() {
-                    let (_, lat, out) = piece.project(p);
-                    let d2 = lat * lat + out * out;
-                    if d2 < best.0 {
-                        best = (d2, k as u16);
-                    }
-                }
-                if best.0 <= near * near {
-                    grid[j * grid_w + i].0 = best.1;
-                    let (_, lat, _) = track.pieces[best.1 as usize].project(p);
-                    let c = lines
-                        .iter()
-                        .map(|l| (lat - l.offset).abs() - l.half_width)
-                        .fold(f64::INFINITY, f64::min);
-                    grid[j * grid_w + i].1 = ((c - half_diag - 1e-4).max(0.0) * 1e4).floor().min(65535.0) as u16;
-                }
-            }
-        }
+        let (grid, grid_w, grid_h, far_clear) = piece_grid(track, &lines);
 
         Scene {
             track: track.clone(),
@@ -297,7 +213,7 @@ impl Scene {
             illum_w,
             illum_h,
             grid,
-            far_clear: (near - reach - half_diag).max(0.0) as f32,
+            far_clear,
             arc_mid: track
                 .pieces
                 .iter()
@@ -529,8 +445,8 @@ impl Scene {
     pub fn object_prims(&self, o: &Object, t_s: f64, out: &mut Vec<Prim>) {
         let [x, y] = o.pos;
         let (s, c) = o.yaw.sin_cos();
-        match o.kind {
-            ObjectKind::StopSign => {
+        match o.kind.info().shape {
+            SimShape::Octagon => {
                 let w = o.size[0];
                 out.push(Prim::Box {
                     center: [x, y, (o.height - w / 2.0) / 2.0],
@@ -544,7 +460,7 @@ impl Scene {
                     kind: PanelKind::StopFace { width: w },
                 });
             }
-            ObjectKind::TrafficLight => {
+            SimShape::LightHousing => {
                 let h = o.size[0];
                 let (hw, hd) = (h * 0.38, h * 0.33);
                 out.push(Prim::Box {
@@ -577,7 +493,7 @@ impl Scene {
                     });
                 }
             }
-            ObjectKind::Obstacle => {
+            SimShape::Box => {
                 let [l, w, h] = o.size;
                 let rgb = [o.color[0] as f32, o.color[1] as f32, o.color[2] as f32];
                 out.push(Prim::Box {
@@ -594,10 +510,10 @@ impl Scene {
     /// world metres: screen bounds for rendering and ground-truth image boxes.
     pub fn object_bounds(o: &Object) -> [[f64; 3]; 8] {
         // Half extents along the facing direction and across it, and the top.
-        let (hx, hy, top) = match o.kind {
-            ObjectKind::StopSign => (0.015, o.size[0] / 2.0, o.height + o.size[0] / 2.0),
-            ObjectKind::TrafficLight => (o.size[0] * 0.17, o.size[0] * 0.19, o.height + o.size[0] / 2.0),
-            ObjectKind::Obstacle => (o.size[0] / 2.0, o.size[1] / 2.0, o.size[2]),
+        let (hx, hy, top) = match o.kind.info().shape {
+            SimShape::Octagon => (0.015, o.size[0] / 2.0, o.height + o.size[0] / 2.0),
+            SimShape::LightHousing => (o.size[0] * 0.17, o.size[0] * 0.19, o.height + o.size[0] / 2.0),
+            SimShape::Box => (o.size[0] / 2.0, o.size[1] / 2.0, o.size[2]),
         };
         let (s, c) = o.yaw.sin_cos();
         let mut out = [[0.0; 3]; 8];
@@ -625,127 +541,150 @@ impl Scene {
 
     fn intersect_one(&self, p: &Prim, o: [f64; 3], d: [f64; 3], t_max: f64) -> Option<Hit> {
         match *p {
-            Prim::Box { center, half, dir, rgb } => {
-                // Ray in the box's frame; slab test; the entering face gives the normal.
-                let [c, s] = dir;
-                let rel = [o[0] - center[0], o[1] - center[1], o[2] - center[2]];
-                let lo = [c * rel[0] + s * rel[1], -s * rel[0] + c * rel[1], rel[2]];
-                let ld = [c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2]];
-                let (mut t0, mut t1, mut axis) = (0.0f64, t_max, usize::MAX);
-                for a in 0..3 {
-                    if ld[a].abs() < 1e-12 {
-                        if lo[a].abs() > half[a] {
-                            return None;
-                        }
-                        continue;
-                    }
-                    let (mut ta, mut tb) = ((-half[a] - lo[a]) / ld[a], (half[a] - lo[a]) / ld[a]);
-                    if ta > tb {
-                        std::mem::swap(&mut ta, &mut tb);
-                    }
-                    if ta > t0 {
-                        t0 = ta;
-                        axis = a;
-                    }
-                    t1 = t1.min(tb);
-                    if t0 > t1 {
-                        return None;
-                    }
-                }
-                if axis == usize::MAX || t0 >= t_max {
+            Prim::Box { center, half, dir, rgb } => self.intersect_box(center, half, dir, rgb, o, d, t_max),
+            Prim::Panel { center, dir, kind } => self.intersect_panel(center, dir, kind, o, d, t_max),
+        }
+    }
+
+    /// [`Scene::intersect_one`] for a [`Prim::Box`].
+    #[allow(clippy::too_many_arguments)]
+    fn intersect_box(
+        &self,
+        center: [f64; 3],
+        half: [f64; 3],
+        dir: [f64; 2],
+        rgb: [f32; 3],
+        o: [f64; 3],
+        d: [f64; 3],
+        t_max: f64,
+    ) -> Option<Hit> {
+        // Ray in the box's frame; slab test; the entering face gives the normal.
+        let [c, s] = dir;
+        let rel = [o[0] - center[0], o[1] - center[1], o[2] - center[2]];
+        let lo = [c * rel[0] + s * rel[1], -s * rel[0] + c * rel[1], rel[2]];
+        let ld = [c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2]];
+        let (mut t0, mut t1, mut axis) = (0.0f64, t_max, usize::MAX);
+        for a in 0..3 {
+            if ld[a].abs() < 1e-12 {
+                if lo[a].abs() > half[a] {
                     return None;
                 }
-                // World normal of the entering face.
-                let sign = -ld[axis].signum();
-                let n = match axis {
-                    0 => [c * sign, s * sign, 0.0],
-                    1 => [-s * sign, c * sign, 0.0],
-                    _ => [0.0, 0.0, sign],
-                };
-                let hit = [o[0] + t0 * d[0], o[1] + t0 * d[1]];
-                let k = shade(n) * self.illumination(hit);
+                continue;
+            }
+            let (mut ta, mut tb) = ((-half[a] - lo[a]) / ld[a], (half[a] - lo[a]) / ld[a]);
+            if ta > tb {
+                std::mem::swap(&mut ta, &mut tb);
+            }
+            if ta > t0 {
+                t0 = ta;
+                axis = a;
+            }
+            t1 = t1.min(tb);
+            if t0 > t1 {
+                return None;
+            }
+        }
+        if axis == usize::MAX || t0 >= t_max {
+            return None;
+        }
+        // World normal of the entering face.
+        let sign = -ld[axis].signum();
+        let n = match axis {
+            0 => [c * sign, s * sign, 0.0],
+            1 => [-s * sign, c * sign, 0.0],
+            _ => [0.0, 0.0, sign],
+        };
+        let hit = [o[0] + t0 * d[0], o[1] + t0 * d[1]];
+        let k = shade(n) * self.illumination(hit);
+        Some(Hit {
+            t: t0,
+            rgb: [rgb[0] * k, rgb[1] * k, rgb[2] * k],
+        })
+    }
+
+    /// [`Scene::intersect_one`] for a [`Prim::Panel`].
+    fn intersect_panel(
+        &self,
+        center: [f64; 3],
+        dir: [f64; 2],
+        kind: PanelKind,
+        o: [f64; 3],
+        d: [f64; 3],
+        t_max: f64,
+    ) -> Option<Hit> {
+        let [c, s] = dir;
+        let n = [c, s, 0.0];
+        let dn = d[0] * n[0] + d[1] * n[1];
+        if dn.abs() < 1e-12 {
+            return None;
+        }
+        let t = ((center[0] - o[0]) * n[0] + (center[1] - o[1]) * n[1]) / dn;
+        if t <= 0.0 || t >= t_max {
+            return None;
+        }
+        let hit = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
+        // Face coordinates: u to the viewer's right when facing the panel, w up.
+        let rel = [hit[0] - center[0], hit[1] - center[1], hit[2] - center[2]];
+        let u = -s * rel[0] + c * rel[1];
+        let w = rel[2];
+        let front = dn < 0.0;
+        let light = self.illumination([hit[0], hit[1]]);
+        match kind {
+            PanelKind::StopFace { width } => {
+                let r = width / 2.0;
+                // Regular octagon with flats at 0°, 45°, ...: the max over the four
+                // axis pairs of |projection|.
+                let k = std::f64::consts::FRAC_1_SQRT_2;
+                let m = u.abs().max(w.abs()).max((u + w).abs() * k).max((u - w).abs() * k);
+                if m > r {
+                    return None;
+                }
+                if !front {
+                    let g = 120.0 * light;
+                    return Some(Hit {
+                        t,
+                        rgb: [g, g, g * 1.03],
+                    });
+                }
+                let white = [235.0 * light, 235.0 * light, 232.0 * light];
+                let red = [196.0 * light, 22.0 * light, 28.0 * light];
+                if m > r * 0.9 {
+                    return Some(Hit { t, rgb: white });
+                }
+                // "STOP" across the middle: 4 letters, 0.34 r high.
+                let lh = r * 0.42;
+                let lw = lh * 0.62;
+                let adv = lw * 1.3;
+                let total = adv * 3.0 + lw;
+                let (bx, by) = ((u + total / 2.0) / lh, (w + lh / 2.0) / lh);
+                let dist = glyphs::text_distance("STOP", (lw / lh) as f32, (adv / lh) as f32, bx as f32, by as f32);
                 Some(Hit {
-                    t: t0,
-                    rgb: [rgb[0] * k, rgb[1] * k, rgb[2] * k],
+                    t,
+                    rgb: if dist < 0.09 { white } else { red },
                 })
             }
-            Prim::Panel { center, dir, kind } => {
-                let [c, s] = dir;
-                let n = [c, s, 0.0];
-                let dn = d[0] * n[0] + d[1] * n[1];
-                if dn.abs() < 1e-12 {
+            PanelKind::Lamp { radius, rgb, lit } => {
+                let r2 = u * u + w * w;
+                if r2 > radius * radius || !front {
                     return None;
                 }
-                let t = ((center[0] - o[0]) * n[0] + (center[1] - o[1]) * n[1]) / dn;
-                if t <= 0.0 || t >= t_max {
-                    return None;
-                }
-                let hit = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
-                // Face coordinates: u to the viewer's right when facing the panel, w up.
-                let rel = [hit[0] - center[0], hit[1] - center[1], hit[2] - center[2]];
-                let u = -s * rel[0] + c * rel[1];
-                let w = rel[2];
-                let front = dn < 0.0;
-                let light = self.illumination([hit[0], hit[1]]);
-                match kind {
-                    PanelKind::StopFace { width } => {
-                        let r = width / 2.0;
-                        // Regular octagon with flats at 0°, 45°, ...: the max over the four
-                        // axis pairs of |projection|.
-                        let k = std::f64::consts::FRAC_1_SQRT_2;
-                        let m = u.abs().max(w.abs()).max((u + w).abs() * k).max((u - w).abs() * k);
-                        if m > r {
-                            return None;
-                        }
-                        if !front {
-                            let g = 120.0 * light;
-                            return Some(Hit {
-                                t,
-                                rgb: [g, g, g * 1.03],
-                            });
-                        }
-                        let white = [235.0 * light, 235.0 * light, 232.0 * light];
-                        let red = [196.0 * light, 22.0 * light, 28.0 * light];
-                        if m > r * 0.9 {
-                            return Some(Hit { t, rgb: white });
-                        }
-                        // "STOP" across the middle: 4 letters, 0.34 r high.
-                        let lh = r * 0.42;
-                        let lw = lh * 0.62;
-                        let adv = lw * 1.3;
-                        let total = adv * 3.0 + lw;
-                        let (bx, by) = ((u + total / 2.0) / lh, (w + lh / 2.0) / lh);
-                        let dist =
-                            glyphs::text_distance("STOP", (lw / lh) as f32, (adv / lh) as f32, bx as f32, by as f32);
-                        Some(Hit {
-                            t,
-                            rgb: if dist < 0.09 { white } else { red },
-                        })
-                    }
-                    PanelKind::Lamp { radius, rgb, lit } => {
-                        let r2 = u * u + w * w;
-                        if r2 > radius * radius || !front {
-                            return None;
-                        }
-                        if lit {
-                            // Emissive; the centre saturates towards white, as a camera sees it.
-                            let q = (1.0 - r2 / (radius * radius)) as f32;
-                            let wt = (q * q).min(1.0) * 0.7;
-                            Some(Hit {
-                                t,
-                                rgb: [
-                                    rgb[0] + (255.0 - rgb[0]) * wt,
-                                    rgb[1] + (255.0 - rgb[1]) * wt,
-                                    rgb[2] + (255.0 - rgb[2]) * wt,
-                                ],
-                            })
-                        } else {
-                            Some(Hit {
-                                t,
-                                rgb: [rgb[0] * 0.16 + 8.0, rgb[1] * 0.16 + 8.0, rgb[2] * 0.16 + 8.0],
-                            })
-                        }
-                    }
+                if lit {
+                    // Emissive; the centre saturates towards white, as a camera sees it.
+                    let q = (1.0 - r2 / (radius * radius)) as f32;
+                    let wt = (q * q).min(1.0) * 0.7;
+                    Some(Hit {
+                        t,
+                        rgb: [
+                            rgb[0] + (255.0 - rgb[0]) * wt,
+                            rgb[1] + (255.0 - rgb[1]) * wt,
+                            rgb[2] + (255.0 - rgb[2]) * wt,
+                        ],
+                    })
+                } else {
+                    Some(Hit {
+                        t,
+                        rgb: [rgb[0] * 0.16 + 8.0, rgb[1] * 0.16 + 8.0, rgb[2] * 0.16 + 8.0],
+                    })
                 }
             }
         }
@@ -802,6 +741,110 @@ pub fn dash_coverage(s: f64, w: f64, dash: f64, period: f64) -> f64 {
         k * dash + (x - k * period).min(dash)
     };
     ((f(s + w / 2.0) - f(s - w / 2.0)) / w).clamp(0.0, 1.0)
+}
+
+/// Step 1 of [`Scene::new`]: the floor's texture tile, value noise with octaves from
+/// `texture_scale_m` down to 2 texels, −127..127.
+fn floor_texture(spec_floor: &FloorSpec) -> Vec<i8> {
+    let seed = spec_floor.seed;
+    let mut texture = vec![0f32; TEX_N * TEX_N];
+    let mut period = ((spec_floor.texture_scale_m / TEX_M).round() as usize).clamp(2, TEX_N);
+    period = period.next_power_of_two().min(TEX_N);
+    let mut amp = 1.0f32;
+    let mut total = 0.0f32;
+    let mut octave = 0u64;
+    while period >= 2 {
+        let n = TEX_N / period;
+        let lattice: Vec<f32> = (0..n * n)
+            .map(|i| (mix(seed ^ (octave << 40) ^ i as u64) >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0)
+            .collect();
+        for y in 0..TEX_N {
+            let (gy, fy) = (y / period, (y % period) as f32 / period as f32);
+            let sy = fy * fy * (3.0 - 2.0 * fy);
+            for x in 0..TEX_N {
+                let (gx, fx) = (x / period, (x % period) as f32 / period as f32);
+                let sx = fx * fx * (3.0 - 2.0 * fx);
+                let at = |i: usize, j: usize| lattice[(j % n) * n + (i % n)];
+                let top = at(gx, gy) * (1.0 - sx) + at(gx + 1, gy) * sx;
+                let bot = at(gx, gy + 1) * (1.0 - sx) + at(gx + 1, gy + 1) * sx;
+                texture[y * TEX_N + x] += amp * (top * (1.0 - sy) + bot * sy);
+            }
+        }
+        total += amp;
+        amp *= 0.6;
+        period /= 2;
+        octave += 1;
+    }
+    texture
+        .iter()
+        .map(|t| (t / total * 127.0).round().clamp(-127.0, 127.0) as i8)
+        .collect()
+}
+
+/// Step 2 of [`Scene::new`]: illumination, ambient plus a few soft lamps over the floor
+/// `floor_rect`, on a grid of `ILLUM_M` cells: (values, width, height).
+fn illumination(floor_rect: [f64; 4], seed: u64) -> (Vec<f32>, usize, usize) {
+    let [x0, y0, x1, y1] = floor_rect;
+    let illum_w = ((x1 - x0) / ILLUM_M).ceil() as usize + 2;
+    let illum_h = ((y1 - y0) / ILLUM_M).ceil() as usize + 2;
+    let mut rng = SplitMix64::new(seed ^ 0x11u64);
+    let lamps: Vec<([f64; 2], f64)> = (0..4)
+        .map(|_| {
+            (
+                [x0 + (x1 - x0) * rng.next_f64(), y0 + (y1 - y0) * rng.next_f64()],
+                1.2 + 1.5 * rng.next_f64(),
+            )
+        })
+        .collect();
+    let mut illum = vec![0f32; illum_w * illum_h];
+    for j in 0..illum_h {
+        for i in 0..illum_w {
+            let p = [x0 + i as f64 * ILLUM_M, y0 + j as f64 * ILLUM_M];
+            let mut l = 0.86;
+            for (c, s) in &lamps {
+                let r2 = (p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2);
+                l += 0.16 * (-r2 / (2.0 * s * s)).exp();
+            }
+            illum[j * illum_w + i] = l as f32;
+        }
+    }
+    (illum, illum_w, illum_h)
+}
+
+/// Step 3 of [`Scene::new`]: per `CELL_M` cell of the floor, the nearest piece where any of
+/// `lines` is within reach and the clearance to the nearest line (1e-4 m units); with the
+/// grid's width and height and the far-clear distance.
+fn piece_grid(track: &Track, lines: &[LinePaint]) -> (Vec<(u16, u16)>, usize, usize, f32) {
+    let [x0, y0, x1, y1] = track.floor_rect;
+    let reach = lines.iter().map(|l| l.offset.abs() + l.half_width).fold(0.0, f64::max);
+    let grid_w = ((x1 - x0) / CELL_M).ceil() as usize + 1;
+    let grid_h = ((y1 - y0) / CELL_M).ceil() as usize + 1;
+    let near = reach + CELL_M + 0.05;
+    let mut grid = vec![(u16::MAX, u16::MAX); grid_w * grid_h];
+    let half_diag = CELL_M * std::f64::consts::FRAC_1_SQRT_2;
+    for j in 0..grid_h {
+        for i in 0..grid_w {
+            let p = [x0 + (i as f64 + 0.5) * CELL_M, y0 + (j as f64 + 0.5) * CELL_M];
+            let mut best = (f64::INFINITY, u16::MAX);
+            for (k, piece) in track.pieces.iter().enumerate() {
+                let (_, lat, out) = piece.project(p);
+                let d2 = lat * lat + out * out;
+                if d2 < best.0 {
+                    best = (d2, k as u16);
+                }
+            }
+            if best.0 <= near * near {
+                grid[j * grid_w + i].0 = best.1;
+                let (_, lat, _) = track.pieces[best.1 as usize].project(p);
+                let c = lines
+                    .iter()
+                    .map(|l| (lat - l.offset).abs() - l.half_width)
+                    .fold(f64::INFINITY, f64::min);
+                grid[j * grid_w + i].1 = ((c - half_diag - 1e-4).max(0.0) * 1e4).floor().min(65535.0) as u16;
+            }
+        }
+    }
+    (grid, grid_w, grid_h, (near - reach - half_diag).max(0.0) as f32)
 }
 
 #[cfg(test)]

@@ -7,9 +7,9 @@
 
 use super::render::{CameraMount, ObjectBox, RenderOptions, Renderer};
 use super::scene::Scene;
-use super::track::ObjectKind;
 use super::vehicle::Pose;
 use crate::camera::PinholeCamera;
+use crate::classes::ObjectClass;
 use crate::config::Config;
 use image::RgbImage;
 use std::sync::Arc;
@@ -81,7 +81,7 @@ impl StereoRig {
                     .iter()
                     .map(|o| &o.0)
                     .find(|o| o.index == b.index)?;
-                let near = if ob.kind == ObjectKind::Obstacle {
+                let near = if ob.kind == ObjectClass::Obstacle {
                     ob.size[0] / 2.0
                 } else {
                     0.0
@@ -103,7 +103,7 @@ impl StereoRig {
 /// wholly outside the image. [`Renderer::object_box`] boxes the whole object, pole and all;
 /// a detector boxes the face.
 pub fn sign_face_box(r: &Renderer, pose: &Pose, ob: &super::track::Object) -> Option<([f64; 4], bool)> {
-    if ob.kind != ObjectKind::StopSign {
+    if ob.kind != ObjectClass::StopSign {
         return None;
     }
     let half = ob.size[0] / 2.0;
@@ -264,7 +264,11 @@ pub fn render_spans(
     spans: &[std::ops::Range<usize>],
     blur_px: f64,
 ) {
-    let reach = if blur_px > 0.0 { (3.0 * blur_px).ceil() as usize + 1 } else { 0 };
+    let reach = if blur_px > 0.0 {
+        (3.0 * blur_px).ceil() as usize + 1
+    } else {
+        0
+    };
     let mut merged: Vec<std::ops::Range<usize>> = Vec::with_capacity(spans.len());
     for s in spans.iter().filter(|s| !s.is_empty()) {
         let s = s.start.saturating_sub(reach)..s.end + reach;

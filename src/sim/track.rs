@@ -14,6 +14,7 @@
 //! headings counter-clockwise from +x. Lateral offsets are positive to the left of the
 //! direction of travel.
 
+use crate::classes::ObjectClass;
 use serde::Deserialize;
 use std::f64::consts::{PI, TAU};
 use std::path::{Path, PathBuf};
@@ -254,7 +255,7 @@ pub enum SegmentSpec {
 pub struct ObjectSpec {
     /// `stop_sign`, `traffic_light` or `obstacle`.
     #[serde(rename = "type")]
-    pub kind: ObjectKind,
+    pub kind: ObjectClass,
     /// Position on the floor, metres.
     pub x: f64,
     /// Position on the floor, metres.
@@ -291,29 +292,6 @@ fn box_color() -> Rgb {
 }
 fn cycle() -> [f64; 3] {
     [4.0, 1.0, 4.0]
-}
-
-/// The kinds of placed objects.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ObjectKind {
-    /// Red octagon with STOP on a post.
-    StopSign,
-    /// Housing with red, amber and green lamps on a post.
-    TrafficLight,
-    /// A box standing on the floor.
-    Obstacle,
-}
-
-impl ObjectKind {
-    /// The name used in track files and telemetry.
-    pub fn name(self) -> &'static str {
-        match self {
-            ObjectKind::StopSign => "stop_sign",
-            ObjectKind::TrafficLight => "traffic_light",
-            ObjectKind::Obstacle => "obstacle",
-        }
-    }
 }
 
 /// A piece of the centre line, placed in the world.
@@ -458,7 +436,7 @@ pub fn wrap_pi(a: f64) -> f64 {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Object {
     /// What it is.
-    pub kind: ObjectKind,
+    pub kind: ObjectClass,
     /// Index in the file's `[[objects]]` list (enabled or not), for messages and telemetry.
     pub index: usize,
     /// Position on the floor, metres.
@@ -560,13 +538,64 @@ impl Track {
 
     /// Checks a parsed track file and builds its geometry.
     pub fn from_spec(spec: TrackFile, origin: &str) -> Result<Track, TrackError> {
+        // 2. Numbers.
+        Self::check_numbers(&spec, origin)?;
+        let (r, f) = (&spec.road, &spec.floor);
+
+        // 3. Chain the pieces.
+        let outer = if r.lanes == 2 {
+            r.lane_width_m + r.line_width_m / 2.0
+        } else {
+            r.lane_width_m / 2.0 + r.line_width_m / 2.0
+        };
+        let (pieces, piece_s0, total) = Self::chain(&spec, outer, origin)?;
+
+        // Lines and the driven lane.
+        let w = r.lane_width_m;
+        let (lines, drive_offset) = if r.lanes == 2 {
+            let mut l = vec![(w, false), (-w, false)];
+            if r.centre_line != CentreLine::None {
+                l.push((0.0, r.centre_line == CentreLine::Dashed));
+            }
+            (l, -w / 2.0)
+        } else {
+            (vec![(w / 2.0, false), (-w / 2.0, false)], 0.0)
+        };
+
+        let floor_rect = Self::floor_rect(&pieces, total, outer, f.margin_m, origin)?;
+
+        // Objects.
+        let mut objects = Vec::new();
+        for (i, o) in spec.objects.iter().enumerate() {
+            objects.push((Self::place_object(i, o, floor_rect, origin)?, o.enabled));
+        }
+
+        Ok(Track {
+            name: if spec.name.is_empty() {
+                origin.to_string()
+            } else {
+                spec.name.clone()
+            },
+            pieces,
+            piece_s0,
+            length: total,
+            lines,
+            drive_offset,
+            floor_rect,
+            objects,
+            spec,
+        })
+    }
+
+    /// Step 2 of [`Track::from_spec`]: the road's, floor's and start's numbers and the
+    /// counts within their limits.
+    fn check_numbers(spec: &TrackFile, origin: &str) -> Result<(), TrackError> {
         let bad = |key: String, value: String, problem: &str| TrackError::Invalid {
             origin: origin.into(),
             key,
             value,
             problem: problem.into(),
         };
-        // 2. Numbers.
         let r = &spec.road;
         if !(r.lanes == 1 || r.lanes == 2) {
             return Err(bad("road.lanes".into(), r.lanes.to_string(), "must be 1 or 2"));
@@ -647,80 +676,27 @@ impl Track {
             ));
         }
 
-        // 3. Chain the pieces.
+        Ok(())
+    }
+
+    /// Step 3 of [`Track::from_spec`]: the segments chained into pieces from the start pose
+    /// (each checked; `outer` = the outer lines' distance from the centre line), their start
+    /// arc lengths and the total length; the chain must close on the start.
+    fn chain(spec: &TrackFile, outer: f64, origin: &str) -> Result<(Vec<Piece>, Vec<f64>, f64), TrackError> {
+        let bad = |key: String, value: String, problem: &str| TrackError::Invalid {
+            origin: origin.into(),
+            key,
+            value,
+            problem: problem.into(),
+        };
+        let st = spec.start;
         let mut pieces = Vec::with_capacity(spec.segments.len());
         let mut piece_s0 = Vec::with_capacity(spec.segments.len());
         let mut p = [st.x, st.y];
         let mut h = st.heading_deg.to_radians();
         let mut s = 0.0;
-        let outer = if r.lanes == 2 {
-            r.lane_width_m + r.line_width_m / 2.0
-        } else {
-            r.lane_width_m / 2.0 + r.line_width_m / 2.0
-        };
         for (i, seg) in spec.segments.iter().enumerate() {
-            let piece = match *seg {
-                SegmentSpec::Straight { length_m } => {
-                    if !(length_m > 1e-6 && length_m.is_finite()) {
-                        return Err(bad(
-                            format!("segments[{i}].length_m"),
-                            length_m.to_string(),
-                            "a straight must be longer than zero",
-                        ));
-                    }
-                    if length_m > limits::MAX_STRAIGHT_M {
-                        return Err(bad(
-                            format!("segments[{i}].length_m"),
-                            length_m.to_string(),
-                            &format!("a straight may be at most {} m long", limits::MAX_STRAIGHT_M),
-                        ));
-                    }
-                    Piece::Line {
-                        p0: p,
-                        dir: [h.cos(), h.sin()],
-                        len: length_m,
-                    }
-                }
-                SegmentSpec::Arc { radius_m, angle_deg } => {
-                    if !(radius_m > 1e-6 && radius_m.is_finite()) {
-                        return Err(bad(
-                            format!("segments[{i}].radius_m"),
-                            radius_m.to_string(),
-                            "an arc needs a radius greater than zero",
-                        ));
-                    }
-                    if radius_m > limits::MAX_RADIUS_M {
-                        return Err(bad(
-                            format!("segments[{i}].radius_m"),
-                            radius_m.to_string(),
-                            &format!("an arc's radius may be at most {} m", limits::MAX_RADIUS_M),
-                        ));
-                    }
-                    if !(angle_deg.abs() > 1e-6 && angle_deg.abs() <= 360.0) {
-                        return Err(bad(
-                            format!("segments[{i}].angle_deg"),
-                            angle_deg.to_string(),
-                            "an arc must turn by a non-zero angle of at most 360 degrees",
-                        ));
-                    }
-                    if radius_m <= outer {
-                        return Err(bad(
-                            format!("segments[{i}].radius_m"),
-                            radius_m.to_string(),
-                            &format!("the road's outer lines are {outer:.3} m from its centre line, so the radius must be larger"),
-                        ));
-                    }
-                    let sg = angle_deg.signum();
-                    // The centre lies to the left of travel on a left turn.
-                    let center = [p[0] - sg * radius_m * h.sin(), p[1] + sg * radius_m * h.cos()];
-                    Piece::Arc {
-                        center,
-                        radius: radius_m,
-                        a0: (p[1] - center[1]).atan2(p[0] - center[0]),
-                        sweep: angle_deg.to_radians(),
-                    }
-                }
-            };
+            let piece = Self::segment_piece(i, seg, p, h, outer, origin)?;
             piece_s0.push(s);
             s += piece.length();
             if s > limits::MAX_LENGTH_M {
@@ -755,23 +731,107 @@ impl Track {
             });
         }
 
-        // Lines and the driven lane.
-        let w = r.lane_width_m;
-        let (lines, drive_offset) = if r.lanes == 2 {
-            let mut l = vec![(w, false), (-w, false)];
-            if r.centre_line != CentreLine::None {
-                l.push((0.0, r.centre_line == CentreLine::Dashed));
-            }
-            (l, -w / 2.0)
-        } else {
-            (vec![(w / 2.0, false), (-w / 2.0, false)], 0.0)
-        };
+        Ok((pieces, piece_s0, s))
+    }
 
-        // The floor: the road's bounding box plus the margin.
+    /// Segment `i` as a piece starting at `p` with heading `h` (radians), checked (`outer` =
+    /// the outer lines' distance from the centre line, which an arc's radius must exceed).
+    fn segment_piece(
+        i: usize,
+        seg: &SegmentSpec,
+        p: [f64; 2],
+        h: f64,
+        outer: f64,
+        origin: &str,
+    ) -> Result<Piece, TrackError> {
+        let bad = |key: String, value: String, problem: &str| TrackError::Invalid {
+            origin: origin.into(),
+            key,
+            value,
+            problem: problem.into(),
+        };
+        Ok(match *seg {
+            SegmentSpec::Straight { length_m } => {
+                if !(length_m > 1e-6 && length_m.is_finite()) {
+                    return Err(bad(
+                        format!("segments[{i}].length_m"),
+                        length_m.to_string(),
+                        "a straight must be longer than zero",
+                    ));
+                }
+                if length_m > limits::MAX_STRAIGHT_M {
+                    return Err(bad(
+                        format!("segments[{i}].length_m"),
+                        length_m.to_string(),
+                        &format!("a straight may be at most {} m long", limits::MAX_STRAIGHT_M),
+                    ));
+                }
+                Piece::Line {
+                    p0: p,
+                    dir: [h.cos(), h.sin()],
+                    len: length_m,
+                }
+            }
+            SegmentSpec::Arc { radius_m, angle_deg } => {
+                if !(radius_m > 1e-6 && radius_m.is_finite()) {
+                    return Err(bad(
+                        format!("segments[{i}].radius_m"),
+                        radius_m.to_string(),
+                        "an arc needs a radius greater than zero",
+                    ));
+                }
+                if radius_m > limits::MAX_RADIUS_M {
+                    return Err(bad(
+                        format!("segments[{i}].radius_m"),
+                        radius_m.to_string(),
+                        &format!("an arc's radius may be at most {} m", limits::MAX_RADIUS_M),
+                    ));
+                }
+                if !(angle_deg.abs() > 1e-6 && angle_deg.abs() <= 360.0) {
+                    return Err(bad(
+                        format!("segments[{i}].angle_deg"),
+                        angle_deg.to_string(),
+                        "an arc must turn by a non-zero angle of at most 360 degrees",
+                    ));
+                }
+                if radius_m <= outer {
+                    return Err(bad(
+                        format!("segments[{i}].radius_m"),
+                        radius_m.to_string(),
+                        &format!("the road's outer lines are {outer:.3} m from its centre line, so the radius must be larger"),
+                    ));
+                }
+                let sg = angle_deg.signum();
+                // The centre lies to the left of travel on a left turn.
+                let center = [p[0] - sg * radius_m * h.sin(), p[1] + sg * radius_m * h.cos()];
+                Piece::Arc {
+                    center,
+                    radius: radius_m,
+                    a0: (p[1] - center[1]).atan2(p[0] - center[0]),
+                    sweep: angle_deg.to_radians(),
+                }
+            }
+        })
+    }
+
+    /// The floor: the road's bounding box (the outer lines, `outer` from the centre line) plus
+    /// `margin_m`, at most `limits::MAX_FLOOR_SIDE_M` a side.
+    fn floor_rect(
+        pieces: &[Piece],
+        total: f64,
+        outer: f64,
+        margin_m: f64,
+        origin: &str,
+    ) -> Result<[f64; 4], TrackError> {
+        let bad = |key: String, value: String, problem: &str| TrackError::Invalid {
+            origin: origin.into(),
+            key,
+            value,
+            problem: problem.into(),
+        };
         let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-        let total = s;
         let n = (total / 0.02).ceil().max(8.0) as usize;
-        for piece in &pieces {
+        for piece in pieces {
             let len = piece.length();
             let m = ((len / total) * n as f64).ceil().max(2.0) as usize;
             for j in 0..=m {
@@ -783,12 +843,7 @@ impl Track {
                 }
             }
         }
-        let floor_rect = [
-            bb[0] - f.margin_m,
-            bb[1] - f.margin_m,
-            bb[2] + f.margin_m,
-            bb[3] + f.margin_m,
-        ];
+        let floor_rect = [bb[0] - margin_m, bb[1] - margin_m, bb[2] + margin_m, bb[3] + margin_m];
         let (fw, fh) = (floor_rect[2] - floor_rect[0], floor_rect[3] - floor_rect[1]);
         if !(fw <= limits::MAX_FLOOR_SIDE_M && fh <= limits::MAX_FLOOR_SIDE_M) {
             return Err(bad(
@@ -800,106 +855,92 @@ impl Track {
                 ),
             ));
         }
+        Ok(floor_rect)
+    }
 
-        // Objects.
-        let mut objects = Vec::new();
-        for (i, o) in spec.objects.iter().enumerate() {
-            let key = |k: &str| format!("objects[{i}].{k}");
-            if !(o.x.is_finite() && o.y.is_finite() && o.yaw_deg.is_finite()) {
-                return Err(bad(
-                    key("x/y/yaw_deg"),
-                    format!("({}, {}, {})", o.x, o.y, o.yaw_deg),
-                    "must be finite",
-                ));
+    /// Object `i` of a track file, checked (finite, on the floor `floor_rect`, sizes and
+    /// heights in range, a light's phases > 0), with the registry's defaults filled in.
+    fn place_object(i: usize, o: &ObjectSpec, floor_rect: [f64; 4], origin: &str) -> Result<Object, TrackError> {
+        let bad = |key: String, value: String, problem: &str| TrackError::Invalid {
+            origin: origin.into(),
+            key,
+            value,
+            problem: problem.into(),
+        };
+        let key = |k: &str| format!("objects[{i}].{k}");
+        if !(o.x.is_finite() && o.y.is_finite() && o.yaw_deg.is_finite()) {
+            return Err(bad(
+                key("x/y/yaw_deg"),
+                format!("({}, {}, {})", o.x, o.y, o.yaw_deg),
+                "must be finite",
+            ));
+        }
+        if o.x < floor_rect[0] || o.x > floor_rect[2] || o.y < floor_rect[1] || o.y > floor_rect[3] {
+            return Err(TrackError::OffMap {
+                origin: origin.into(),
+                index: i,
+                kind: o.kind.name(),
+                x: o.x,
+                y: o.y,
+                x0: floor_rect[0],
+                x1: floor_rect[2],
+                y0: floor_rect[1],
+                y1: floor_rect[3],
+            });
+        }
+        let info = o.kind.info();
+        let used = info.shape.size_numbers();
+        let size = match o.size_m.len() {
+            0 => info.sim_size_m,
+            n if n == used => {
+                let mut size = [0.0; 3];
+                size[..n].copy_from_slice(&o.size_m);
+                size
             }
-            if o.x < floor_rect[0] || o.x > floor_rect[2] || o.y < floor_rect[1] || o.y > floor_rect[3] {
-                return Err(TrackError::OffMap {
-                    origin: origin.into(),
-                    index: i,
-                    kind: o.kind.name(),
-                    x: o.x,
-                    y: o.y,
-                    x0: floor_rect[0],
-                    x1: floor_rect[2],
-                    y0: floor_rect[1],
-                    y1: floor_rect[3],
-                });
-            }
-            let size = match (o.kind, o.size_m.len()) {
-                (ObjectKind::StopSign, 0) => [0.10, 0.0, 0.0],
-                (ObjectKind::TrafficLight, 0) => [0.12, 0.0, 0.0],
-                (ObjectKind::Obstacle, 0) => [0.15, 0.12, 0.10],
-                (ObjectKind::Obstacle, 3) => [o.size_m[0], o.size_m[1], o.size_m[2]],
-                (ObjectKind::StopSign | ObjectKind::TrafficLight, 1) => [o.size_m[0], 0.0, 0.0],
-                (kind, n) => {
-                    return Err(bad(
-                        key("size_m"),
-                        format!("{:?}", o.size_m),
-                        &format!(
-                            "a {} takes {} (got {n} numbers)",
-                            kind.name(),
-                            if kind == ObjectKind::Obstacle {
-                                "[length, width, height]"
-                            } else {
-                                "one number"
-                            }
-                        ),
-                    ))
-                }
-            };
-            let used = if o.kind == ObjectKind::Obstacle { 3 } else { 1 };
-            if size[..used].iter().any(|v| !(*v > 0.005 && *v <= 3.0)) {
+            n => {
                 return Err(bad(
                     key("size_m"),
                     format!("{:?}", o.size_m),
-                    "sizes must be 0.005..=3 m",
-                ));
+                    &format!(
+                        "a {} takes {} (got {n} numbers)",
+                        o.kind.name(),
+                        if used == 3 {
+                            "[length, width, height]"
+                        } else {
+                            "one number"
+                        }
+                    ),
+                ))
             }
-            let height = o.height_m.unwrap_or(match o.kind {
-                ObjectKind::StopSign => 0.17,
-                ObjectKind::TrafficLight => 0.16,
-                ObjectKind::Obstacle => size[2] / 2.0,
-            });
-            if !(height > 0.0 && height <= 3.0) {
-                return Err(bad(key("height_m"), height.to_string(), "must be > 0 and <= 3 m"));
-            }
-            if o.kind == ObjectKind::TrafficLight && o.cycle_s.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
-                return Err(bad(
-                    key("cycle_s"),
-                    format!("{:?}", o.cycle_s),
-                    "every phase must last > 0 s",
-                ));
-            }
-            objects.push((
-                Object {
-                    kind: o.kind,
-                    index: i,
-                    pos: [o.x, o.y],
-                    yaw: o.yaw_deg.to_radians(),
-                    size,
-                    height,
-                    color: o.color,
-                    cycle_s: o.cycle_s,
-                    phase_s: o.phase_s,
-                },
-                o.enabled,
+        };
+        if size[..used].iter().any(|v| !(*v > 0.005 && *v <= 3.0)) {
+            return Err(bad(
+                key("size_m"),
+                format!("{:?}", o.size_m),
+                "sizes must be 0.005..=3 m",
             ));
         }
-
-        Ok(Track {
-            name: if spec.name.is_empty() {
-                origin.to_string()
-            } else {
-                spec.name.clone()
-            },
-            pieces,
-            piece_s0,
-            length: total,
-            lines,
-            drive_offset,
-            floor_rect,
-            objects,
-            spec,
+        let height = o.height_m.unwrap_or(info.sim_height_m.unwrap_or(size[2] / 2.0));
+        if !(height > 0.0 && height <= 3.0) {
+            return Err(bad(key("height_m"), height.to_string(), "must be > 0 and <= 3 m"));
+        }
+        if o.kind == ObjectClass::TrafficLight && o.cycle_s.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+            return Err(bad(
+                key("cycle_s"),
+                format!("{:?}", o.cycle_s),
+                "every phase must last > 0 s",
+            ));
+        }
+        Ok(Object {
+            kind: o.kind,
+            index: i,
+            pos: [o.x, o.y],
+            yaw: o.yaw_deg.to_radians(),
+            size,
+            height,
+            color: o.color,
+            cycle_s: o.cycle_s,
+            phase_s: o.phase_s,
         })
     }
 
@@ -1035,8 +1076,8 @@ angle_deg = 180
         let t = Track::load(&path).unwrap();
         let curv: Vec<f64> = t.pieces.iter().map(|p| p.curvature()).collect();
         assert!(curv.iter().any(|&c| c > 0.0) && curv.iter().any(|&c| c < 0.0));
-        let kinds: Vec<ObjectKind> = t.enabled_objects().map(|o| o.kind).collect();
-        for k in [ObjectKind::StopSign, ObjectKind::TrafficLight, ObjectKind::Obstacle] {
+        let kinds: Vec<ObjectClass> = t.enabled_objects().map(|o| o.kind).collect();
+        for k in [ObjectClass::StopSign, ObjectClass::TrafficLight, ObjectClass::Obstacle] {
             assert!(kinds.contains(&k), "{k:?} missing");
         }
         assert!(t.tightest_lane_radius() >= 2.8, "{}", t.tightest_lane_radius());

@@ -25,16 +25,16 @@ pub use super::camera::SimCamera;
 use super::render::ObjectBox;
 use super::render::{CameraMount, RenderOptions, Renderer};
 use super::scene::Scene;
-use super::track::{LightState as TrackLight, ObjectKind};
+use super::track::LightState as TrackLight;
 use super::truth::{FrameTruth, TruthModel};
 use super::vehicle::{Pose, Vehicle};
 use crate::camera::PinholeCamera;
+use crate::classes::SimShape;
 use crate::config::Config;
 use crate::control::behaviour::LightColor;
 use crate::control::Command;
 use crate::drive::{Flow, FrameContext, LoopError, Observer};
 use crate::pipeline::{FrameOutput, GivenBox};
-use crate::ranging::ObjectClass;
 use crate::sink::{CommandSink, SinkError};
 use image::RgbImage;
 use serde::Serialize;
@@ -301,7 +301,11 @@ impl World {
             y: truth.pose[1],
             yaw: truth.pose[2],
         };
-        truth.objects.iter().filter_map(|b| self.given_box(&pose, b, t_s)).collect()
+        truth
+            .objects
+            .iter()
+            .filter_map(|b| self.given_box(&pose, b, t_s))
+            .collect()
     }
 
     /// One frame period under `cmd` (`substeps` fixed steps): the lock-step vehicle.
@@ -367,20 +371,18 @@ impl World {
         let h = self.cfg.camera.height as f64 - 1.0;
         let ob = &self.scene.track.objects.iter().find(|o| o.0.index == b.index)?.0;
         let mount = self.renderer.mount();
-        let (class, bottom_z) = match b.kind {
-            ObjectKind::StopSign => (ObjectClass::StopSign, ob.height - ob.size[0] / 2.0),
-            ObjectKind::TrafficLight => (ObjectClass::TrafficLight, ob.height - ob.size[0] / 2.0),
-            ObjectKind::Obstacle => (ObjectClass::Obstacle, 0.0),
-        };
+        let class = b.kind;
+        let on_post = class.info().shape != SimShape::Box;
+        let bottom_z = if on_post { ob.height - ob.size[0] / 2.0 } else { 0.0 };
         let mut bbox = b.bbox;
-        if b.kind != ObjectKind::Obstacle {
+        if on_post {
             let (_, v) = mount.project_world(pose, [ob.pos[0], ob.pos[1], bottom_z])?;
             bbox[3] = v;
         }
         if bbox[3] >= h || bbox[3] <= bbox[1] {
             return None;
         }
-        let light = (b.kind == ObjectKind::TrafficLight).then(|| match ob.light_state(t) {
+        let light = class.info().reads_light.then(|| match ob.light_state(t) {
             TrackLight::Red => LightColor::Red,
             TrackLight::Amber => LightColor::Amber,
             TrackLight::Green => LightColor::Green,
@@ -477,7 +479,6 @@ impl World {
             self.sc.still_s = 0.0;
         }
     }
-
 }
 
 /// The simulated car's actuators, lock-step: each command drives the car for one frame period.

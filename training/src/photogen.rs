@@ -81,7 +81,11 @@ pub fn list_photos(dirs: &[PathBuf]) -> Vec<PathBuf> {
         if d.is_file() && is_img(d) {
             out.push(d.clone());
         } else if let Ok(rd) = std::fs::read_dir(d) {
-            out.extend(rd.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.is_file() && is_img(p)));
+            out.extend(
+                rd.filter_map(|e| e.ok())
+                    .map(|e| e.path())
+                    .filter(|p| p.is_file() && is_img(p)),
+            );
         }
     }
     out.sort();
@@ -171,6 +175,53 @@ pub struct PhotoSet {
     pub csv: PathBuf,
 }
 
+/// Step 2 of [`generate`]: the sign `template` on a post (`post`) pasted into the `FRAME`-sized
+/// `canvas` (size from `o.sign_px`, up to 40° off its axis, ±8° roll, ±6% corner jitter,
+/// contrast and brightness); its box [x, y, w, h] clipped to the frame.
+fn paste_sign(
+    canvas: &mut [f32],
+    template: &RgbaImage,
+    post: &RgbaImage,
+    o: &PhotoSetOptions,
+    rng: &mut SplitMix64,
+) -> [i64; 4] {
+    let (fw, fh) = FRAME;
+    let u = |r: &mut SplitMix64, lo: f64, hi: f64| lo + (hi - lo) * r.next_f64();
+    let s = (o.sign_px.0.ln() + (o.sign_px.1.ln() - o.sign_px.0.ln()) * rng.next_f64()).exp();
+    // Seen up to 40° off its axis: narrower by cos.
+    let sx = s * u(rng, 0.0, 40f64.to_radians()).cos();
+    let margin = 4.0;
+    let ccx = u(rng, margin + sx / 2.0 + 3.0, fw as f64 - margin - sx / 2.0 - 3.0);
+    let ccy = u(rng, margin + s / 2.0 + 3.0, fh as f64 - margin - s / 2.0 - 3.0);
+    let a = u(rng, -8f64, 8.0).to_radians();
+    let (sa, ca) = a.sin_cos();
+    let mut dst = [[0f64; 2]; 4];
+    for (i, (dx, dy)) in [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)].iter().enumerate() {
+        let (px, py) = (dx * sx + u(rng, -0.06, 0.06) * s, dy * s + u(rng, -0.06, 0.06) * s);
+        dst[i] = [ccx + ca * px - sa * py, ccy + sa * px + ca * py];
+    }
+    let contrast = u(rng, 0.7, 1.2);
+    let bright = u(rng, -30.0, 30.0);
+    // The post: from under the face down 1-3 face sizes.
+    let (pw2, pl) = (s * 0.06, s * u(rng, 1.0, 3.0));
+    let (bx, by) = (ccx - sa * s * 0.45, ccy + ca * s * 0.45);
+    let post_dst = [
+        [bx - pw2 / 2.0, by],
+        [bx + pw2 / 2.0, by],
+        [bx + pw2 / 2.0 - sa * pl, by + ca * pl],
+        [bx - pw2 / 2.0 - sa * pl, by + ca * pl],
+    ];
+    paste(canvas, fw, fh, post, post_dst, contrast, bright);
+    paste(canvas, fw, fh, template, dst, contrast, bright);
+    let x0 = dst.iter().map(|p| p[0]).fold(f64::MAX, f64::min).round();
+    let y0 = dst.iter().map(|p| p[1]).fold(f64::MAX, f64::min).round();
+    let x1 = dst.iter().map(|p| p[0]).fold(f64::MIN, f64::max).round();
+    let y1 = dst.iter().map(|p| p[1]).fold(f64::MIN, f64::max).round();
+    let (x0, y0) = (x0.max(0.0), y0.max(0.0));
+    let (x1, y1) = (x1.min(fw as f64), y1.min(fh as f64));
+    [x0 as i64, y0 as i64, (x1 - x0) as i64, (y1 - y0) as i64]
+}
+
 /// Makes a photo-like set from `photos` (at least one readable, at least 64 × 48) into `dir`.
 pub fn generate(photos: &[PathBuf], template: &RgbaImage, o: &PhotoSetOptions, dir: &Path) -> Result<PhotoSet, String> {
     let io = |p: &Path, e: &dyn std::fmt::Display| format!("{}: {e}", p.display());
@@ -183,7 +234,10 @@ pub fn generate(photos: &[PathBuf], template: &RgbaImage, o: &PhotoSetOptions, d
         }
     }
     if bgs.is_empty() {
-        return Err(format!("no readable photo of at least 64x48 among {} files", photos.len()));
+        return Err(format!(
+            "no readable photo of at least 64x48 among {} files",
+            photos.len()
+        ));
     }
     let fdir = dir.join("frames");
     std::fs::create_dir_all(&fdir).map_err(|e| io(&fdir, &e))?;
@@ -208,7 +262,14 @@ pub fn generate(photos: &[PathBuf], template: &RgbaImage, o: &PhotoSetOptions, d
         );
         let crop = image::imageops::crop_imm(src, cx, cy, cw, ch).to_image();
         let mut frame = vec![0u8; (fw * fh) as usize];
-        rs.resize(crop.as_raw(), cw as usize, ch as usize, &mut frame, fw as usize, fh as usize);
+        rs.resize(
+            crop.as_raw(),
+            cw as usize,
+            ch as usize,
+            &mut frame,
+            fw as usize,
+            fh as usize,
+        );
         if rng.next_f64() < 0.5 {
             for row in frame.chunks_mut(fw as usize) {
                 row.reverse();
@@ -218,42 +279,7 @@ pub fn generate(photos: &[PathBuf], template: &RgbaImage, o: &PhotoSetOptions, d
         // 2. The sign.
         let mut label = None;
         if n < o.with_sign {
-            let s = (o.sign_px.0.ln() + (o.sign_px.1.ln() - o.sign_px.0.ln()) * rng.next_f64()).exp();
-            // Seen up to 40° off its axis: narrower by cos.
-            let sx = s * u(&mut rng, 0.0, 40f64.to_radians()).cos();
-            let margin = 4.0;
-            let ccx = u(&mut rng, margin + sx / 2.0 + 3.0, fw as f64 - margin - sx / 2.0 - 3.0);
-            let ccy = u(&mut rng, margin + s / 2.0 + 3.0, fh as f64 - margin - s / 2.0 - 3.0);
-            let a = u(&mut rng, -8f64, 8.0).to_radians();
-            let (sa, ca) = a.sin_cos();
-            let mut dst = [[0f64; 2]; 4];
-            for (i, (dx, dy)) in [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)].iter().enumerate() {
-                let (px, py) = (
-                    dx * sx + u(&mut rng, -0.06, 0.06) * s,
-                    dy * s + u(&mut rng, -0.06, 0.06) * s,
-                );
-                dst[i] = [ccx + ca * px - sa * py, ccy + sa * px + ca * py];
-            }
-            let contrast = u(&mut rng, 0.7, 1.2);
-            let bright = u(&mut rng, -30.0, 30.0);
-            // The post: from under the face down 1-3 face sizes.
-            let (pw2, pl) = (s * 0.06, s * u(&mut rng, 1.0, 3.0));
-            let (bx, by) = (ccx - sa * s * 0.45, ccy + ca * s * 0.45);
-            let post_dst = [
-                [bx - pw2 / 2.0, by],
-                [bx + pw2 / 2.0, by],
-                [bx + pw2 / 2.0 - sa * pl, by + ca * pl],
-                [bx - pw2 / 2.0 - sa * pl, by + ca * pl],
-            ];
-            paste(&mut canvas, fw, fh, &post, post_dst, contrast, bright);
-            paste(&mut canvas, fw, fh, template, dst, contrast, bright);
-            let x0 = dst.iter().map(|p| p[0]).fold(f64::MAX, f64::min).round();
-            let y0 = dst.iter().map(|p| p[1]).fold(f64::MAX, f64::min).round();
-            let x1 = dst.iter().map(|p| p[0]).fold(f64::MIN, f64::max).round();
-            let y1 = dst.iter().map(|p| p[1]).fold(f64::MIN, f64::max).round();
-            let (x0, y0) = (x0.max(0.0), y0.max(0.0));
-            let (x1, y1) = (x1.min(fw as f64), y1.min(fh as f64));
-            label = Some([x0 as i64, y0 as i64, (x1 - x0) as i64, (y1 - y0) as i64]);
+            label = Some(paste_sign(&mut canvas, template, &post, o, &mut rng));
         }
         // 3. Camera: exposure, gamma, blur, noise, JPEG.
         let gain = u(&mut rng, 0.6, 1.4);

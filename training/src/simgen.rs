@@ -21,11 +21,12 @@
 
 use image::{GrayImage, RgbImage};
 use rccar::camera::PinholeCamera;
+use rccar::classes::{ObjectClass, SimShape};
 use rccar::config::Config;
 use rccar::sim::render::{CameraMount, RenderOptions, Renderer};
 use rccar::sim::rng::{mix, SplitMix64};
 use rccar::sim::scene::Scene;
-use rccar::sim::track::{Object, ObjectKind, ObjectSpec, Track, TrackFile};
+use rccar::sim::track::{Object, ObjectSpec, Track, TrackFile};
 use rccar::sim::vehicle::Pose;
 use std::f64::consts::PI;
 use std::io::Write;
@@ -100,22 +101,13 @@ fn grey(c: [u8; 3]) -> f64 {
 }
 
 /// Window aspect (width / height) the target box is widened to.
-pub fn default_window(kind: ObjectKind) -> (u32, u32) {
-    match kind {
-        ObjectKind::StopSign => (16, 16),
-        ObjectKind::TrafficLight => (8, 20),
-        ObjectKind::Obstacle => (20, 16),
-    }
+pub fn default_window(kind: ObjectClass) -> (u32, u32) {
+    kind.info().train_window
 }
 
 /// Parses `stop_sign`, `traffic_light`, `obstacle` (and short forms).
-pub fn parse_kind(s: &str) -> Option<ObjectKind> {
-    match s {
-        "stop_sign" | "stop" => Some(ObjectKind::StopSign),
-        "traffic_light" | "light" => Some(ObjectKind::TrafficLight),
-        "obstacle" => Some(ObjectKind::Obstacle),
-        _ => None,
-    }
+pub fn parse_kind(s: &str) -> Option<ObjectClass> {
+    ObjectClass::from_label(s)
 }
 
 /// The image box [x0, y0, x1, y1] of the part of `ob` a cascade window covers, widened to
@@ -124,15 +116,15 @@ pub fn target_box(mount: &CameraMount, pose: &Pose, ob: &Object, aspect: f64) ->
     let (s, c) = ob.yaw.sin_cos();
     let [x, y] = ob.pos;
     let mut pts: Vec<[f64; 3]> = Vec::with_capacity(8);
-    match ob.kind {
-        ObjectKind::StopSign => {
+    match ob.kind.info().shape {
+        SimShape::Octagon => {
             let half = ob.size[0] / 2.0;
             let (fx, fy) = (x + 0.007 * c, y + 0.007 * s);
             for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
                 pts.push([fx - a * half * s, fy + a * half * c, ob.height + b * half]);
             }
         }
-        ObjectKind::TrafficLight => {
+        SimShape::LightHousing => {
             let h = ob.size[0];
             let (hw, hd) = (h * 0.38 / 2.0, h * 0.33 / 2.0);
             for k in 0..8 {
@@ -142,7 +134,7 @@ pub fn target_box(mount: &CameraMount, pose: &Pose, ob: &Object, aspect: f64) ->
                 pts.push([x + c * lx - s * ly, y + s * lx + c * ly, z]);
             }
         }
-        ObjectKind::Obstacle => pts.extend(Scene::object_bounds(ob)),
+        SimShape::Box => pts.extend(Scene::object_bounds(ob)),
     }
     let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
     for p in pts {
@@ -151,7 +143,7 @@ pub fn target_box(mount: &CameraMount, pose: &Pose, ob: &Object, aspect: f64) ->
     }
     let (cx, cy) = ((bb[0] + bb[2]) / 2.0, (bb[1] + bb[3]) / 2.0);
     let (mut w, mut h) = (bb[2] - bb[0], bb[3] - bb[1]);
-    if ob.kind == ObjectKind::Obstacle {
+    if ob.kind.info().shape == SimShape::Box {
         // A margin of floor around the box: its outline is what the features see.
         w *= OBSTACLE_MARGIN;
         h *= OBSTACLE_MARGIN;
@@ -179,7 +171,7 @@ pub enum Split {
 #[derive(Debug, Clone)]
 pub struct GenOptions {
     /// Object kind.
-    pub kind: ObjectKind,
+    pub kind: ObjectClass,
     /// Which data.
     pub split: Split,
     /// How many samples (positives) or frames.
@@ -240,7 +232,7 @@ fn uniform(r: &mut SplitMix64, lo: f64, hi: f64) -> f64 {
     lo + (hi - lo) * r.next_f64()
 }
 
-fn spec(kind: ObjectKind, x: f64, y: f64, yaw: f64) -> ObjectSpec {
+fn spec(kind: ObjectClass, x: f64, y: f64, yaw: f64) -> ObjectSpec {
     ObjectSpec {
         kind,
         x,
@@ -282,7 +274,7 @@ impl SimGen {
     }
 
     /// A scene with one target of `kind` beside the road and distractors of the other kinds.
-    fn place(&self, kind: ObjectKind, rng: &mut SplitMix64) -> Result<Placed, GenError> {
+    fn place(&self, kind: ObjectClass, rng: &mut SplitMix64) -> Result<Placed, GenError> {
         let base = Track::from_spec(self.base.clone(), "base").map_err(|e| GenError::Track(e.to_string()))?;
         let mut spec_file = self.base.clone();
         spec_file.objects.clear();
@@ -291,10 +283,10 @@ impl SimGen {
         spec_file.floor.color = self.base.floor.color.map(|c| (c as f64 * fl).clamp(0.0, 255.0) as u8);
         let spec_file_floor = spec_file.floor.color;
         let half_road = base.spec.road.lane_width_m * base.spec.road.lanes as f64 / 2.0;
-        let verge = |rng: &mut SplitMix64, s: f64, kind: ObjectKind| -> ObjectSpec {
+        let verge = |rng: &mut SplitMix64, s: f64, kind: ObjectClass| -> ObjectSpec {
             let (p, hd) = base.pose_at(s);
             let side = if rng.next_f64() < 0.75 { -1.0 } else { 1.0 };
-            let off = if kind == ObjectKind::Obstacle && rng.next_f64() < 0.5 {
+            let off = if kind.info().shape == SimShape::Box && rng.next_f64() < 0.5 {
                 // In the lane.
                 uniform(rng, -half_road * 0.8, half_road * 0.8)
             } else {
@@ -303,14 +295,14 @@ impl SimGen {
             let (x, y) = (p[0] - off * hd.sin(), p[1] + off * hd.cos());
             // Facing the oncoming car (right side) or the other way, ± 25°.
             let facing = if side < 0.0 { hd + PI } else { hd } + uniform(rng, -0.45, 0.45);
-            let yaw = if kind == ObjectKind::Obstacle {
+            let yaw = if kind.info().shape == SimShape::Box {
                 uniform(rng, -PI, PI)
             } else {
                 facing
             };
             let mut o = spec(kind, x, y, yaw);
-            match kind {
-                ObjectKind::Obstacle => {
+            match kind.info().shape {
+                SimShape::Box => {
                     o.size_m = vec![
                         uniform(rng, 0.12, 0.22),
                         uniform(rng, 0.10, 0.18),
@@ -326,8 +318,8 @@ impl SimGen {
                         }
                     }
                 }
-                ObjectKind::StopSign => o.size_m = vec![uniform(rng, 0.095, 0.105)],
-                ObjectKind::TrafficLight => {
+                SimShape::Octagon => o.size_m = vec![uniform(rng, 0.095, 0.105)],
+                SimShape::LightHousing => {
                     o.size_m = vec![uniform(rng, 0.115, 0.125)];
                     o.phase_s = uniform(rng, 0.0, 9.0);
                 }
@@ -336,10 +328,7 @@ impl SimGen {
         };
         let s_t = uniform(rng, 0.0, base.length);
         spec_file.objects.push(verge(rng, s_t, kind));
-        let others: Vec<ObjectKind> = [ObjectKind::StopSign, ObjectKind::TrafficLight, ObjectKind::Obstacle]
-            .into_iter()
-            .filter(|k| *k != kind)
-            .collect();
+        let others: Vec<ObjectClass> = ObjectClass::ALL.into_iter().filter(|k| *k != kind).collect();
         for i in 0..8 {
             let k = others[i % others.len()];
             // Two near the target (views that hide it are not used), the rest anywhere.
@@ -415,7 +404,7 @@ impl SimGen {
         let floor = placed.scene.track.floor_rect;
         for _ in 0..50 {
             let d = uniform(rng, o.distance_m.0, o.distance_m.1);
-            let view = if t.kind == ObjectKind::Obstacle {
+            let view = if t.kind.info().shape == SimShape::Box {
                 uniform(rng, -PI, PI)
             } else {
                 uniform(rng, -0.8, 0.8)
@@ -458,7 +447,7 @@ impl SimGen {
             if !inside || b[2] - b[0] < o.window.0 as f64 || b[3] - b[1] < o.window.1 as f64 {
                 continue;
             }
-            let time = if t.kind == ObjectKind::TrafficLight {
+            let time = if t.kind.info().shape == SimShape::LightHousing {
                 Self::light_time(t, rng)
             } else {
                 0.0
@@ -524,94 +513,23 @@ impl SimGen {
                             let r = round_box(b);
                             format!("{name} 1 {} {} {} {}", r[0], r[1], r[2], r[3])
                         } else {
-                            // Jitter: ±6% shift, ±7% size (the detector's grid: 2 px steps, 1.1× scales); then a crop 1.5× the box.
-                            let (w, h) = (b[2] - b[0], b[3] - b[1]);
-                            let k = uniform(&mut rng, 0.93, 1.07);
-                            let (cx, cy) = (
-                                (b[0] + b[2]) / 2.0 + uniform(&mut rng, -0.06, 0.06) * w,
-                                (b[1] + b[3]) / 2.0 + uniform(&mut rng, -0.06, 0.06) * h,
-                            );
-                            let (w, h) = (w * k, h * k);
-                            let jb = [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0];
-                            let r = round_box(jb);
-                            let (iw, ih) = (gray.width() as i64, gray.height() as i64);
-                            if r[0] < 0
-                                || r[1] < 0
-                                || r[0] + r[2] > iw
-                                || r[1] + r[3] > ih
-                                || r[2] < o.window.0 as i64
-                                || r[3] < o.window.1 as i64
-                            {
-                                misses += 1;
-                                continue;
+                            match self.positive_crop(&gray, b, o, &mut rng, &path, &name)? {
+                                Some(l) => l,
+                                None => {
+                                    misses += 1;
+                                    continue;
+                                }
                             }
-                            let cx0 = (r[0] - r[2] / 4).max(0);
-                            let cy0 = (r[1] - r[3] / 4).max(0);
-                            let cx1 = (r[0] + r[2] + r[2] / 4).min(iw);
-                            let cy1 = (r[1] + r[3] + r[3] / 4).min(ih);
-                            let crop = image::imageops::crop_imm(
-                                &gray,
-                                cx0 as u32,
-                                cy0 as u32,
-                                (cx1 - cx0) as u32,
-                                (cy1 - cy0) as u32,
-                            )
-                            .to_image();
-                            crop.save(&path).map_err(|e| io_err(&path, e))?;
-                            format!("{name} 1 {} {} {} {}", r[0] - cx0, r[1] - cy0, r[2], r[3])
                         }
                     }
                     Split::Negatives => {
-                        // Driving along the lane (40%), looking at the target (40%: its
-                        // surroundings are the hardest negatives) or at some other object.
-                        let track = &placed.scene.track;
-                        let r = rng.next_f64();
-                        let near_target = if (0.4..0.8).contains(&r) {
-                            self.view_of_target(&placed, o, &mut rng).map(|v| v.0)
-                        } else {
-                            None
-                        };
-                        let pose = if let Some(p) = near_target {
-                            p
-                        } else if r < 0.4 {
-                            let s = uniform(&mut rng, 0.0, track.length);
-                            let (p, hd) = track.lane_pose_at(s);
-                            let lat = uniform(&mut rng, -0.12, 0.12);
-                            Pose {
-                                x: p[0] - lat * hd.sin(),
-                                y: p[1] + lat * hd.cos(),
-                                yaw: hd + uniform(&mut rng, -0.3, 0.3),
+                        match self.negative_frame(&placed, o, &mut rng, &mut gray, aspect, &path, &name, n)? {
+                            Some(l) => l,
+                            None => {
+                                misses += 1;
+                                continue;
                             }
-                        } else {
-                            let objs: Vec<&Object> = track.enabled_objects().collect();
-                            let ob = objs[(rng.next_u64() % objs.len() as u64) as usize];
-                            let view = uniform(&mut rng, -1.2, 1.2);
-                            self.pose_looking_at(ob, uniform(&mut rng, 0.2, 2.0), view, uniform(&mut rng, -0.5, 0.5))
-                        };
-                        let lens = self.mount.origin(&pose);
-                        let fr = track.floor_rect;
-                        if lens[0] < fr[0] || lens[0] > fr[2] || lens[1] < fr[1] || lens[1] > fr[3] {
-                            misses += 1;
-                            continue;
                         }
-                        let t = uniform(&mut rng, 0.0, 9.0);
-                        let ro = self.options(&mut rng);
-                        let img = self.render(&placed, &pose, t, ro, n as u64);
-                        rccar::detect::gray_from_rgb(&img, &mut gray);
-                        gray.save(&path).map_err(|e| io_err(&path, e))?;
-                        // Keep the target out of the negatives where it is in view.
-                        let boxes: Vec<[i64; 4]> = target_box(&self.mount, &pose, &placed.target, aspect)
-                            .filter(|b| {
-                                b[2] > 0.0 && b[3] > 0.0 && b[0] < gray.width() as f64 && b[1] < gray.height() as f64
-                            })
-                            .map(round_box)
-                            .into_iter()
-                            .collect();
-                        let mut l = format!("{name} {}", boxes.len());
-                        for r in boxes {
-                            l += &format!(" {} {} {} {}", r[0], r[1], r[2], r[3]);
-                        }
-                        l
                     }
                 };
                 writeln!(out, "{line}").map_err(|e| io_err(&list, e))?;
@@ -623,6 +541,119 @@ impl SimGen {
         }
         out.flush().map_err(|e| io_err(&list, e))?;
         Ok(list)
+    }
+
+    /// A positive sample from the frame `gray` whose target box is `b`: the box jittered
+    /// (±6% shift, ±7% size) and a crop 1.5× the box saved to `path`; its info.dat line, or
+    /// `None` when the jittered box leaves the frame or is below the window.
+    fn positive_crop(
+        &self,
+        gray: &GrayImage,
+        b: [f64; 4],
+        o: &GenOptions,
+        rng: &mut SplitMix64,
+        path: &Path,
+        name: &str,
+    ) -> Result<Option<String>, GenError> {
+        // Jitter: ±6% shift, ±7% size (the detector's grid: 2 px steps, 1.1× scales); then a crop 1.5× the box.
+        let (w, h) = (b[2] - b[0], b[3] - b[1]);
+        let k = uniform(rng, 0.93, 1.07);
+        let (cx, cy) = (
+            (b[0] + b[2]) / 2.0 + uniform(rng, -0.06, 0.06) * w,
+            (b[1] + b[3]) / 2.0 + uniform(rng, -0.06, 0.06) * h,
+        );
+        let (w, h) = (w * k, h * k);
+        let jb = [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0];
+        let r = round_box(jb);
+        let (iw, ih) = (gray.width() as i64, gray.height() as i64);
+        if r[0] < 0
+            || r[1] < 0
+            || r[0] + r[2] > iw
+            || r[1] + r[3] > ih
+            || r[2] < o.window.0 as i64
+            || r[3] < o.window.1 as i64
+        {
+            return Ok(None);
+        }
+        let cx0 = (r[0] - r[2] / 4).max(0);
+        let cy0 = (r[1] - r[3] / 4).max(0);
+        let cx1 = (r[0] + r[2] + r[2] / 4).min(iw);
+        let cy1 = (r[1] + r[3] + r[3] / 4).min(ih);
+        let crop =
+            image::imageops::crop_imm(gray, cx0 as u32, cy0 as u32, (cx1 - cx0) as u32, (cy1 - cy0) as u32).to_image();
+        crop.save(path).map_err(|e| io_err(path, e))?;
+        Ok(Some(format!(
+            "{name} 1 {} {} {} {}",
+            r[0] - cx0,
+            r[1] - cy0,
+            r[2],
+            r[3]
+        )))
+    }
+
+    /// A negative frame of the scene `placed` saved to `path`: driving along the lane (40%),
+    /// looking at the target (40%: its surroundings are the hardest negatives) or at some other
+    /// object, with the target's box listed where it is in view; its bg.txt line, or `None`
+    /// when the lens is off the floor.
+    #[allow(clippy::too_many_arguments)]
+    fn negative_frame(
+        &self,
+        placed: &Placed,
+        o: &GenOptions,
+        rng: &mut SplitMix64,
+        gray: &mut GrayImage,
+        aspect: f64,
+        path: &Path,
+        name: &str,
+        n: usize,
+    ) -> Result<Option<String>, GenError> {
+        // Driving along the lane (40%), looking at the target (40%: its
+        // surroundings are the hardest negatives) or at some other object.
+        let track = &placed.scene.track;
+        let r = rng.next_f64();
+        let near_target = if (0.4..0.8).contains(&r) {
+            self.view_of_target(placed, o, rng).map(|v| v.0)
+        } else {
+            None
+        };
+        let pose = if let Some(p) = near_target {
+            p
+        } else if r < 0.4 {
+            let s = uniform(rng, 0.0, track.length);
+            let (p, hd) = track.lane_pose_at(s);
+            let lat = uniform(rng, -0.12, 0.12);
+            Pose {
+                x: p[0] - lat * hd.sin(),
+                y: p[1] + lat * hd.cos(),
+                yaw: hd + uniform(rng, -0.3, 0.3),
+            }
+        } else {
+            let objs: Vec<&Object> = track.enabled_objects().collect();
+            let ob = objs[(rng.next_u64() % objs.len() as u64) as usize];
+            let view = uniform(rng, -1.2, 1.2);
+            self.pose_looking_at(ob, uniform(rng, 0.2, 2.0), view, uniform(rng, -0.5, 0.5))
+        };
+        let lens = self.mount.origin(&pose);
+        let fr = track.floor_rect;
+        if lens[0] < fr[0] || lens[0] > fr[2] || lens[1] < fr[1] || lens[1] > fr[3] {
+            return Ok(None);
+        }
+        let t = uniform(rng, 0.0, 9.0);
+        let ro = self.options(rng);
+        let img = self.render(placed, &pose, t, ro, n as u64);
+        rccar::detect::gray_from_rgb(&img, gray);
+        gray.save(path).map_err(|e| io_err(path, e))?;
+        // Keep the target out of the negatives where it is in view.
+        let boxes: Vec<[i64; 4]> = target_box(&self.mount, &pose, &placed.target, aspect)
+            .filter(|b| b[2] > 0.0 && b[3] > 0.0 && b[0] < gray.width() as f64 && b[1] < gray.height() as f64)
+            .map(round_box)
+            .into_iter()
+            .collect();
+        let mut l = format!("{name} {}", boxes.len());
+        for r in boxes {
+            l += &format!(" {} {} {} {}", r[0], r[1], r[2], r[3]);
+        }
+        Ok(Some(l))
     }
 
     /// The configuration the camera came from.

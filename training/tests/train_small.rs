@@ -1,8 +1,8 @@
 //! A small end-to-end training run (simulator data, a few stages) so the trainer cannot
 //! silently break, plus resume and bad-input behaviour (issue 6, "must show").
 
+use rccar::classes::ObjectClass;
 use rccar::detect::{Cascade, DetectParams, Detector, Rect};
-use rccar::sim::track::ObjectKind;
 use rccar_train::evaluate::{group, match_boxes};
 use rccar_train::features::HaarMode;
 use rccar_train::model::{BoostType, ModelParams};
@@ -23,7 +23,7 @@ fn gen(dir: &Path, split: Split, count: usize, seed: u64) -> PathBuf {
     .expect("track");
     g.generate(
         &GenOptions {
-            kind: ObjectKind::StopSign,
+            kind: ObjectClass::StopSign,
             split,
             count,
             seed,
@@ -225,7 +225,9 @@ fn bad_input_is_named_skipped_or_refused() {
         img: image::GrayImage::from_fn(40, 30, |_, _| image::Luma([(rng.next_u64() % 256) as u8])),
         avoid: vec![],
     };
-    let pos_real: Vec<Vec<u8>> = (0..200).map(|_| (0..256).map(|_| (rng.next_u64() % 256) as u8).collect()).collect();
+    let pos_real: Vec<Vec<u8>> = (0..200)
+        .map(|_| (0..256).map(|_| (rng.next_u64() % 256) as u8).collect())
+        .collect();
     let mut o = opts(6);
     o.num_neg = 2000;
     let out = train::train(&o, &pos_real, &[few], &d.join("m6"), false, &mut NoProgress).expect("trains");

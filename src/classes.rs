@@ -1,0 +1,202 @@
+//! The one registry of object classes: every kind of object the car detects, ranges, reacts
+//! to, the simulator draws and the trainer generates is declared here once, in [`CLASSES`].
+//! Everything else iterates over [`ObjectClass::ALL`] or reads [`ObjectClass::info`]; label
+//! strings are turned into a class only when parsing ([`ObjectClass::from_label`]).
+//!
+//! Adding a class: a variant of [`ObjectClass`] and its [`ClassInfo`] entry here, its config
+//! keys (`detect.<name>`, `detect.<name>_region`, `detect.<name>_box_m`,
+//! `ranging.<name>_bottom_m`, `_size_m`, `_box_margin`; docs/architecture.md lists them) and a
+//! model file. A class that reuses an existing [`Reaction`], [`ColourCue`] and [`SimShape`]
+//! needs no other code. Depends on nothing in the crate (every stage may import it).
+//! Units: metres, pixels where said.
+
+use serde::{Deserialize, Serialize};
+
+/// An object class (the index into [`CLASSES`]). Serialized as its [`ClassInfo::name`]
+/// (`stop_sign`, …) in telemetry and track files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObjectClass {
+    /// A stop sign (box = the face).
+    StopSign,
+    /// A traffic light (box = the housing).
+    TrafficLight,
+    /// An obstacle standing on the floor.
+    Obstacle,
+}
+
+/// Which behaviour of `control::behaviour` reacts to a class.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reaction {
+    /// Stop before it, hold, then go on (a stop sign).
+    StopThenGo,
+    /// Wait while its lamp is red or amber (a traffic light).
+    WaitForGreen,
+    /// Stop (or pass through the other lane) while it blocks the lane (an obstacle).
+    StopOrPass,
+}
+
+/// The colour cue ranging refines a detector box with (src/ranging/refine.rs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ColourCue {
+    /// A red face (a stop sign): the red pixels' outline.
+    RedFace,
+    /// A dark housing with one lit lamp (a traffic light).
+    LitHousing,
+    /// No colour cue (obstacles differ): the box is ranged as it is.
+    None,
+}
+
+/// How the simulator draws a class (src/sim/scene.rs) and places it (src/sim/track.rs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SimShape {
+    /// A red octagon with STOP on a post; `size_m` = one number, the face's width.
+    Octagon,
+    /// A housing with red, amber and green lamps on a post; `size_m` = the housing's height.
+    LightHousing,
+    /// A box standing on the floor; `size_m` = [length, width, height].
+    Box,
+}
+
+impl SimShape {
+    /// How many numbers a track file's `size_m` takes for this shape.
+    pub fn size_numbers(self) -> usize {
+        match self {
+            SimShape::Box => 3,
+            SimShape::Octagon | SimShape::LightHousing => 1,
+        }
+    }
+}
+
+/// Everything about one class that is not a tunable of `car.toml`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClassInfo {
+    /// The class.
+    pub class: ObjectClass,
+    /// Its name: telemetry, track files, the cascade's label, the config keys' stem.
+    pub name: &'static str,
+    /// Other spellings accepted when parsing a label (`stop`, `light`).
+    pub aliases: &'static [&'static str],
+    /// The model file `detect.<name>` defaults to (relative to the config's folder).
+    pub model_file: &'static str,
+    /// The config key naming its model file (`detect.<name>`), for messages.
+    pub model_key: &'static str,
+    /// The detect stage reads the lamp colour inside its boxes.
+    pub reads_light: bool,
+    /// The colour cue that refines its boxes before ranging.
+    pub colour_cue: ColourCue,
+    /// The behaviour that reacts to it.
+    pub reaction: Reaction,
+    /// How the simulator draws it.
+    pub shape: SimShape,
+    /// The simulator's size when a track file gives none (`size_m`; unused numbers 0), metres.
+    pub sim_size_m: [f64; 3],
+    /// The simulator's face-centre height when a track file gives none, metres (`None`: half
+    /// the box's height, it stands on the floor).
+    pub sim_height_m: Option<f64>,
+    /// The trainer's detection window (width, height) in pixels (training/src/simgen.rs).
+    pub train_window: (u32, u32),
+}
+
+/// The registry: one entry per class, in [`ObjectClass`] order.
+pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
+    ClassInfo {
+        class: ObjectClass::StopSign,
+        name: "stop_sign",
+        aliases: &["stop"],
+        model_file: "cascades/stop_sign.xml",
+        model_key: "detect.stop_sign",
+        reads_light: false,
+        colour_cue: ColourCue::RedFace,
+        reaction: Reaction::StopThenGo,
+        shape: SimShape::Octagon,
+        sim_size_m: [0.10, 0.0, 0.0],
+        sim_height_m: Some(0.17),
+        train_window: (16, 16),
+    },
+    ClassInfo {
+        class: ObjectClass::TrafficLight,
+        name: "traffic_light",
+        aliases: &["light"],
+        model_file: "cascades/traffic_light.xml",
+        model_key: "detect.traffic_light",
+        reads_light: true,
+        colour_cue: ColourCue::LitHousing,
+        reaction: Reaction::WaitForGreen,
+        shape: SimShape::LightHousing,
+        sim_size_m: [0.12, 0.0, 0.0],
+        sim_height_m: Some(0.16),
+        train_window: (8, 20),
+    },
+    ClassInfo {
+        class: ObjectClass::Obstacle,
+        name: "obstacle",
+        aliases: &[],
+        model_file: "cascades/obstacle.xml",
+        model_key: "detect.obstacle",
+        reads_light: false,
+        colour_cue: ColourCue::None,
+        reaction: Reaction::StopOrPass,
+        shape: SimShape::Box,
+        sim_size_m: [0.15, 0.12, 0.10],
+        sim_height_m: None,
+        train_window: (20, 16),
+    },
+];
+
+impl ObjectClass {
+    /// How many classes there are (the length of per-class arrays).
+    pub const COUNT: usize = 3;
+    /// Every class, in registry order.
+    pub const ALL: [ObjectClass; ObjectClass::COUNT] =
+        [ObjectClass::StopSign, ObjectClass::TrafficLight, ObjectClass::Obstacle];
+
+    /// Its registry entry.
+    pub fn info(self) -> &'static ClassInfo {
+        &CLASSES[self.index()]
+    }
+
+    /// Its index in [`CLASSES`] and in per-class arrays.
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Its name (`stop_sign`, `traffic_light`, `obstacle`).
+    pub fn name(self) -> &'static str {
+        self.info().name
+    }
+
+    /// The class of a label (its name or an alias); `None` for a label of no class.
+    pub fn from_label(label: &str) -> Option<ObjectClass> {
+        CLASSES
+            .iter()
+            .find(|c| c.name == label || c.aliases.contains(&label))
+            .map(|c| c.class)
+    }
+}
+
+impl std::fmt::Display for ObjectClass {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn registry_is_in_enum_order_and_names_round_trip() {
+        for (i, c) in ObjectClass::ALL.iter().enumerate() {
+            assert_eq!(CLASSES[i].class, *c);
+            assert_eq!(c.index(), i);
+            assert_eq!(ObjectClass::from_label(c.name()), Some(*c));
+            assert_eq!(c.info().model_key, format!("detect.{}", c.name()));
+            let json = serde_json::to_string(c).unwrap();
+            assert_eq!(json, format!("\"{}\"", c.name()));
+        }
+        assert_eq!(ObjectClass::from_label("stop"), Some(ObjectClass::StopSign));
+        assert_eq!(ObjectClass::from_label("light"), Some(ObjectClass::TrafficLight));
+        assert_eq!(ObjectClass::from_label("face"), None);
+    }
+}
