@@ -14,10 +14,10 @@
 use super::common::ConfigArgs;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
+use rccar::calib::tilt::{self, backup_name, check_pairs, edit_override, line_diff};
 use rccar::camera::PinholeCamera;
-use rccar::config::LoadedConfig;
-use rccar::ranging::Pair;
-use rccar::ranging::{fit, parse_pairs_csv, FitOptions, TiltRanging};
+use rccar::config::{Config, LoadedConfig};
+use rccar::ranging::{fit, parse_pairs_csv, Fit, FitOptions, Pair};
 use std::path::Path;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -89,49 +89,10 @@ const MAX_SIM_PAIRS: usize = 10_000;
 fn ranging(a: RangingArgs) -> Result<ExitCode> {
     let loaded = a.config.load_full()?;
     let cfg = loaded.cfg.clone();
-    if !(a.max_rms_px.is_finite() && a.max_rms_px > 0.0) {
-        bail!("--max-rms-px {}: must be a finite number of pixels > 0", a.max_rms_px);
-    }
-    if !(a.v0_sigma_px.is_finite() && a.v0_sigma_px >= 0.0) {
-        bail!(
-            "--v0-sigma-px {}: must be a finite number of pixels >= 0 (0 = free)",
-            a.v0_sigma_px
-        );
-    }
+    check_bounds(&a)?;
     // 1. The pairs: measured, or made in the simulator's lab.
     let pairs = match (&a.pairs, a.from_sim) {
-        (_, Some(n)) => {
-            if !(3..=MAX_SIM_PAIRS).contains(&n) {
-                bail!("--from-sim {n}: must be 3..={MAX_SIM_PAIRS} pairs");
-            }
-            if !(a.sim_tilt_error_deg.is_finite() && a.sim_tilt_error_deg.abs() <= 30.0) {
-                bail!(
-                    "--sim-tilt-error-deg {}: must be -30..=30 degrees",
-                    a.sim_tilt_error_deg
-                );
-            }
-            if !(a.sim_tape_sigma_m.is_finite() && (0.0..=0.5).contains(&a.sim_tape_sigma_m)) {
-                bail!("--sim-tape-sigma-m {}: must be 0..=0.5 m", a.sim_tape_sigma_m);
-            }
-            let mut real = cfg.clone();
-            real.camera.tilt_deg += a.sim_tilt_error_deg;
-            let p = rccar::sim::scenario_lab::calibration_pairs(&real, n, a.sim_tape_sigma_m, a.sim_seed)?;
-            println!(
-                "lab: {} pairs from the simulator (true tilt {:.2} deg, tape sigma {} m)",
-                p.len(),
-                real.camera.tilt_deg,
-                a.sim_tape_sigma_m
-            );
-            if let Some(out) = &a.sim_pairs_out {
-                let mut text = String::from("row_px,distance_m,height_m\n");
-                for q in &p {
-                    text += &format!("{:.1},{:.4},{}\n", q.v, q.d, q.z);
-                }
-                write_file(out, &text)?;
-                println!("lab pairs written to {}", out.display());
-            }
-            p
-        }
+        (_, Some(n)) => lab_pairs(&a, &cfg, n)?,
         (Some(path), None) => {
             let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
             parse_pairs_csv(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?
@@ -143,12 +104,11 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         _ => "lab pairs".into(),
     };
     // 2. Refuse data that cannot determine the unknowns.
-    check_pairs(&pairs, &cfg, a.fit_ay).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
+    check_pairs(&pairs, cfg.camera.height, cfg.camera.height_m, a.fit_ay)
+        .map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 3. Fit from the configured (nominal) camera.
     let cam = PinholeCamera::from(&cfg.camera);
-    let mut start = TiltRanging::from_camera(&cam);
-    start.v0 += cfg.ranging.v0_offset_px;
-    start.a_y *= cfg.ranging.a_y_scale;
+    let start = tilt::nominal(&cam, cfg.ranging.v0_offset_px, cfg.ranging.a_y_scale);
     let opts = FitOptions {
         fit_ay: a.fit_ay,
         v0_sigma_px: if a.v0_sigma_px > 0.0 {
@@ -160,6 +120,72 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     };
     let f = fit(&pairs, start, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 4. Report.
+    print_fit(&pairs, &f);
+    let tilt = f.ranging.alpha.to_degrees();
+    let v0_off = f.ranging.v0 - cam.v0;
+    let ay_scale = f.ranging.a_y / cam.f_px;
+    println!(
+        "fit: tilt {tilt:.3} deg (was {:.3}), v0 {:.2} px (offset {v0_off:+.2}), a_y {:.1} px (scale {ay_scale:.4}); rms row error {:.2} px",
+        cfg.camera.tilt_deg, f.ranging.v0, f.ranging.a_y, f.rms_row_px
+    );
+    // 5. Refuse a fit that does not explain the data.
+    refuse_bad_fit(&origin, &pairs, &f, a.max_rms_px, [("tilt", tilt), ("v0 offset", v0_off), ("a_y scale", ay_scale)])?;
+    // 6.-7. The override file.
+    let round = |v: f64| (v * 1e4).round() / 1e4;
+    let values = [
+        ("camera", "tilt_deg", round(tilt)),
+        ("ranging", "v0_offset_px", round(v0_off)),
+        ("ranging", "a_y_scale", round(ay_scale)),
+    ];
+    write_result(&a, &loaded, &values)
+}
+
+/// The flags' bounds.
+fn check_bounds(a: &RangingArgs) -> Result<()> {
+    if !(a.max_rms_px.is_finite() && a.max_rms_px > 0.0) {
+        bail!("--max-rms-px {}: must be a finite number of pixels > 0", a.max_rms_px);
+    }
+    if !(a.v0_sigma_px.is_finite() && a.v0_sigma_px >= 0.0) {
+        bail!(
+            "--v0-sigma-px {}: must be a finite number of pixels >= 0 (0 = free)",
+            a.v0_sigma_px
+        );
+    }
+    Ok(())
+}
+
+/// `n` pairs made in the simulator's calibration lab (and written to `--sim-pairs-out`).
+fn lab_pairs(a: &RangingArgs, cfg: &Config, n: usize) -> Result<Vec<Pair>> {
+    if !(3..=MAX_SIM_PAIRS).contains(&n) {
+        bail!("--from-sim {n}: must be 3..={MAX_SIM_PAIRS} pairs");
+    }
+    if !(a.sim_tilt_error_deg.is_finite() && a.sim_tilt_error_deg.abs() <= 30.0) {
+        bail!(
+            "--sim-tilt-error-deg {}: must be -30..=30 degrees",
+            a.sim_tilt_error_deg
+        );
+    }
+    if !(a.sim_tape_sigma_m.is_finite() && (0.0..=0.5).contains(&a.sim_tape_sigma_m)) {
+        bail!("--sim-tape-sigma-m {}: must be 0..=0.5 m", a.sim_tape_sigma_m);
+    }
+    let mut real = cfg.clone();
+    real.camera.tilt_deg += a.sim_tilt_error_deg;
+    let p = rccar::sim::scenario_lab::calibration_pairs(&real, n, a.sim_tape_sigma_m, a.sim_seed)?;
+    println!(
+        "lab: {} pairs from the simulator (true tilt {:.2} deg, tape sigma {} m)",
+        p.len(),
+        real.camera.tilt_deg,
+        a.sim_tape_sigma_m
+    );
+    if let Some(out) = &a.sim_pairs_out {
+        write_file(out, &tilt::pairs_csv(&p))?;
+        println!("lab pairs written to {}", out.display());
+    }
+    Ok(p)
+}
+
+/// The residuals' table.
+fn print_fit(pairs: &[Pair], f: &Fit) {
     println!(
         "{:>8} {:>9} {:>10} {:>10} {:>7}",
         "row px", "true m", "fitted m", "resid m", "resid %"
@@ -174,14 +200,11 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
             100.0 * r / p.d
         );
     }
-    let tilt = f.ranging.alpha.to_degrees();
-    let v0_off = f.ranging.v0 - cam.v0;
-    let ay_scale = f.ranging.a_y / cam.f_px;
-    println!(
-        "fit: tilt {tilt:.3} deg (was {:.3}), v0 {:.2} px (offset {v0_off:+.2}), a_y {:.1} px (scale {ay_scale:.4}); rms row error {:.2} px",
-        cfg.camera.tilt_deg, f.ranging.v0, f.ranging.a_y, f.rms_row_px
-    );
-    // 5. Refuse a fit that does not explain the data.
+}
+
+/// Refuses a fit with an undefined residual, an rms row error above `max_rms_px` or a value
+/// that is not finite.
+fn refuse_bad_fit(origin: &str, pairs: &[Pair], f: &Fit, max_rms_px: f64, values: [(&str, f64); 3]) -> Result<()> {
     if let Some(i) = f.residuals_m.iter().position(|r| !r.is_finite()) {
         bail!(
             "{origin}: pair {} (row {} px, {} m): the fitted camera does not see that row on the floor (above its horizon); the pairs do not belong together; nothing written",
@@ -190,35 +213,31 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
             pairs[i].d
         );
     }
-    if !(f.rms_row_px.is_finite() && f.rms_row_px <= a.max_rms_px) {
+    if !(f.rms_row_px.is_finite() && f.rms_row_px <= max_rms_px) {
         bail!(
             "{origin}: rms row error {:.2} px is above the bound {} px (--max-rms-px): the rows and distances do not fit one camera; check the measurements; nothing written",
             f.rms_row_px,
-            a.max_rms_px
+            max_rms_px
         );
     }
-    for (what, v) in [("tilt", tilt), ("v0 offset", v0_off), ("a_y scale", ay_scale)] {
+    for (what, v) in values {
         if !v.is_finite() {
             bail!("{origin}: the fitted {what} is {v}; nothing written");
         }
     }
-    // 6. The new override file, validated merged with the configuration before writing.
+    Ok(())
+}
+
+/// The new override file, validated merged with the configuration, then printed as a diff
+/// (`--dry-run`) or written (the old one backed up first, the new one replacing it atomically).
+fn write_result(a: &RangingArgs, loaded: &LoadedConfig, values: &[(&str, &str, f64)]) -> Result<ExitCode> {
     let target = a.write.clone().unwrap_or_else(|| loaded.dir.join("local.toml"));
     let old = match std::fs::read_to_string(&target) {
         Ok(t) => Some(t),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
         Err(e) => bail!("{}: cannot read: {e}", target.display()),
     };
-    let round = |v: f64| (v * 1e4).round() / 1e4;
-    let new = edit_override(
-        old.as_deref(),
-        &[
-            ("camera", "tilt_deg", round(tilt)),
-            ("ranging", "v0_offset_px", round(v0_off)),
-            ("ranging", "a_y_scale", round(ay_scale)),
-        ],
-    )
-    .with_context(|| format!("{}: cannot update", target.display()))?;
+    let new = edit_override(old.as_deref(), values).with_context(|| format!("{}: cannot update", target.display()))?;
     let base = &loaded.files[0];
     let others: Vec<PathBuf> = loaded.files[1..].to_vec();
     LoadedConfig::check_with_text(base, &others, &target, &new).map_err(|e| {
@@ -237,7 +256,7 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         println!("dry run: nothing written");
         return Ok(ExitCode::SUCCESS);
     }
-    // 7. Back up, then replace atomically (a full disk leaves the old file in place).
+    // Back up, then replace atomically (a full disk leaves the old file in place).
     if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     }
@@ -255,161 +274,7 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Why these pairs cannot calibrate the camera, if they cannot. `pairs` are 1-based in
-/// messages, as a student counts the rows of the CSV.
-fn check_pairs(pairs: &[Pair], cfg: &rccar::config::Config, fit_ay: bool) -> Result<(), String> {
-    let h_img = cfg.camera.height as f64;
-    let h_cam = cfg.camera.height_m;
-    for (i, p) in pairs.iter().enumerate() {
-        let n = i + 1;
-        if !(p.v.is_finite() && p.d.is_finite() && p.z.is_finite()) {
-            return Err(format!(
-                "pair {n} ({}, {}, {}): every value must be a finite number (NaN and inf are not allowed)",
-                p.v, p.d, p.z
-            ));
-        }
-        if !(0.0..h_img).contains(&p.v) {
-            return Err(format!(
-                "pair {n}: row {} px is outside the image (rows 0..{} of camera.height = {})",
-                p.v,
-                h_img - 1.0,
-                cfg.camera.height
-            ));
-        }
-        if !(p.d > 0.0 && p.d <= 100.0) {
-            return Err(format!("pair {n}: distance {} m must be > 0 and <= 100 m", p.d));
-        }
-        if !(p.z >= 0.0 && p.z < h_cam) {
-            return Err(format!(
-                "pair {n}: height {} m must be >= 0 and below the camera (camera.height_m = {h_cam} m): a ray from the lens only reaches lower points",
-                p.z
-            ));
-        }
-    }
-    let need = if fit_ay { 4 } else { 3 };
-    let mut rows: Vec<f64> = pairs.iter().map(|p| p.v).collect();
-    rows.sort_by(f64::total_cmp);
-    rows.dedup_by(|a, b| (*a - *b).abs() < 0.5);
-    if rows.len() < need {
-        return Err(format!(
-            "{} pair(s) on only {} distinct row(s) (rows closer than 0.5 px count as one); fitting {} needs at least {need} distinct rows: measure at more distances",
-            pairs.len(),
-            rows.len(),
-            if fit_ay { "tilt, v0 and a_y" } else { "tilt and v0" }
-        ));
-    }
-    Ok(())
-}
-
-/// The override file's text with `values` set (section, key, value): existing comments,
-/// formatting and other keys are kept; a missing section or key is added.
-fn edit_override(old: Option<&str>, values: &[(&str, &str, f64)]) -> Result<String> {
-    let mut doc: toml_edit::DocumentMut = match old {
-        Some(t) => t.parse().context("not valid TOML (fix it or move it away first)")?,
-        None => "# Personal overrides of the car's configuration (git-ignored).\n# `rccar calibrate ranging` updates its keys here in place.\n"
-            .parse()
-            .context("header")?,
-    };
-    for &(section, key, v) in values {
-        let item = doc
-            .as_table_mut()
-            .entry(section)
-            .or_insert_with(|| toml_edit::Item::Table(toml_edit::Table::new()));
-        let table = item
-            .as_table_like_mut()
-            .with_context(|| format!("`{section}` is not a table"))?;
-        match table.get_mut(key) {
-            Some(it) => {
-                let decor = it
-                    .as_value()
-                    .with_context(|| format!("`{section}.{key}` is not a value"))?
-                    .decor()
-                    .clone();
-                let mut nv = toml_edit::Value::from(v);
-                *nv.decor_mut() = decor;
-                *it = toml_edit::Item::Value(nv);
-            }
-            None => {
-                table.insert(key, toml_edit::value(v));
-            }
-        }
-    }
-    Ok(doc.to_string())
-}
-
-/// `FILE.bak`, or `FILE.bak2`, `FILE.bak3`... when that exists (no backup is overwritten).
-fn backup_name(target: &Path) -> PathBuf {
-    let base = target.as_os_str().to_owned();
-    for n in 1..10_000 {
-        let mut name = base.clone();
-        name.push(if n == 1 { ".bak".to_string() } else { format!(".bak{n}") });
-        let p = PathBuf::from(name);
-        if !p.exists() {
-            return p;
-        }
-    }
-    let mut name = base;
-    name.push(".bak");
-    PathBuf::from(name)
-}
-
-/// Writes `text` to `path`; errors name `path`. A regular file (or a symlink to one) is
-/// replaced atomically: the text goes to a temporary file beside the real file, which is then
-/// renamed over it, so a full disk leaves the old file untouched and a symlink stays a
-/// symlink. Anything else (a new file, a device such as /dev/null) is written directly.
+/// [`tilt::write_file`]; errors name `path`.
 fn write_file(path: &Path, text: &str) -> Result<()> {
-    use std::io::Write;
-    let fail = |e: std::io::Error| anyhow::anyhow!("{}: cannot write: {e}", path.display());
-    let real = std::fs::canonicalize(path).ok().filter(|p| p.is_file());
-    let Some(real) = real else {
-        return std::fs::write(path, text).map_err(fail);
-    };
-    let mut tmp = real.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    let res = (|| -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(text.as_bytes())?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, &real)
-    })();
-    if let Err(e) = res {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(fail(e));
-    }
-    Ok(())
-}
-
-/// A line diff (`-` old, `+` new, two spaces unchanged) by longest common subsequence; the
-/// files are a few dozen lines.
-fn line_diff(old: &str, new: &str) -> String {
-    let a: Vec<&str> = old.lines().collect();
-    let b: Vec<&str> = new.lines().collect();
-    let (n, m) = (a.len(), b.len());
-    let mut l = vec![vec![0u32; m + 1]; n + 1];
-    for i in (0..n).rev() {
-        for j in (0..m).rev() {
-            l[i][j] = if a[i] == b[j] {
-                l[i + 1][j + 1] + 1
-            } else {
-                l[i + 1][j].max(l[i][j + 1])
-            };
-        }
-    }
-    let (mut i, mut j) = (0, 0);
-    let mut out = String::new();
-    while i < n || j < m {
-        if i < n && j < m && a[i] == b[j] {
-            out += &format!("  {}\n", a[i]);
-            i += 1;
-            j += 1;
-        } else if i < n && (j == m || l[i + 1][j] >= l[i][j + 1]) {
-            out += &format!("- {}\n", a[i]);
-            i += 1;
-        } else {
-            out += &format!("+ {}\n", b[j]);
-            j += 1;
-        }
-    }
-    out
+    tilt::write_file(path, text).map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", path.display()))
 }

@@ -5,14 +5,13 @@
 //!
 //! Aliases: `t` = `time_s`, `xte` = `truth.xte` = `truth.offset_m` (the true cross-track error,
 //! metres). `null` (e.g. `error` while the lane is lost) leaves a gap. Units are those of the
-//! telemetry (docs/sim.md, docs/lane.md).
+//! telemetry (docs/sim.md, docs/lane.md). Reading the fields is `rccar::fields`.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use rccar::fields::{default_label, panels, read_jsonl, resolve, shown};
 use rccar::sim::plot::{self, Trace};
-use serde_json::Value;
-use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 /// Flags of `rccar plot`.
@@ -36,84 +35,6 @@ pub struct PlotArgs {
     pub label: Vec<String>,
 }
 
-/// Field aliases for students: the short names used in the labs.
-pub fn resolve(field: &str) -> &str {
-    match field {
-        "t" | "time" => "time_s",
-        "xte" | "truth.xte" => "truth.offset_m",
-        f => f,
-    }
-}
-
-/// The value at a dotted path, if the record has it.
-fn lookup<'a>(v: &'a Value, path: &str) -> Option<&'a Value> {
-    path.split('.').try_fold(v, |v, k| v.get(k))
-}
-
-/// Every numeric leaf's dotted path in `v` (arrays not entered).
-fn numeric_paths(v: &Value, prefix: &str, out: &mut BTreeSet<String>) {
-    match v {
-        Value::Object(m) => {
-            for (k, x) in m {
-                let p = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
-                numeric_paths(x, &p, out);
-            }
-        }
-        Value::Number(_) => {
-            out.insert(prefix.to_string());
-        }
-        _ => {}
-    }
-}
-
-/// A telemetry file's records, with their line numbers.
-fn read_jsonl(path: &Path) -> Result<Vec<(usize, Value)>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        if line.trim().is_empty() {
-            continue;
-        }
-        let v: Value = serde_json::from_str(line)
-            .with_context(|| format!("{}:{}: not a JSON record", path.display(), i + 1))?;
-        if !v.is_object() {
-            bail!("{}:{}: not a JSON object (a telemetry record is one)", path.display(), i + 1);
-        }
-        out.push((i + 1, v));
-    }
-    if out.is_empty() {
-        bail!("{}: no records", path.display());
-    }
-    Ok(out)
-}
-
-/// The number at `path` in `rec`: `None` when absent, NaN for `null`; an error for a string.
-fn number(rec: &Value, path: &str, file: &Path, line: usize, shown: &str) -> Result<Option<f64>> {
-    match lookup(rec, path) {
-        None => Ok(None),
-        Some(Value::Null) => Ok(Some(f64::NAN)),
-        Some(Value::Number(n)) => Ok(n.as_f64()),
-        Some(Value::Bool(b)) => Ok(Some(if *b { 1.0 } else { 0.0 })),
-        Some(other) => bail!(
-            "{}:{line}: `{shown}` is not a number ({}); plot numeric fields only",
-            file.display(),
-            other
-        ),
-    }
-}
-
-fn default_label(p: &Path) -> String {
-    let stem = p.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
-    let parent = p
-        .parent()
-        .and_then(|d| d.file_name())
-        .map(|s| s.to_string_lossy().to_string());
-    match parent {
-        Some(d) if stem == "telemetry" => d,
-        _ => stem,
-    }
-}
-
 /// Runs `rccar plot`.
 pub fn run(a: PlotArgs) -> Result<ExitCode> {
     if a.label.len() > a.files.len() {
@@ -127,43 +48,15 @@ pub fn run(a: PlotArgs) -> Result<ExitCode> {
     let mut traces = Vec::new();
     for (k, file) in a.files.iter().enumerate() {
         let recs = read_jsonl(file)?;
-        let mut avail = BTreeSet::new();
-        for (_, r) in &recs {
-            numeric_paths(r, "", &mut avail);
-        }
-        let has = |f: &str| recs.iter().any(|(_, r)| lookup(r, f).is_some());
-        for f in std::iter::once(&a.x).chain(&fields) {
-            let r = resolve(f.trim());
-            if !has(r) {
-                let list: Vec<&str> = avail.iter().map(String::as_str).collect();
-                bail!(
-                    "{}: no field `{}` in the telemetry; numeric fields: {} (aliases: t, xte)",
-                    file.display(),
-                    f.trim(),
-                    list.join(", ")
-                );
-            }
-        }
-        let mut panels = vec![Vec::new(); fields.len()];
-        for (line, r) in &recs {
-            let Some(xv) = number(r, &x, file, *line, &a.x)? else { continue };
-            for (p, f) in panels.iter_mut().zip(&fields) {
-                let y = number(r, resolve(f), file, *line, f)?.unwrap_or(f64::NAN);
-                p.push((xv, y));
-            }
-        }
+        let panels = panels(file, &recs, &a.x, &fields)?;
         let label = a.label.get(k).cloned().unwrap_or_else(|| default_label(file));
         println!("plot: {} ({} records) as `{label}`", file.display(), recs.len());
         traces.push(Trace { label, panels });
     }
-    let font = super::sim::load_font()
-        .with_context(|| format!("no font at {}; apt install fonts-dejavu-core", super::sim::FONT))?;
+    let font = super::common::load_font()
+        .with_context(|| format!("no font at {}; apt install fonts-dejavu-core", super::common::FONT))?;
     plot::register_font(font);
     // Panel titles and axis names: the field as typed, and what an alias stands for.
-    let shown = |f: &str| {
-        let r = resolve(f);
-        if r == f { f.to_string() } else { format!("{f} = {r}") }
-    };
     let names: Vec<String> = fields.iter().map(|f| shown(f)).collect();
     let x_name = if x == "time_s" { "time_s (s)".to_string() } else { shown(a.x.trim()) };
     let img = plot::fields_plot(&x_name, &names, &traces)?;
@@ -173,22 +66,4 @@ pub fn run(a: PlotArgs) -> Result<ExitCode> {
     img.save(&a.out).with_context(|| format!("{}: cannot write", a.out.display()))?;
     println!("  wrote {} ({}×{} px, {} panel(s))", a.out.display(), img.width(), img.height(), fields.len());
     Ok(ExitCode::SUCCESS)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn dotted_paths_and_aliases() {
-        let v: Value = serde_json::json!({"t": 1, "truth": {"offset_m": 0.02, "pose": [1, 2]}, "s": "x", "e": null});
-        assert_eq!(lookup(&v, resolve("truth.xte")), Some(&serde_json::json!(0.02)));
-        assert_eq!(resolve("t"), "time_s");
-        let mut p = BTreeSet::new();
-        numeric_paths(&v, "", &mut p);
-        assert_eq!(p.into_iter().collect::<Vec<_>>(), vec!["t", "truth.offset_m"]);
-        assert!(number(&v, "e", Path::new("f"), 3, "e").unwrap().unwrap().is_nan());
-        let e = number(&v, "s", Path::new("f.jsonl"), 3, "s").unwrap_err().to_string();
-        assert!(e.starts_with("f.jsonl:3: `s` is not a number"), "{e}");
-    }
 }
