@@ -2,10 +2,26 @@
 //! run's telemetry.jsonl (a loader), the students' aliases (`t` = `time_s`, `xte` =
 //! `truth.xte` = `truth.offset_m`), and each run's panels of (x, y) points. `null` (e.g.
 //! `error` while the lane is lost) is NaN: a gap in the plot.
+//!
+//! Bounded: at most [`MAX_FIELDS`] panels (the image is 1000 × (40 + 260·fields) pixels),
+//! [`MAX_FILES`] runs (one colour each), [`MAX_POINTS`] points over all of them, lines of at
+//! most [`MAX_LINE_BYTES`]; the files are read line by line, keeping only the plotted numbers.
 
 use serde_json::Value;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+
+/// Most panels (`--y` fields): the image is 1000 × (40 + 260·16) = 1000 × 4200 pixels.
+pub const MAX_FIELDS: usize = 16;
+/// Most telemetry files: one colour each ([`crate::sim::plot::RUN_COLOURS`]).
+pub const MAX_FILES: usize = crate::sim::plot::RUN_COLOURS.len();
+/// Most points over all files and fields (16 bytes each: 160 MB), e.g. 8 runs × 3 fields of
+/// a 2-hour drive at 30 fps (216,000 records each) is 5.2 million.
+pub const MAX_POINTS: usize = 10_000_000;
+/// Longest telemetry line, bytes (a record is about 1 kB).
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+/// Most distinct numeric fields listed when a field is not found.
+const MAX_LISTED: usize = 400;
 
 /// A telemetry file or field that cannot be plotted; each names the file (and line).
 #[derive(Debug, thiserror::Error)]
@@ -33,6 +49,22 @@ pub enum FieldsError {
     /// A line is JSON but not an object.
     #[error("{}:{line}: not a JSON object (a telemetry record is one)", path.display())]
     NotObject {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+    },
+    /// A line longer than [`MAX_LINE_BYTES`].
+    #[error("{}:{line}: line longer than {MAX_LINE_BYTES} bytes (a telemetry record is about 1 kB): not a telemetry file", path.display())]
+    LineTooLong {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+    },
+    /// More than [`MAX_POINTS`] points over all files and fields.
+    #[error("{}:{line}: more than {MAX_POINTS} points to plot over all files and fields: plot fewer fields or a shorter run", path.display())]
+    TooManyPoints {
         /// The file.
         path: PathBuf,
         /// 1-based line.
@@ -109,34 +141,60 @@ pub fn numeric_paths(v: &Value, prefix: &str, out: &mut BTreeSet<String>) {
     }
 }
 
-/// A telemetry file's records, with their line numbers.
-pub fn read_jsonl(path: &Path) -> Result<Vec<(usize, Value)>, FieldsError> {
-    let text = std::fs::read_to_string(path).map_err(|source| FieldsError::Read {
+/// Reads a telemetry file line by line and calls `each(line number, record)` for every record;
+/// only what `each` keeps stays in memory. Returns the number of records. Errors name the file
+/// and line.
+pub fn read_jsonl(
+    path: &Path,
+    mut each: impl FnMut(usize, &Value) -> Result<(), FieldsError>,
+) -> Result<usize, FieldsError> {
+    use std::io::{BufRead, Read};
+    let read_err = |source| FieldsError::Read {
         path: path.to_path_buf(),
         source,
-    })?;
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        if line.trim().is_empty() {
+    };
+    let f = std::fs::File::open(path).map_err(read_err)?;
+    let mut r = std::io::BufReader::new(f);
+    let mut buf = Vec::new();
+    let (mut line, mut records) = (0usize, 0usize);
+    loop {
+        buf.clear();
+        let n = r
+            .by_ref()
+            .take(MAX_LINE_BYTES as u64 + 1)
+            .read_until(b'\n', &mut buf)
+            .map_err(read_err)?;
+        if n == 0 {
+            break;
+        }
+        line += 1;
+        if buf.len() > MAX_LINE_BYTES {
+            return Err(FieldsError::LineTooLong {
+                path: path.to_path_buf(),
+                line,
+            });
+        }
+        if buf.iter().all(u8::is_ascii_whitespace) {
             continue;
         }
-        let v: Value = serde_json::from_str(line).map_err(|source| FieldsError::NotJson {
+        let v: Value = serde_json::from_slice(&buf).map_err(|source| FieldsError::NotJson {
             path: path.to_path_buf(),
-            line: i + 1,
+            line,
             source,
         })?;
         if !v.is_object() {
             return Err(FieldsError::NotObject {
                 path: path.to_path_buf(),
-                line: i + 1,
+                line,
             });
         }
-        out.push((i + 1, v));
+        records += 1;
+        each(line, &v)?;
     }
-    if out.is_empty() {
+    if records == 0 {
         return Err(FieldsError::Empty(path.to_path_buf()));
     }
-    Ok(out)
+    Ok(records)
 }
 
 /// The number at `path` in `rec`: `None` when absent, NaN for `null`; an error for a string.
@@ -171,22 +229,49 @@ pub fn default_label(p: &Path) -> String {
     }
 }
 
+/// One run's panels, as [`panels`] read them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Panels {
+    /// One panel per field: the (x, y) points of the records that have x.
+    pub panels: Vec<Vec<(f64, f64)>>,
+    /// The file's records.
+    pub records: usize,
+}
+
 /// One panel per field of `fields` (trimmed, as typed): the (x, y) points of the records of
-/// `file` that have `x` (as typed; aliases allowed). Every field must occur in some record.
-pub fn panels(
-    file: &Path,
-    recs: &[(usize, Value)],
-    x: &str,
-    fields: &[String],
-) -> Result<Vec<Vec<(f64, f64)>>, FieldsError> {
+/// `file` that have `x` (as typed; aliases allowed), read line by line. Every field must occur
+/// in some record. `points` counts the points over all files (at most [`MAX_POINTS`]).
+pub fn panels(file: &Path, x: &str, fields: &[String], points: &mut usize) -> Result<Panels, FieldsError> {
+    let xr = resolve(x.trim());
     let mut avail = BTreeSet::new();
-    for (_, r) in recs {
-        numeric_paths(r, "", &mut avail);
-    }
-    let has = |f: &str| recs.iter().any(|(_, r)| lookup(r, f).is_some());
-    for f in std::iter::once(&x.to_string()).chain(fields) {
-        let r = resolve(f.trim());
-        if !has(r) {
+    let wanted: Vec<&str> = std::iter::once(xr).chain(fields.iter().map(|f| resolve(f))).collect();
+    let mut seen = vec![false; wanted.len()];
+    let mut panels = vec![Vec::new(); fields.len()];
+    let records = read_jsonl(file, |line, r| {
+        if avail.len() < MAX_LISTED {
+            numeric_paths(r, "", &mut avail);
+        }
+        for (s, w) in seen.iter_mut().zip(&wanted) {
+            *s |= lookup(r, w).is_some();
+        }
+        let Some(xv) = number(r, xr, file, line, x)? else {
+            return Ok(());
+        };
+        *points += fields.len();
+        if *points > MAX_POINTS {
+            return Err(FieldsError::TooManyPoints {
+                path: file.to_path_buf(),
+                line,
+            });
+        }
+        for (p, f) in panels.iter_mut().zip(fields) {
+            let y = number(r, resolve(f), file, line, f)?.unwrap_or(f64::NAN);
+            p.push((xv, y));
+        }
+        Ok(())
+    })?;
+    for (f, s) in std::iter::once(&x.to_string()).chain(fields).zip(&seen) {
+        if !s {
             let list: Vec<&str> = avail.iter().map(String::as_str).collect();
             return Err(FieldsError::NoField {
                 path: file.to_path_buf(),
@@ -195,18 +280,7 @@ pub fn panels(
             });
         }
     }
-    let xr = resolve(x.trim());
-    let mut panels = vec![Vec::new(); fields.len()];
-    for (line, r) in recs {
-        let Some(xv) = number(r, xr, file, *line, x)? else {
-            continue;
-        };
-        for (p, f) in panels.iter_mut().zip(fields) {
-            let y = number(r, resolve(f), file, *line, f)?.unwrap_or(f64::NAN);
-            p.push((xv, y));
-        }
-    }
-    Ok(panels)
+    Ok(Panels { panels, records })
 }
 
 #[cfg(test)]

@@ -22,6 +22,7 @@
 
 use crate::config::{Config, DetectConfig};
 use crate::control::behaviour::{Behaviour, DeadReckoning, Decision, LightColor, Mode, Observations, Ranged};
+use crate::control::steering::SteeringInput;
 use crate::control::{Command, Controller};
 use crate::detect::cascade::CascadeError;
 use crate::detect::detector::DetectParams;
@@ -50,6 +51,9 @@ pub enum PipelineError {
     /// was made for another image size.
     #[error("stereo.calibration: {0}")]
     StereoCalibration(crate::calib::file::FileError),
+    /// The steering method `steering.method` picks cannot be built from this configuration.
+    #[error("{0}")]
+    Steering(#[from] crate::control::steering::SteeringError),
 }
 
 // By hand, not `#[from]`: a `source` would print the file's error a second time.
@@ -115,21 +119,51 @@ pub struct RangedObject {
     pub predicted: bool,
 }
 
-/// Loads the `[detect]` cascades that exist (paths relative to `base`). Returns the stage
-/// (`None` when no file exists or detection is off) and the files that were missing.
-/// This is the pipeline's only filesystem access; callers report the missing files once.
-pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectStage>, Vec<PathBuf>), CascadeError> {
+/// A `[detect]` cascade that is configured (a non-empty path) but not a file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MissingCascade {
+    /// The config key (`detect.stop_sign`, `detect.traffic_light`, `detect.obstacle`).
+    pub key: &'static str,
+    /// The path that was looked for.
+    pub path: PathBuf,
+}
+
+impl std::fmt::Display for MissingCascade {
+    /// The key, the file and the fix, as the binary and the session report it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} = {:?}: no such cascade file; give the cascade's path (a relative path is read from the config file's folder), set {} = \"\" to run without that detector, or detect.enabled = false for lane keeping only",
+            self.key,
+            self.path.display().to_string(),
+            self.key
+        )
+    }
+}
+
+/// Loads the `[detect]` cascades that exist (paths relative to `base`; an empty path switches
+/// that class off). Returns the stage (`None` when no file exists or detection is off) and the
+/// configured files that were missing, which the binary refuses (a configured model that is
+/// not there is an error, not a silently weaker car). This is the pipeline's only filesystem
+/// access.
+pub fn load_detector(
+    cfg: &DetectConfig,
+    base: &Path,
+) -> Result<(Option<DetectStage>, Vec<MissingCascade>), CascadeError> {
     if !cfg.enabled {
         return Ok((None, Vec::new()));
     }
     let params = DetectParams::from(cfg);
     let mut specs = Vec::new();
     let mut missing = Vec::new();
-    for (label, file, light) in [
-        ("stop_sign", &cfg.stop_sign, false),
-        ("traffic_light", &cfg.traffic_light, true),
-        ("obstacle", &cfg.obstacle, false),
+    for (label, key, file, light) in [
+        ("stop_sign", "detect.stop_sign", &cfg.stop_sign, false),
+        ("traffic_light", "detect.traffic_light", &cfg.traffic_light, true),
+        ("obstacle", "detect.obstacle", &cfg.obstacle, false),
     ] {
+        if file.is_empty() {
+            continue;
+        }
         let path = base.join(file);
         if path.is_file() {
             specs.push(CascadeSpec {
@@ -139,7 +173,7 @@ pub fn load_detector(cfg: &DetectConfig, base: &Path) -> Result<(Option<DetectSt
                 params,
             });
         } else {
-            missing.push(path);
+            missing.push(MissingCascade { key, path });
         }
     }
     if specs.is_empty() {
@@ -333,7 +367,7 @@ impl Pipeline {
         let ranging = cfg.ranging.box_ranging(&cfg.camera);
         Ok(Self {
             lane: cfg.lane_detector()?,
-            control: Controller::new((&cfg.steering).into(), (&cfg.throttle).into()),
+            control: cfg.controller()?,
             width: cfg.camera.width,
             height: cfg.camera.height,
             detect: None,
@@ -601,11 +635,16 @@ impl Pipeline {
         let decision = self.behaviour.step(&obs, self.time_s);
         let detect_us = timer.lap_us();
         // 6. Control, then the behaviour's overrides.
-        let mut command = self.control.step(&lane, dt_s);
+        let input = SteeringInput {
+            lane: &lane,
+            lane_detector: &self.lane,
+            frame,
+        };
+        let mut command = self.control.step(&input, dt_s);
         command = apply(command, &decision);
         if decision.steer.is_some() {
             // The lane error means nothing during a lane change: start afresh afterwards.
-            self.control.pid.reset();
+            self.control.steering_mut().reset();
         }
         self.last_throttle = command.throttle;
         stage_us.control_us = timer.lap_us();
@@ -678,7 +717,7 @@ impl Pipeline {
         &self.control
     }
 
-    /// The controller, to change gains between frames (a dashboard, a lab); see
+    /// The controller, to change its parameters between frames (a dashboard, a lab); see
     /// [`crate::drive::Observer::before_frame`].
     pub fn controller_mut(&mut self) -> &mut Controller {
         &mut self.control

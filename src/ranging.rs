@@ -145,11 +145,16 @@ pub enum FitError {
 pub struct FitOptions {
     /// Also fit a_y (needs pairs spread over many rows).
     pub fit_ay: bool,
-    /// How far the principal point row may plausibly be from the starting value, pixels (a
+    /// How far the principal point row may plausibly be from `v0_prior_px`, pixels (a
     /// Gaussian prior). Tilt and v0 nearly trade off against each other in Eq. 5 (a row shift
     /// looks like a tilt change of Δv0/a_y), so a few noisy pairs cannot separate them; the prior
     /// keeps v0 near the image centre unless the data insist. `f64::INFINITY` = free.
     pub v0_sigma_px: f64,
+    /// Centre of the v0 prior, pixels; `None` = the starting value's v0. Give the image centre
+    /// (`(height − 1) / 2`): a prior centred on an earlier fit's v0 keeps that fit's answer
+    /// whatever the pairs say (tilt and v0 trade off), so the result would depend on the last
+    /// calibration rather than on the data.
+    pub v0_prior_px: Option<f64>,
     /// Expected noise of a measured row, pixels.
     pub row_sigma_px: f64,
     /// Expected error of a measured distance, metres (a tape measure: ~5 mm). Near the car a
@@ -163,6 +168,7 @@ impl Default for FitOptions {
         Self {
             fit_ay: false,
             v0_sigma_px: 3.0,
+            v0_prior_px: None,
             row_sigma_px: 1.0,
             distance_sigma_m: 0.005,
         }
@@ -170,7 +176,8 @@ impl Default for FitOptions {
 }
 
 /// Fits `α` and `v0` (and `a_y` when asked) to `pairs`, starting from `start` (whose `h` is
-/// kept). Minimises the squared row error plus the prior on v0.
+/// kept). Minimises the squared row error plus the prior on v0 (centred on `opts.v0_prior_px`,
+/// else on `start.v0`).
 pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, FitError> {
     let fit_ay = opts.fit_ay;
     let n_par = if fit_ay { 3 } else { 2 };
@@ -186,8 +193,9 @@ pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, 
             return Err(FitError::BadPair { index, d: p.d, v: p.v });
         }
     }
-    // Residual r_i = row(d_i) − v_i, plus the prior (v0 − v0_start)·σ_row/σ_v0;
+    // Residual r_i = row(d_i) − v_i, plus the prior (v0 − v0_prior)·σ_row/σ_v0;
     // parameters x = (α, v0, a_y).
+    let v0_prior = opts.v0_prior_px.unwrap_or(start.v0);
     let prior_w = if opts.v0_sigma_px.is_finite() && opts.v0_sigma_px > 0.0 {
         opts.row_sigma_px / opts.v0_sigma_px
     } else {
@@ -199,14 +207,53 @@ pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, 
             .sqrt()
             .max(1e-6)
     };
-    let weights: Vec<f64> = pairs.iter().map(|p| opts.row_sigma_px / sigma(&start, p)).collect();
+    // The weights depend on the parameters (∂v/∂d): fitted with weights taken at the start,
+    // then again with weights taken at the result, until the result stops moving, so the
+    // answer does not depend on where the fit started.
+    let mut cur = start;
+    for _ in 0..5 {
+        let weights: Vec<f64> = pairs.iter().map(|p| opts.row_sigma_px / sigma(&cur, p)).collect();
+        let next = solve_weighted(pairs, cur, &weights, v0_prior, prior_w, fit_ay)?;
+        let settled = (next.alpha - cur.alpha).abs() < 1e-10
+            && (next.v0 - cur.v0).abs() < 1e-7
+            && (next.a_y - cur.a_y).abs() < 1e-7;
+        cur = next;
+        if settled {
+            break;
+        }
+    }
+    if cur.a_y <= 0.0 {
+        return Err(FitError::NoConvergence);
+    }
+    let residuals_m = pairs
+        .iter()
+        .map(|p| cur.distance(p.v, p.z).map_or(f64::NAN, |d| d - p.d))
+        .collect();
+    let rms_row_px = (pairs.iter().map(|p| (cur.row(p.d, p.z) - p.v).powi(2)).sum::<f64>() / pairs.len() as f64).sqrt();
+    Ok(Fit {
+        ranging: cur,
+        residuals_m,
+        rms_row_px,
+    })
+}
+
+/// One Levenberg–Marquardt solve of [`fit`] with fixed per-pair `weights`, from `start`.
+fn solve_weighted(
+    pairs: &[Pair],
+    start: TiltRanging,
+    weights: &[f64],
+    v0_prior: f64,
+    prior_w: f64,
+    fit_ay: bool,
+) -> Result<TiltRanging, FitError> {
+    let n_par = if fit_ay { 3 } else { 2 };
     let residuals = |r: &TiltRanging| -> Vec<f64> {
         let mut e: Vec<f64> = pairs
             .iter()
-            .zip(&weights)
+            .zip(weights)
             .map(|(p, w)| (r.row(p.d, p.z) - p.v) * w)
             .collect();
-        e.push((r.v0 - start.v0) * prior_w);
+        e.push((r.v0 - v0_prior) * prior_w);
         e
     };
     let cost = |r: &TiltRanging| residuals(r).iter().map(|e| e * e).sum::<f64>();
@@ -274,16 +321,7 @@ pub fn fit(pairs: &[Pair], start: TiltRanging, opts: FitOptions) -> Result<Fit, 
     if !c.is_finite() || cur.a_y <= 0.0 {
         return Err(FitError::NoConvergence);
     }
-    let residuals_m = pairs
-        .iter()
-        .map(|p| cur.distance(p.v, p.z).map_or(f64::NAN, |d| d - p.d))
-        .collect();
-    let rms_row_px = (pairs.iter().map(|p| (cur.row(p.d, p.z) - p.v).powi(2)).sum::<f64>() / pairs.len() as f64).sqrt();
-    Ok(Fit {
-        ranging: cur,
-        residuals_m,
-        rms_row_px,
-    })
+    Ok(cur)
 }
 
 /// The kinds of objects the pipeline ranges, each with its own box-bottom height.

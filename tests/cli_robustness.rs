@@ -176,7 +176,7 @@ fn calibration_validates_the_merged_config_before_writing() {
     );
     assert_eq!(o.code, Some(2), "{}", o.all());
     assert!(
-        o.stderr.contains("does not validate") && o.stderr.contains("ranging.a_y_scale = 2.7"),
+        o.stderr.contains("does not validate") && o.stderr.contains("ranging.a_y_scale = 2.69"),
         "{}",
         o.stderr
     );
@@ -813,6 +813,176 @@ fn every_size_a_flag_or_file_controls_is_bounded() {
         "{}",
         o.all()
     );
+}
+
+/// Issue 24: a configured cascade that is missing is an error naming the key, the file and the
+/// fix, for every command that runs the detector; before, `sim` warned and ran on without the
+/// stop-sign detector (exit 0). An empty path switches one class off on purpose, and the
+/// shipped configuration's cascades are there (the default runs).
+#[test]
+fn a_missing_cascade_is_an_error_naming_the_key_and_the_fix() {
+    let p = project();
+    let d = p.path();
+    let set = "detect.stop_sign=/nonexistent.xml";
+    std::fs::create_dir_all(d.join("frames")).unwrap();
+    std::fs::copy(sample_png(0), d.join("frames/a.png")).unwrap();
+    let runs: [&[&str]; 4] = [
+        &["sim", "--seconds", "1", "--no-timing", "-o", "out/sim", "--set", set],
+        &["replay", "frames", "-o", "out/replay", "--no-timing", "--set", set],
+        &["drive", "--camera", "sim", "--dry-run", "--seconds", "1", "-o", "out/drive", "--set", set],
+        &["stereo", "frames/a.png", "frames/a.png", "--set", set],
+    ];
+    for args in runs {
+        let o = rccar(d, args);
+        assert_eq!(o.code, Some(2), "{args:?}: {}", o.all());
+        assert!(
+            o.stderr.contains("detect.stop_sign = \"/nonexistent.xml\": no such cascade file")
+                && o.stderr.contains("detect.stop_sign = \"\" to run without that detector")
+                && o.stderr.contains("detect.enabled = false"),
+            "{args:?}: {}",
+            o.stderr
+        );
+    }
+    // rccar detect names its --cascade file.
+    let o = rccar(d, &["detect", "--cascade", "/nonexistent.xml", "frames/a.png", "--out", "out/det"]);
+    assert_eq!(o.code, Some(2), "{}", o.all());
+    assert!(o.stderr.contains("/nonexistent.xml"), "{}", o.stderr);
+    // The shipped cascades, and one class switched off on purpose: the run goes on.
+    for (extra, out) in [(None, "out/sim2"), (Some("detect.stop_sign="), "out/sim3")] {
+        let mut args = vec!["sim", "--seconds", "1", "--no-timing", "-o", out];
+        if let Some(e) = extra {
+            args.extend(["--set", e]);
+        }
+        let o = rccar(d, &args);
+        assert_eq!(o.code, Some(0), "{extra:?}: {}", o.all());
+        assert!(!o.stderr.contains("missing"), "{extra:?}: {}", o.stderr);
+    }
+}
+
+/// Issue 24: `rccar plot` bounds its fields (16 panels), files (8, one colour each), points
+/// (10 million over all of them) and line length (1 MiB). Before: 5,600 fields panicked
+/// (exit 101) and 1,500 aborted under a memory cap (a 1000 × 390,040 px image).
+#[test]
+fn plot_bounds_its_fields_files_points_and_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let tel: String = (0..50).map(|i| format!("{{\"time_s\":{i},\"steer\":0.1}}\n")).collect();
+    std::fs::write(d.join("t.jsonl"), &tel).unwrap();
+    let many = vec!["steer"; 5600].join(",");
+    let sixteen = vec!["steer"; 16].join(",");
+    let nine: Vec<&str> = vec!["t.jsonl"; 9];
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["plot", "t.jsonl", "--y", &many], "--y: 5600 fields; at most 16"),
+        (vec!["plot", "t.jsonl", "--y", "steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer,steer"], "--y: 17 fields; at most 16"),
+        ([&["plot"][..], &nine, &["--y", "steer"]].concat(), "9 telemetry files; at most 8"),
+    ];
+    for (args, want) in cases {
+        let o = rccar(d, &args);
+        assert_eq!(o.code, Some(2), "{want}: {}", o.all());
+        assert!(o.stderr.contains(want), "{want}: {}", o.stderr);
+    }
+    // At the bounds: 16 fields, 8 files.
+    let eight: Vec<&str> = vec!["t.jsonl"; 8];
+    let o = rccar(d, &[&["plot"][..], &eight, &["--y", &sixteen, "-o", "p.png"]].concat());
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    assert_eq!(image::image_dimensions(d.join("p.png")).unwrap(), (1000, 40 + 260 * 16));
+    // A 2 MiB line, and 625,001 records × 16 fields = 10,000,016 points.
+    std::fs::write(d.join("long.jsonl"), format!("{{\"time_s\":1,\"s\":\"{}\"}}\n", "x".repeat(2 << 20))).unwrap();
+    let o = rccar(d, &["plot", "long.jsonl", "--y", "steer"]);
+    assert!(o.code == Some(2) && o.stderr.contains("long.jsonl:1: line longer than 1048576 bytes"), "{}", o.all());
+    let big: String = (0..625_001).map(|i| format!("{{\"time_s\":{i},\"steer\":1}}\n")).collect();
+    std::fs::write(d.join("big.jsonl"), big).unwrap();
+    let o = rccar(d, &["plot", "big.jsonl", "--y", &sixteen]);
+    assert!(
+        o.code == Some(2) && o.stderr.contains("big.jsonl:625001: more than 10000000 points"),
+        "{}",
+        o.all()
+    );
+}
+
+/// Issue 24: every size and count a flag of `rccar` controls has a stated bound (in `--help`),
+/// enforced with an error naming the flag (or file) and the bound. One case per bound class:
+/// counts of things (files, boxes, pairs, pings, jobs), sizes in pixels, lengths and times,
+/// and files read whole (a cascade, a calibration, a pairs CSV given as /dev/zero, an image
+/// whose header claims 100000 × 100000 pixels). Before: `stereo --box 9223372036854775807,0,5,5`
+/// panicked, `link --latency 18446744073709551615` would ask for that many slots, `/dev/zero`
+/// as a cascade or calibration was read until memory ran out; the rest were taken silently.
+#[test]
+fn every_flag_names_its_bound() {
+    let p = project();
+    let d = p.path();
+    std::fs::write(d.join("big.png"), png_claiming(100_000, 100_000)).unwrap();
+    let img = sample_png(0).display().to_string();
+    let cascade = cascade_path(d);
+    let mut many_pairs = String::from("row_px,distance_m\n");
+    for i in 0..10_001 {
+        many_pairs += &format!("{},{}\n", 100 + i % 100, 0.5 + i as f64 * 1e-5);
+    }
+    std::fs::write(d.join("many.csv"), many_pairs).unwrap();
+    let boxes: Vec<String> = (0..1001).map(|_| "--box=1,1,5,5".to_string()).collect();
+    let imgs_101: Vec<&str> = vec![img.as_str(); 101];
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        // detect
+        (vec!["detect", "--cascade", &cascade, &img, "--min-neighbors", "101"], "--min-neighbors 101: must be 0..=100"),
+        (vec!["detect", "--cascade", &cascade, &img, "--min-size", "16385x5"], "--min-size 16385x5: each side must be 0..=16384"),
+        (vec!["detect", "--cascade", &cascade, &img, "--max-size", "5x99999"], "--max-size 5x99999: each side must be 0..=16384"),
+        ([&["detect"][..], &["--cascade", &cascade].repeat(17), &[img.as_str()]].concat(), "17 --cascade files: at most 16"),
+        (vec!["detect", "--cascade", "/dev/zero", &img], "/dev/zero: larger than a cascade file may be (33554432 bytes)"),
+        // calibrate camera / stereo
+        (vec!["calibrate", "camera", &img, "--square", "2"], "--square 2 must be a length in metres, > 0 and <= 1"),
+        (vec!["calibrate", "camera", &img, "--subpix-win", "0"], "--subpix-win 0: must be 1..=32"),
+        (vec!["calibrate", "camera", &img, "--subpix-win", "1000"], "--subpix-win 1000: must be 1..=32"),
+        ([&["calibrate", "camera"][..], &imgs_101].concat(), "101 images: at most 100"),
+        (vec!["calibrate", "camera", "big.png", "big.png", "big.png"], "big.png: 100000×100000 pixels is outside the image limit"),
+        (vec!["calibrate", "stereo", "--left", &img, "--right", &img, "--max-rms-px", "6"], "--max-rms-px 6: must be > 0 and <= 5"),
+        // calibrate ranging
+        (vec!["calibrate", "ranging", "--from-sim", "10", "--max-rms-px", "1000"], "--max-rms-px 1000: must be > 0 and <= 100"),
+        (vec!["calibrate", "ranging", "--from-sim", "10", "--v0-sigma-px", "1e9"], "--v0-sigma-px 1000000000: must be 0..=1000"),
+        (vec!["calibrate", "ranging", "many.csv"], "many.csv: 10001 pairs; at most 10000"),
+        (vec!["calibrate", "ranging", "/dev/zero"], "/dev/zero: larger than 1048576 bytes"),
+        // stereo
+        (vec!["stereo", &img, &img, "--box", "9223372036854775807,0,5,5"], "X and Y must be 0..=16384, W and H 1..=16384"),
+        (vec!["stereo", &img, &img, "--box", "0,0,0,5"], "X and Y must be 0..=16384, W and H 1..=16384"),
+        ([&["stereo", &img, &img][..], &boxes.iter().map(String::as_str).collect::<Vec<_>>()].concat(), "1001 --box flags: at most 1000"),
+        (vec!["stereo", "big.png", "big.png", "--box", "1,1,5,5"], "big.png: 100000×100000 pixels is outside the image limit"),
+        (vec!["stereo", &img, &img, "--box", "1,1,5,5", "--set", "stereo.calibration=/dev/zero"], "larger than a calibration file may be (16777216 bytes)"),
+        // link (checked before the port is opened)
+        (vec!["link", "--port", "/nonexistent", "--latency", "18446744073709551615"], "--latency 18446744073709551615: must be 1..=10000"),
+        (vec!["link", "--port", "/nonexistent", "--seconds", "1e9"], "--seconds 1000000000: must be > 0 and <= 86400"),
+        // drive
+        (vec!["drive", "--camera", "sim", "--dry-run", "--seconds", "1e20"], "--seconds 100000000000000000000: must be > 0 and <= 86400"),
+        (vec!["drive", "--camera", "sim", "--dry-run", "--seconds", "1", "--status-every", "NaN"], "--status-every NaN: must be 0.2..=3600"),
+        (vec!["drive", "--camera", "sim", "--dry-run", "--seconds", "1", "--record-max-mb", "1e300"], "must be 1..=1000000 megabytes (as record.max_mb)"),
+        // sim
+        (vec!["sim", "--sweep", "steering.kp=0.5:1:2", "--jobs", "0"], "--jobs 0: must be 1..=256"),
+        (vec!["sim", "--sweep", "steering.kp=0.5:1:2", "--jobs", "100000"], "--jobs 100000: must be 1..=256"),
+        (vec!["sim", "--kick", "1e9:0.01"], "--kick `1e9:0.01`: expected T:DY (seconds 0..=36000 : metres)"),
+        (vec!["sim", "--sweep", "steering.kp=0:1:1000", "--sweep", "steering.kd=0:1:2"], "at most 1000"),
+    ];
+    let mut failed = Vec::new();
+    for (args, want) in &cases {
+        let o = rccar_lenient(d, args);
+        if !(o.code == Some(2) && o.stderr.contains(want)) {
+            let shown: Vec<&str> = args.iter().take(8).copied().collect();
+            failed.push(format!("{shown:?}: want exit 2 and {want:?}, got {:?}: {}", o.code, o.stderr.trim()));
+        }
+    }
+    assert!(failed.is_empty(), "{} of {} cases:\n{}", failed.len(), cases.len(), failed.join("\n"));
+}
+
+/// [`rccar`] without its panic check (the panic is reported as a failed case instead).
+fn rccar_lenient(cwd: &Path, args: &[&str]) -> Out {
+    let o = Command::new(env!("CARGO_BIN_EXE_rccar"))
+        .current_dir(cwd)
+        .args(args)
+        .env_remove("RCCAR_CONFIG")
+        .output()
+        .unwrap();
+    Out {
+        code: o.status.code(),
+        stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&o.stderr).chars().take(300).collect(),
+    }
 }
 
 /// A structurally whole PNG whose header claims `w × h` (one tiny IDAT).

@@ -299,6 +299,7 @@ labs! {
     #[cfg_attr(not(feature = "serial"), ignore = "needs --features serial: tests/all.sh stage labs-link")]
     lab11 => "11-serial-link.md",
     lab12 => "12-behaviours.md",
+    lab13 => "13-pure-pursuit.md",
 }
 
 #[test]

@@ -25,7 +25,7 @@ const WAIT: Duration = Duration::from_secs(30);
 /// generous; every timing *assertion* is in simulated time.
 fn options() -> LinkOptions {
     LinkOptions {
-        reply_timeout: Duration::from_millis(2000),
+        reply_timeout: Duration::from_millis(8000),
         silence_timeout: Duration::from_millis(3000),
         ..LinkOptions::default()
     }
@@ -273,11 +273,24 @@ fn bit_errors_at_1e_3_never_apply_a_corrupted_command_and_every_loss_is_counted(
         (s, t)
     };
     inject.store(true, Ordering::SeqCst);
+    let drives_before = sim.rx_times(protocol::id::DRIVE).len();
     for i in 0..FRAMES {
         let (s, t) = pulse(i);
         link.drive(s, t);
         while link.drive_pending() {
             std::thread::sleep(Duration::from_micros(200));
+        }
+        // At most ~IN_FLIGHT intact frames between the host and the firmware's UART (the
+        // emulator's UART drains at 115200 baud of *its* clock, slower than ours on a busy
+        // machine): flooding the pty would block the writer past its back-pressure limit and
+        // reopen the port, throwing away what it held — a test artefact, not a wire error.
+        if i % 16 == 15 {
+            const IN_FLIGHT: usize = 64;
+            let intact = log.lock().unwrap().iter().filter(|x| !x.1).count();
+            let ok = sim.wait_until(WAIT, || (), |sm| {
+                sm.rx_times(protocol::id::DRIVE).len() - drives_before + IN_FLIGHT >= intact
+            });
+            assert!(ok, "the firmware stopped taking DRIVEs at frame {i}: {:?}", link.stats());
         }
     }
     inject.store(false, Ordering::SeqCst);
@@ -303,6 +316,15 @@ fn bit_errors_at_1e_3_never_apply_a_corrupted_command_and_every_loss_is_counted(
         after.crc_errors.wrapping_sub(before.crc_errors),
         after.framing_errors.wrapping_sub(before.framing_errors),
         after.overruns
+    );
+    // what else happened on the link (a reconnect or a firmware reset would explain a gap)
+    println!(
+        "bit errors: host {:?}; firmware failsafe trips {} -> {}, uptime {} -> {} ms",
+        link.stats(),
+        before.failsafe_trips,
+        after.failsafe_trips,
+        before.uptime_ms,
+        after.uptime_ms
     );
     assert!(sent as usize >= FRAMES);
     assert!(corrupted > 300, "the error rate did not bite: {corrupted}");

@@ -64,6 +64,85 @@ pub struct StereoCalibration {
     pub rectification: Rectification,
 }
 
+/// Largest calibration results file read, bytes (100 photo pairs write about 50 kB).
+pub const MAX_FILE_BYTES: u64 = 16 << 20;
+
+/// Shortest stereo baseline a calibration may have, metres. The project's pairs are 6–12 cm
+/// apart (`stereo.base_m` is 0.01..=2); a shorter one is a calibration made from the same
+/// photos given as left and right (|T| ≈ 1e-17 m), and ranges by b·f/d would be noise.
+pub const MIN_BASELINE_M: f64 = 0.01;
+/// Longest stereo baseline, metres (the bound of `stereo.base_m`).
+pub const MAX_BASELINE_M: f64 = 2.0;
+/// Smallest share of the baseline along the cameras' x axis, |T.x| / |T|: a side-by-side pair
+/// (cos 25° ≈ 0.906). Rows can only be rectified level for a pair that stands side by side.
+pub const MIN_BASELINE_ALONG_X: f64 = 0.9;
+/// Largest stereo reprojection rms a calibration file may hold, pixels (`rccar calibrate
+/// stereo --max-rms-px` refuses above 1 px by default and accepts at most this).
+pub const MAX_STEREO_RMS_PX: f64 = 5.0;
+
+/// Why a stereo calibration cannot be used for ranging (its geometry, not its file).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StereoGeometryError {
+    /// A number is NaN or infinite.
+    #[error("{what} is {value}: every number must be finite")]
+    NotFinite {
+        /// Which value.
+        what: &'static str,
+        /// The value.
+        value: f64,
+    },
+    /// The baseline is shorter than [`MIN_BASELINE_M`] or longer than [`MAX_BASELINE_M`].
+    #[error(
+        "baseline |T| = {baseline_m:.3e} m is outside {MIN_BASELINE_M}..={MAX_BASELINE_M} m{}",
+        if *baseline_m < MIN_BASELINE_M {
+            ": the left and right photos show the board from the same place (the same photos given twice?); photograph the board with both cameras of the pair, --left from the left camera, --right from the right"
+        } else {
+            ": check --square (the board's square size in metres)"
+        }
+    )]
+    Baseline {
+        /// |T|, metres.
+        baseline_m: f64,
+    },
+    /// The baseline is not mostly along x (a pair one above the other, or a bad fit).
+    #[error("T = [{:.4}, {:.4}, {:.4}] m is not a side-by-side pair (|T.x| is {:.0} % of |T|, at least {:.0} % needed): mount the cameras side by side, level, and calibrate again", t[0], t[1], t[2], 100.0 * along, 100.0 * MIN_BASELINE_ALONG_X)]
+    NotSideBySide {
+        /// T, metres.
+        t: [f64; 3],
+        /// |T.x| / |T|.
+        along: f64,
+    },
+    /// T.x > 0: the "right" camera sits left of the "left" one (OpenCV's convention,
+    /// X_r = R·X_l + T, gives T.x < 0 for a right camera on the right).
+    #[error("T.x = {tx:+.4} m > 0: the right camera is to the LEFT of the left one, so the two cameras are swapped; calibrate again with the --left and --right photos exchanged (or swap the cameras' cables)")]
+    Swapped {
+        /// T.x, metres.
+        tx: f64,
+    },
+    /// R is not a rotation.
+    #[error("R is not a rotation matrix (|RᵀR − I| = {err:.2e}, det {det:.4})")]
+    NotRotation {
+        /// Largest entry of |RᵀR − I|.
+        err: f64,
+        /// det R.
+        det: f64,
+    },
+    /// The stereo reprojection error is too large to trust.
+    #[error("stereo rms {rms_px:.3} px is above {max_px} px: the corners of the two views do not fit one rigid pair (a moved camera, a mislabelled pair, a blurred photo); check the per-pair rms and retake the worst pairs")]
+    Rms {
+        /// The file's rms, pixels.
+        rms_px: f64,
+        /// The bound, pixels.
+        max_px: f64,
+    },
+    /// The rectified camera is unusable (focal length not positive).
+    #[error("rectified focal length {f} px must be > 0")]
+    Focal {
+        /// f, pixels.
+        f: f64,
+    },
+}
+
 impl StereoCalibration {
     /// The pair's results: both cameras, the stereo fit `st` over the image pairs
     /// `names` (left, right; in the fit's order), its rectification, and the pairs not used.
@@ -95,6 +174,58 @@ impl StereoCalibration {
             pairs_not_used,
             rectification,
         }
+    }
+
+    /// Whether this pair's geometry can range: a finite R (a rotation) and T, a baseline of
+    /// [`MIN_BASELINE_M`]..=[`MAX_BASELINE_M`] mostly along x ([`MIN_BASELINE_ALONG_X`]), the
+    /// right camera on the right (T.x < 0), an rms of at most `max_rms_px` and a positive
+    /// rectified focal length.
+    pub fn check(&self, max_rms_px: f64) -> Result<(), StereoGeometryError> {
+        let finite = |what, value: f64| {
+            if value.is_finite() {
+                Ok(())
+            } else {
+                Err(StereoGeometryError::NotFinite { what, value })
+            }
+        };
+        for v in self.t {
+            finite("T", v)?;
+        }
+        for v in self.r.iter().flatten() {
+            finite("R", *v)?;
+        }
+        finite("rms_px", self.rms_px)?;
+        finite("rectification.f", self.rectification.f)?;
+        let [tx, ty, tz] = self.t;
+        let baseline_m = (tx * tx + ty * ty + tz * tz).sqrt();
+        if !(MIN_BASELINE_M..=MAX_BASELINE_M).contains(&baseline_m) {
+            return Err(StereoGeometryError::Baseline { baseline_m });
+        }
+        let along = tx.abs() / baseline_m;
+        if along < MIN_BASELINE_ALONG_X {
+            return Err(StereoGeometryError::NotSideBySide { t: self.t, along });
+        }
+        if tx > 0.0 {
+            return Err(StereoGeometryError::Swapped { tx });
+        }
+        let r = nalgebra::Matrix3::from_fn(|i, j| self.r[i][j]);
+        let err = (r.transpose() * r - nalgebra::Matrix3::identity()).abs().max();
+        let det = r.determinant();
+        if err > 1e-6 || det <= 0.0 {
+            return Err(StereoGeometryError::NotRotation { err, det });
+        }
+        if self.rms_px > max_rms_px {
+            return Err(StereoGeometryError::Rms {
+                rms_px: self.rms_px,
+                max_px: max_rms_px,
+            });
+        }
+        if self.rectification.f <= 0.0 {
+            return Err(StereoGeometryError::Focal {
+                f: self.rectification.f,
+            });
+        }
+        Ok(())
     }
 }
 
@@ -152,6 +283,14 @@ pub enum FileError {
         /// What was needed.
         want: &'static str,
     },
+    /// The stereo pair's geometry cannot range (see [`StereoCalibration::check`]).
+    #[error("{path}: {err}")]
+    Geometry {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        err: StereoGeometryError,
+    },
     /// The calibration was made for another image size.
     #[error("{path}: calibrated for {cw}x{ch} images, but the frames are {w}x{h}")]
     Size {
@@ -172,14 +311,28 @@ impl CalibrationFile {
     /// Reads a results file.
     pub fn load(path: &Path) -> Result<CalibrationFile, FileError> {
         let p = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|err| FileError::Io { path: p.clone(), err })?;
+        use std::io::Read;
+        let io = |err| FileError::Io { path: p.clone(), err };
+        let mut text = String::new();
+        std::fs::File::open(path)
+            .map_err(io)?
+            .take(MAX_FILE_BYTES + 1)
+            .read_to_string(&mut text)
+            .map_err(io)?;
+        if text.len() as u64 > MAX_FILE_BYTES {
+            return Err(FileError::Parse {
+                path: p,
+                msg: format!("larger than a calibration file may be ({MAX_FILE_BYTES} bytes)"),
+            });
+        }
         serde_json::from_str(&text).map_err(|e| FileError::Parse {
             path: p,
             msg: e.to_string(),
         })
     }
 
-    /// Reads a stereo results file whose images are `width`×`height`.
+    /// Reads a stereo results file whose images are `width`×`height`, and refuses one whose
+    /// geometry cannot range ([`StereoCalibration::check`] with [`MAX_STEREO_RMS_PX`]).
     pub fn load_stereo(path: &Path, width: u32, height: u32) -> Result<StereoCalibration, FileError> {
         let p = path.display().to_string();
         match Self::load(path)? {
@@ -194,6 +347,9 @@ impl CalibrationFile {
                         h: height,
                     });
                 }
+                stereo
+                    .check(MAX_STEREO_RMS_PX)
+                    .map_err(|err| FileError::Geometry { path: p, err })?;
                 Ok(stereo)
             }
             CalibrationFile::Camera { .. } => Err(FileError::Kind {

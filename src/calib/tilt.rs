@@ -1,5 +1,6 @@
 //! Calibrating tilt ranging from measured pairs (`rccar calibrate ranging`): which pairs can
-//! determine the camera ([`check_pairs`]), where the fit starts ([`nominal`]), and writing the
+//! determine the camera ([`check_pairs`]), where the fit starts ([`from_image_centre`]; the
+//! check start [`nominal`], [`same_fit`]), and writing the
 //! result into the student's override file in place ([`edit_override`], [`backup_name`],
 //! [`write_file`], the dry run's [`line_diff`]). The fit itself is
 //! [`crate::ranging::fit`].
@@ -22,13 +23,42 @@ pub enum OverrideError {
     NotValue(String),
 }
 
+/// Where the fit starts: the configured camera with v0 at the image centre (the prior on v0
+/// sits there too: the centre is a property of the image, not of the last calibration; tilt
+/// and v0 trade off, so a prior at an earlier fit's v0 returns that fit whatever the pairs
+/// say). Without `fit_ay`, a_y is held at the configured `a_y_scale`.
+pub fn from_image_centre(cam: &PinholeCamera, a_y_scale: f64, fit_ay: bool) -> TiltRanging {
+    let mut start = TiltRanging::from_camera(cam);
+    if !fit_ay {
+        start.a_y *= a_y_scale;
+    }
+    start
+}
+
 /// The configured (nominal) camera's tilt ranging, with the configured v0 offset and a_y
-/// scale applied: where the fit starts.
+/// scale applied (the last calibration): where the second fit starts, which must land on the
+/// same answer as the first ([`same_fit`]).
 pub fn nominal(cam: &PinholeCamera, v0_offset_px: f64, a_y_scale: f64) -> TiltRanging {
     let mut start = TiltRanging::from_camera(cam);
     start.v0 += v0_offset_px;
     start.a_y *= a_y_scale;
     start
+}
+
+/// Two fits of the same pairs, one started from the image centre and one from the configured
+/// values, must agree within this tilt, degrees, ...
+pub const START_TOL_DEG: f64 = 0.01;
+/// ... this v0, pixels ...
+pub const START_TOL_PX: f64 = 0.05;
+/// ... and this fraction of a_y; otherwise the start decided the answer and it is refused.
+pub const START_TOL_AY: f64 = 1e-3;
+
+/// Whether the fit `g` (started from the configured values) lands on `f` (started from the
+/// image centre) within [`START_TOL_DEG`], [`START_TOL_PX`] and [`START_TOL_AY`].
+pub fn same_fit(f: &TiltRanging, g: &TiltRanging) -> bool {
+    !((g.alpha - f.alpha).abs().to_degrees() > START_TOL_DEG
+        || (g.v0 - f.v0).abs() > START_TOL_PX
+        || (g.a_y - f.a_y).abs() > START_TOL_AY * f.a_y)
 }
 
 /// The pairs as the CSV `calibrate ranging` reads (`row_px,distance_m,height_m`).

@@ -7,7 +7,7 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rccar::calib::corners::{find_chessboard, orient_like, BoardSize, CornerOptions};
-use rccar::calib::file::{CalibrationFile, CameraCalibration, StereoCalibration};
+use rccar::calib::file::{CalibrationFile, CameraCalibration, StereoCalibration, MAX_STEREO_RMS_PX};
 use rccar::calib::intrinsics::{board_points, calibrate_camera};
 use rccar::calib::stereo::{stereo_calibrate, stereo_rectify};
 use std::path::{Path, PathBuf};
@@ -19,10 +19,11 @@ pub struct BoardArgs {
     /// Inner corners of the board, COLSxROWS (OpenCV's sample board: 9x6).
     #[arg(long, default_value = "9x6")]
     pub board: BoardSize,
-    /// Side of one square, metres (the unit of T and the baseline).
+    /// Side of one square, metres (the unit of T and the baseline); 0 < S <= 1.
     #[arg(long, default_value_t = 0.025)]
     pub square: f64,
-    /// Half size of the sub-pixel search window, pixels (OpenCV's winSize (11, 11) → 11).
+    /// Half size of the sub-pixel search window, pixels (OpenCV's winSize (11, 11) → 11);
+    /// 1..=32.
     #[arg(long, default_value_t = 11)]
     pub subpix_win: usize,
     /// Also write the corners found in every image to this JSON file ({image: [[u, v], ...]}).
@@ -33,7 +34,7 @@ pub struct BoardArgs {
 /// `rccar calibrate camera` flags.
 #[derive(Args, Debug)]
 pub struct CameraArgs {
-    /// Photos of the board (PNG or JPEG), at least 3 with the board found.
+    /// Photos of the board (PNG or JPEG), at least 3 with the board found, at most 100.
     #[arg(required = true)]
     pub images: Vec<PathBuf>,
     #[command(flatten)]
@@ -46,7 +47,7 @@ pub struct CameraArgs {
 /// `rccar calibrate stereo` flags.
 #[derive(Args, Debug)]
 pub struct StereoArgs {
-    /// Left-camera photos, in the same order as `--right`.
+    /// Left-camera photos, in the same order as `--right` (at most 100 pairs).
     #[arg(long, num_args = 1.., required = true)]
     pub left: Vec<PathBuf>,
     /// Right-camera photos, paired one to one with `--left`.
@@ -57,11 +58,56 @@ pub struct StereoArgs {
     /// Results file to write (`[stereo] calibration` in config/car.toml reads it).
     #[arg(long, short, default_value = "stereo_calib.json")]
     pub out: PathBuf,
+    /// Refuse a stereo fit whose rms reprojection error is above this, pixels (0 < N <= 5;
+    /// a good calibration is below 0.5 px).
+    #[arg(long, default_value_t = 1.0)]
+    pub max_rms_px: f64,
 }
 
 fn load_gray(path: &Path) -> Result<image::GrayImage> {
-    let img = image::open(path).with_context(|| format!("{}: cannot read the image", path.display()))?;
-    Ok(img.to_luma8())
+    Ok(open_image(path)?.to_luma8())
+}
+
+/// Opens an image with the `image` crate's decoders (the calibration's parity with OpenCV was
+/// measured with them), after checking the size in its header against the project's image
+/// limits (`rccar::config::limits`), so a header claiming 100000×100000 pixels is refused by
+/// name before anything is allocated.
+pub(crate) fn open_image(path: &Path) -> Result<image::DynamicImage> {
+    use rccar::config::limits::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
+    let (w, h) = image::image_dimensions(path).with_context(|| format!("{}: cannot read the image", path.display()))?;
+    if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE || w as u64 * h as u64 > MAX_IMAGE_PIXELS {
+        bail!(
+            "{}: {w}×{h} pixels is outside the image limit (1..={MAX_IMAGE_SIDE} per side, at most {} megapixels)",
+            path.display(),
+            MAX_IMAGE_PIXELS / 1_000_000
+        );
+    }
+    image::open(path).with_context(|| format!("{}: cannot read the image", path.display()))
+}
+
+/// Most photos per camera: the docs ask for 10–20, and the fit's Jacobian grows with the
+/// square of the views.
+pub const MAX_IMAGES: usize = 100;
+/// Most board corners over all photos of one fit (the Jacobian has 2 rows per corner and 6
+/// columns per photo: 20,000 corners of 100 photos is 40,000 × 615 values, 200 MB).
+pub const MAX_CORNERS: usize = 20_000;
+/// Largest `--corners-out` file read back to append to, bytes.
+const MAX_CORNERS_FILE: u64 = 64 << 20;
+/// `--subpix-win` bounds, pixels.
+const SUBPIX_WIN: (usize, usize) = (1, 32);
+
+/// Refuses more than [`MAX_IMAGES`] photos and more than [`MAX_CORNERS`] corners found.
+fn check_counts(what: &str, n_images: usize, found: &Found) -> Result<()> {
+    if n_images > MAX_IMAGES {
+        bail!("{n_images} {what}: at most {MAX_IMAGES} (10–20 photos calibrate a camera)");
+    }
+    let corners: usize = found.iter().flatten().map(Vec::len).sum();
+    if corners > MAX_CORNERS {
+        bail!(
+            "{corners} board corners found in {n_images} {what}: at most {MAX_CORNERS} in one fit; use fewer photos or a board with fewer squares"
+        );
+    }
+    Ok(())
 }
 
 /// Corners of each image (None where the board was not found); all images must share a size.
@@ -69,11 +115,25 @@ fn load_gray(path: &Path) -> Result<image::GrayImage> {
 type Found = Vec<Option<Vec<[f64; 2]>>>;
 
 fn find_all(paths: &[PathBuf], b: &BoardArgs) -> Result<(Found, (u32, u32))> {
-    if b.square <= 0.0 || !b.square.is_finite() {
-        bail!("--square {} must be a positive length in metres", b.square);
+    if !(b.square > 0.0 && b.square <= 1.0) {
+        bail!("--square {} must be a length in metres, > 0 and <= 1", b.square);
+    }
+    if !(SUBPIX_WIN.0..=SUBPIX_WIN.1).contains(&b.subpix_win) {
+        bail!(
+            "--subpix-win {}: must be {}..={} pixels",
+            b.subpix_win,
+            SUBPIX_WIN.0,
+            SUBPIX_WIN.1
+        );
+    }
+    if paths.len() > MAX_IMAGES {
+        bail!(
+            "{} images: at most {MAX_IMAGES} (10–20 photos calibrate a camera)",
+            paths.len()
+        );
     }
     let opts = CornerOptions {
-        subpix_win: b.subpix_win.max(1),
+        subpix_win: b.subpix_win,
         ..CornerOptions::default()
     };
     let mut size = None;
@@ -95,6 +155,13 @@ fn find_all(paths: &[PathBuf], b: &BoardArgs) -> Result<(Found, (u32, u32))> {
     }
     if let Some(path) = &b.corners_out {
         // Appends to what an earlier call (the other camera) wrote.
+        let small = std::fs::metadata(path).map_or(true, |m| m.len() <= MAX_CORNERS_FILE);
+        if !small {
+            bail!(
+                "--corners-out {}: an existing file larger than {MAX_CORNERS_FILE} bytes (not one this command wrote); move it away",
+                path.display()
+            );
+        }
         let mut all: std::collections::BTreeMap<String, Option<Vec<[f64; 2]>>> = std::fs::read_to_string(path)
             .ok()
             .and_then(|t| serde_json::from_str(&t).ok())
@@ -124,6 +191,7 @@ fn name(p: &Path) -> String {
 /// Runs `rccar calibrate camera`.
 pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
     let (found, size) = find_all(&a.images, &a.board)?;
+    check_counts("images", a.images.len(), &found)?;
     let mut views = vec![];
     let mut names = vec![];
     let mut not_found = vec![];
@@ -176,8 +244,16 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
             a.right.len()
         );
     }
+    if !(a.max_rms_px.is_finite() && a.max_rms_px > 0.0 && a.max_rms_px <= MAX_STEREO_RMS_PX) {
+        bail!(
+            "--max-rms-px {}: must be > 0 and <= {MAX_STEREO_RMS_PX} pixels",
+            a.max_rms_px
+        );
+    }
     let (fl, sl) = find_all(&a.left, &a.board)?;
+    check_counts("left images", a.left.len(), &fl)?;
     let (fr, sr) = find_all(&a.right, &a.board)?;
+    check_counts("right images", a.right.len(), &fr)?;
     if sl != sr {
         bail!(
             "left images are {}x{} but right images are {}x{} ({} vs {}): the pair must have one size",
@@ -229,6 +305,13 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
         "stereo: T = [{:.5}, {:.5}, {:.5}] m (baseline {:.4} m), RMS {:.4} px; rectified f {:.2} px, c ({:.2}, {:.2})",
         t[0], t[1], t[2], stereo.baseline_m, st.rms, stereo.rectification.f, stereo.rectification.c[0], stereo.rectification.c[1]
     );
+    // Only a pair that can range is written (the loaders refuse the rest too).
+    stereo.check(a.max_rms_px).map_err(|e| {
+        anyhow::anyhow!(
+            "the stereo calibration is not usable, so {} is not written: {e}",
+            a.out.display()
+        )
+    })?;
     let file = CalibrationFile::Stereo {
         board: a.board.board,
         square_m: a.board.square,

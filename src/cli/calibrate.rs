@@ -8,7 +8,10 @@
 //! It never writes a value it cannot stand behind: degenerate pairs (too few distinct rows,
 //! rows outside the image, heights at or above the camera, NaN/inf anywhere) are refused
 //! before the fit; a fit with an undefined residual or an rms row error above `--max-rms-px`
-//! is refused after it; the merged configuration is validated before anything is written;
+//! is refused after it; so is a fit decided by where it started (the prior on v0 sits at the
+//! image centre, never at the last calibration's v0, and the fit started from the configured
+//! values must land on the same answer); the merged configuration is validated before
+//! anything is written;
 //! `--dry-run` prints the diff of the override file instead of writing it.
 
 use super::common::ConfigArgs;
@@ -36,7 +39,8 @@ pub enum CalibrateCmd {
 /// `rccar calibrate ranging` flags.
 #[derive(Args, Debug)]
 pub struct RangingArgs {
-    /// CSV of `row_px,distance_m[,height_m]` lines (header and `#` comments allowed).
+    /// CSV of `row_px,distance_m[,height_m]` lines (header and `#` comments allowed; at most
+    /// 10,000 pairs, 1 MiB).
     pub pairs: Option<PathBuf>,
     /// Also fit a_y (needs pairs spread over many rows).
     #[arg(long)]
@@ -49,7 +53,7 @@ pub struct RangingArgs {
     #[arg(long)]
     pub dry_run: bool,
     /// Refuse a fit whose rms row error is above this, pixels (a good tape-measure
-    /// calibration is below 1 px).
+    /// calibration is below 1 px); 0 < N <= 100.
     #[arg(long, default_value_t = 2.0)]
     pub max_rms_px: f64,
     /// Make N pairs in the simulator's lab instead of reading a CSV.
@@ -67,7 +71,8 @@ pub struct RangingArgs {
     /// Lab: also write the pairs to this CSV (a lab hand-out).
     #[arg(long)]
     pub sim_pairs_out: Option<PathBuf>,
-    /// How far v0 may plausibly move from the image centre, pixels (a prior; 0 = free).
+    /// How far v0 may plausibly move from the image centre, pixels (a prior centred on the
+    /// image's middle row, never on the configured v0_offset_px; 0 = free); 0..=1000.
     #[arg(long, default_value_t = 3.0)]
     pub v0_sigma_px: f64,
     #[command(flatten)]
@@ -83,8 +88,30 @@ pub fn run(c: CalibrateCmd) -> Result<ExitCode> {
     }
 }
 
-/// Largest `--from-sim` pair count (the lab renders one frame per pair).
+/// Largest `--from-sim` pair count (the lab renders one frame per pair), and of a CSV.
 const MAX_SIM_PAIRS: usize = 10_000;
+/// Largest pairs CSV, bytes (10,000 pairs of ~25 bytes fit 25 times over).
+const MAX_CSV_BYTES: u64 = 1 << 20;
+/// Largest override file edited in place, bytes.
+const MAX_OVERRIDE_BYTES: u64 = 1 << 20;
+/// Largest `--max-rms-px`, pixels.
+const MAX_RMS_PX: f64 = 100.0;
+/// Largest `--v0-sigma-px`, pixels (4× the largest image side is no prior at all).
+const MAX_V0_SIGMA_PX: f64 = 1000.0;
+
+/// Reads a text file of at most `max` bytes; the error names the file and the bound.
+fn read_small(path: &Path, max: u64) -> Result<String> {
+    use std::io::Read;
+    let f = std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let mut text = String::new();
+    f.take(max + 1)
+        .read_to_string(&mut text)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    if text.len() as u64 > max {
+        bail!("{}: larger than {max} bytes; not a file this command reads", path.display());
+    }
+    Ok(text)
+}
 
 fn ranging(a: RangingArgs) -> Result<ExitCode> {
     let loaded = a.config.load_full()?;
@@ -94,8 +121,12 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     let pairs = match (&a.pairs, a.from_sim) {
         (_, Some(n)) => lab_pairs(&a, &cfg, n)?,
         (Some(path), None) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-            parse_pairs_csv(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?
+            let text = read_small(path, MAX_CSV_BYTES)?;
+            let p = parse_pairs_csv(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?;
+            if p.len() > MAX_SIM_PAIRS {
+                bail!("{}: {} pairs; at most {MAX_SIM_PAIRS}", path.display(), p.len());
+            }
+            p
         }
         (None, None) => bail!("give a PAIRS.csv or --from-sim N"),
     };
@@ -106,9 +137,12 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     // 2. Refuse data that cannot determine the unknowns.
     check_pairs(&pairs, cfg.camera.height, cfg.camera.height_m, a.fit_ay)
         .map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
-    // 3. Fit from the configured (nominal) camera.
+    // 3. Fit. The prior on v0 sits at the image centre (a property of the image, not of the
+    // last calibration: tilt and v0 trade off, so a prior at an earlier fit's v0 returns that
+    // fit whatever the pairs say). Without --fit-ay, a_y is held at the configured scale.
     let cam = PinholeCamera::from(&cfg.camera);
-    let start = tilt::nominal(&cam, cfg.ranging.v0_offset_px, cfg.ranging.a_y_scale);
+    let centre = cam.v0;
+    let from_image = tilt::from_image_centre(&cam, cfg.ranging.a_y_scale, a.fit_ay);
     let opts = FitOptions {
         fit_ay: a.fit_ay,
         v0_sigma_px: if a.v0_sigma_px > 0.0 {
@@ -116,9 +150,10 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         } else {
             f64::INFINITY
         },
+        v0_prior_px: Some(centre),
         ..Default::default()
     };
-    let f = fit(&pairs, start, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
+    let f = fit(&pairs, from_image, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 4. Report.
     print_fit(&pairs, &f);
     let tilt = f.ranging.alpha.to_degrees();
@@ -129,7 +164,9 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         cfg.camera.tilt_deg, f.ranging.v0, f.ranging.a_y, f.rms_row_px
     );
     // 5. Refuse a fit that does not explain the data.
-    refuse_bad_fit(&origin, &pairs, &f, a.max_rms_px, [("tilt", tilt), ("v0 offset", v0_off), ("a_y scale", ay_scale)])?;
+    let fitted = [("tilt", tilt), ("v0 offset", v0_off), ("a_y scale", ay_scale)];
+    refuse_bad_fit(&origin, &pairs, &f, a.max_rms_px, fitted, cfg.camera.height)?;
+    refuse_start_dependent(&origin, &pairs, &f, opts, &cfg, a.v0_sigma_px)?;
     // 6.-7. The override file.
     let round = |v: f64| (v * 1e4).round() / 1e4;
     let values = [
@@ -142,12 +179,12 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
 
 /// The flags' bounds.
 fn check_bounds(a: &RangingArgs) -> Result<()> {
-    if !(a.max_rms_px.is_finite() && a.max_rms_px > 0.0) {
-        bail!("--max-rms-px {}: must be a finite number of pixels > 0", a.max_rms_px);
+    if !(a.max_rms_px > 0.0 && a.max_rms_px <= MAX_RMS_PX) {
+        bail!("--max-rms-px {}: must be > 0 and <= {MAX_RMS_PX} pixels", a.max_rms_px);
     }
-    if !(a.v0_sigma_px.is_finite() && a.v0_sigma_px >= 0.0) {
+    if !(a.v0_sigma_px >= 0.0 && a.v0_sigma_px <= MAX_V0_SIGMA_PX) {
         bail!(
-            "--v0-sigma-px {}: must be a finite number of pixels >= 0 (0 = free)",
+            "--v0-sigma-px {}: must be 0..={MAX_V0_SIGMA_PX} pixels (0 = free)",
             a.v0_sigma_px
         );
     }
@@ -202,9 +239,16 @@ fn print_fit(pairs: &[Pair], f: &Fit) {
     }
 }
 
-/// Refuses a fit with an undefined residual, an rms row error above `max_rms_px` or a value
-/// that is not finite.
-fn refuse_bad_fit(origin: &str, pairs: &[Pair], f: &Fit, max_rms_px: f64, values: [(&str, f64); 3]) -> Result<()> {
+/// Refuses a fit with an undefined residual, an rms row error above `max_rms_px`, a value
+/// that is not finite or a v0 outside the image's `image_height` rows.
+fn refuse_bad_fit(
+    origin: &str,
+    pairs: &[Pair],
+    f: &Fit,
+    max_rms_px: f64,
+    values: [(&str, f64); 3],
+    image_height: u32,
+) -> Result<()> {
     if let Some(i) = f.residuals_m.iter().position(|r| !r.is_finite()) {
         bail!(
             "{origin}: pair {} (row {} px, {} m): the fitted camera does not see that row on the floor (above its horizon); the pairs do not belong together; nothing written",
@@ -225,6 +269,56 @@ fn refuse_bad_fit(origin: &str, pairs: &[Pair], f: &Fit, max_rms_px: f64, values
             bail!("{origin}: the fitted {what} is {v}; nothing written");
         }
     }
+    if !(0.0..image_height as f64).contains(&f.ranging.v0) {
+        bail!(
+            "{origin}: the fitted principal point row v0 = {:.1} px is outside the image (rows 0..{}): the pairs do not pin tilt and v0 apart; measure at more distances spread over the image, or keep v0 near the centre (--v0-sigma-px 3); nothing written",
+            f.ranging.v0,
+            image_height - 1
+        );
+    }
+    Ok(())
+}
+
+/// 5b. Refuses a fit `f` that lands elsewhere when started from the configured values (the
+/// last calibration, [`tilt::nominal`]): it was decided by its start, not by the pairs.
+fn refuse_start_dependent(
+    origin: &str,
+    pairs: &[Pair],
+    f: &Fit,
+    opts: FitOptions,
+    cfg: &Config,
+    v0_sigma_px: f64,
+) -> Result<()> {
+    let from_config = tilt::nominal(
+        &PinholeCamera::from(&cfg.camera),
+        cfg.ranging.v0_offset_px,
+        cfg.ranging.a_y_scale,
+    );
+    let g = fit(pairs, from_config, opts);
+    let disagree = match &g {
+        Ok(g) => !tilt::same_fit(&f.ranging, &g.ranging),
+        Err(_) => true,
+    };
+    if disagree {
+        let other = match &g {
+            Ok(g) => format!(
+                "tilt {:.3} deg, v0 {:.2} px, a_y {:.1} px",
+                g.ranging.alpha.to_degrees(),
+                g.ranging.v0,
+                g.ranging.a_y
+            ),
+            Err(e) => format!("no fit ({e})"),
+        };
+        bail!(
+            "{origin}: the fit depends on where it starts: from the image centre it gives tilt {:.3} deg, v0 {:.2} px, a_y {:.1} px; from the configured values (ranging.v0_offset_px = {}, ranging.a_y_scale = {}) {other}; the pairs do not pin the camera down: measure at more distances spread over the image{}; nothing written",
+            f.ranging.alpha.to_degrees(),
+            f.ranging.v0,
+            f.ranging.a_y,
+            cfg.ranging.v0_offset_px,
+            cfg.ranging.a_y_scale,
+            if v0_sigma_px > 0.0 { "" } else { ", or keep v0 near the image centre (--v0-sigma-px 3)" }
+        );
+    }
     Ok(())
 }
 
@@ -232,10 +326,9 @@ fn refuse_bad_fit(origin: &str, pairs: &[Pair], f: &Fit, max_rms_px: f64, values
 /// (`--dry-run`) or written (the old one backed up first, the new one replacing it atomically).
 fn write_result(a: &RangingArgs, loaded: &LoadedConfig, values: &[(&str, &str, f64)]) -> Result<ExitCode> {
     let target = a.write.clone().unwrap_or_else(|| loaded.dir.join("local.toml"));
-    let old = match std::fs::read_to_string(&target) {
-        Ok(t) => Some(t),
+    let old = match std::fs::metadata(&target) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-        Err(e) => bail!("{}: cannot read: {e}", target.display()),
+        _ => Some(read_small(&target, MAX_OVERRIDE_BYTES)?),
     };
     let new = edit_override(old.as_deref(), values).with_context(|| format!("{}: cannot update", target.display()))?;
     let base = &loaded.files[0];

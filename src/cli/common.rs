@@ -100,22 +100,13 @@ impl ConfigArgs {
     }
 }
 
-/// Loads the `[detect]` cascades that exist and says once, on stderr, which are missing (the
-/// pipeline then runs without them: lane keeping only when none exists). The paths in `cfg`
-/// are absolute after [`ConfigArgs::load`].
+/// Loads the `[detect]` cascades; a configured one that is missing is an error naming the key,
+/// the file and the fix (an empty path switches a class off). The paths in `cfg` are absolute
+/// after [`ConfigArgs::load`].
 pub fn load_detector(cfg: &Config) -> Result<Option<rccar::detect::DetectStage>> {
     let (stage, missing) = rccar::pipeline::load_detector(&cfg.detect, Path::new("."))?;
-    if !missing.is_empty() {
-        let names: Vec<String> = missing.iter().map(|p| p.display().to_string()).collect();
-        eprintln!(
-            "detect: missing {}; {}",
-            names.join(", "),
-            if stage.is_some() {
-                "running without them"
-            } else {
-                "running lane-only"
-            }
-        );
+    if let Some(m) = missing.first() {
+        bail!("{m}");
     }
     Ok(stage)
 }

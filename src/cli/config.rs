@@ -87,6 +87,17 @@ pub fn run(cmd: ConfigCmd) -> Result<ExitCode> {
 fn check(args: &ConfigArgs) -> Result<ExitCode> {
     match args.load_full() {
         Ok(l) => {
+            // A named stereo calibration must be one the pipeline would load (file, image
+            // size, a pair that can range).
+            if !l.cfg.stereo.calibration.is_empty() {
+                let path = std::path::Path::new(&l.cfg.stereo.calibration);
+                if let Err(e) =
+                    rccar::calib::file::CalibrationFile::load_stereo(path, l.cfg.camera.width, l.cfg.camera.height)
+                {
+                    eprintln!("config error:\nstereo.calibration: {e}");
+                    return Ok(ExitCode::from(1));
+                }
+            }
             print!("{}", l.cfg.to_toml());
             let files: Vec<String> = l.files.iter().map(|p| p.display().to_string()).collect();
             if l.values_in_files == 0 {

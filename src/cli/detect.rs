@@ -16,7 +16,7 @@ use std::process::ExitCode;
 /// Flags of `rccar detect`.
 #[derive(Args, Debug)]
 pub struct DetectArgs {
-    /// Cascade XML file (repeatable; each runs on every image).
+    /// Cascade XML file (repeatable, at most 16; each runs on every image).
     #[arg(long = "cascade", required = true)]
     pub cascades: Vec<PathBuf>,
     /// Images (PNG or JPEG; colour is converted to grey as OpenCV's cvtColor does).
@@ -25,13 +25,13 @@ pub struct DetectArgs {
     /// Ratio between pyramid levels (1.01..=4; below 1.01 the pyramid needs hundreds of levels).
     #[arg(long, default_value_t = 1.1)]
     pub scale_factor: f64,
-    /// Raw hits a box needs beyond itself; 0 prints raw hits.
+    /// Raw hits a box needs beyond itself; 0 prints raw hits (0..=100).
     #[arg(long, default_value_t = 3)]
     pub min_neighbors: u32,
-    /// Smallest box, WxH pixels.
+    /// Smallest box, WxH pixels (each side 0..=16384).
     #[arg(long, value_parser = parse_size, default_value = "0x0")]
     pub min_size: (u32, u32),
-    /// Largest box, WxH pixels (0x0 = image size).
+    /// Largest box, WxH pixels (0x0 = image size; each side 0..=16384).
     #[arg(long, value_parser = parse_size, default_value = "0x0")]
     pub max_size: (u32, u32),
     /// Spread the pyramid levels over all cores.
@@ -71,6 +71,10 @@ const COLOURS: [[u8; 3]; 6] = [
 
 /// Bounds of `--scale-factor`: at 1.01 a 4096-pixel image already has ~500 pyramid levels.
 const SCALE_FACTOR: (f64, f64) = (1.01, 4.0);
+/// Most `--cascade` files (each runs on every image).
+const MAX_CASCADES: usize = 16;
+/// Largest `--min-neighbors` (as `detect.min_neighbors`).
+const MAX_MIN_NEIGHBORS: u32 = 100;
 
 /// Runs the detectors and reports.
 pub fn run(args: DetectArgs) -> Result<ExitCode> {
@@ -81,6 +85,21 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
             SCALE_FACTOR.0,
             SCALE_FACTOR.1
         );
+    }
+    if args.cascades.len() > MAX_CASCADES {
+        anyhow::bail!(
+            "{} --cascade files: at most {MAX_CASCADES} (each runs on every image)",
+            args.cascades.len()
+        );
+    }
+    if args.min_neighbors > MAX_MIN_NEIGHBORS {
+        anyhow::bail!("--min-neighbors {}: must be 0..={MAX_MIN_NEIGHBORS}", args.min_neighbors);
+    }
+    let side = rccar::config::limits::MAX_IMAGE_SIDE;
+    for (flag, (w, h)) in [("--min-size", args.min_size), ("--max-size", args.max_size)] {
+        if w > side || h > side {
+            anyhow::bail!("{flag} {w}x{h}: each side must be 0..={side} pixels (the largest image side)");
+        }
     }
     let params = DetectParams {
         scale_factor: args.scale_factor,

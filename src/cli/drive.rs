@@ -48,7 +48,7 @@ pub struct DriveArgs {
     /// Arm from the first frame (otherwise the start button or the dashboard arms).
     #[arg(long)]
     pub arm: bool,
-    /// Stop after this many seconds of wall-clock time (default: until stopped).
+    /// Stop after this many seconds of wall-clock time (default: until stopped); 0 < S <= 86400.
     #[arg(long)]
     pub seconds: Option<f64>,
     /// With `--camera sim`: laps to drive before stopping (default: `sim.laps`; 0 = no limit).
@@ -67,15 +67,15 @@ pub struct DriveArgs {
     /// `rccar replay DIR --right DIR2` replays the pair.
     #[arg(long, value_name = "DIR2", requires = "record")]
     pub record_right: Option<PathBuf>,
-    /// Disk budget of the recording, megabytes (default `record.max_mb`); the oldest frames go
-    /// first, the telemetry is always kept.
+    /// Disk budget of the recording, megabytes (default `record.max_mb`; 1..=1000000); the
+    /// oldest frames go first, the telemetry is always kept.
     #[arg(long, value_name = "MB")]
     pub record_max_mb: Option<f64>,
     /// Output folder for telemetry.jsonl and summary.json: new or empty (default: a new
     /// folder under out/drive/, with out/drive/latest pointing at it).
     #[arg(long, short)]
     pub out: Option<PathBuf>,
-    /// Seconds between status lines.
+    /// Seconds between status lines (0.2..=3600).
     #[arg(long, default_value_t = 2.0)]
     pub status_every: f64,
     /// A link that stays down this long, seconds, ends the run as a fault (exit 3); shorter
@@ -157,10 +157,19 @@ fn spec(a: &DriveArgs, track: PathBuf, stereo: bool, run: &RunDir) -> Result<Ses
 /// Runs `rccar drive`.
 pub fn run(a: DriveArgs) -> Result<ExitCode> {
     let mut cfg = a.config.load()?;
+    if let Some(s) = a.seconds.filter(|s| !(*s > 0.0 && *s <= 86_400.0)) {
+        bail!("--seconds {s}: must be > 0 and <= 86400 seconds (a day)");
+    }
+    if !(0.2..=3600.0).contains(&a.status_every) {
+        bail!("--status-every {}: must be 0.2..=3600 seconds", a.status_every);
+    }
     if let Some(l) = a.laps {
         cfg = cfg.with_override(&format!("sim.laps={l}"))?;
     }
     if let Some(mb) = a.record_max_mb {
+        if !(1.0..=1_000_000.0).contains(&mb) {
+            bail!("--record-max-mb {mb:?}: must be 1..=1000000 megabytes (as record.max_mb)");
+        }
         cfg = cfg.with_override(&format!("record.max_mb={mb}"))?;
     }
     // The run folder (and the recordings): new, or refused before anything is written; a run

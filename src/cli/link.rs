@@ -14,7 +14,7 @@ pub struct LinkArgs {
     /// Serial port of the Arduino (e.g. /dev/ttyACM0) or the emulator's pty.
     #[arg(long)]
     pub port: String,
-    /// How long to show live telemetry, seconds.
+    /// How long to show live telemetry, seconds (0 < S <= 86400).
     #[arg(long, default_value_t = 5.0)]
     pub seconds: f64,
     /// Arm and sweep the steering servo full left ↔ full right twice (throttle stays 0).
@@ -26,13 +26,25 @@ pub struct LinkArgs {
     /// With --trim-us: store the new configuration in the Arduino's EEPROM.
     #[arg(long)]
     pub save: bool,
-    /// Measure the PING → TELEMETRY round trip N times and print median and max.
+    /// Measure the PING → TELEMETRY round trip N times (1..=10000) and print median and max.
     #[arg(long)]
     pub latency: Option<usize>,
 }
 
+/// Refuses flags out of their bounds before the port is opened.
+fn check(args: &LinkArgs) -> anyhow::Result<()> {
+    if !(args.seconds > 0.0 && args.seconds <= 86_400.0) {
+        anyhow::bail!("--seconds {}: must be > 0 and <= 86400 seconds", args.seconds);
+    }
+    if let Some(n) = args.latency.filter(|n| !(1..=10_000).contains(n)) {
+        anyhow::bail!("--latency {n}: must be 1..=10000 pings");
+    }
+    Ok(())
+}
+
 #[cfg(not(feature = "serial"))]
-pub fn run(_args: LinkArgs) -> anyhow::Result<ExitCode> {
+pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
+    check(&args)?;
     anyhow::bail!("this rccar was built without the serial link: cargo build --release --features serial")
 }
 
@@ -42,6 +54,7 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
     use rccar::link::protocol::status;
     use rccar::link::transport::{Link, LinkOptions};
     use std::time::Duration;
+    check(&args)?;
 
     // Ctrl-C / SIGTERM end the loops (the Link disarms when dropped); a second one disarms
     // from the signal thread and exits at once, even if this thread is stuck.

@@ -6,10 +6,14 @@
 //! Aliases: `t` = `time_s`, `xte` = `truth.xte` = `truth.offset_m` (the true cross-track error,
 //! metres). `null` (e.g. `error` while the lane is lost) leaves a gap. Units are those of the
 //! telemetry (docs/sim.md, docs/lane.md). Reading the fields is `rccar::fields`.
+//!
+//! Bounded (the bounds are `rccar::fields`'): at most 16 panels (the image is 1000 × (40 +
+//! 260·fields) pixels), 8 runs (one colour each), 10 million points over all of them, lines of
+//! at most 1 MiB; the files are read line by line, keeping only the plotted numbers.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rccar::fields::{default_label, panels, read_jsonl, resolve, shown};
+use rccar::fields::{default_label, panels, resolve, shown, MAX_FIELDS, MAX_FILES};
 use rccar::sim::plot::{self, Trace};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -17,11 +21,12 @@ use std::process::ExitCode;
 /// Flags of `rccar plot`.
 #[derive(Args, Debug)]
 pub struct PlotArgs {
-    /// Telemetry files (JSONL, one record per frame), e.g. out/sim/telemetry.jsonl.
+    /// Telemetry files (JSONL, one record per frame), e.g. out/sim/telemetry.jsonl; at most 8
+    /// (one colour each).
     #[arg(required = true, value_name = "FILE.jsonl")]
     pub files: Vec<PathBuf>,
     /// Fields to plot, comma-separated; dotted paths reach into nested records
-    /// (`truth.offset_m`). One panel each.
+    /// (`truth.offset_m`). One panel each, at most 16.
     #[arg(long, short, value_delimiter = ',', required = true)]
     pub y: Vec<String>,
     /// The x axis field.
@@ -44,13 +49,26 @@ pub fn run(a: PlotArgs) -> Result<ExitCode> {
     if fields.is_empty() {
         bail!("--y: name at least one field, e.g. --y error,steer");
     }
+    if fields.len() > MAX_FIELDS {
+        bail!(
+            "--y: {} fields; at most {MAX_FIELDS} (one panel each, 260 px tall): plot them in several images",
+            fields.len()
+        );
+    }
+    if a.files.len() > MAX_FILES {
+        bail!(
+            "{} telemetry files; at most {MAX_FILES} in one plot (one colour each): plot them in groups",
+            a.files.len()
+        );
+    }
     let x = resolve(a.x.trim()).to_string();
     let mut traces = Vec::new();
+    let mut points = 0usize;
     for (k, file) in a.files.iter().enumerate() {
-        let recs = read_jsonl(file)?;
-        let panels = panels(file, &recs, &a.x, &fields)?;
+        let read = panels(file, &a.x, &fields, &mut points)?;
+        let (records, panels) = (read.records, read.panels);
         let label = a.label.get(k).cloned().unwrap_or_else(|| default_label(file));
-        println!("plot: {} ({} records) as `{label}`", file.display(), recs.len());
+        println!("plot: {} ({records} records) as `{label}`", file.display());
         traces.push(Trace { label, panels });
     }
     let font = super::common::load_font()

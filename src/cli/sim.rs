@@ -62,7 +62,7 @@ pub struct SimArgs {
     /// e.g. `--kick 5:0.05`; then measure as with --start-offset.
     #[arg(long, value_name = "T:DY")]
     pub kick: Option<String>,
-    /// Parallel runs in a sweep (default: the number of cores).
+    /// Parallel runs in a sweep (default: the number of cores; 1..=256).
     #[arg(long)]
     pub jobs: Option<usize>,
     /// Write zeros instead of measured stage times (reproducible telemetry).
@@ -80,6 +80,9 @@ pub struct SimArgs {
 /// The configuration with `--laps`, `--seconds` and `--seed` applied.
 fn config(a: &SimArgs) -> Result<Config> {
     let mut cfg = a.config.load()?;
+    if let Some(j) = a.jobs.filter(|j| !(1..=256).contains(j)) {
+        bail!("--jobs {j}: must be 1..=256 parallel runs");
+    }
     let mut sets = Vec::new();
     if let Some(l) = a.laps {
         sets.push(format!("sim.laps={l}"));

@@ -23,12 +23,16 @@ pub struct StereoRangeArgs {
     pub left: PathBuf,
     /// Right image, the same size.
     pub right: PathBuf,
-    /// A box in the reference image, `X,Y,W,H` pixels (repeatable); default: run the detector.
+    /// A box in the reference image, `X,Y,W,H` pixels (repeatable, at most 1000; X, Y
+    /// 0..=16384, W, H 1..=16384); default: run the detector.
     #[arg(long = "box", value_name = "X,Y,W,H")]
     pub boxes: Vec<String>,
     #[command(flatten)]
     pub config: ConfigArgs,
 }
+
+/// Most `--box` flags.
+const MAX_BOXES: usize = 1000;
 
 fn parse_box(s: &str) -> Result<[i64; 4]> {
     let v: Vec<i64> = s
@@ -39,18 +43,21 @@ fn parse_box(s: &str) -> Result<[i64; 4]> {
     let [x, y, w, h] = v[..] else {
         bail!("--box {s}: needs exactly four integers X,Y,W,H");
     };
+    let side = rccar::config::limits::MAX_IMAGE_SIDE as i64;
+    if !((0..=side).contains(&x) && (0..=side).contains(&y) && (1..=side).contains(&w) && (1..=side).contains(&h)) {
+        bail!("--box {s}: X and Y must be 0..={side}, W and H 1..={side} pixels (the largest image side)");
+    }
     Ok([x, y, w, h])
 }
 
 /// Runs `rccar stereo`.
 pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
     let cfg = a.config.load()?;
+    if a.boxes.len() > MAX_BOXES {
+        bail!("{} --box flags: at most {MAX_BOXES}", a.boxes.len());
+    }
     let boxes: Vec<[i64; 4]> = a.boxes.iter().map(|s| parse_box(s)).collect::<Result<_>>()?;
-    let load = |p: &PathBuf| -> Result<image::RgbImage> {
-        Ok(image::open(p)
-            .with_context(|| format!("{}: cannot read the image", p.display()))?
-            .to_rgb8())
-    };
+    let load = |p: &PathBuf| -> Result<image::RgbImage> { Ok(super::calib_board::open_image(p)?.to_rgb8()) };
     let (l, r) = (load(&a.left)?, load(&a.right)?);
     if l.dimensions() != r.dimensions() {
         bail!(
@@ -111,6 +118,17 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
     } else {
         boxes.into_iter().map(|b| ("box".to_string(), b)).collect()
     };
+    if labelled.is_empty() {
+        bail!(
+            "no boxes: the detector found nothing in the {} image {}; give the object's box with --box X,Y,W,H",
+            cfg.stereo.reference,
+            if reference_left {
+                a.left.display()
+            } else {
+                a.right.display()
+            }
+        );
+    }
     let opts = MatchOptions {
         min_disparity: 0,
         max_disparity: cfg.stereo.max_disparity_px,

@@ -34,7 +34,7 @@ pub fn run_sweep(
     let scene = Arc::new(Scene::new(track));
     let jobs = jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-        .max(1);
+        .clamp(1, 256);
     let n = cfgs.len();
     println!(
         "sweep {} over {} run(s) on {} thread(s), track {}",

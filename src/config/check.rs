@@ -39,6 +39,21 @@ impl Checker {
         }
     }
 
+    /// Every tunable parameter of `section` (`crate::control::params::all`, keys
+    /// `section.name`) against its table range, its value read from the serialised section.
+    pub(super) fn params<T: serde::Serialize>(&mut self, section: &str, values: &T) {
+        let table = super::layers::to_table(values);
+        for p in crate::control::params::all() {
+            let Some(name) = p.key.strip_prefix(section).and_then(|k| k.strip_prefix('.')) else {
+                continue;
+            };
+            match super::layers::number_at(&table, name) {
+                Some(v) => self.range(p.key, v, p.range[0], p.range[1]),
+                None => self.fail(p.key, "missing".into(), "a number (the key of a tunable parameter)"),
+            }
+        }
+    }
+
     /// Records a bad value with what is allowed instead.
     pub(super) fn fail(&mut self, key: &str, value: String, allowed: &str) {
         self.0.push(InvalidValue {
@@ -68,6 +83,10 @@ impl Config {
         self.record.check(&mut c);
         self.dashboard.check(&mut c);
         self.stereo.check(&mut c, self.camera.width);
+        if c.0.is_empty() {
+            // The steering method as built from the sections it reads (checked above).
+            self.check_steering_method(&mut c);
+        }
         if c.0.is_empty() {
             Ok(())
         } else {

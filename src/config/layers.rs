@@ -52,6 +52,11 @@ impl Config {
         Self::from_layers(&[base, Layer::from_assignment(assignment, None)?])
     }
 
+    /// The number at a dotted key, e.g. `steering.kp` (`None`: no such key, or not a number).
+    pub fn number(&self, key: &str) -> Option<f64> {
+        number_at(&to_table(self), key)
+    }
+
     fn from_layers(layers: &[Layer]) -> Result<Config, ConfigError> {
         let known = to_table(&Config::default());
         let mut merged = toml::Table::new();
@@ -231,6 +236,15 @@ fn lookup<'a>(t: &'a toml::Table, path: &str) -> Option<&'a toml::Value> {
     cur
 }
 
+/// The number at a dotted key of a serialised section or configuration.
+pub(super) fn number_at(t: &toml::Table, key: &str) -> Option<f64> {
+    match lookup(t, key)? {
+        toml::Value::Float(f) => Some(*f),
+        toml::Value::Integer(i) => Some(*i as f64),
+        _ => None,
+    }
+}
+
 fn show_value(v: &toml::Value) -> String {
     let s = v.to_string();
     if s.chars().count() > 60 {
@@ -376,7 +390,7 @@ fn resolve_table_paths(table: &mut toml::Table, dir: &Path) {
     }
 }
 
-fn to_table<T: Serialize>(v: &T) -> toml::Table {
+pub(super) fn to_table<T: Serialize>(v: &T) -> toml::Table {
     toml::Table::try_from(v).expect("config types always serialise")
 }
 

@@ -1,15 +1,21 @@
 //! Control: turns the lane measurement into a [`Command`] for the car.
 //!
-//! [`pid`] steers on the lane error, [`throttle`] picks the speed, [`Controller`] combines
-//! them. Both take the time step as an argument and never read the clock. [`behaviour`] is
-//! the state machine for stop signs, lights, obstacles and a lost lane on top of them; control
-//! never talks to the serial link: a sink delivers commands.
+//! Steering is a plug-in ([`steering::Steering`], picked by `steering.method`): [`pid`] steers
+//! on the lane error, [`pure_pursuit`] towards a look-ahead point on the lane. [`throttle`]
+//! picks the speed, [`Controller`] combines a steering method and the throttle policy. Every
+//! part takes the time step as an argument and never reads the clock, and publishes its
+//! tunable parameters once ([`params`]). [`behaviour`] is the state machine for stop signs,
+//! lights, obstacles and a lost lane on top of them; control never talks to the serial link:
+//! a sink delivers commands.
 
 pub mod behaviour;
+pub mod params;
 pub mod pid;
+pub mod pure_pursuit;
+pub mod steering;
 pub mod throttle;
 
-use crate::lane::LaneMeasurement;
+use params::{ParamInfo, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// What the car is told to do, both values in [−1, 1].
@@ -41,36 +47,61 @@ impl Command {
     }
 }
 
-/// Lane keeping: PID steering + throttle policy.
+/// Lane keeping: a steering method + the throttle policy.
 #[derive(Debug, Clone)]
 pub struct Controller {
-    /// Steering PID.
-    pub pid: pid::Pid,
-    /// Throttle policy.
-    pub throttle: throttle::Throttle,
+    steering: Box<dyn steering::Steering>,
+    throttle: throttle::Throttle,
 }
 
 impl Controller {
-    /// A controller steering with `gains` and driving with the policy `throttle`
-    /// (`[steering]` and `[throttle]` of car.toml convert into them).
-    pub fn new(gains: pid::PidGains, throttle: throttle::ThrottleOptions) -> Self {
+    /// A controller steering with `steering` and driving with the policy `throttle`
+    /// (`[steering]` and `[throttle]` of car.toml convert into them: `Config::controller`).
+    pub fn new(steering: Box<dyn steering::Steering>, throttle: throttle::ThrottleOptions) -> Self {
         Self {
-            pid: pid::Pid::new(gains),
+            steering,
             throttle: throttle::Throttle::new(throttle),
         }
     }
 
     /// One control step, `dt` seconds after the previous one. With the lane lost the steering
-    /// is held (the PID's history is forgotten) and the throttle policy decides when to stop.
-    pub fn step(&mut self, lane: &LaneMeasurement, dt: f64) -> Command {
-        let steer = match lane.error {
-            Some(e) => self.pid.update(e, dt),
-            None => {
-                self.pid.reset();
-                self.pid.output()
-            }
-        };
-        let throttle = self.throttle.update(lane.error, dt);
+    /// method decides (the shipped ones hold the wheel) and the throttle policy decides when
+    /// to stop.
+    pub fn step(&mut self, input: &steering::SteeringInput<'_>, dt: f64) -> Command {
+        let steer = self.steering.steer(input, dt);
+        let throttle = self.throttle.update(input.lane.error, dt);
         Command::clamped(steer, throttle)
+    }
+
+    /// The steering method.
+    pub fn steering(&self) -> &dyn steering::Steering {
+        self.steering.as_ref()
+    }
+
+    /// The steering method, to reset or tune between frames.
+    pub fn steering_mut(&mut self) -> &mut dyn steering::Steering {
+        self.steering.as_mut()
+    }
+
+    /// The throttle policy.
+    pub fn throttle(&self) -> &throttle::Throttle {
+        &self.throttle
+    }
+
+    /// The parameters that tune this controller: the steering method's, then the throttle's.
+    pub fn params(&self) -> Vec<ParamInfo> {
+        params::of_method(self.steering.method())
+    }
+
+    /// The value in force of a parameter of [`Controller::params`].
+    pub fn get_param(&self, key: &str) -> Option<f64> {
+        self.steering.get_param(key).or_else(|| self.throttle.get_param(key))
+    }
+
+    /// Sets a parameter of [`Controller::params`] from the next step on; `false` when `key` is
+    /// not one of them. Check the value first (the configuration's range:
+    /// `dashboard::validate_set`).
+    pub fn set_param(&mut self, key: &str, value: f64) -> bool {
+        self.steering.set_param(key, value) || self.throttle.set_param(key, value)
     }
 }

@@ -11,6 +11,9 @@
 //!
 //! Time is passed in (`dt`, seconds): the controller never reads a clock.
 
+use super::params::{Param, ParamInfo, Params};
+use super::steering::{Steering, SteeringInput, SteeringMethod};
+
 /// PID gains and limits (units: steer per unit of normalised error, seconds); `[steering]` of
 /// car.toml converts into them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -105,6 +108,121 @@ impl Pid {
         self.prev_measurement = None;
         self.derivative = 0.0;
     }
+}
+
+/// The lane-keeping PID as a steering method (`steering.method = "pid"`): `u` of
+/// [`Pid::update`] on the frame's normalised lane error. With the lane lost the history is
+/// forgotten and the last output held.
+impl Steering for Pid {
+    fn method(&self) -> SteeringMethod {
+        SteeringMethod::Pid
+    }
+
+    fn steer(&mut self, input: &SteeringInput<'_>, dt: f64) -> f64 {
+        match input.lane.error {
+            Some(e) => self.update(e, dt),
+            None => {
+                Pid::reset(self);
+                self.output()
+            }
+        }
+    }
+
+    fn reset(&mut self) {
+        Pid::reset(self);
+    }
+
+    fn clone_box(&self) -> Box<dyn Steering> {
+        Box::new(self.clone())
+    }
+}
+
+/// `steering.max_steer`: the output clamp every shipped method applies (steer units).
+pub const MAX_STEER: ParamInfo = ParamInfo {
+    key: "steering.max_steer",
+    unit: "steer",
+    range: [0.0, 1.0],
+    slider: [0.0, 1.0, 0.01],
+    doc: "steering output clamp; 1 = full servo travel",
+};
+
+/// `steering.slew_rate`: the rate limit every shipped method applies (steer units per second).
+pub const SLEW_RATE: ParamInfo = ParamInfo {
+    key: "steering.slew_rate",
+    unit: "1/s",
+    range: [0.1, 1000.0],
+    slider: [0.5, 30.0, 0.5],
+    doc: "largest change of the steering command per second; protects the servo, too low is late into curves",
+};
+
+impl Params for Pid {
+    const PARAMS: &'static [Param<Pid>] = &[
+        Param {
+            info: ParamInfo {
+                key: "steering.kp",
+                unit: "steer per unit error",
+                range: [0.0, 20.0],
+                slider: [0.0, 5.0, 0.05],
+                doc: "proportional gain: too low drifts out of curves, too high weaves",
+            },
+            get: |p| p.gains.kp,
+            set: |p, v| p.gains.kp = v,
+        },
+        Param {
+            info: ParamInfo {
+                key: "steering.ki",
+                unit: "steer per error·s",
+                range: [0.0, 20.0],
+                slider: [0.0, 2.0, 0.01],
+                doc: "integral gain: removes a steady offset, too high overshoots slowly",
+            },
+            get: |p| p.gains.ki,
+            set: |p, v| p.gains.ki = v,
+        },
+        Param {
+            info: ParamInfo {
+                key: "steering.kd",
+                unit: "steer per error/s",
+                range: [0.0, 5.0],
+                slider: [0.0, 5.0, 0.01],
+                doc: "derivative gain, on the measurement: damps weaving, too high twitches with camera noise",
+            },
+            get: |p| p.gains.kd,
+            set: |p, v| p.gains.kd = v,
+        },
+        Param {
+            info: ParamInfo {
+                key: "steering.integral_limit",
+                unit: "steer",
+                range: [0.0, 1.0],
+                slider: [0.0, 1.0, 0.01],
+                doc: "largest contribution of the integral term (anti-windup)",
+            },
+            get: |p| p.gains.integral_limit,
+            set: |p, v| p.gains.integral_limit = v,
+        },
+        Param {
+            info: MAX_STEER,
+            get: |p| p.gains.max_out,
+            set: |p, v| p.gains.max_out = v,
+        },
+        Param {
+            info: SLEW_RATE,
+            get: |p| p.gains.slew_rate,
+            set: |p, v| p.gains.slew_rate = v,
+        },
+        Param {
+            info: ParamInfo {
+                key: "steering.derivative_tau",
+                unit: "s",
+                range: [0.0, 5.0],
+                slider: [0.0, 1.0, 0.01],
+                doc: "low-pass time constant of the derivative (0 = none): smoother steering, later damping",
+            },
+            get: |p| p.gains.derivative_tau,
+            set: |p, v| p.gains.derivative_tau = v,
+        },
+    ];
 }
 
 #[cfg(test)]

@@ -1,5 +1,8 @@
 //! Throttle policy: drive at a base speed, slower as the lane error grows (curves), and stop
-//! once the lane has been lost for a while. Time is passed in.
+//! once the lane has been lost for a while. Time is passed in. Its tunable parameters are a
+//! table ([`Params`]) like the steering methods'.
+
+use super::params::{Param, ParamInfo, Params};
 
 /// The policy's settings (`[throttle]` of car.toml converts into them). Throttle 0..=1.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,7 +53,13 @@ impl Throttle {
         }
     }
 
-    /// The policy's settings (a dashboard changes `base`, `min` between frames).
+    /// The policy's settings.
+    pub fn options(&self) -> &ThrottleOptions {
+        &self.cfg
+    }
+
+    /// The policy's settings, to change between frames (a dashboard does it by key through
+    /// [`Params`]).
     pub fn options_mut(&mut self) -> &mut ThrottleOptions {
         &mut self.cfg
     }
@@ -59,6 +68,55 @@ impl Throttle {
     pub fn lost_for_s(&self) -> f64 {
         self.lost_for_s
     }
+}
+
+impl Params for Throttle {
+    const PARAMS: &'static [Param<Throttle>] = &[
+        Param {
+            info: ParamInfo {
+                key: "throttle.base",
+                unit: "throttle 0..1",
+                range: [0.0, 1.0],
+                slider: [0.0, 1.0, 0.01],
+                doc: "throttle on a straight with zero error",
+            },
+            get: |t| t.cfg.base,
+            set: |t, v| t.cfg.base = v,
+        },
+        Param {
+            info: ParamInfo {
+                key: "throttle.min",
+                unit: "throttle 0..1",
+                range: [0.0, 1.0],
+                slider: [0.0, 1.0, 0.01],
+                doc: "lowest throttle while the lane is seen (at most throttle.base)",
+            },
+            get: |t| t.cfg.min,
+            set: |t, v| t.cfg.min = v,
+        },
+        Param {
+            info: ParamInfo {
+                key: "throttle.error_slowdown",
+                unit: "throttle per unit error",
+                range: [0.0, 5.0],
+                slider: [0.0, 2.0, 0.05],
+                doc: "throttle taken off per unit of |lane error|: slows down in curves",
+            },
+            get: |t| t.cfg.error_slowdown,
+            set: |t, v| t.cfg.error_slowdown = v,
+        },
+        Param {
+            info: ParamInfo {
+                key: "throttle.lost_timeout_s",
+                unit: "s",
+                range: [0.0, 60.0],
+                slider: [0.0, 5.0, 0.1],
+                doc: "after the lane has been lost this long the throttle is zero",
+            },
+            get: |t| t.cfg.lost_timeout_s,
+            set: |t, v| t.cfg.lost_timeout_s = v,
+        },
+    ];
 }
 
 #[cfg(test)]

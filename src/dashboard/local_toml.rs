@@ -1,6 +1,8 @@
 //! Writes the dashboard's changed keys into `config/local.toml` in place: only those keys are
 //! added or replaced; every other line, comment and table of the student's file is kept
-//! (toml_edit keeps the document's formatting).
+//! (toml_edit keeps the document's formatting). Only keys of the parameter tables
+//! ([`crate::control::params::all`]) are written; a key new to the file gets its unit and
+//! allowed range as a comment on its line.
 
 use std::path::Path;
 use toml_edit::{value, DocumentMut, Item, Table};
@@ -36,18 +38,19 @@ pub enum SaveError {
     },
 }
 
-/// `text` with each dotted `section.key` set to its value (other content kept as it was).
+/// `text` with each dotted `section.key` (a tunable parameter) set to its value (other content
+/// kept as it was).
 pub fn set_keys(text: &str, keys: &[(String, f64)], path: &str) -> Result<String, SaveError> {
     let mut doc: DocumentMut = text.parse().map_err(|e: toml_edit::TomlError| SaveError::Parse {
         path: path.into(),
         message: e.to_string().trim().replace('\n', " "),
     })?;
     for (key, v) in keys {
-        let Some((section, name)) = key.split_once('.') else {
+        let (Some((section, name)), Some(info)) = (key.split_once('.'), crate::control::params::find(key)) else {
             return Err(SaveError::Key {
                 path: path.into(),
                 key: key.clone(),
-                why: "expected section.key".into(),
+                why: "not a tunable parameter (src/control/params.rs)".into(),
             });
         };
         if !doc.as_table().contains_key(section) {
@@ -79,7 +82,12 @@ pub fn set_keys(text: &str, keys: &[(String, f64)], path: &str) -> Result<String
                 *old.decor_mut() = decor;
             }
             None => {
-                tab.insert(name, value(*v));
+                let mut item = value(*v);
+                if let Some(new) = item.as_value_mut() {
+                    let range = crate::control::params::show_range(info.range);
+                    new.decor_mut().set_suffix(format!(" # {}, allowed {range}", info.unit));
+                }
+                tab.insert(name, item);
             }
         }
     }
@@ -112,7 +120,7 @@ mod tests {
         let out = set_keys(text, &[("steering.kp".into(), 0.9), ("throttle.base".into(), 0.3)], "local.toml").unwrap();
         assert!(out.starts_with("# my overrides\n[steering]\n# tuned on the hall floor\nkp = 0.9 # keep\nkd = 0.1\n"), "{out}");
         assert!(out.contains("[sim]\nlaps = 2\n"), "{out}");
-        assert!(out.contains("[throttle]\nbase = 0.3\n"), "{out}");
+        assert!(out.contains("[throttle]\nbase = 0.3 # throttle 0..1, allowed 0 ..= 1\n"), "{out}");
         let back: toml::Table = out.parse().unwrap();
         assert_eq!(back["steering"]["kp"].as_float(), Some(0.9));
     }
@@ -120,9 +128,9 @@ mod tests {
     #[test]
     fn a_comment_only_file_keeps_its_comment_on_top() {
         let out = set_keys("# mine\n", &[("steering.kp".into(), 1.05)], "l.toml").unwrap();
-        assert_eq!(out, "# mine\n[steering]\nkp = 1.05\n");
-        let out = set_keys("", &[("steering.kp".into(), 1.05)], "l.toml").unwrap();
-        assert_eq!(out, "[steering]\nkp = 1.05\n");
+        assert_eq!(out, "# mine\n[steering]\nkp = 1.05 # steer per unit error, allowed 0 ..= 20\n");
+        let out = set_keys("", &[("steering.lookahead_m".into(), 0.95)], "l.toml").unwrap();
+        assert_eq!(out, "[steering]\nlookahead_m = 0.95 # m, allowed 0.1 ..= 5\n");
     }
 
     #[test]
@@ -131,5 +139,14 @@ mod tests {
         assert!(e.to_string().contains("local.toml") && e.to_string().contains("line 1"), "{e}");
         let e = set_keys("steering = 3\n", &[("steering.kp".into(), 0.9)], "l.toml").unwrap_err();
         assert!(e.to_string().contains("not a table"), "{e}");
+    }
+
+    /// Only the tables' keys are written (the page can set nothing else either).
+    #[test]
+    fn a_key_outside_the_parameter_tables_is_refused() {
+        for key in ["camera.fps", "steering.method", "kp"] {
+            let e = set_keys("", &[(key.into(), 1.0)], "l.toml").unwrap_err().to_string();
+            assert!(e.contains(&format!("`{key}`")) && e.contains("not a tunable parameter"), "{e}");
+        }
     }
 }

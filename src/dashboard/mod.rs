@@ -31,6 +31,8 @@ pub use shared::{DashboardError, Sent};
 
 use crate::config::Config;
 use crate::control::behaviour::Transition;
+use crate::control::params::{self, ParamInfo};
+use crate::control::steering::unused_by;
 use crate::control::Command;
 use crate::drive::{Flow, FrameContext, Latest, LoopError, Observer, StopSignal};
 use crate::lane::warp::Homography;
@@ -45,14 +47,12 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-/// The keys the page may change while the car runs (the rest needs a restart).
-pub const SETTABLE: &[&str] = &[
-    "steering.kp",
-    "steering.ki",
-    "steering.kd",
-    "throttle.base",
-    "throttle.min",
-];
+/// The keys the page may change while the car runs (the rest needs a restart): the
+/// parameter table of the run's steering method, then the throttle's
+/// ([`crate::control::params::of_method`]), with their units, ranges, sliders and docs.
+pub fn settable(cfg: &Config) -> Vec<ParamInfo> {
+    params::of_method(cfg.steering.method)
+}
 
 /// Largest control message body the server reads, bytes.
 pub const MAX_BODY: usize = 4096;
@@ -67,8 +67,16 @@ pub enum ControlError {
     #[error("malformed request: {0}")]
     Malformed(String),
     /// A key the dashboard may not change.
-    #[error("unknown key `{0}` (settable: steering.kp, steering.ki, steering.kd, throttle.base, throttle.min)")]
-    UnknownKey(String),
+    #[error("unknown key `{key}` (settable: {settable})")]
+    UnknownKey {
+        /// The key as given (at most 64 characters).
+        key: String,
+        /// The settable keys, comma-separated.
+        settable: String,
+    },
+    /// A parameter of another steering method than the run's.
+    #[error("{0}; the steering method cannot change while the car runs")]
+    OtherMethod(String),
     /// NaN or infinite.
     #[error("{key} = {value} is not a finite number")]
     NotFinite {
@@ -86,7 +94,7 @@ pub enum ControlError {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SetRequest {
-    /// Dotted config key, one of [`SETTABLE`].
+    /// Dotted config key, one of [`settable`].
     pub key: String,
     /// The new value.
     pub value: f64,
@@ -114,8 +122,15 @@ pub fn parse_body<T: for<'de> Deserialize<'de>>(body: &[u8]) -> Result<T, Contro
 /// Checks `key = value` against the configuration's ranges; returns the configuration with
 /// the value set (the caller keeps it as the dashboard's view of the settings).
 pub fn validate_set(cfg: &Config, key: &str, value: f64) -> Result<Config, ControlError> {
-    if !SETTABLE.contains(&key) {
-        return Err(ControlError::UnknownKey(key.chars().take(64).collect()));
+    let keys = settable(cfg);
+    if !keys.iter().any(|p| p.key == key) {
+        if let Some(why) = unused_by(cfg.steering.method, key) {
+            return Err(ControlError::OtherMethod(why));
+        }
+        return Err(ControlError::UnknownKey {
+            key: key.chars().take(64).collect(),
+            settable: keys.iter().map(|p| p.key).collect::<Vec<_>>().join(", "),
+        });
     }
     if !value.is_finite() {
         return Err(ControlError::NotFinite {
@@ -129,34 +144,18 @@ pub fn validate_set(cfg: &Config, key: &str, value: f64) -> Result<Config, Contr
 
 /// The value of a settable key in `cfg`.
 pub fn get_value(cfg: &Config, key: &str) -> Option<f64> {
-    Some(match key {
-        "steering.kp" => cfg.steering.kp,
-        "steering.ki" => cfg.steering.ki,
-        "steering.kd" => cfg.steering.kd,
-        "throttle.base" => cfg.throttle.base,
-        "throttle.min" => cfg.throttle.min,
-        _ => return None,
-    })
+    settable(cfg).iter().any(|p| p.key == key).then(|| cfg.number(key)).flatten()
 }
 
 /// Applies a settable key to the running pipeline (acts on the next frame).
 pub fn apply_value(p: &mut Pipeline, key: &str, value: f64) -> bool {
-    let c = p.controller_mut();
-    match key {
-        "steering.kp" => c.pid.gains.kp = value,
-        "steering.ki" => c.pid.gains.ki = value,
-        "steering.kd" => c.pid.gains.kd = value,
-        "throttle.base" => c.throttle.options_mut().base = value,
-        "throttle.min" => c.throttle.options_mut().min = value,
-        _ => return false,
-    }
-    true
+    p.controller_mut().set_param(key, value)
 }
 
 /// A message from the page to the loop (already validated by the server).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Control {
-    /// Set a [`SETTABLE`] key. `note` says who asked and when (wall clock), for telemetry.
+    /// Set a [`settable`] key. `note` says who asked and when (wall clock), for telemetry.
     Set {
         /// Dotted key.
         key: String,
@@ -225,7 +224,7 @@ pub struct Snapshot {
     pub roi: [[f64; 2]; 4],
     /// Plot samples since the previous snapshot (every frame).
     pub points: Vec<PlotPoint>,
-    /// The settable values in force, in [`SETTABLE`] order.
+    /// The settable values in force, in [`settable`] order.
     pub values: Vec<(String, f64)>,
     /// The last behaviour transition, with the frame time it happened at.
     pub last_transition: Option<(f64, Transition)>,
@@ -332,7 +331,7 @@ impl DashObserver {
     fn apply(&mut self, c: Control, p: &mut Pipeline) -> bool {
         match c {
             Control::Set { key, value, note } => {
-                let was = get_value_pipeline(p, &key);
+                let was = p.controller().get_param(&key);
                 if apply_value(p, &key, value) {
                     self.event(format!(
                         "{key}={value} (was {}) from {note}",
@@ -363,7 +362,7 @@ impl DashObserver {
                 let s = if let Control::PlaceAt(s) = c { s } else { 0.0 };
                 if let Some(w) = &self.world {
                     lock(w).place_at(s);
-                    p.controller_mut().pid.reset();
+                    p.controller_mut().steering_mut().reset();
                     self.event(format!("car placed at s={s:.2} m from dashboard"));
                 }
                 false
@@ -374,18 +373,6 @@ impl DashObserver {
             }
         }
     }
-}
-
-fn get_value_pipeline(p: &mut Pipeline, key: &str) -> Option<f64> {
-    let c = p.controller_mut();
-    Some(match key {
-        "steering.kp" => c.pid.gains.kp,
-        "steering.ki" => c.pid.gains.ki,
-        "steering.kd" => c.pid.gains.kd,
-        "throttle.base" => c.throttle.options_mut().base,
-        "throttle.min" => c.throttle.options_mut().min,
-        _ => return None,
-    })
 }
 
 impl Observer for DashObserver {
@@ -454,13 +441,11 @@ impl Observer for DashObserver {
         self.last_pub = Some(r.time_s);
         let p = ctx.pipeline;
         let c = p.controller();
-        let values = vec![
-            ("steering.kp".to_string(), c.pid.gains.kp),
-            ("steering.ki".to_string(), c.pid.gains.ki),
-            ("steering.kd".to_string(), c.pid.gains.kd),
-            ("throttle.base".to_string(), throttle_cfg(p).0),
-            ("throttle.min".to_string(), throttle_cfg(p).1),
-        ];
+        let values = c
+            .params()
+            .iter()
+            .filter_map(|i| Some((i.key.to_string(), c.get_param(i.key)?)))
+            .collect();
         let snap = Snapshot {
             record: r.clone(),
             image: ctx.frame.image.clone(),
@@ -481,13 +466,6 @@ impl Observer for DashObserver {
     }
 }
 
-fn throttle_cfg(p: &Pipeline) -> (f64, f64) {
-    // `Throttle` exposes its settings mutably only; read them through a clone.
-    let mut t = p.controller().throttle.clone();
-    let c = t.options_mut();
-    (c.base, c.min)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -503,7 +481,26 @@ mod tests {
         assert!(e.contains("throttle.min"), "{e}");
         assert!(matches!(validate_set(&cfg, "steering.kp", f64::NAN), Err(ControlError::NotFinite { .. })));
         assert!(matches!(validate_set(&cfg, "steering.kp", f64::INFINITY), Err(ControlError::NotFinite { .. })));
-        assert!(matches!(validate_set(&cfg, "camera.fps", 10.0), Err(ControlError::UnknownKey(_))));
+        assert!(matches!(validate_set(&cfg, "camera.fps", 10.0), Err(ControlError::UnknownKey { .. })));
+    }
+
+    /// The settable keys are the run's steering method's table and the throttle's: another
+    /// method's key is refused with its owner named.
+    #[test]
+    fn settable_keys_follow_the_steering_method() {
+        let keys = |c: &Config| settable(c).iter().map(|p| p.key).collect::<Vec<_>>();
+        let pid = Config::default();
+        assert!(keys(&pid).contains(&"steering.kd") && !keys(&pid).contains(&"steering.lookahead_m"));
+        assert!(keys(&pid).contains(&"throttle.base"));
+        let pp = pid.with_override("steering.method=pure_pursuit").unwrap();
+        assert!(keys(&pp).contains(&"steering.lookahead_m") && !keys(&pp).contains(&"steering.kp"));
+        assert_eq!(validate_set(&pp, "steering.lookahead_m", 1.0).unwrap().steering.lookahead_m, 1.0);
+        let e = validate_set(&pp, "steering.kp", 1.0).unwrap_err().to_string();
+        assert!(e.contains("steering.method = pid") && e.contains("cannot change while the car runs"), "{e}");
+        let e = validate_set(&pp, "camera.fps", 1.0).unwrap_err().to_string();
+        assert!(e.contains("settable: steering.lookahead_m, steering.lookahead_band_m"), "{e}");
+        assert_eq!(get_value(&pp, "steering.lookahead_m"), Some(0.9));
+        assert_eq!(get_value(&pp, "steering.kp"), None);
     }
 
     #[test]

@@ -27,16 +27,26 @@ pub const THRESHOLD_EPS: f32 = 1e-5;
 /// Largest training window side accepted (OpenCV's stock cascades are 14–64 px).
 pub const MAX_WINDOW: i32 = 4096;
 
+/// Largest cascade file read, bytes (OpenCV's largest stock cascade,
+/// haarcascade_frontalface_alt_tree.xml, is 2.7 MB).
+pub const MAX_CASCADE_BYTES: u64 = 32 << 20;
+
 /// Why a cascade could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum CascadeError {
+    /// The file is larger than [`MAX_CASCADE_BYTES`].
+    #[error("{path}: larger than a cascade file may be ({MAX_CASCADE_BYTES} bytes)")]
+    TooLarge {
+        /// File that failed.
+        path: String,
+    },
     /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read: {err}")]
     Io {
         /// File that failed.
         path: String,
-        /// Underlying error.
-        source: std::io::Error,
+        /// Underlying error (in the message, not a `source`: said once).
+        err: std::io::Error,
     },
     /// Not well-formed XML (truncated, bad characters, ...).
     #[error("{origin}: XML syntax error: {message}")]
@@ -266,11 +276,23 @@ fn as_int(v: f64, min: i64, max: i64) -> Option<i32> {
 impl Cascade {
     /// Loads a cascade from an XML file (either format).
     pub fn from_file(path: impl AsRef<Path>) -> Result<Cascade, CascadeError> {
+        use std::io::Read;
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| CascadeError::Io {
+        let io = |err| CascadeError::Io {
             path: path.display().to_string(),
-            source,
-        })?;
+            err,
+        };
+        let mut bytes = Vec::new();
+        std::fs::File::open(path)
+            .map_err(io)?
+            .take(MAX_CASCADE_BYTES + 1)
+            .read_to_end(&mut bytes)
+            .map_err(io)?;
+        if bytes.len() as u64 > MAX_CASCADE_BYTES {
+            return Err(CascadeError::TooLarge {
+                path: path.display().to_string(),
+            });
+        }
         let origin = path.display().to_string();
         let text = String::from_utf8(bytes).map_err(|e| CascadeError::Xml {
             origin: origin.clone(),

@@ -88,11 +88,18 @@ pub struct LaneMeasurement {
 
 /// Step 1: counts white pixels per column over the bottom `band_rows` rows into `hist`.
 pub fn column_histogram(binary: &GrayImage, band_rows: u32, hist: &mut [u16]) {
+    let h = binary.height() as usize;
+    column_histogram_rows(binary, h - (band_rows as usize).min(h)..h, hist);
+}
+
+/// Step 1 for any band: counts white pixels per column over `rows` (clipped to the image)
+/// into `hist` (e.g. a band around a look-ahead distance, src/control/pure_pursuit.rs).
+pub fn column_histogram_rows(binary: &GrayImage, rows: std::ops::Range<usize>, hist: &mut [u16]) {
     let (w, h) = (binary.width() as usize, binary.height() as usize);
     assert_eq!(hist.len(), w, "histogram length must equal the image width");
     hist.fill(0);
-    let rows = (band_rows as usize).min(h);
-    for row in binary.as_raw()[(h - rows) * w..].chunks_exact(w) {
+    let (r0, r1) = (rows.start.min(h), rows.end.min(h));
+    for row in binary.as_raw()[r0 * w..r1.max(r0) * w].chunks_exact(w) {
         for (c, &p) in hist.iter_mut().zip(row) {
             *c += (p != 0) as u16;
         }
@@ -165,13 +172,27 @@ pub fn peak(hist: &[u16], range: std::ops::Range<usize>, min_count: u16) -> Opti
     Some(wsum / sum)
 }
 
-/// Steps 2–5: the lane measurement from the column histogram of an image `width` wide.
+/// Steps 2–5: the lane measurement from the column histogram of an image `width` wide, the
+/// left line searched in its left half and the right line in its right half.
 pub fn measure(hist: &[u16], band_rows: u32, opts: &LineOptions) -> LaneMeasurement {
+    let (w, mid) = (hist.len(), hist.len() / 2);
+    measure_in(hist, band_rows, opts, 0..mid, mid..w)
+}
+
+/// Steps 2–5 with the left line searched in the columns `left` and the right one in `right`
+/// (e.g. either side of where the lane centre is expected, when the lane may have moved off
+/// the image centre: a band far ahead in a curve).
+pub fn measure_in(
+    hist: &[u16],
+    band_rows: u32,
+    opts: &LineOptions,
+    left: std::ops::Range<usize>,
+    right: std::ops::Range<usize>,
+) -> LaneMeasurement {
     let w = hist.len();
     let min_count = (opts.min_peak * band_rows as f64).ceil().max(1.0) as u16;
-    let mid = w / 2;
-    let mut left = peak_with(opts.peak, hist, 0..mid, min_count);
-    let mut right = peak_with(opts.peak, hist, mid..w, min_count);
+    let mut left = peak_with(opts.peak, hist, left, min_count);
+    let mut right = peak_with(opts.peak, hist, right, min_count);
     // Two peaks at an implausible distance: keep the stronger, estimate the other.
     if let (Some(l), Some(r)) = (left, right) {
         if ((r - l) - opts.lane_width_px).abs() > opts.width_tolerance * opts.lane_width_px {

@@ -46,7 +46,14 @@ pub struct LinkSink {
     handshakes: u64,
     inject: Arc<AtomicBool>,
     flipped: Arc<AtomicU64>,
+    /// When (loop time, s) the last ARM after a failsafe trip was queued.
+    rearm_at: Option<f64>,
+    /// ARMs queued after failsafe trips.
+    rearms: u64,
 }
+
+/// How often (s of loop time) an ARM is asked again while the firmware still reports failsafe.
+const REARM_EVERY_S: f64 = 0.1;
 
 impl LinkSink {
     /// Opens `port`, waits up to `connect` for the firmware's handshake, and returns the sink
@@ -82,6 +89,8 @@ impl LinkSink {
                 handshakes,
                 inject,
                 flipped,
+                rearm_at: None,
+                rearms: 0,
             },
             hello,
         ))
@@ -90,6 +99,11 @@ impl LinkSink {
     /// The link (e.g. for an emergency hook that sends neutral from another thread).
     pub fn link(&self) -> Arc<Link> {
         self.link.clone()
+    }
+
+    /// ARMs queued so far to leave a failsafe trip (rule 3).
+    pub fn failsafe_rearms(&self) -> u64 {
+        self.rearms
     }
 
     /// Bits flipped so far by the `bit_errors` test hook.
@@ -121,14 +135,20 @@ fn noisy_wire(ber: f64, on: Arc<AtomicBool>, flipped: Arc<AtomicU64>) -> WireFau
 }
 
 impl CommandSink for LinkSink {
-    fn send(&mut self, c: Command, _t: f64) -> Result<Command, SinkError> {
+    fn send(&mut self, c: Command, t: f64) -> Result<Command, SinkError> {
         if !self.armed {
             return Ok(Command::NEUTRAL);
         }
-        // Rule 3: the firmware's failsafe tripped during our own pause.
-        if let Some((t, _)) = self.link.telemetry() {
-            if t.state == State::Failsafe && c != Command::NEUTRAL {
-                self.link.arm().map_err(|e| SinkError(format!("arming again after the failsafe: {e}")))?;
+        // Rule 3: the firmware's failsafe tripped during our own pause. The ARM is queued, not
+        // awaited (the loop must not block on a busy or noisy link); the DRIVE below follows it
+        // on the wire. Asked again at most every REARM_EVERY_S while the telemetry still says
+        // failsafe (a lost ARM, or a telemetry older than the ARM).
+        if let Some((tm, _)) = self.link.telemetry() {
+            let due = self.rearm_at.is_none_or(|t0| t - t0 >= REARM_EVERY_S || t < t0);
+            if tm.state == State::Failsafe && c != Command::NEUTRAL && due {
+                self.link.request_arm();
+                self.rearm_at = Some(t);
+                self.rearms += 1;
             }
         }
         self.link.drive(to_permille(c.steer), to_permille(c.throttle));

@@ -122,6 +122,9 @@ enum Reply {
     Config(u8, LinkConfig),
 }
 
+/// The ticket of a request nobody waits for ([`Link::request_arm`]): its answer is not kept.
+const UNAWAITED: u64 = u64::MAX;
+
 #[derive(Default)]
 struct Inner {
     drive: Option<(Message, Instant)>,
@@ -294,6 +297,22 @@ impl Link {
                 code: status::UNKNOWN_MESSAGE,
             }),
         }
+    }
+
+    /// Queues an ARM without waiting for its answer, so a control loop never blocks on it:
+    /// arming again after a failsafe trip while the loop goes on sending DRIVEs (the io thread
+    /// writes requests before the newest DRIVE, so the ARM precedes it). The answer shows in
+    /// the telemetry's state; a lost ARM is simply requested again. Like [`Link::arm`], the
+    /// link then re-arms after a reconnect or firmware reset.
+    pub fn request_arm(&self) {
+        let mut g = self.shared.lock();
+        g.want_armed = true;
+        // one is enough while it waits to be written (a stuck port must not pile them up)
+        if !g.requests.iter().any(|(t, _)| *t == UNAWAITED) {
+            g.requests.push_back((UNAWAITED, Message::Arm));
+        }
+        drop(g);
+        self.shared.cv.notify_all();
     }
 
     /// Arms the firmware (it stays armed across reconnects and firmware resets: the link
@@ -606,11 +625,12 @@ fn write_pending(conn: &mut Conn, shared: &Shared, opt: &mut LinkOptions) -> Opt
     }
     for (ticket, msg) in requests {
         match write_msg(conn, shared, opt, &msg) {
-            Ok(seq) => {
+            Ok(seq) if ticket != UNAWAITED => {
                 let mut g = shared.lock();
                 g.pending.push((seq, msg.id(), ticket));
                 g.sent_at.insert(ticket, Instant::now());
             }
+            Ok(_) => {}
             Err(e) => {
                 shared.lock().last_error = format!("write: {e}");
                 return Some(Exit::Reopen);

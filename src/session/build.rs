@@ -239,16 +239,9 @@ fn setup_pipeline(cfg: &Config, spec: &SessionSpec, pipeline: &mut Pipeline, par
     }
     if spec.detector == DetectorSpec::FromConfig && !spec.truth_boxes {
         let (stage, missing) = crate::pipeline::load_detector(&cfg.detect, Path::new("."))?;
-        if !missing.is_empty() {
-            let names: Vec<String> = missing.iter().map(|p| p.display().to_string()).collect();
-            parts.notes.push((
-                Level::Warn,
-                format!(
-                    "detect: missing {}; {}",
-                    names.join(", "),
-                    if stage.is_some() { "running without them" } else { "running lane-only" }
-                ),
-            ));
+        // A configured model that is not there is an error, not a silently weaker car.
+        if let Some(m) = missing.first() {
+            return Err(invalid(m.to_string()));
         }
         pipeline.set_detector(stage);
     }

@@ -492,12 +492,20 @@ pub const RUN_COLOURS: [RGBColor; 8] = [
 
 /// Height of one panel of [`fields_plot`], pixels.
 pub const PANEL_H: u32 = 260;
+/// Most panels of [`fields_plot`] (1000 × 16,680 pixels, 50 MB).
+pub const MAX_PANELS: usize = 64;
 
 /// Several runs' telemetry fields against `x_name`: one panel per field (stacked), one colour
 /// per run, a legend in the first panel. 1000 × (40 + 260·fields) pixels.
 pub fn fields_plot(x_name: &str, fields: &[String], traces: &[Trace]) -> Result<RgbImage, PlotError> {
     if fields.is_empty() {
         return Err(PlotError("no field to plot".into()));
+    }
+    if fields.len() > MAX_PANELS {
+        return Err(PlotError(format!(
+            "{} fields: at most {MAX_PANELS} panels in one image",
+            fields.len()
+        )));
     }
     let (w, h) = (1000u32, 40 + PANEL_H * fields.len() as u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];

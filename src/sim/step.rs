@@ -114,7 +114,7 @@ pub enum StepRequestError {
         lane_width: f64,
     },
     /// `--kick` not of the form T:DY.
-    #[error("--kick `{0}`: expected T:DY (seconds:metres), e.g. 5:0.05")]
+    #[error("--kick `{0}`: expected T:DY (seconds 0..=36000 : metres), e.g. 5:0.05")]
     Form(String),
 }
 
@@ -136,7 +136,7 @@ impl StepRequest {
             (None, Some(k)) => {
                 let form = || StepRequestError::Form(k.to_string());
                 let (t, dy) = k.split_once(':').ok_or_else(form)?;
-                let t: f64 = t.trim().parse().ok().filter(|t: &f64| t.is_finite() && *t >= 0.0).ok_or_else(form)?;
+                let t: f64 = t.trim().parse().ok().filter(|t: &f64| (0.0..=36_000.0).contains(t)).ok_or_else(form)?;
                 let dy: f64 = dy.trim().parse().ok().filter(|d: &f64| d.is_finite()).ok_or_else(form)?;
                 check("--kick", dy)?;
                 Ok(Some(StepRequest { kick: true, t, dy }))

@@ -45,6 +45,16 @@ pub enum SweepError {
     /// The grid would be too large.
     #[error("--sweep: {0} runs; a sweep may have at most 1000")]
     TooMany(usize),
+    /// A parameter of another steering method than the run's: it would change nothing (every
+    /// row the same).
+    #[error("--sweep {key}: {why}")]
+    OtherMethod {
+        /// The key.
+        key: String,
+        /// Which method it belongs to and how to steer with it
+        /// ([`crate::control::steering::unused_by`]).
+        why: String,
+    },
     /// A value of the grid the configuration refuses (its message, with its causes).
     #[error("--sweep {key}={value}: {message}")]
     Value {
@@ -147,21 +157,14 @@ pub fn grid(axes: &[Axis]) -> Vec<Vec<f64>> {
     out
 }
 
-/// The unit of a config key for axis labels: from its name's suffix (`_m`, `_s`, `_deg`, …)
-/// or, for the steering gains, from `config/car.toml`'s comments. Empty when unitless or
-/// unknown.
+/// The unit of a config key for axis labels: a tunable parameter's from its table
+/// ([`crate::control::params`]), else from its name's suffix (`_m`, `_s`, `_deg`, …). Empty
+/// when unitless or unknown.
 pub fn key_unit(key: &str) -> &'static str {
-    let last = key.rsplit('.').next().unwrap_or(key);
-    match key {
-        "steering.kp" => return "steer per unit error",
-        "steering.ki" => return "steer per error·s",
-        "steering.kd" => return "steer per error/s",
-        "steering.slew_rate" => return "1/s",
-        "steering.derivative_tau" => return "s",
-        "steering.max_steer" | "steering.integral_limit" => return "steer",
-        "throttle.base" | "throttle.min" => return "throttle 0..1",
-        _ => {}
+    if let Some(p) = crate::control::params::find(key) {
+        return p.unit;
     }
+    let last = key.rsplit('.').next().unwrap_or(key);
     for (suffix, unit) in [
         ("_mps", "m/s"),
         ("_dps", "deg/s"),
@@ -342,8 +345,17 @@ pub fn run_all(
 }
 
 /// The configuration of every point of the grid (`keys` set to the point's values), each
-/// checked before any run starts.
+/// checked before any run starts; a key of another steering method than `cfg`'s is refused.
 pub fn configs(cfg: &Config, keys: &[&str], points: &[Vec<f64>]) -> Result<Vec<Config>, SweepError> {
+    // A parameter of another steering method would change nothing: every row the same.
+    for k in keys {
+        if let Some(why) = crate::control::steering::unused_by(cfg.steering.method, k) {
+            return Err(SweepError::OtherMethod {
+                key: k.to_string(),
+                why,
+            });
+        }
+    }
     points
         .iter()
         .map(|p| {

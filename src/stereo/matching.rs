@@ -292,7 +292,8 @@ impl Matcher {
         }
         let planes = reference.len().min(other.len());
         let [bx, by, bw, bh] = bbox;
-        if bw < 3 || bh < 3 || bx < 0 || by < 0 || bx + bw > w as i64 || by + bh > h as i64 {
+        // Written so that no sum can overflow (a box from the command line may hold i64::MAX).
+        if bw < 3 || bh < 3 || bx < 0 || by < 0 || bw > w as i64 - bx || bh > h as i64 - by {
             return Err(NoRange::BadBox(bbox));
         }
         let (bx, by, bw, bh) = (bx as usize, by as usize, bw as usize, bh as usize);
@@ -568,6 +569,17 @@ pub fn match_box(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A box whose corner plus size overflows i64 is refused, not sliced out of range (issue
+    /// 24: `rccar stereo --box 9223372036854775807,0,5,5` panicked here).
+    #[test]
+    fn a_box_at_the_end_of_i64_is_refused() {
+        let g = GrayImage::from_fn(64, 48, |x, y| image::Luma([((x * 7 + y * 13) % 251) as u8]));
+        for b in [[i64::MAX, 0, 5, 5], [0, i64::MAX, 5, 5], [10, 10, i64::MAX, 5], [60, 0, 5, 5]] {
+            let e = match_box(&g, &g, b, &MatchOptions::default()).unwrap_err();
+            assert_eq!(e, NoRange::BadBox(b));
+        }
+    }
 
     /// A plain blue box (disparity 20 px) in front of a floor of irregular white stripes
     /// (disparity 5 px) that fill most of the box: the opponent planes see only the box.

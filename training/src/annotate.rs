@@ -33,7 +33,7 @@ impl Labels {
 
 /// Reads and checks a boxes CSV; `Err` lists every bad line (`file:line: reason`).
 pub fn read_csv(csv: &Path) -> Result<Labels, Vec<String>> {
-    let text = std::fs::read_to_string(csv).map_err(|e| vec![format!("{}: cannot read: {e}", csv.display())])?;
+    let text = crate::samples::read_list_text(csv).map_err(|e| vec![e.to_string()])?;
     let dir = csv.parent().unwrap_or(Path::new("."));
     let name = csv.display().to_string();
     let mut errors = Vec::new();

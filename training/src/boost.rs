@@ -255,21 +255,8 @@ impl Booster {
         let kind = self.kind;
         let total_w: f64 = w.iter().sum();
         // 1. Root: best split over all features, in parallel.
-        let search = |mask: Option<&[bool]>| -> Option<(f64, usize, usize, [f64; 4])> {
-            (0..m.features.len())
-                .into_par_iter()
-                .filter_map(|r| {
-                    let nb = m.edges[r].len();
-                    if nb == 0 {
-                        return None;
-                    }
-                    let (hw, ht) = histogram(m.row(r), &w, &wt, mask);
-                    best_split(kind, &hw, &ht, nb).map(|(g, b, s)| (g, r, b, s))
-                })
-                .reduce_with(|a, b| if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) { b } else { a })
-        };
+        let search = |mask: Option<&[bool]>| best_feature_split(m, kind, &w, &wt, mask);
         let (_, r0, b0, s0) = search(None)?;
-        let row0 = m.row(r0);
         let split0 = Split {
             feature: m.features[r0],
             threshold: m.edges[r0][b0],
@@ -280,51 +267,7 @@ impl Booster {
         let mut rb: Vec<(usize, usize)> = Vec::new();
         let mut weak = if depth >= 2 {
             // 2. Depth 2: each side gets its own best split (or stays a leaf).
-            let left_mask: Vec<bool> = row0.iter().map(|&b| (b as usize) <= b0).collect();
-            let right_mask: Vec<bool> = left_mask.iter().map(|v| !v).collect();
-            let mut splits = vec![Split {
-                left: 1,
-                right: 2,
-                ..split0
-            }];
-            rb.push((r0, b0));
-            let mut leaves = Vec::new();
-            for (side, mask) in [left_mask, right_mask].iter().enumerate() {
-                let (sw, st) = if side == 0 { (s0[0], s0[1]) } else { (s0[2], s0[3]) };
-                match search(Some(mask)) {
-                    Some((_, r, b, s)) => {
-                        let l = leaves.len() as i32;
-                        leaves.push(leaf_value(kind, s[0], s[1], total_w) as f32);
-                        leaves.push(leaf_value(kind, s[2], s[3], total_w) as f32);
-                        splits.push(Split {
-                            feature: m.features[r],
-                            threshold: m.edges[r][b],
-                            left: -l,
-                            right: -(l + 1),
-                        });
-                        rb.push((r, b));
-                    }
-                    None => {
-                        // A leaf directly under the root.
-                        let l = leaves.len() as i32;
-                        leaves.push(leaf_value(kind, sw, st, total_w) as f32);
-                        if side == 0 {
-                            splits[0].left = -l;
-                        } else {
-                            splits[0].right = -l;
-                        }
-                        splits.push(Split {
-                            feature: split0.feature,
-                            threshold: split0.threshold,
-                            left: -l,
-                            right: -l,
-                        });
-                        rb.push((r0, b0));
-                    }
-                }
-            }
-            // Renumber: internal children are at node indices 1 and 2 (possibly unused).
-            Weak { splits, leaves }
+            depth2_tree(m, kind, total_w, (r0, b0, s0), split0, &mut rb, search)
         } else {
             rb.push((r0, b0));
             Weak {
@@ -337,23 +280,36 @@ impl Booster {
         };
         // 3. Discrete: scale the ±1 leaves by α from the weighted error.
         if kind == BoostType::Discrete {
-            let mut err = 0.0;
-            for i in 0..self.y.len() {
-                let f = apply(&weak, &rb, m, i);
-                if f * self.y[i] <= 0.0 {
-                    err += self.w[i];
-                }
-            }
-            let e = (err / total_w).clamp(1e-10, 1.0 - 1e-10);
-            let alpha = 0.5 * ((1.0 - e) / e).ln();
-            for l in &mut weak.leaves {
-                *l = (*l as f64 * alpha) as f32;
-            }
+            self.scale_discrete(&mut weak, &rb, m, total_w);
         }
         // 4. Scores and weights.
+        self.update(&weak, &rb, m);
+        Some(weak)
+    }
+
+    /// Discrete AdaBoost: the ±1 leaves scaled by α = ½ ln((1 − e)/e), e the weighted error.
+    fn scale_discrete(&self, weak: &mut Weak, rb: &[(usize, usize)], m: &FeatureMatrix, total_w: f64) {
+        let mut err = 0.0;
+        for i in 0..self.y.len() {
+            let f = apply(weak, rb, m, i);
+            if f * self.y[i] <= 0.0 {
+                err += self.w[i];
+            }
+        }
+        let e = (err / total_w).clamp(1e-10, 1.0 - 1e-10);
+        let alpha = 0.5 * ((1.0 - e) / e).ln();
+        for l in &mut weak.leaves {
+            *l = (*l as f64 * alpha) as f32;
+        }
+    }
+
+    /// Adds the weak learner to the scores and re-weights the samples (normalised; Logit's
+    /// weights come from the scores instead).
+    fn update(&mut self, weak: &Weak, rb: &[(usize, usize)], m: &FeatureMatrix) {
+        let kind = self.kind;
         let mut s = 0.0;
         for i in 0..self.y.len() {
-            let f = apply(&weak, &rb, m, i);
+            let f = apply(weak, rb, m, i);
             self.score[i] += f;
             if kind != BoostType::Logit {
                 self.w[i] *= (-self.y[i] * f).exp();
@@ -365,8 +321,89 @@ impl Booster {
                 *v /= s;
             }
         }
-        Some(weak)
     }
+}
+
+/// The best split over all features of `m` (rows in parallel; ties go to the lower row):
+/// (gain, matrix row, last left bin, the sides' sums), or `None` when nothing splits. `mask`
+/// keeps only some samples (one side of a depth-2 tree's root).
+fn best_feature_split(
+    m: &FeatureMatrix,
+    kind: BoostType,
+    w: &[f64],
+    wt: &[f64],
+    mask: Option<&[bool]>,
+) -> Option<(f64, usize, usize, [f64; 4])> {
+    (0..m.features.len())
+        .into_par_iter()
+        .filter_map(|r| {
+            let nb = m.edges[r].len();
+            if nb == 0 {
+                return None;
+            }
+            let (hw, ht) = histogram(m.row(r), w, wt, mask);
+            best_split(kind, &hw, &ht, nb).map(|(g, b, s)| (g, r, b, s))
+        })
+        .reduce_with(|a, b| if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) { b } else { a })
+}
+
+/// A depth-2 tree under the root split `(r0, b0, s0)`: each side gets its own best split, or
+/// stays a leaf. Pushes each split's (matrix row, last left bin) onto `rb`.
+fn depth2_tree(
+    m: &FeatureMatrix,
+    kind: BoostType,
+    total_w: f64,
+    (r0, b0, s0): (usize, usize, [f64; 4]),
+    split0: Split,
+    rb: &mut Vec<(usize, usize)>,
+    search: impl Fn(Option<&[bool]>) -> Option<(f64, usize, usize, [f64; 4])>,
+) -> Weak {
+    let row0 = m.row(r0);
+    let left_mask: Vec<bool> = row0.iter().map(|&b| (b as usize) <= b0).collect();
+    let right_mask: Vec<bool> = left_mask.iter().map(|v| !v).collect();
+    let mut splits = vec![Split {
+        left: 1,
+        right: 2,
+        ..split0
+    }];
+    rb.push((r0, b0));
+    let mut leaves = Vec::new();
+    for (side, mask) in [left_mask, right_mask].iter().enumerate() {
+        let (sw, st) = if side == 0 { (s0[0], s0[1]) } else { (s0[2], s0[3]) };
+        match search(Some(mask)) {
+            Some((_, r, b, s)) => {
+                let l = leaves.len() as i32;
+                leaves.push(leaf_value(kind, s[0], s[1], total_w) as f32);
+                leaves.push(leaf_value(kind, s[2], s[3], total_w) as f32);
+                splits.push(Split {
+                    feature: m.features[r],
+                    threshold: m.edges[r][b],
+                    left: -l,
+                    right: -(l + 1),
+                });
+                rb.push((r, b));
+            }
+            None => {
+                // A leaf directly under the root.
+                let l = leaves.len() as i32;
+                leaves.push(leaf_value(kind, sw, st, total_w) as f32);
+                if side == 0 {
+                    splits[0].left = -l;
+                } else {
+                    splits[0].right = -l;
+                }
+                splits.push(Split {
+                    feature: split0.feature,
+                    threshold: split0.threshold,
+                    left: -l,
+                    right: -l,
+                });
+                rb.push((r0, b0));
+            }
+        }
+    }
+    // Renumber: internal children are at node indices 1 and 2 (possibly unused).
+    Weak { splits, leaves }
 }
 
 /// A weak learner's leaf (as f32, widened) on sample `i`; `rb` holds each split's matrix row

@@ -93,14 +93,92 @@ struct DistortArgs {
     min_jpeg_quality: u8,
 }
 
+/// Refuses a flag's value outside `lo..=hi` (NaN too), naming the flag and the bound.
+fn within<T: PartialOrd + std::fmt::Display + Copy>(flag: &str, v: T, lo: T, hi: T, unit: &str) -> anyhow::Result<()> {
+    if !(v >= lo && v <= hi) {
+        bail!("{flag} {v}: must be {lo}..={hi}{unit}");
+    }
+    Ok(())
+}
+
+/// Refuses a window side outside 3..=256 pixels (as `train -W/-H`).
+fn check_window(flag: &str, (w, h): (u32, u32)) -> anyhow::Result<()> {
+    if !(3..=256).contains(&w) || !(3..=256).contains(&h) {
+        bail!("{flag} {w}x{h}: each side must be 3..=256 px");
+    }
+    Ok(())
+}
+
+/// Refuses a size (N or WxH) with a side above the largest image side.
+fn check_size(flag: &str, (w, h): (u32, u32)) -> anyhow::Result<()> {
+    let side = rccar::config::limits::MAX_IMAGE_SIDE;
+    if w > side || h > side {
+        bail!("{flag} {w}x{h}: each side must be 0..={side} px");
+    }
+    Ok(())
+}
+
+/// Most templates `distort` holds (each a decoded image).
+const MAX_TEMPLATES: usize = 10_000;
+/// Most stages `train` builds (OpenCV's cascades have 20-25).
+const MAX_STAGES: u32 = 100;
+/// Most samples (`--count`, `--num-pos`, `--num-neg`) a command makes or uses per stage.
+const MAX_SAMPLES: usize = 1_000_000;
+/// Most weak classifiers per stage.
+const MAX_WEAK: u32 = 10_000;
+/// Most memory `train --mem-mb` may be given, MiB (64 GiB).
+const MAX_MEM_MB: usize = 65_536;
+/// Most threads.
+const MAX_THREADS: usize = 256;
+/// Most frames `photoset` makes of either kind.
+const MAX_PHOTOSET_FRAMES: usize = 100_000;
+
+/// The detector's settings a user gives `train` (held-out check) and `evaluate`, as
+/// `[detect]` bounds them: scale factor 1.01..=2, minNeighbors 0..=100, a minimum size within
+/// the largest image side.
+fn check_detector(prefix: &str, scale_factor: f64, min_neighbors: u32, min_size: (u32, u32)) -> anyhow::Result<()> {
+    within("--scale-factor", scale_factor, 1.01, 2.0, "")?;
+    within(&format!("--{prefix}min-neighbors"), min_neighbors, 0, 100, "")?;
+    check_size(&format!("--{prefix}min-size"), min_size)
+}
+
+/// `train`'s sizes and counts, each refused by flag and bound before anything is read.
+fn check_train_args(a: &TrainArgs) -> anyhow::Result<(u32, u32)> {
+    for (flag, side) in [("-W", a.width), ("-H", a.height)] {
+        if let Some(v) = side {
+            within(flag, v, 3, 256, " px")?;
+        }
+    }
+    within("--num-stages", a.num_stages, 1, MAX_STAGES, "")?;
+    if let Some(n) = a.num_pos {
+        within("--num-pos", n, 1, MAX_SAMPLES, "")?;
+    }
+    within("--num-neg", a.num_neg, 1, MAX_SAMPLES, "")?;
+    within("--max-weak-count", a.max_weak_count, 1, MAX_WEAK, "")?;
+    within("--mem-mb", a.mem_mb, 1, MAX_MEM_MB, " MiB")?;
+    if let Some(t) = a.threads {
+        within("--threads", t, 1, MAX_THREADS, "")?;
+    }
+    within("--target-fp-per-frame", a.target_fp_per_frame, 0.0, 1000.0, "")?;
+    let min_size = parse_size(&a.holdout_min_size)?;
+    check_detector("holdout-", a.scale_factor, a.holdout_min_neighbors, min_size)?;
+    Ok(min_size)
+}
+
 /// Expands files, folders and simple globs (`*`, `?` in the file name) to image files.
 fn expand_images(specs: &[String]) -> anyhow::Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     for s in specs {
         let p = PathBuf::from(s);
-        let name = p.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+        let name = p
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
         if name.contains('*') || name.contains('?') {
-            let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+            let dir = p
+                .parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(std::path::Path::new("."));
             let mut m: Vec<PathBuf> = std::fs::read_dir(dir)
                 .with_context(|| format!("{s}: cannot list {}", dir.display()))?
                 .filter_map(|e| e.ok())
@@ -150,23 +228,48 @@ fn glob_match(pat: &str, s: &str) -> bool {
     pi == p.len()
 }
 
-fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
-    let mut templates = Vec::new();
-    for t in expand_images(&a.templates)? {
-        templates.push(
-            image::open(&t)
-                .with_context(|| format!("{}: cannot read template", t.display()))?
-                .to_rgba8(),
-        );
+/// `distort`'s counts, angles, scales and window, each refused by flag and bound.
+fn check_distort_args(a: &DistortArgs) -> anyhow::Result<()> {
+    within("--count", a.count, 1, MAX_SAMPLES, "")?;
+    within("--max-angle-deg", a.max_angle_deg, 0.0, 180.0, " degrees")?;
+    within("--max-skew", a.max_skew, 0.0, 0.5, " (fraction of the object size)")?;
+    within(
+        "--min-scale",
+        a.min_scale,
+        1.0,
+        20.0,
+        " (multiple of the window: the object is at least the window)",
+    )?;
+    within(
+        "--max-scale",
+        a.max_scale,
+        a.min_scale.max(1.0),
+        20.0,
+        " (multiple of the window, at least --min-scale)",
+    )?;
+    if let Some(w) = &a.window {
+        check_window("--window", parse_wh(w)?)?;
     }
+    Ok(())
+}
+
+/// Every box of these info.dat files cut out of its photo as a template (at most
+/// [`MAX_TEMPLATES`] in all); boxes outside their photo and unreadable photos are skipped, named.
+fn templates_from_info(
+    files: &[PathBuf],
+    templates: &mut Vec<image::RgbaImage>,
+) -> anyhow::Result<Vec<samples::InfoLine>> {
     let mut info_lines = Vec::new();
-    for f in &a.templates_from_info {
+    for f in files {
         let (lines, skipped) = samples::read_info(f)?;
         for s in &skipped {
             eprintln!("{s}");
         }
         for l in &lines {
-            let img = match image::open(&l.path) {
+            let img = match samples::checked_dimensions(&l.path)
+                .map_err(|e| e.to_string())
+                .and_then(|_| image::open(&l.path).map_err(|e| e.to_string()))
+            {
                 Ok(i) => i.to_rgba8(),
                 Err(e) => {
                     eprintln!("{}:{}: skipped: {}: {e}", f.display(), l.line, l.path.display());
@@ -174,11 +277,24 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
                 }
             };
             for b in &l.boxes {
-                if b.x < 0 || b.y < 0 || b.width <= 0 || b.height <= 0
-                    || (b.x + b.width) as u32 > img.width() || (b.y + b.height) as u32 > img.height()
+                if b.x < 0
+                    || b.y < 0
+                    || b.width <= 0
+                    || b.height <= 0
+                    || (b.x as i64 + b.width as i64) > img.width() as i64
+                    || (b.y as i64 + b.height as i64) > img.height() as i64
                 {
-                    eprintln!("{}:{}: skipped: box {:?} is outside {}", f.display(), l.line, b, l.path.display());
+                    eprintln!(
+                        "{}:{}: skipped: box {:?} is outside {}",
+                        f.display(),
+                        l.line,
+                        b,
+                        l.path.display()
+                    );
                     continue;
+                }
+                if templates.len() >= MAX_TEMPLATES {
+                    bail!("{}:{}: more than {MAX_TEMPLATES} templates", f.display(), l.line);
                 }
                 templates.push(
                     image::imageops::crop_imm(&img, b.x as u32, b.y as u32, b.width as u32, b.height as u32).to_image(),
@@ -187,6 +303,27 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
         }
         info_lines.extend(lines);
     }
+    Ok(info_lines)
+}
+
+fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
+    check_distort_args(&a)?;
+    let mut templates = Vec::new();
+    let files = expand_images(&a.templates)?;
+    if files.len() > MAX_TEMPLATES {
+        bail!("{} templates: at most {MAX_TEMPLATES}", files.len());
+    }
+    for t in files {
+        if let Err(e) = samples::checked_dimensions(&t) {
+            bail!("{e}");
+        }
+        templates.push(
+            image::open(&t)
+                .with_context(|| format!("{}: cannot read template", t.display()))?
+                .to_rgba8(),
+        );
+    }
+    let info_lines = templates_from_info(&a.templates_from_info, &mut templates)?;
     if templates.is_empty() {
         bail!("no templates: give --template FILE|FOLDER|GLOB or --templates-from-info info.dat");
     }
@@ -291,7 +428,11 @@ fn run_boxes(a: BoxesArgs) -> anyhow::Result<ExitCode> {
     }
     if let Some(dir) = &a.preview {
         let files = rccar_train::annotate::previews(&labels, dir, 64).map_err(anyhow::Error::msg)?;
-        println!("{}: {} preview pictures (crops.png shows every box)", dir.display(), files.len());
+        println!(
+            "{}: {} preview pictures (crops.png shows every box)",
+            dir.display(),
+            files.len()
+        );
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -329,7 +470,17 @@ struct PhotosetArgs {
 
 fn run_photoset(a: PhotosetArgs) -> anyhow::Result<ExitCode> {
     use rccar_train::photogen;
-    let dirs = if a.photos.is_empty() { photogen::system_photo_dirs() } else { a.photos.clone() };
+    within("--with-sign", a.with_sign, 0, MAX_PHOTOSET_FRAMES, "")?;
+    within("--without", a.without, 0, MAX_PHOTOSET_FRAMES, "")?;
+    let (lo, hi) = parse_wh(&a.sign_px)?;
+    if !(4..=1024).contains(&lo) || !(lo..=1024).contains(&hi) {
+        bail!("--sign-px {lo}x{hi}: each must be 4..=1024 px, MIN <= MAX");
+    }
+    let dirs = if a.photos.is_empty() {
+        photogen::system_photo_dirs()
+    } else {
+        a.photos.clone()
+    };
     let all = photogen::list_photos(&dirs);
     let Some(photos) = photogen::part(&all, &a.half) else {
         bail!("--half `{}`: expected 0, 1, 0-train, 0-val or all", a.half)
@@ -337,11 +488,13 @@ fn run_photoset(a: PhotosetArgs) -> anyhow::Result<ExitCode> {
     if photos.is_empty() {
         bail!("no .jpg/.png photos in {dirs:?} (install Debian's opencv-doc, or give --photos DIR)");
     }
-    let (lo, hi) = parse_wh(&a.sign_px)?;
+
     let track = if a.track.exists() {
         a.track.clone()
     } else {
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(&a.track)
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("..")
+            .join(&a.track)
     };
     let t = photogen::stop_sign_template(&track, 96).map_err(anyhow::Error::msg)?;
     let o = photogen::PhotoSetOptions {
@@ -396,9 +549,17 @@ struct EvalArgs {
 const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 
 fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
+    let min_size = parse_size(&a.min_size)?;
+    check_detector("", a.scale_factor, a.min_neighbors, min_size)?;
+    within("--iou", a.iou, 0.01, 1.0, "")?;
     let cascade = rccar::detect::Cascade::from_file(&a.cascade)?;
     let frames = load_frames(&a.info)?;
-    let info_name = a.info.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" + ");
+    let info_name = a
+        .info
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(" + ");
     if frames.is_empty() {
         bail!("{info_name}: no readable frames");
     }
@@ -408,7 +569,7 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
         &a.cascade.display().to_string(),
         &frames,
         a.scale_factor,
-        parse_size(&a.min_size)?,
+        min_size,
         a.iou,
         &mns,
         a.min_neighbors,
@@ -504,7 +665,10 @@ fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
     if s.contains('x') {
         parse_wh(s)
     } else {
-        let n: u32 = s.trim().parse().with_context(|| format!("`{s}`: expected N or WxH pixels"))?;
+        let n: u32 = s
+            .trim()
+            .parse()
+            .with_context(|| format!("`{s}`: expected N or WxH pixels"))?;
         Ok((n, n))
     }
 }
@@ -705,18 +869,14 @@ fn load_frames(files: &[PathBuf]) -> anyhow::Result<Vec<(String, image::GrayImag
     Ok(frames)
 }
 
-fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
+/// The training window and why: `-W/-H`, the window `distort` wrote into the --pos files, or
+/// one chosen from their boxes; each side 3..=256 px.
+fn train_window(a: &TrainArgs) -> anyhow::Result<(i32, i32, String)> {
     use rccar_train::plan;
-    use std::io::IsTerminal;
-    if let Some(t) = a.threads {
-        rayon::ThreadPoolBuilder::new().num_threads(t).build_global().ok();
-    }
-    let t = std::time::Instant::now();
-    // 1. The window: given, written by distort, or chosen from the boxes.
     let mut lines = Vec::new();
     let mut hint = None;
     for f in &a.pos {
-        let text = std::fs::read_to_string(f).with_context(|| format!("{}: cannot read", f.display()))?;
+        let text = samples::read_list_text(f)?;
         hint = hint.or(plan::window_hint(&text));
         lines.extend(samples::parse_info(&text, f).0);
     }
@@ -725,7 +885,11 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
         (Some(w), None) => (w, w, "given (-H = -W)".to_string()),
         (None, Some(h)) => (h, h, "given (-W = -H)".to_string()),
         (None, None) => match hint {
-            Some((w, h)) => (w as i32, h as i32, "the window distort made the positives for".to_string()),
+            Some((w, h)) => (
+                w as i32,
+                h as i32,
+                "the window distort made the positives for".to_string(),
+            ),
             None => {
                 let c = plan::choose_window(&lines).context("no boxes in the --pos files")?;
                 (c.size.0 as i32, c.size.1 as i32, c.why)
@@ -733,8 +897,83 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
         },
     };
     if !(3..=256).contains(&width) || !(3..=256).contains(&height) {
-        bail!("window {width}x{height}: each side must be 3..=256 px");
+        bail!("-W/-H window {width}x{height} ({why}): each side must be 3..=256 px");
     }
+    Ok((width, height, why))
+}
+
+/// The held-out frames of `--holdout` and the detector settings they are checked with
+/// (`None` without `--holdout`); an error when none of the frames can be read.
+fn load_holdout(a: &TrainArgs, min_size: (u32, u32)) -> anyhow::Result<Option<train::Holdout>> {
+    if a.holdout.is_empty() {
+        return Ok(None);
+    }
+    let frames = load_frames(&a.holdout)?;
+    if frames.is_empty() {
+        bail!("no readable held-out frame in {:?}", a.holdout);
+    }
+    eprintln!(
+        "{} held-out frames ({} boxes): training stops at {} false positives per frame",
+        frames.len(),
+        frames.iter().map(|f| f.2.len()).sum::<usize>(),
+        a.target_fp_per_frame
+    );
+    Ok(Some(train::Holdout {
+        frames,
+        min_neighbors: a.holdout_min_neighbors,
+        min_size,
+        scale_factor: a.scale_factor,
+        iou: 0.5,
+        target_fp_per_frame: a.target_fp_per_frame,
+    }))
+}
+
+/// What `train` prints at the end besides the outcome.
+struct Summary<'a> {
+    window: (i32, i32, &'a str),
+    num_pos: usize,
+    usable: usize,
+    backgrounds: usize,
+    seconds: f64,
+    note: Option<String>,
+}
+
+/// The summary of a finished training, on stdout.
+fn print_summary(a: &TrainArgs, out: &train::TrainOutcome, s: &Summary) {
+    let (width, height, why) = s.window;
+    println!("cascade      {}", out.xml.display());
+    println!("stages       {} ({})", out.stages, out.reason);
+    println!("window       {width}x{height} ({why})");
+    println!("positives    {} per stage of {} usable", s.num_pos, s.usable);
+    println!(
+        "negatives    {} per stage from {} backgrounds",
+        a.num_neg, s.backgrounds
+    );
+    if let Some(c) = &out.holdout {
+        println!(
+            "held-out     {} false positives per frame (target {}){} at minNeighbors {}",
+            format_args!("{:.4}", c.fp_per_frame),
+            a.target_fp_per_frame,
+            c.recall.map(|r| format!(", recall {r:.4}")).unwrap_or_default(),
+            a.holdout_min_neighbors
+        );
+    }
+    println!("time         {:.1} s", s.seconds);
+    if let Some(n) = &s.note {
+        println!("note         {n}");
+    }
+}
+
+fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
+    use rccar_train::plan;
+    use std::io::IsTerminal;
+    let holdout_min_size = check_train_args(&a)?;
+    if let Some(t) = a.threads {
+        rayon::ThreadPoolBuilder::new().num_threads(t).build_global().ok();
+    }
+    let t = std::time::Instant::now();
+    // 1. The window: given, written by distort, or chosen from the boxes.
+    let (width, height, why) = train_window(&a)?;
     eprintln!("window {width}x{height}: {why}");
     let (w, h) = (width as usize, height as usize);
     // 2. Positives and backgrounds.
@@ -758,28 +997,7 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
         eprintln!("{s}");
     }
     eprintln!("{} background images", bgs.len());
-    let holdout = if a.holdout.is_empty() {
-        None
-    } else {
-        let frames = load_frames(&a.holdout)?;
-        if frames.is_empty() {
-            bail!("no readable held-out frame in {:?}", a.holdout);
-        }
-        eprintln!(
-            "{} held-out frames ({} boxes): training stops at {} false positives per frame",
-            frames.len(),
-            frames.iter().map(|f| f.2.len()).sum::<usize>(),
-            a.target_fp_per_frame
-        );
-        Some(train::Holdout {
-            frames,
-            min_neighbors: a.holdout_min_neighbors,
-            min_size: parse_size(&a.holdout_min_size)?,
-            scale_factor: a.scale_factor,
-            iou: 0.5,
-            target_fp_per_frame: a.target_fp_per_frame,
-        })
-    };
+    let holdout = load_holdout(&a, holdout_min_size)?;
     let opts = TrainOptions {
         params: ModelParams {
             width,
@@ -807,24 +1025,15 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
     let out = train::train_with_holdout(&opts, &pos, &bgs, holdout.as_ref(), &a.out, a.resume, &mut bars)
         .with_context(|| format!("training into {}", a.out.display()))?;
     // 3. The summary, on stdout.
-    println!("cascade      {}", out.xml.display());
-    println!("stages       {} ({})", out.stages, out.reason);
-    println!("window       {width}x{height} ({why})");
-    println!("positives    {num_pos} per stage of {} usable", pos.len());
-    println!("negatives    {} per stage from {} backgrounds", a.num_neg, bgs.len());
-    if let Some(c) = out.holdout {
-        println!(
-            "held-out     {} false positives per frame (target {}){} at minNeighbors {}",
-            format_args!("{:.4}", c.fp_per_frame),
-            a.target_fp_per_frame,
-            c.recall.map(|r| format!(", recall {r:.4}")).unwrap_or_default(),
-            a.holdout_min_neighbors
-        );
-    }
-    println!("time         {:.1} s", t.elapsed().as_secs_f64());
-    if let Some(n) = note {
-        println!("note         {n}");
-    }
+    let summary = Summary {
+        window: (width, height, &why),
+        num_pos,
+        usable: pos.len(),
+        backgrounds: bgs.len(),
+        seconds: t.elapsed().as_secs_f64(),
+        note,
+    };
+    print_summary(&a, &out, &summary);
     Ok(ExitCode::SUCCESS)
 }
 

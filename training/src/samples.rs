@@ -15,6 +15,15 @@ use rccar::detect::resize::Resizer;
 use rccar::detect::Rect;
 use std::path::{Path, PathBuf};
 
+/// Largest list file (info.dat, bg.txt, a boxes CSV) read, bytes.
+pub const MAX_LIST_BYTES: u64 = 64 << 20;
+/// Largest image read, pixels (width × height), as rccar's own limit.
+pub const MAX_IMAGE_PIXELS: u64 = rccar::config::limits::MAX_IMAGE_PIXELS;
+/// Most grey pixels held at once by one command (backgrounds, evaluation frames): 2 GB.
+pub const MAX_TOTAL_PIXELS: u64 = 2_000_000_000;
+/// Most positive windows loaded for training.
+pub const MAX_POSITIVES: usize = 1_000_000;
+
 /// Why a whole file could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum SampleError {
@@ -26,6 +35,44 @@ pub enum SampleError {
         /// Cause.
         source: std::io::Error,
     },
+    /// A bound was exceeded (the message names it).
+    #[error("{0}")]
+    TooMuch(String),
+}
+
+/// Reads a text file of at most [`MAX_LIST_BYTES`]; the error names the file and the bound.
+pub fn read_list_text(path: &Path) -> Result<String, SampleError> {
+    use std::io::Read;
+    let io = |source| SampleError::Io {
+        path: path.into(),
+        source,
+    };
+    let mut text = String::new();
+    std::fs::File::open(path)
+        .map_err(io)?
+        .take(MAX_LIST_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(io)?;
+    if text.len() as u64 > MAX_LIST_BYTES {
+        return Err(SampleError::TooMuch(format!(
+            "{}: larger than {MAX_LIST_BYTES} bytes (a list of images and boxes is far smaller)",
+            path.display()
+        )));
+    }
+    Ok(text)
+}
+
+/// An image's size from its header, refused above [`MAX_IMAGE_PIXELS`] before decoding.
+pub fn checked_dimensions(path: &Path) -> Result<(u32, u32), String> {
+    let (w, h) = image::image_dimensions(path).map_err(|e| format!("{}: cannot read image: {e}", path.display()))?;
+    if w as u64 * h as u64 > MAX_IMAGE_PIXELS {
+        return Err(format!(
+            "{}: {w}x{h} pixels is above the image limit ({} megapixels)",
+            path.display(),
+            MAX_IMAGE_PIXELS / 1_000_000
+        ));
+    }
+    Ok((w, h))
 }
 
 /// A line or box that was skipped, and why.
@@ -58,10 +105,7 @@ pub struct InfoLine {
 
 /// Parses an info.dat (or bg.txt) file. Malformed lines are returned in the skip list.
 pub fn read_info(path: &Path) -> Result<(Vec<InfoLine>, Vec<Skipped>), SampleError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SampleError::Io {
-        path: path.into(),
-        source,
-    })?;
+    let text = read_list_text(path)?;
     Ok(parse_info(&text, path))
 }
 
@@ -123,6 +167,7 @@ pub fn parse_info(text: &str, origin: &Path) -> (Vec<InfoLine>, Vec<Skipped>) {
 
 /// Loads an image as grey (OpenCV's integer BT.601 for colour files).
 pub fn load_gray(path: &Path) -> Result<GrayImage, String> {
+    checked_dimensions(path)?;
     let img = image::open(path).map_err(|e| format!("{}: cannot read image: {e}", path.display()))?;
     let rgb = img.to_rgb8();
     let mut g = GrayImage::new(rgb.width(), rgb.height());
@@ -175,7 +220,11 @@ pub fn load_positives(files: &[PathBuf], w: usize, h: usize) -> Result<(Vec<Vec<
             for b in l.boxes {
                 let reason = if b.width <= 0 || b.height <= 0 {
                     Some(format!("box {b:?} is empty"))
-                } else if b.x < 0 || b.y < 0 || b.x + b.width > iw || b.y + b.height > ih {
+                } else if b.x < 0
+                    || b.y < 0
+                    || b.x as i64 + b.width as i64 > iw as i64
+                    || b.y as i64 + b.height as i64 > ih as i64
+                {
                     Some(format!(
                         "box ({}, {}, {}, {}) is outside the {iw}x{ih} image {}",
                         b.x,
@@ -200,7 +249,15 @@ pub fn load_positives(files: &[PathBuf], w: usize, h: usize) -> Result<(Vec<Vec<
                         line: l.line,
                         reason,
                     }),
-                    None => out.push(crop_resize(&img, b, w, h, &mut rs)),
+                    None => {
+                        if out.len() >= MAX_POSITIVES {
+                            return Err(SampleError::TooMuch(format!(
+                                "{file}:{}: more than {MAX_POSITIVES} positive boxes; use fewer",
+                                l.line
+                            )));
+                        }
+                        out.push(crop_resize(&img, b, w, h, &mut rs))
+                    }
                 }
             }
         }
@@ -223,10 +280,21 @@ pub struct Background {
 pub fn load_backgrounds(files: &[PathBuf]) -> Result<(Vec<Background>, Vec<Skipped>), SampleError> {
     let mut out = Vec::new();
     let mut skipped = Vec::new();
+    let mut pixels = 0u64;
     for f in files {
         let (lines, mut sk) = read_info(f)?;
         skipped.append(&mut sk);
         for l in lines {
+            if let Ok((w, h)) = image::image_dimensions(&l.path) {
+                pixels += w as u64 * h as u64;
+                if pixels > MAX_TOTAL_PIXELS {
+                    return Err(SampleError::TooMuch(format!(
+                        "{}:{}: the backgrounds so far hold more than {MAX_TOTAL_PIXELS} pixels; use fewer or smaller ones",
+                        f.display(),
+                        l.line
+                    )));
+                }
+            }
             match load_gray(&l.path) {
                 Ok(img) => out.push(Background {
                     name: l.path.display().to_string(),
@@ -260,5 +328,73 @@ mod tests {
         assert_eq!(skipped[0].line, 5);
         assert!(skipped[0].to_string().contains("dir/info.dat:5"), "{}", skipped[0]);
         assert_eq!(skipped[1].line, 6);
+    }
+
+    /// A PNG that holds only its header (IHDR, an empty IDAT, IEND): enough for
+    /// `image::image_dimensions`, far too little to decode.
+    fn png_header(path: &Path, w: u32, h: u32) {
+        fn crc(bytes: &[u8]) -> u32 {
+            let mut c = !0u32;
+            for &b in bytes {
+                c ^= b as u32;
+                for _ in 0..8 {
+                    c = if c & 1 == 1 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+                }
+            }
+            !c
+        }
+        let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+        let mut ihdr = w.to_be_bytes().to_vec();
+        ihdr.extend(h.to_be_bytes());
+        ihdr.extend([8, 0, 0, 0, 0]); // 8-bit grey, no interlace
+        for (kind, data) in [(&b"IHDR"[..], &ihdr[..]), (b"IDAT", &[]), (b"IEND", &[])] {
+            out.extend((data.len() as u32).to_be_bytes());
+            let mut body = kind.to_vec();
+            body.extend(data);
+            out.extend(&body);
+            out.extend(crc(&body).to_be_bytes());
+        }
+        std::fs::write(path, out).unwrap();
+    }
+
+    /// The image bound: 40 million pixels pass the header check, one more is refused before
+    /// decoding, with the file and the limit named.
+    #[test]
+    fn images_above_the_pixel_bound_are_refused_from_the_header() {
+        let dir = tempfile::tempdir().unwrap();
+        let at = dir.path().join("at.png");
+        png_header(&at, 8000, 5000);
+        assert_eq!(8000 * 5000, MAX_IMAGE_PIXELS);
+        assert_eq!(checked_dimensions(&at), Ok((8000, 5000)));
+        let over = dir.path().join("over.png");
+        png_header(&over, 40_000_001, 1);
+        let e = checked_dimensions(&over).unwrap_err();
+        assert!(
+            e.contains("over.png") && e.contains("40000001x1") && e.contains("40 megapixels"),
+            "{e}"
+        );
+        // load_gray refuses it the same way (before allocating 40 MB).
+        assert_eq!(load_gray(&over).unwrap_err(), e);
+    }
+
+    /// The list bound: a list of exactly MAX_LIST_BYTES is read, one byte more is refused,
+    /// naming the file and the bound.
+    #[test]
+    fn list_files_above_the_byte_bound_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let at = dir.path().join("at.txt");
+        let mut text = "# padding\n".repeat((MAX_LIST_BYTES / 10) as usize);
+        text.push_str(&"#".repeat((MAX_LIST_BYTES - text.len() as u64) as usize));
+        assert_eq!(text.len() as u64, MAX_LIST_BYTES);
+        std::fs::write(&at, &text).unwrap();
+        assert_eq!(read_list_text(&at).unwrap().len() as u64, MAX_LIST_BYTES);
+        let over = dir.path().join("over.txt");
+        text.push('#');
+        std::fs::write(&over, &text).unwrap();
+        let e = read_info(&over).unwrap_err().to_string();
+        assert!(
+            e.contains("over.txt") && e.contains(&format!("larger than {MAX_LIST_BYTES} bytes")),
+            "{e}"
+        );
     }
 }

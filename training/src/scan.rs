@@ -23,10 +23,10 @@
 use crate::features::{tilted_offset, SampleIntegral};
 use crate::model::CompiledCascade;
 use crate::samples::Background;
+use rayon::prelude::*;
 use rccar::detect::integral::Integrals;
 use rccar::detect::resize::Resizer;
 use rccar::detect::{Cascade, Rect};
-use rayon::prelude::*;
 use rccar::sim::rng::{mix, SplitMix64};
 
 /// Windows overlapping an object box by at least this IoU are not negatives.
@@ -113,25 +113,7 @@ pub fn scan(
             while x < xs {
                 // 2. Normalisation, as the detector.
                 let p = y * stride + x;
-                let d = &ii.data[p..];
-                let vs = d[norm[0]]
-                    .wrapping_sub(d[norm[1]])
-                    .wrapping_sub(d[norm[2]])
-                    .wrapping_add(d[norm[3]]);
-                let q = &ii.sqsum[p..];
-                let vq = (q[norm[0]] + q[norm[3]]).wrapping_sub(q[norm[1]] + q[norm[2]]) as u32;
-                let nf = area * vq as f64 - vs as f64 * vs as f64;
-                let mut result = -1;
-                if nf > 0.0 {
-                    let inv = (1.0 / nf.sqrt()) as f32;
-                    if area * (inv as f64) < 0.1 {
-                        res.windows += 1;
-                        result = match &compiled {
-                            Some(c) => c.eval(d, inv),
-                            None => 1,
-                        };
-                    }
-                }
+                let result = window_result(&ii.data[p..], &ii.sqsum[p..], &norm, area, compiled.as_ref(), &mut res);
                 if result > 0 {
                     // 3. A false alarm unless it is one of the objects.
                     let r = Rect::new(
@@ -142,24 +124,13 @@ pub fn scan(
                     );
                     if !bg.avoid.iter().any(|a| a.iou(&r) >= AVOID_IOU) {
                         res.hits += 1;
-                        // Reservoir sampling of `cap` windows.
-                        let slot = if res.kept.len() < cap {
-                            Some(res.kept.len())
-                        } else {
-                            let j = (rng.next_u64() % res.hits) as usize;
-                            (j < cap).then_some(j)
-                        };
-                        if let Some(j) = slot {
+                        keep_hit(&mut res, &mut rng, cap, || {
                             let mut win = Vec::with_capacity(cw * ch);
                             for yy in y..y + ch {
                                 win.extend_from_slice(&pix[yy * lw + x..yy * lw + x + cw]);
                             }
-                            if j == res.kept.len() {
-                                res.kept.push(win);
-                            } else {
-                                res.kept[j] = win;
-                            }
-                        }
+                            win
+                        });
                     }
                 }
                 if result == 0 {
@@ -171,6 +142,56 @@ pub fn scan(
         }
     }
     res
+}
+
+/// The cascade's answer on the window whose integrals start at `d` / `q` (`norm`: the
+/// offsets of the variance rectangle's corners): −1 for a flat window the detector skips
+/// (not counted), else the cascade's result (1 without a cascade), counted in `res.windows`.
+fn window_result(
+    d: &[i32],
+    q: &[u64],
+    norm: &[usize; 4],
+    area: f64,
+    compiled: Option<&CompiledCascade>,
+    res: &mut ScanResult,
+) -> i32 {
+    let vs = d[norm[0]]
+        .wrapping_sub(d[norm[1]])
+        .wrapping_sub(d[norm[2]])
+        .wrapping_add(d[norm[3]]);
+    let vq = (q[norm[0]] + q[norm[3]]).wrapping_sub(q[norm[1]] + q[norm[2]]) as u32;
+    let nf = area * vq as f64 - vs as f64 * vs as f64;
+    let mut result = -1;
+    if nf > 0.0 {
+        let inv = (1.0 / nf.sqrt()) as f32;
+        if area * (inv as f64) < 0.1 {
+            res.windows += 1;
+            result = match compiled {
+                Some(c) => c.eval(d, inv),
+                None => 1,
+            };
+        }
+    }
+    result
+}
+
+/// Reservoir sampling of `cap` windows: the `res.hits`-th hit (already counted) takes a free
+/// slot, or replaces a kept one with probability `cap / hits`; `window` cuts it only then.
+fn keep_hit(res: &mut ScanResult, rng: &mut SplitMix64, cap: usize, window: impl FnOnce() -> Vec<u8>) {
+    let slot = if res.kept.len() < cap {
+        Some(res.kept.len())
+    } else {
+        let j = (rng.next_u64() % res.hits) as usize;
+        (j < cap).then_some(j)
+    };
+    if let Some(j) = slot {
+        let win = window();
+        if j == res.kept.len() {
+            res.kept.push(win);
+        } else {
+            res.kept[j] = win;
+        }
+    }
 }
 
 /// One (background, pyramid level, flip) part of the negative pool.
@@ -542,7 +563,10 @@ mod tests {
         u4.dedup();
         assert_eq!(u4.len(), 300, "each window once (noise: no two alike)");
         let flipped: Vec<u8> = all.windows[0].chunks(16).rev().flatten().copied().collect();
-        assert!(all4.windows.contains(&flipped), "upside-down copy of a window is in the pool");
+        assert!(
+            all4.windows.contains(&flipped),
+            "upside-down copy of a window is in the pool"
+        );
         // An object box in the unflipped frame keeps its upside-down windows out too.
         let boxed = [Background {
             avoid: vec![Rect::new(0, 0, 16, 16)],
@@ -554,7 +578,11 @@ mod tests {
         let corner_up: Vec<u8> = corner.chunks(16).rev().flatten().copied().collect();
         assert!(!up.windows.contains(&corner) && !up.windows.contains(&corner_up));
         // (16 − x)(16 − y) ≥ 119 (IoU ≥ 0.3) for 9 + 9 + 8 + 7 + 7 = 40 of the 75 offsets.
-        assert_eq!(up.windows.len(), 2 * (75 - 40), "windows with IoU >= 0.3 with the box are out");
+        assert_eq!(
+            up.windows.len(),
+            2 * (75 - 40),
+            "windows with IoU >= 0.3 with the box are out"
+        );
         // The pool is several times the detector's 2-pixel grid.
         let big = Background {
             name: "n".into(),

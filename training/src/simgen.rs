@@ -46,7 +46,43 @@ pub enum GenError {
     /// The track did not load.
     #[error("{0}")]
     Track(String),
+    /// An option is out of its bounds (the message names the flag and the bound).
+    #[error("{0}")]
+    Options(String),
+    /// No view of the object fits the window within the distances, scene after scene.
+    #[error("no view of the {kind} at {near}..{far} m gives a box of at least {w}x{h} px inside the {cw}x{ch} image ({scenes} placements in a row gave none): use a smaller --window or nearer --min-distance/--max-distance")]
+    NoView {
+        /// The object kind.
+        kind: String,
+        /// Nearest distance, metres.
+        near: f64,
+        /// Farthest distance, metres.
+        far: f64,
+        /// Window width, pixels.
+        w: u32,
+        /// Window height, pixels.
+        h: u32,
+        /// Camera width, pixels.
+        cw: u32,
+        /// Camera height, pixels.
+        ch: u32,
+        /// Placements tried in a row.
+        scenes: usize,
+    },
 }
+
+/// Smallest window side, pixels (as `rccar-train train -W/-H`).
+pub const MIN_WINDOW: u32 = 3;
+/// Largest window side, pixels (as `rccar-train train -W/-H`); also at most the camera's size.
+pub const MAX_WINDOW: u32 = 256;
+/// Most samples or frames of one `gen` (each is a PNG file).
+pub const MAX_COUNT: usize = 1_000_000;
+/// Most object placements of one `gen`.
+pub const MAX_SCENES: usize = 10_000;
+/// Object distances allowed, metres (`--min-distance`, `--max-distance`).
+pub const DISTANCE_M: (f64, f64) = (0.05, 20.0);
+/// Placements in a row that give no usable view before `generate` gives up.
+pub const MAX_EMPTY_SCENES: usize = 20;
 
 fn io_err(path: &Path, e: impl std::fmt::Display) -> GenError {
     GenError::Io {
@@ -156,6 +192,41 @@ pub struct GenOptions {
     pub window: (u32, u32),
     /// Different object placements (scenes) to spread the frames over.
     pub scenes: usize,
+}
+
+impl GenOptions {
+    /// Refuses options out of their bounds for a `cam_w`×`cam_h` camera: the window
+    /// [`MIN_WINDOW`]..=[`MAX_WINDOW`] a side and inside the image, the count 1..=[`MAX_COUNT`],
+    /// the scenes 1..=[`MAX_SCENES`], the distances within [`DISTANCE_M`] and near < far.
+    pub fn check(&self, cam_w: u32, cam_h: u32) -> Result<(), GenError> {
+        let bad = |m: String| Err(GenError::Options(m));
+        let (w, h) = self.window;
+        if !(MIN_WINDOW..=MAX_WINDOW).contains(&w) || !(MIN_WINDOW..=MAX_WINDOW).contains(&h) {
+            return bad(format!(
+                "--window {w}x{h}: each side must be {MIN_WINDOW}..={MAX_WINDOW} px"
+            ));
+        }
+        if w > cam_w || h > cam_h {
+            return bad(format!(
+                "--window {w}x{h}: larger than the {cam_w}x{cam_h} camera image"
+            ));
+        }
+        if !(1..=MAX_COUNT).contains(&self.count) {
+            return bad(format!("--count {}: must be 1..={MAX_COUNT}", self.count));
+        }
+        if !(1..=MAX_SCENES).contains(&self.scenes) {
+            return bad(format!("--scenes {}: must be 1..={MAX_SCENES}", self.scenes));
+        }
+        let (near, far) = self.distance_m;
+        let ok = |d: f64| d.is_finite() && (DISTANCE_M.0..=DISTANCE_M.1).contains(&d);
+        if !(ok(near) && ok(far) && near < far) {
+            return bad(format!(
+                "--min-distance {near} --max-distance {far}: each must be {}..={} m, min < max",
+                DISTANCE_M.0, DISTANCE_M.1
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The generator: a base track, the car's camera, and the scenes built so far.
@@ -404,6 +475,8 @@ impl SimGen {
 
     /// Writes `o.count` samples or frames into `dir` (created); returns the list file written.
     pub fn generate(&self, o: &GenOptions, dir: &Path, progress: &mut dyn FnMut(usize)) -> Result<PathBuf, GenError> {
+        let (cw, ch) = (self.mount.camera.width, self.mount.camera.height);
+        o.check(cw, ch)?;
         std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
         let list = dir.join(if o.split == Split::Negatives {
             "bg.txt"
@@ -417,7 +490,21 @@ impl SimGen {
         let aspect = o.window.0 as f64 / o.window.1 as f64;
         let mut n = 0usize;
         let mut gray = GrayImage::new(self.mount.camera.width, self.mount.camera.height);
+        let mut empty_scenes = 0usize;
         while n < o.count {
+            // A window no view can fill would otherwise place scenes forever.
+            if empty_scenes >= MAX_EMPTY_SCENES {
+                return Err(GenError::NoView {
+                    kind: format!("{:?}", o.kind),
+                    near: o.distance_m.0,
+                    far: o.distance_m.1,
+                    w: o.window.0,
+                    h: o.window.1,
+                    cw,
+                    ch,
+                    scenes: empty_scenes,
+                });
+            }
             let placed = self.place(o.kind, &mut rng)?;
             let mut in_scene = 0;
             let mut misses = 0;
@@ -532,6 +619,7 @@ impl SimGen {
                 in_scene += 1;
                 progress(n);
             }
+            empty_scenes = if in_scene == 0 { empty_scenes + 1 } else { 0 };
         }
         out.flush().map_err(|e| io_err(&list, e))?;
         Ok(list)

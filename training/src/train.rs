@@ -280,6 +280,328 @@ pub fn train_with_holdout(
     let p = &opts.params;
     let (w, h) = (p.width as usize, p.height as usize);
     // 0. Checks.
+    check_inputs(opts, positives, backgrounds)?;
+    let (xml_path, log_path) = output_paths(out_dir)?;
+    // 1. Positives' integrals; windows the detector would never look at are left out.
+    let mut ii = Integrals::new();
+    let pos_pool = positive_pool(positives, w, h, opts.seed, &mut ii, progress);
+    // 2. Resume.
+    let mut model = Model::new(p.clone());
+    let mut file = StageFile::new(opts, pos_pool.len(), backgrounds.len());
+    if resume && log_path.exists() {
+        if let Some(done) = resume_from(&log_path, &xml_path, &mut model, &mut file, progress)? {
+            return Ok(done);
+        }
+    }
+    // The feature matrix gets what the data leaves of --mem-mb; 2b. the negative pool.
+    let (budget, pool) = negative_pool(opts, positives.len(), backgrounds, progress)?;
+    let mut last_check: Option<HoldoutCheck> = None;
+    let mut ran_out = false;
+    let reason;
+    loop {
+        let si = model.stages.len();
+        if si >= p.num_stages as usize {
+            reason = format!("all {} stages trained", p.num_stages);
+            break;
+        }
+        let t0 = Instant::now();
+        let cascade: Option<Cascade> = if si == 0 { None } else { Some(model.to_cascade()?) };
+        // 2c. The held-out check of the cascade so far (its early stop).
+        let est = file.log.last().map_or(1.0, |l| l.acceptance_ratio * l.false_alarm);
+        if let Some(r) = early_stop(holdout, cascade.as_ref(), est, &mut last_check, si)? {
+            reason = r;
+            break;
+        }
+        // 3. Positives the cascade so far accepts.
+        let pos = stage_positives(&pos_pool, cascade.as_ref(), (w, h), opts.num_pos, si)?;
+        // 4. Negatives: windows of the pool the cascade so far wrongly accepts.
+        let seed = mix(opts.seed ^ (si as u64 + 1).wrapping_mul(0x9E37));
+        let mined = pool.mine(backgrounds, cascade.as_ref(), opts.num_neg, seed);
+        let t_mine = t0.elapsed().as_secs_f64();
+        if let Some((r, out)) = negatives_stop(opts, &mined, si, backgrounds, &pool, holdout, last_check, progress)? {
+            (reason, ran_out) = (r, out);
+            break;
+        }
+        let (np, nn) = (pos.len(), mined.windows.len());
+        // 5. Feature matrix within the budget.
+        let t1 = Instant::now();
+        let matrix = feature_matrix(&model, opts, si, budget, &pos, &mined.windows, &mut ii);
+        let t_pre = t1.elapsed().as_secs_f64();
+        // 6. Boosting until the stage's false-alarm target.
+        let t2 = Instant::now();
+        let (stage, hit, fa) = boost_stage(p, &matrix, np, nn, si, progress);
+        if stage.weaks.is_empty() {
+            reason = format!("done after {si} stages: no feature separates the remaining samples");
+            break;
+        }
+        let t_boost = t2.elapsed().as_secs_f64();
+        // 7. Save.
+        model.stages.push(stage.clone());
+        let times = [t_mine, t_pre, t_boost];
+        let mut log = stage_log(si, &stage, (hit, fa), (np, nn), &mined, &matrix, times, pool.windows());
+        // 8. The held-out check of the new cascade, once it rejects most windows.
+        if let Some(chk) = log_holdout(&model, holdout, &mined, fa, &mut log)? {
+            last_check = Some(chk);
+        }
+        log.seconds = t0.elapsed().as_secs_f64();
+        progress.stage_end(&log);
+        file.stages.push(stage);
+        file.log.push(log);
+        save(&xml_path, &log_path, &model, &file)?;
+    }
+    progress.note(&reason);
+    above_target_note(holdout, last_check, ran_out, progress);
+    file.finished = Some(reason.clone());
+    if model.stages.is_empty() {
+        return Err(TrainError::Invalid(format!("no stage could be trained: {reason}")));
+    }
+    save(&xml_path, &log_path, &model, &file)?;
+    Ok(TrainOutcome {
+        xml: xml_path,
+        stages: model.stages.len(),
+        reason,
+        holdout: last_check,
+        negatives_ran_out: ran_out,
+    })
+}
+
+/// Creates `out_dir`; the paths of its cascade.xml and stages.json.
+fn output_paths(out_dir: &Path) -> Result<(PathBuf, PathBuf), TrainError> {
+    std::fs::create_dir_all(out_dir).map_err(|source| TrainError::Io {
+        path: out_dir.into(),
+        source,
+    })?;
+    Ok((out_dir.join("cascade.xml"), out_dir.join("stages.json")))
+}
+
+/// Writes the cascade and the stage log (each atomically).
+fn save(xml_path: &Path, log_path: &Path, model: &Model, file: &StageFile) -> Result<(), TrainError> {
+    write_atomic(xml_path, &model.to_xml())?;
+    write_atomic(log_path, &serde_json::to_string_pretty(file).unwrap_or_default())
+}
+
+impl StageFile {
+    /// A run with no stage yet.
+    fn new(opts: &TrainOptions, positives_total: usize, backgrounds_total: usize) -> StageFile {
+        StageFile {
+            options: opts.clone(),
+            stages: vec![],
+            log: vec![],
+            finished: None,
+            positives_total,
+            backgrounds_total,
+        }
+    }
+}
+
+/// Step 3: the first `num_pos` positives of the seeded pool that the cascade so far accepts;
+/// an error when fewer than 10 do.
+fn stage_positives<'a>(
+    pos_pool: &'a [SampleIntegral],
+    cascade: Option<&Cascade>,
+    (w, h): (usize, usize),
+    num_pos: usize,
+    si: usize,
+) -> Result<Vec<&'a SampleIntegral>, TrainError> {
+    let compiled = cascade.map(|c| scan::compile_for_samples(c, w, h));
+    let pos: Vec<&SampleIntegral> = pos_pool
+        .iter()
+        .filter(|s| scan::passes(s, compiled.as_ref()))
+        .take(num_pos)
+        .collect();
+    if pos.len() < 10 {
+        return Err(TrainError::Invalid(format!(
+            "stage {si}: only {} positives pass the cascade so far (of {}); need at least 10",
+            pos.len(),
+            pos_pool.len()
+        )));
+    }
+    Ok(pos)
+}
+
+/// Step 8: the held-out check of the model so far, once it rejects most windows (before, the
+/// raw hits are too many to group quickly and the check could not stop anything), written
+/// into the stage's log.
+fn log_holdout(
+    model: &Model,
+    holdout: Option<&Holdout>,
+    mined: &scan::Mined,
+    fa: f64,
+    log: &mut StageLog,
+) -> Result<Option<HoldoutCheck>, TrainError> {
+    let (scanned, accepted) = (mined.evaluated, mined.accepted);
+    let acc_now = if scanned > 0 {
+        accepted as f64 / scanned as f64
+    } else {
+        1.0
+    };
+    let Some(hd) = holdout.filter(|_| acc_now * fa <= HOLDOUT_FROM) else {
+        return Ok(None);
+    };
+    let c = model.to_cascade()?;
+    let chk = check_holdout(&c, hd)?;
+    log.holdout_recall = chk.recall;
+    log.holdout_fp_per_frame = Some(chk.fp_per_frame);
+    Ok(Some(chk))
+}
+
+/// Step 2c: the held-out check of the cascade so far, first run once it should reject most
+/// windows (`est` ≤ [`HOLDOUT_FROM`]); the reason to stop when it meets the target.
+fn early_stop(
+    holdout: Option<&Holdout>,
+    cascade: Option<&Cascade>,
+    est: f64,
+    last_check: &mut Option<HoldoutCheck>,
+    si: usize,
+) -> Result<Option<String>, TrainError> {
+    if let (Some(hd), Some(c)) = (holdout, cascade) {
+        if last_check.is_none() && est <= HOLDOUT_FROM {
+            let chk = check_holdout(c, hd)?;
+            *last_check = Some(chk);
+        }
+        if let Some(chk) = *last_check {
+            if chk.fp_per_frame <= hd.target_fp_per_frame {
+                return Ok(Some(format!(
+                    "held-out target reached after {si} stages: {:.4} false positives per frame <= {}{}",
+                    chk.fp_per_frame,
+                    hd.target_fp_per_frame,
+                    chk.recall.map(|r| format!(", recall {r:.4}")).unwrap_or_default()
+                )));
+            }
+        }
+    }
+    Ok(None)
+}
+
+/// Step 4's outcome: `Some((reason, negatives ran out))` when training stops for want of
+/// negatives (an error at stage 0), with a note when it goes on with fewer than asked.
+#[allow(clippy::too_many_arguments)]
+fn negatives_stop(
+    opts: &TrainOptions,
+    mined: &scan::Mined,
+    si: usize,
+    backgrounds: &[Background],
+    pool: &scan::NegativePool,
+    holdout: Option<&Holdout>,
+    last_check: Option<HoldoutCheck>,
+    progress: &mut dyn Progress,
+) -> Result<Option<(String, bool)>, TrainError> {
+    let (w, h) = (opts.params.width as usize, opts.params.height as usize);
+    let negs = &mined.windows;
+    let (scanned, accepted) = (mined.evaluated, mined.accepted);
+    if negs.is_empty() {
+        if si == 0 {
+            return Err(TrainError::Invalid(format!(
+                "no negative windows in the {} background images (each must be at least {w}x{h} and not flat)",
+                backgrounds.len()
+            )));
+        }
+        let reason = format!(
+            "done after {si} stages: the cascade accepts none of the {scanned} background windows{}",
+            if holdout.is_some()
+                && last_check.is_some_and(|c| c.fp_per_frame > holdout.map_or(0.0, |h| h.target_fp_per_frame))
+            {
+                format!(
+                    "; {}",
+                    more_backgrounds_advice(backgrounds.len(), 0.0, opts.num_neg, pool.windows())
+                )
+            } else {
+                String::new()
+            }
+        );
+        return Ok(Some((reason, holdout.is_some())));
+    }
+    let min_neg = (opts.num_neg / 10).max(10);
+    if mined.exhausted && negs.len() < min_neg {
+        let reason = format!(
+            "negatives ran out after {si} stages: only {} windows of the {} in the backgrounds \
+             (every offset and scale) still pass the cascade, fewer than {min_neg} (num_neg/10). {}",
+            negs.len(),
+            pool.windows(),
+            more_backgrounds_advice(
+                backgrounds.len(),
+                accepted as f64 / scanned.max(1) as f64,
+                opts.num_neg,
+                pool.windows()
+            )
+        );
+        return Ok(Some((reason, true)));
+    }
+    if mined.exhausted {
+        progress.note(&format!(
+            "stage {si}: only {} negatives left in all {} background windows (asked {}): training on them",
+            negs.len(),
+            pool.windows(),
+            opts.num_neg
+        ));
+    }
+    Ok(None)
+}
+
+/// Step 7: the log of a finished stage (its held-out figures and total time come later).
+#[allow(clippy::too_many_arguments)]
+fn stage_log(
+    si: usize,
+    stage: &StageModel,
+    (hit, fa): (f64, f64),
+    (np, nn): (usize, usize),
+    mined: &scan::Mined,
+    matrix: &FeatureMatrix,
+    times: [f64; 3],
+    pool_windows: u64,
+) -> StageLog {
+    let (scanned, accepted) = (mined.evaluated, mined.accepted);
+    StageLog {
+        stage: si,
+        weak_count: stage.weaks.len(),
+        hit_rate: hit,
+        false_alarm: fa,
+        num_pos: np,
+        num_neg: nn,
+        windows_scanned: scanned,
+        windows_accepted: accepted,
+        acceptance_ratio: if scanned > 0 {
+            accepted as f64 / scanned as f64
+        } else {
+            0.0
+        },
+        features_used: matrix.features.len(),
+        matrix_bytes: matrix.bytes(),
+        seconds_mining: times[0],
+        seconds_precompute: times[1],
+        seconds_boost: times[2],
+        seconds: 0.0,
+        pool_windows,
+        negatives_exhausted: mined.exhausted,
+        holdout_recall: None,
+        holdout_fp_per_frame: None,
+    }
+}
+
+/// The advice when training ended above the held-out target for another reason than the
+/// negatives running out.
+fn above_target_note(
+    holdout: Option<&Holdout>,
+    last_check: Option<HoldoutCheck>,
+    ran_out: bool,
+    progress: &mut dyn Progress,
+) {
+    if let (Some(hd), Some(chk)) = (holdout, last_check) {
+        if chk.fp_per_frame > hd.target_fp_per_frame && !ran_out {
+            progress.note(&format!(
+                "held-out false positives {:.4} per frame are above the target {}: more stages (--num-stages), \
+                 more backgrounds like the frames with false positives, or a higher --holdout-min-neighbors",
+                chk.fp_per_frame, hd.target_fp_per_frame
+            ));
+        }
+    }
+}
+
+/// Step 0 of [`train_with_holdout`]: the window, rates, depth, counts and samples, each
+/// refused with what is allowed.
+fn check_inputs(opts: &TrainOptions, positives: &[Vec<u8>], backgrounds: &[Background]) -> Result<(), TrainError> {
+    let p = &opts.params;
+    let (w, h) = (p.width as usize, p.height as usize);
     if !(3..=256).contains(&w) || !(3..=256).contains(&h) {
         return Err(TrainError::Invalid(format!(
             "window {w}x{h}: each side must be 3..=256 px"
@@ -311,19 +633,20 @@ pub fn train_with_holdout(
             w * h
         )));
     }
-    std::fs::create_dir_all(out_dir).map_err(|source| TrainError::Io {
-        path: out_dir.into(),
-        source,
-    })?;
-    let xml_path = out_dir.join("cascade.xml");
-    let log_path = out_dir.join("stages.json");
+    Ok(())
+}
 
-    // 1. Positives' integrals; windows the detector would never look at are left out.
-    let mut ii = Integrals::new();
-    let pos_all: Vec<SampleIntegral> = positives
-        .iter()
-        .map(|s| SampleIntegral::new(s, w, h, &mut ii))
-        .collect();
+/// Step 1: the positives' integrals in a seeded order (each stage takes the first accepted
+/// ones); windows the detector would never look at (too flat) are left out, with a note.
+fn positive_pool(
+    positives: &[Vec<u8>],
+    w: usize,
+    h: usize,
+    seed: u64,
+    ii: &mut Integrals,
+    progress: &mut dyn Progress,
+) -> Vec<SampleIntegral> {
+    let pos_all: Vec<SampleIntegral> = positives.iter().map(|s| SampleIntegral::new(s, w, h, ii)).collect();
     let flat = pos_all.iter().filter(|s| !s.scannable).count();
     if flat > 0 {
         progress.note(&format!(
@@ -333,78 +656,82 @@ pub fn train_with_holdout(
     }
     let mut pos_pool: Vec<SampleIntegral> = pos_all.into_iter().filter(|s| s.scannable).collect();
     // Seeded order, so each stage takes the first accepted ones.
-    let mut rng = SplitMix64::new(opts.seed);
+    let mut rng = SplitMix64::new(seed);
     for i in (1..pos_pool.len()).rev() {
         let j = (rng.next_u64() % (i as u64 + 1)) as usize;
         pos_pool.swap(i, j);
     }
+    pos_pool
+}
 
-    // 2. Resume.
-    let mut model = Model::new(p.clone());
-    let mut file = StageFile {
-        options: opts.clone(),
-        stages: vec![],
-        log: vec![],
-        finished: None,
-        positives_total: pos_pool.len(),
-        backgrounds_total: backgrounds.len(),
-    };
-    if resume && log_path.exists() {
-        let text = std::fs::read_to_string(&log_path).map_err(|source| TrainError::Io {
-            path: log_path.clone(),
-            source,
-        })?;
-        let old: StageFile = serde_json::from_str(&text).map_err(|e| TrainError::Resume {
-            path: log_path.clone(),
-            message: format!("not a stages.json: {e}"),
-        })?;
-        if old.options.params.width != p.width
-            || old.options.params.height != p.height
-            || old.options.params.mode != p.mode
-        {
-            return Err(TrainError::Resume {
-                path: log_path.clone(),
-                message: format!(
-                    "it was trained with window {}x{} mode {:?}, this run asks for {}x{} {:?}",
-                    old.options.params.width,
-                    old.options.params.height,
-                    old.options.params.mode,
-                    p.width,
-                    p.height,
-                    p.mode
-                ),
-            });
-        }
-        if let Some(bad) = old
-            .stages
-            .iter()
-            .flat_map(|s| s.weaks.iter().flat_map(|w| w.splits.iter()))
-            .find(|s| s.feature >= model.pool.len())
-        {
-            return Err(TrainError::Resume {
-                path: log_path.clone(),
-                message: format!("feature {} is outside the pool", bad.feature),
-            });
-        }
-        model.stages = old.stages.clone();
-        file.stages = old.stages;
-        file.log = old.log;
-        progress.note(&format!("resuming after stage {}", model.stages.len()));
-        if model.stages.len() >= p.num_stages as usize {
-            let reason = old.finished.unwrap_or_else(|| "all stages trained".into());
-            return Ok(TrainOutcome {
-                xml: xml_path,
-                stages: model.stages.len(),
-                reason,
-                holdout: None,
-                negatives_ran_out: false,
-            });
-        }
+/// Step 2, `--resume`: the finished stages of `log_path` into `model` and `file` (the window
+/// and mode must match, every feature must be in the pool). `Some` when all stages are done.
+fn resume_from(
+    log_path: &Path,
+    xml_path: &Path,
+    model: &mut Model,
+    file: &mut StageFile,
+    progress: &mut dyn Progress,
+) -> Result<Option<TrainOutcome>, TrainError> {
+    let p = &file.options.params.clone();
+    let text = std::fs::read_to_string(log_path).map_err(|source| TrainError::Io {
+        path: log_path.into(),
+        source,
+    })?;
+    let old: StageFile = serde_json::from_str(&text).map_err(|e| TrainError::Resume {
+        path: log_path.into(),
+        message: format!("not a stages.json: {e}"),
+    })?;
+    if old.options.params.width != p.width || old.options.params.height != p.height || old.options.params.mode != p.mode
+    {
+        return Err(TrainError::Resume {
+            path: log_path.into(),
+            message: format!(
+                "it was trained with window {}x{} mode {:?}, this run asks for {}x{} {:?}",
+                old.options.params.width, old.options.params.height, old.options.params.mode, p.width, p.height, p.mode
+            ),
+        });
     }
+    if let Some(bad) = old
+        .stages
+        .iter()
+        .flat_map(|s| s.weaks.iter().flat_map(|w| w.splits.iter()))
+        .find(|s| s.feature >= model.pool.len())
+    {
+        return Err(TrainError::Resume {
+            path: log_path.into(),
+            message: format!("feature {} is outside the pool", bad.feature),
+        });
+    }
+    model.stages = old.stages.clone();
+    file.stages = old.stages;
+    file.log = old.log;
+    progress.note(&format!("resuming after stage {}", model.stages.len()));
+    if model.stages.len() >= p.num_stages as usize {
+        let reason = old.finished.unwrap_or_else(|| "all stages trained".into());
+        return Ok(Some(TrainOutcome {
+            xml: xml_path.into(),
+            stages: model.stages.len(),
+            reason,
+            holdout: None,
+            negatives_ran_out: false,
+        }));
+    }
+    Ok(None)
+}
 
-    // The feature matrix gets what the data leaves of --mem-mb.
+/// The feature matrix's share of `--mem-mb` (what the data leaves; an error when the data
+/// alone does not fit) and step 2b, the negative pool: every window of every background at
+/// every scale (noted with its size).
+fn negative_pool(
+    opts: &TrainOptions,
+    positives: usize,
+    backgrounds: &[Background],
+    progress: &mut dyn Progress,
+) -> Result<(usize, scan::NegativePool), TrainError> {
+    let (w, h) = (opts.params.width as usize, opts.params.height as usize);
     let budget_total = opts.mem_mb.saturating_mul(1 << 20);
-    let data = data_bytes(backgrounds, positives.len(), opts.num_neg, w, h) + (24 << 20);
+    let data = data_bytes(backgrounds, positives, opts.num_neg, w, h) + (24 << 20);
     if data >= budget_total {
         return Err(TrainError::Invalid(format!(
             "--mem-mb {}: the backgrounds and samples alone take about {} MiB (plus 24 for the program); \
@@ -438,224 +765,81 @@ pub fn train_with_holdout(
         budget >> 20,
         opts.mem_mb
     ));
-    let mut last_check: Option<HoldoutCheck> = None;
-    let mut ran_out = false;
-    let reason;
-    loop {
-        let si = model.stages.len();
-        if si >= p.num_stages as usize {
-            reason = format!("all {} stages trained", p.num_stages);
+    Ok((budget, pool))
+}
+
+/// Step 5: the feature matrix of stage `si` over `pos` then the negative windows `negs`,
+/// within `budget` bytes (a seeded part of the pool when all features do not fit).
+fn feature_matrix(
+    model: &Model,
+    opts: &TrainOptions,
+    si: usize,
+    budget: usize,
+    pos: &[&SampleIntegral],
+    negs: &[Vec<u8>],
+    ii: &mut Integrals,
+) -> FeatureMatrix {
+    let (w, h) = (opts.params.width as usize, opts.params.height as usize);
+    let neg: Vec<SampleIntegral> = negs.iter().map(|s| SampleIntegral::new(s, w, h, ii)).collect();
+    let (np, n) = (pos.len(), pos.len() + neg.len());
+    // Per feature: one bin byte per sample and up to 255 f32 edges.
+    let fit = (budget / (n + 1024)).max(1);
+    let mut feats: Vec<usize> = (0..model.pool.len()).collect();
+    if feats.len() > fit {
+        let mut frng = SplitMix64::new(mix(opts.seed ^ 0xFEA7 ^ si as u64));
+        for i in 0..fit {
+            let j = i + (frng.next_u64() % (feats.len() - i) as u64) as usize;
+            feats.swap(i, j);
+        }
+        feats.truncate(fit);
+        feats.sort_unstable();
+    }
+    let tofs = features::tilted_offset(w, h);
+    let compiled_feats: Vec<features::Compiled> = model
+        .pool
+        .iter()
+        .map(|f| features::Compiled::new(f, w + 1, tofs))
+        .collect();
+    let sample = |i: usize| if i < np { pos[i] } else { &neg[i - np] };
+    FeatureMatrix::build(feats, n, 1024, |f, i| sample(i).value(&compiled_feats[f]))
+}
+
+/// Step 6: boosting until the stage's false-alarm target (or `max_weak_count`); the stage
+/// and its hit and false-alarm rates as the detector tests them.
+fn boost_stage(
+    p: &ModelParams,
+    matrix: &FeatureMatrix,
+    np: usize,
+    nn: usize,
+    si: usize,
+    progress: &mut dyn Progress,
+) -> (StageModel, f64, f64) {
+    progress.stage_start(si, p.max_weak_count as usize);
+    let mut booster = Booster::new(p.boost, np, nn);
+    let mut stage = StageModel {
+        threshold: 0.0,
+        weaks: vec![],
+    };
+    let (mut hit, mut fa) = (0.0, 1.0);
+    while stage.weaks.len() < p.max_weak_count as usize {
+        let Some(weak) = booster.add_weak(matrix, p.max_depth) else {
             break;
-        }
-        let t0 = Instant::now();
-        let cascade: Option<Cascade> = if si == 0 { None } else { Some(model.to_cascade()?) };
-        // 2c. The held-out check of the cascade so far (its early stop).
-        let est = file.log.last().map_or(1.0, |l| l.acceptance_ratio * l.false_alarm);
-        if let (Some(hd), Some(c)) = (holdout, cascade.as_ref()) {
-            if last_check.is_none() && est <= HOLDOUT_FROM {
-                let chk = check_holdout(c, hd)?;
-                last_check = Some(chk);
-            }
-            if let Some(chk) = last_check {
-                if chk.fp_per_frame <= hd.target_fp_per_frame {
-                    reason = format!(
-                        "held-out target reached after {si} stages: {:.4} false positives per frame <= {}{}",
-                        chk.fp_per_frame,
-                        hd.target_fp_per_frame,
-                        chk.recall.map(|r| format!(", recall {r:.4}")).unwrap_or_default()
-                    );
-                    break;
-                }
-            }
-        }
-        // 3. Positives the cascade so far accepts.
-        let compiled = cascade.as_ref().map(|c| scan::compile_for_samples(c, w, h));
-        let pos: Vec<&SampleIntegral> = pos_pool
-            .iter()
-            .filter(|s| scan::passes(s, compiled.as_ref()))
-            .take(opts.num_pos)
-            .collect();
-        if pos.len() < 10 {
-            return Err(TrainError::Invalid(format!(
-                "stage {si}: only {} positives pass the cascade so far (of {}); need at least 10",
-                pos.len(),
-                pos_pool.len()
-            )));
-        }
-        // 4. Negatives: windows of the pool the cascade so far wrongly accepts.
-        let mined = pool.mine(
-            backgrounds,
-            cascade.as_ref(),
-            opts.num_neg,
-            mix(opts.seed ^ (si as u64 + 1).wrapping_mul(0x9E37)),
-        );
-        let (scanned, accepted) = (mined.evaluated, mined.accepted);
-        let t_mine = t0.elapsed().as_secs_f64();
-        let negs = mined.windows;
-        if negs.is_empty() {
-            if si == 0 {
-                return Err(TrainError::Invalid(format!(
-                    "no negative windows in the {} background images (each must be at least {w}x{h} and not flat)",
-                    backgrounds.len()
-                )));
-            }
-            reason = format!(
-                "done after {si} stages: the cascade accepts none of the {scanned} background windows{}",
-                if holdout.is_some() && last_check.is_some_and(|c| c.fp_per_frame > holdout.map_or(0.0, |h| h.target_fp_per_frame)) {
-                    format!("; {}", more_backgrounds_advice(backgrounds.len(), 0.0, opts.num_neg, pool.windows()))
-                } else {
-                    String::new()
-                }
-            );
-            ran_out = holdout.is_some();
-            break;
-        }
-        let min_neg = (opts.num_neg / 10).max(10);
-        if mined.exhausted && negs.len() < min_neg {
-            reason = format!(
-                "negatives ran out after {si} stages: only {} windows of the {} in the backgrounds \
-                 (every offset and scale) still pass the cascade, fewer than {min_neg} (num_neg/10). {}",
-                negs.len(),
-                pool.windows(),
-                more_backgrounds_advice(backgrounds.len(), accepted as f64 / scanned.max(1) as f64, opts.num_neg, pool.windows())
-            );
-            ran_out = true;
-            break;
-        }
-        if mined.exhausted {
-            progress.note(&format!(
-                "stage {si}: only {} negatives left in all {} background windows (asked {}): training on them",
-                negs.len(),
-                pool.windows(),
-                opts.num_neg
-            ));
-        }
-        let neg: Vec<SampleIntegral> = negs.iter().map(|s| SampleIntegral::new(s, w, h, &mut ii)).collect();
-        let (np, nn) = (pos.len(), neg.len());
-        let n = np + nn;
-        // 5. Feature matrix within the budget.
-        let t1 = Instant::now();
-        // Per feature: one bin byte per sample and up to 255 f32 edges.
-        let fit = (budget / (n + 1024)).max(1);
-        let mut feats: Vec<usize> = (0..model.pool.len()).collect();
-        if feats.len() > fit {
-            let mut frng = SplitMix64::new(mix(opts.seed ^ 0xFEA7 ^ si as u64));
-            for i in 0..fit {
-                let j = i + (frng.next_u64() % (feats.len() - i) as u64) as usize;
-                feats.swap(i, j);
-            }
-            feats.truncate(fit);
-            feats.sort_unstable();
-        }
-        let tofs = features::tilted_offset(w, h);
-        let compiled_feats: Vec<features::Compiled> = model
-            .pool
-            .iter()
-            .map(|f| features::Compiled::new(f, w + 1, tofs))
-            .collect();
-        let sample = |i: usize| if i < np { pos[i] } else { &neg[i - np] };
-        let matrix = FeatureMatrix::build(feats, n, 1024, |f, i| sample(i).value(&compiled_feats[f]));
-        let t_pre = t1.elapsed().as_secs_f64();
-        // 6. Boosting until the stage's false-alarm target.
-        let t2 = Instant::now();
-        progress.stage_start(si, p.max_weak_count as usize);
-        let mut booster = Booster::new(p.boost, np, nn);
-        let mut stage = StageModel {
-            threshold: 0.0,
-            weaks: vec![],
         };
-        let (mut hit, mut fa) = (0.0, 1.0);
-        while stage.weaks.len() < p.max_weak_count as usize {
-            let Some(weak) = booster.add_weak(&matrix, p.max_depth) else {
-                break;
-            };
-            stage.weaks.push(weak);
-            let mut ps: Vec<f64> = booster.score[..np].to_vec();
-            ps.sort_by(|a, b| a.total_cmp(b));
-            let idx = (((1.0 - p.min_hit_rate) * np as f64) as usize).min(np - 1);
-            stage.threshold = ps[idx] as f32;
-            // The detector's test: reject when sum < threshold − 1e-5 (in f32, then widened).
-            let eff = (stage.threshold - rccar::detect::cascade::THRESHOLD_EPS) as f64;
-            hit = booster.score[..np].iter().filter(|&&s| s >= eff).count() as f64 / np as f64;
-            fa = booster.score[np..].iter().filter(|&&s| s >= eff).count() as f64 / nn as f64;
-            progress.weak(stage.weaks.len(), hit, fa);
-            if fa <= p.max_false_alarm {
-                break;
-            }
-        }
-        if stage.weaks.is_empty() {
-            reason = format!("done after {si} stages: no feature separates the remaining samples");
+        stage.weaks.push(weak);
+        let mut ps: Vec<f64> = booster.score[..np].to_vec();
+        ps.sort_by(|a, b| a.total_cmp(b));
+        let idx = (((1.0 - p.min_hit_rate) * np as f64) as usize).min(np - 1);
+        stage.threshold = ps[idx] as f32;
+        // The detector's test: reject when sum < threshold − 1e-5 (in f32, then widened).
+        let eff = (stage.threshold - rccar::detect::cascade::THRESHOLD_EPS) as f64;
+        hit = booster.score[..np].iter().filter(|&&s| s >= eff).count() as f64 / np as f64;
+        fa = booster.score[np..].iter().filter(|&&s| s >= eff).count() as f64 / nn as f64;
+        progress.weak(stage.weaks.len(), hit, fa);
+        if fa <= p.max_false_alarm {
             break;
         }
-        let t_boost = t2.elapsed().as_secs_f64();
-        // 7. Save.
-        model.stages.push(stage.clone());
-        let log = StageLog {
-            stage: si,
-            weak_count: stage.weaks.len(),
-            hit_rate: hit,
-            false_alarm: fa,
-            num_pos: np,
-            num_neg: nn,
-            windows_scanned: scanned,
-            windows_accepted: accepted,
-            acceptance_ratio: if scanned > 0 {
-                accepted as f64 / scanned as f64
-            } else {
-                0.0
-            },
-            features_used: matrix.features.len(),
-            matrix_bytes: matrix.bytes(),
-            seconds_mining: t_mine,
-            seconds_precompute: t_pre,
-            seconds_boost: t_boost,
-            seconds: 0.0,
-            pool_windows: pool.windows(),
-            negatives_exhausted: mined.exhausted,
-            holdout_recall: None,
-            holdout_fp_per_frame: None,
-        };
-        let mut log = log;
-        // 8. The held-out check of the new cascade, once it rejects most windows (before, the
-        // raw hits are too many to group quickly and the check could not stop anything).
-        let acc_now = if scanned > 0 { accepted as f64 / scanned as f64 } else { 1.0 };
-        if let Some(hd) = holdout.filter(|_| acc_now * fa <= HOLDOUT_FROM) {
-            let c = model.to_cascade()?;
-            let chk = check_holdout(&c, hd)?;
-            log.holdout_recall = chk.recall;
-            log.holdout_fp_per_frame = Some(chk.fp_per_frame);
-            last_check = Some(chk);
-        }
-        log.seconds = t0.elapsed().as_secs_f64();
-        progress.stage_end(&log);
-        file.stages.push(stage);
-        file.log.push(log);
-        write_atomic(&xml_path, &model.to_xml())?;
-        write_atomic(&log_path, &serde_json::to_string_pretty(&file).unwrap_or_default())?;
     }
-    progress.note(&reason);
-    if let (Some(hd), Some(chk)) = (holdout, last_check) {
-        if chk.fp_per_frame > hd.target_fp_per_frame && !ran_out {
-            progress.note(&format!(
-                "held-out false positives {:.4} per frame are above the target {}: more stages (--num-stages), \
-                 more backgrounds like the frames with false positives, or a higher --holdout-min-neighbors",
-                chk.fp_per_frame, hd.target_fp_per_frame
-            ));
-        }
-    }
-    file.finished = Some(reason.clone());
-    if model.stages.is_empty() {
-        return Err(TrainError::Invalid(format!("no stage could be trained: {reason}")));
-    }
-    write_atomic(&xml_path, &model.to_xml())?;
-    write_atomic(&log_path, &serde_json::to_string_pretty(&file).unwrap_or_default())?;
-    Ok(TrainOutcome {
-        xml: xml_path,
-        stages: model.stages.len(),
-        reason,
-        holdout: last_check,
-        negatives_ran_out: ran_out,
-    })
+    (stage, hit, fa)
 }
 
 /// What to add when the negatives run out: at acceptance ratio `acc` per window, `num_neg`

@@ -412,6 +412,26 @@ if want 12; then
   fig 12 late_stop_resume_s "$(jq -c 'select(.transition.from == "stop_sign") | .time_s' l12late/telemetry.jsonl | head -1)" 0.07 s "$C"
 fi
 
+# ---- lab 13: pure pursuit against the PID ----------------------------------------------------------------------
+# chatter: RMS of the frame-to-frame change of the steering command (steer units per frame),
+# the same measure as sweep.csv's steer_diff_rms
+if want 13; then
+  CHAT='[.[].steer] as $s | [range(1; $s | length) | ($s[.] - $s[. - 1]) | . * .] | (add / length) | sqrt'
+  for m in pid pure_pursuit; do
+    C="rccar sim --laps 3 --no-timing --set steering.method=$m"
+    rccar sim --no-local --laps 3 --no-timing --set steering.method=$m -o l13_$m >/dev/null
+    fig 13 "cmp/$m/laps" "$(jq .laps l13_$m/summary.json)" 0 laps "$C"
+    fig 13 "cmp/$m/departures" "$(jq .lane_departures l13_$m/summary.json)" 0 departures "$C"
+    fig 13 "cmp/$m/rms_m" "$(jq .xte_rms_m l13_$m/summary.json)" 0.0005 m "$C"
+    fig 13 "cmp/$m/max_m" "$(jq .xte_max_m l13_$m/summary.json)" 0.002 m "$C"
+    fig 13 "cmp/$m/chatter" "$(jq -s "$CHAT" l13_$m/telemetry.jsonl)" 0.001 "steer/frame" "$C; RMS of the frame-to-frame steer change"
+    fig 13 "cmp/$m/lap_time_s" "$(jq '.lap_times_s[1]' l13_$m/summary.json)" 0.2 s "$C; the second lap"
+  done
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set steering.method=pure_pursuit --sweep steering.lookahead_m=0.75:1.15:5"
+  $SIM --laps 1 --set steering.method=pure_pursuit --sweep steering.lookahead_m=0.75:1.15:5 -o l13_ld >/dev/null || [ $? -eq 1 ]
+  sweep 13 ld l13_ld "$C"
+fi
+
 # ---- write the key ------------------------------------------------------------------------------------------------
 # one figure per line, so that a regenerated key diffs figure by figure
 {

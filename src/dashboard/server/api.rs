@@ -401,12 +401,23 @@ async fn state(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, u
     reply(StatusCode::OK, &state_json(&sh, since, c.session))
 }
 
+/// The rows of the parameter table of a run steering with `method`, for the page's sliders.
+fn param_rows(method: crate::control::steering::SteeringMethod) -> Vec<Value> {
+    crate::control::params::of_method(method)
+        .iter()
+        .map(|p| json!({"key": p.key, "unit": p.unit, "range": p.range, "slider": p.slider, "doc": p.doc}))
+        .collect()
+}
+
 fn state_json(sh: &Shared, since: f64, session: bool) -> Value {
     let (snap, points) = {
         let v = sh.view.lock().unwrap_or_else(|e| e.into_inner());
         let pts: Vec<PlotPoint> = v.history.iter().filter(|p| p.t > since).copied().collect();
         (v.snap.clone(), pts)
     };
+    // The settable parameters, from the steering method's and the throttle's tables.
+    let method = sh.cfg.lock().unwrap_or_else(|e| e.into_inner()).steering.method;
+    let params: Vec<Value> = param_rows(method);
     let s = &sh.sent;
     let lim = sh.conns.limits();
     let a = &sh.access;
@@ -440,10 +451,8 @@ fn state_json(sh: &Shared, since: f64, session: bool) -> Value {
         "log_lines_dropped": sh.log.dropped.load(Ordering::Relaxed),
         "points": points,
         "changed": *sh.changed.lock().unwrap_or_else(|e| e.into_inner()),
-        "ranges": {
-            "steering.kp": [0.0, 20.0], "steering.ki": [0.0, 20.0], "steering.kd": [0.0, 5.0],
-            "throttle.base": [0.0, 1.0], "throttle.min": [0.0, 1.0],
-        },
+        "steering_method": method.name(),
+        "params": params,
     });
     if let Some(sn) = snap {
         let r = &sn.record;
