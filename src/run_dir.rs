@@ -880,8 +880,48 @@ pub fn check_run(dir: &Path) -> Result<RunCheck, RunDirError> {
             dir.display()
         ));
     }
-    let id = c.record.as_ref().map(|r| r.run_id.clone());
     // 1. Run ids of the JSON summaries.
+    let summary_frames = check_ids(dir, &mut c)?;
+    // 2. The telemetry's frames.
+    let tel = dir.join(TELEMETRY_FILE);
+    let tel_lines = if tel.is_file() { Some(count_lines(&tel)?) } else { None };
+    if let Some(n) = tel_lines {
+        if let Some(m) = summary_frames {
+            if m != n {
+                c.problems.push(format!(
+                    "{TELEMETRY_FILE} has {n} frames, summary.json says the run had {m}"
+                ));
+            }
+        }
+    }
+    if let Some(r) = c.record.clone() {
+        match (r.state, r.telemetry_frames, tel_lines) {
+            (RunState::Running, ..) => c.notes.push(format!(
+                "{RUN_FILE}: run {} has not ended (still running, or it was killed): the files cover what it wrote",
+                r.run_id
+            )),
+            (_, Some(m), Some(n)) if m != n => c.problems.push(format!(
+                "{TELEMETRY_FILE} has {n} frames, {RUN_FILE} says run {} wrote {m}",
+                r.run_id
+            )),
+            (_, Some(m), None) => c.problems.push(format!(
+                "{TELEMETRY_FILE} is missing; run {} wrote {m} frames",
+                r.run_id
+            )),
+            _ => {}
+        }
+        // 3. Every file is one the run wrote.
+        if r.state != RunState::Running {
+            check_files(dir, &r, &mut c)?;
+        }
+    }
+    Ok(c)
+}
+
+/// The run ids of summary.json and config.json against run.json's (or each other's, without
+/// one); returns the frames summary.json counts.
+fn check_ids(dir: &Path, c: &mut RunCheck) -> Result<Option<u64>, RunDirError> {
+    let id = c.record.as_ref().map(|r| r.run_id.clone());
     let mut ids: Vec<(&str, Option<String>)> = Vec::new();
     let mut summary_frames = None;
     for name in ["summary.json", "config.json"] {
@@ -927,65 +967,39 @@ pub fn check_run(dir: &Path) -> Result<RunCheck, RunDirError> {
             }
         }
     }
-    // 2. The telemetry's frames.
-    let tel = dir.join(TELEMETRY_FILE);
-    let tel_lines = if tel.is_file() { Some(count_lines(&tel)?) } else { None };
-    if let Some(n) = tel_lines {
-        if let Some(m) = summary_frames {
-            if m != n {
+    Ok(summary_frames)
+}
+
+/// Every data file and plot in `dir` is one run `r` wrote: a data file that is not is a
+/// problem, a plot that is not is left out (foreign).
+fn check_files(dir: &Path, r: &RunRecord, c: &mut RunCheck) -> Result<(), RunDirError> {
+    let rd = std::fs::read_dir(dir).map_err(|source| RunDirError::Read {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut names: Vec<String> = rd
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    for n in names {
+        let data = matches!(
+            n.as_str(),
+            "summary.json" | "config.json" | TELEMETRY_FILE | "sweep.csv"
+        );
+        let plot = n.to_ascii_lowercase().ends_with(".png") && !n.starts_with("frame_");
+        if (data || plot) && !r.files.contains(&n) {
+            if data {
                 c.problems.push(format!(
-                    "{TELEMETRY_FILE} has {n} frames, summary.json says the run had {m}"
+                    "{n} was not written by run {} (not in {RUN_FILE}'s files)",
+                    r.run_id
                 ));
+            } else {
+                c.foreign.push(n);
             }
         }
     }
-    if let Some(r) = &c.record {
-        match (r.state, r.telemetry_frames, tel_lines) {
-            (RunState::Running, ..) => c.notes.push(format!(
-                "{RUN_FILE}: run {} has not ended (still running, or it was killed): the files cover what it wrote",
-                r.run_id
-            )),
-            (_, Some(m), Some(n)) if m != n => c.problems.push(format!(
-                "{TELEMETRY_FILE} has {n} frames, {RUN_FILE} says run {} wrote {m}",
-                r.run_id
-            )),
-            (_, Some(m), None) => c.problems.push(format!(
-                "{TELEMETRY_FILE} is missing; run {} wrote {m} frames",
-                r.run_id
-            )),
-            _ => {}
-        }
-        // 3. Every file is one the run wrote.
-        if r.state != RunState::Running {
-            let rd = std::fs::read_dir(dir).map_err(|source| RunDirError::Read {
-                path: dir.to_path_buf(),
-                source,
-            })?;
-            let mut names: Vec<String> = rd
-                .flatten()
-                .map(|e| e.file_name().to_string_lossy().into_owned())
-                .collect();
-            names.sort();
-            for n in names {
-                let data = matches!(
-                    n.as_str(),
-                    "summary.json" | "config.json" | TELEMETRY_FILE | "sweep.csv"
-                );
-                let plot = n.to_ascii_lowercase().ends_with(".png") && !n.starts_with("frame_");
-                if (data || plot) && !r.files.contains(&n) {
-                    if data {
-                        c.problems.push(format!(
-                            "{n} was not written by run {} (not in {RUN_FILE}'s files)",
-                            r.run_id
-                        ));
-                    } else {
-                        c.foreign.push(n);
-                    }
-                }
-            }
-        }
-    }
-    Ok(c)
+    Ok(())
 }
 
 #[cfg(test)]

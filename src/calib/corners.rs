@@ -152,17 +152,9 @@ struct Cand {
     dirs: [f64; 2],
 }
 
-/// Finds the `board`'s inner corners in `img`, refined to sub-pixel; `None` when the whole
-/// board is not visible (the caller names the image).
-pub fn find_chessboard(img: &GrayImage, board: BoardSize, opts: &CornerOptions) -> Option<Vec<[f64; 2]>> {
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    if w < 16 || h < 16 {
-        return None;
-    }
-    let raw = FImg::from_gray(img);
-    let sigma = (w.max(h) as f64 / 400.0).clamp(1.0, 3.0);
-    let bl = raw.blur(sigma);
-    // 1. Saddle response and its local maxima.
+/// The saddle response −det(Hessian) of the blurred image `bl` (`w`×`h`) at every inner
+/// pixel (0 on the border), and its largest value.
+fn saddle_response(bl: &FImg, w: usize, h: usize) -> (Vec<f32>, f32) {
     let mut s = vec![0f32; w * h];
     let mut smax = 0f32;
     for y in 1..h - 1 {
@@ -178,6 +170,21 @@ pub fn find_chessboard(img: &GrayImage, board: BoardSize, opts: &CornerOptions) 
             smax = smax.max(v);
         }
     }
+    (s, smax)
+}
+
+/// Finds the `board`'s inner corners in `img`, refined to sub-pixel; `None` when the whole
+/// board is not visible (the caller names the image).
+pub fn find_chessboard(img: &GrayImage, board: BoardSize, opts: &CornerOptions) -> Option<Vec<[f64; 2]>> {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    if w < 16 || h < 16 {
+        return None;
+    }
+    let raw = FImg::from_gray(img);
+    let sigma = (w.max(h) as f64 / 400.0).clamp(1.0, 3.0);
+    let bl = raw.blur(sigma);
+    // 1. Saddle response and its local maxima.
+    let (s, smax) = saddle_response(&bl, w, h);
     if smax <= 0.0 {
         return None;
     }
@@ -286,6 +293,20 @@ where
 /// Rotates a row-major grid of `board` corners by 180° (the other consistent labelling).
 pub fn rotate_180(pts: &mut [[f64; 2]]) {
     pts.reverse();
+}
+
+/// The right image's corners `r` labelled as the left image's `l` are: the same corner gets
+/// the same index in both. Of the two consistent labellings, the one that keeps the rows
+/// level (a side-by-side pair).
+pub fn orient_like(l: &[[f64; 2]], r: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let dy = |r: &[[f64; 2]]| l.iter().zip(r).map(|(p, q)| (p[1] - q[1]).powi(2)).sum::<f64>();
+    let mut flipped = r.to_vec();
+    rotate_180(&mut flipped);
+    if dy(&flipped) < dy(r) {
+        flipped
+    } else {
+        r.to_vec()
+    }
 }
 
 fn min_spacing(pts: &[[f64; 2]], board: BoardSize) -> f64 {

@@ -4,8 +4,8 @@
 //! in radians, image quantities in pixels.
 
 use super::corners::BoardSize;
-use super::intrinsics::{Distortion, Intrinsics};
-use super::stereo::Rectification;
+use super::intrinsics::{CameraFit, Distortion, Intrinsics};
+use super::stereo::{Rectification, StereoFit};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -24,6 +24,21 @@ pub struct CameraCalibration {
     pub per_image_rms_px: Vec<(String, f64)>,
     /// Images where the board was not found.
     pub board_not_found: Vec<String>,
+}
+
+impl CameraCalibration {
+    /// The results of `fit` over the images `names` (in the fit's order) of `size`
+    /// (width, height); `not_found`: the images without a board.
+    pub fn from_fit(fit: &CameraFit, names: &[String], size: (u32, u32), not_found: Vec<String>) -> CameraCalibration {
+        CameraCalibration {
+            image_size: [size.0, size.1],
+            intrinsics: fit.k,
+            distortion: fit.dist,
+            rms_px: fit.rms,
+            per_image_rms_px: names.iter().cloned().zip(fit.per_view_rms.iter().copied()).collect(),
+            board_not_found: not_found,
+        }
+    }
 }
 
 /// A stereo pair's calibration.
@@ -129,6 +144,38 @@ pub enum StereoGeometryError {
 }
 
 impl StereoCalibration {
+    /// The pair's results: both cameras, the stereo fit `st` over the image pairs
+    /// `names` (left, right; in the fit's order), its rectification, and the pairs not used.
+    pub fn from_fit(
+        left: CameraCalibration,
+        right: CameraCalibration,
+        st: &StereoFit,
+        names: &[(String, String)],
+        pairs_not_used: Vec<String>,
+        rectification: Rectification,
+    ) -> StereoCalibration {
+        let m = st.r;
+        StereoCalibration {
+            left,
+            right,
+            r: [
+                [m[(0, 0)], m[(0, 1)], m[(0, 2)]],
+                [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
+                [m[(2, 0)], m[(2, 1)], m[(2, 2)]],
+            ],
+            t: [st.t[0], st.t[1], st.t[2]],
+            baseline_m: st.t.norm(),
+            rms_px: st.rms,
+            per_pair_rms_px: names
+                .iter()
+                .zip(&st.per_view_rms)
+                .map(|((l, r), e)| (l.clone(), r.clone(), *e))
+                .collect(),
+            pairs_not_used,
+            rectification,
+        }
+    }
+
     /// Whether this pair's geometry can range: a finite R (a rotation) and T, a baseline of
     /// [`MIN_BASELINE_M`]..=[`MAX_BASELINE_M`] mostly along x ([`MIN_BASELINE_ALONG_X`]), the
     /// right camera on the right (T.x < 0), an rms of at most `max_rms_px` and a positive

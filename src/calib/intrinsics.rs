@@ -253,29 +253,9 @@ pub struct CameraFit {
     pub per_view_rms: Vec<f64>,
 }
 
-/// Calibrates one camera from `views` (each: board points with z = 0, and their image
-/// points) of an image `width`×`height` (steps 1–4 of the module doc).
-pub fn calibrate_camera(
-    obj: &[[f64; 3]],
-    views: &[Vec<[f64; 2]>],
-    width: u32,
-    height: u32,
-) -> Result<CameraFit, CalibError> {
-    if views.len() < 3 {
-        return Err(CalibError::TooFewViews {
-            need: 3,
-            got: views.len(),
-        });
-    }
-    let obj2: Vec<[f64; 2]> = obj.iter().map(|p| [p[0], p[1]]).collect();
-    // 1. Homographies.
-    let hs: Vec<Matrix3<f64>> = views
-        .iter()
-        .enumerate()
-        .map(|(i, v)| homography(&obj2, v).ok_or_else(|| CalibError::Degenerate(format!("no homography for view {i}"))))
-        .collect::<Result<_, _>>()?;
-    // 2. Focal lengths with the principal point at the centre.
-    let (cx, cy) = ((width as f64 - 1.0) * 0.5, (height as f64 - 1.0) * 0.5);
+/// Zhang's closed-form focal lengths from the views' homographies `hs`, the principal
+/// point taken at (`cx`, `cy`) (step 2 of the module doc).
+fn focal_lengths(hs: &[Matrix3<f64>], cx: f64, cy: f64) -> Result<(f64, f64), CalibError> {
     let mut a = DMatrix::<f64>::zeros(2 * hs.len(), 2);
     let mut b = nalgebra::DVector::<f64>::zeros(2 * hs.len());
     for (i, h) in hs.iter().enumerate() {
@@ -303,6 +283,44 @@ pub fn calibrate_camera(
             "no focal length from the views (are they all parallel to the image?)".into(),
         ));
     }
+    Ok((fx, fy))
+}
+
+/// The intrinsics and distortion held in the first 9 entries of the joint fit's parameters.
+fn intrinsics_of(p: &[f64]) -> (Intrinsics, Distortion) {
+    let k = Intrinsics {
+        fx: p[0],
+        fy: p[1],
+        cx: p[2],
+        cy: p[3],
+    };
+    (k, Distortion([p[4], p[5], p[6], p[7], p[8]]))
+}
+
+/// Calibrates one camera from `views` (each: board points with z = 0, and their image
+/// points) of an image `width`×`height` (steps 1–4 of the module doc).
+pub fn calibrate_camera(
+    obj: &[[f64; 3]],
+    views: &[Vec<[f64; 2]>],
+    width: u32,
+    height: u32,
+) -> Result<CameraFit, CalibError> {
+    if views.len() < 3 {
+        return Err(CalibError::TooFewViews {
+            need: 3,
+            got: views.len(),
+        });
+    }
+    let obj2: Vec<[f64; 2]> = obj.iter().map(|p| [p[0], p[1]]).collect();
+    // 1. Homographies.
+    let hs: Vec<Matrix3<f64>> = views
+        .iter()
+        .enumerate()
+        .map(|(i, v)| homography(&obj2, v).ok_or_else(|| CalibError::Degenerate(format!("no homography for view {i}"))))
+        .collect::<Result<_, _>>()?;
+    // 2. Focal lengths with the principal point at the centre.
+    let (cx, cy) = ((width as f64 - 1.0) * 0.5, (height as f64 - 1.0) * 0.5);
+    let (fx, fy) = focal_lengths(&hs, cx, cy)?;
     let k0 = Intrinsics { fx, fy, cx, cy };
     // 3. Poses.
     let d0 = Distortion::default();
@@ -326,13 +344,7 @@ pub fn calibrate_camera(
     }
     let m = 2 * np * nv;
     let f = |p: &[f64], out: &mut [f64]| {
-        let k = Intrinsics {
-            fx: p[0],
-            fy: p[1],
-            cx: p[2],
-            cy: p[3],
-        };
-        let d = Distortion([p[4], p[5], p[6], p[7], p[8]]);
+        let (k, d) = intrinsics_of(p);
         for (vi, v) in views.iter().enumerate() {
             let q = &p[9 + 6 * vi..15 + 6 * vi];
             let r = rodrigues([q[0], q[1], q[2]]);
@@ -355,13 +367,7 @@ pub fn calibrate_camera(
             tol: 1e-15,
         },
     );
-    let k = Intrinsics {
-        fx: p[0],
-        fy: p[1],
-        cx: p[2],
-        cy: p[3],
-    };
-    let dist = Distortion([p[4], p[5], p[6], p[7], p[8]]);
+    let (k, dist) = intrinsics_of(&p);
     let poses: Vec<Pose> = (0..nv)
         .map(|vi| {
             let q = &p[9 + 6 * vi..15 + 6 * vi];

@@ -15,6 +15,7 @@ pub mod file;
 pub mod intrinsics;
 pub mod lm;
 pub mod stereo;
+pub mod tilt;
 
 pub use corners::{corner_subpix, find_chessboard, BoardSize, CornerOptions};
 pub use file::{CalibrationFile, CameraCalibration, StereoCalibration};

@@ -6,9 +6,9 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rccar::calib::corners::{find_chessboard, rotate_180, BoardSize, CornerOptions};
+use rccar::calib::corners::{find_chessboard, orient_like, BoardSize, CornerOptions};
 use rccar::calib::file::{CalibrationFile, CameraCalibration, StereoCalibration, MAX_STEREO_RMS_PX};
-use rccar::calib::intrinsics::{board_points, calibrate_camera, CameraFit};
+use rccar::calib::intrinsics::{board_points, calibrate_camera};
 use rccar::calib::stereo::{stereo_calibrate, stereo_rectify};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -175,17 +175,6 @@ fn find_all(paths: &[PathBuf], b: &BoardArgs) -> Result<(Found, (u32, u32))> {
     Ok((out, size.unwrap_or((0, 0))))
 }
 
-fn camera_result(fit: &CameraFit, names: &[String], size: (u32, u32), not_found: Vec<String>) -> CameraCalibration {
-    CameraCalibration {
-        image_size: [size.0, size.1],
-        intrinsics: fit.k,
-        distortion: fit.dist,
-        rms_px: fit.rms,
-        per_image_rms_px: names.iter().cloned().zip(fit.per_view_rms.iter().copied()).collect(),
-        board_not_found: not_found,
-    }
-}
-
 fn print_camera(label: &str, c: &CameraCalibration) {
     let k = &c.intrinsics;
     let d = &c.distortion.0;
@@ -231,7 +220,7 @@ pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
             not_found.len()
         )
     })?;
-    let cam = camera_result(&fit, &names, size, not_found);
+    let cam = CameraCalibration::from_fit(&fit, &names, size, not_found);
     for (n, e) in &cam.per_image_rms_px {
         println!("{n}: reprojection RMS {e:.4} px");
     }
@@ -276,23 +265,13 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
             a.right[0].display()
         );
     }
-    let (mut lv, mut rv, mut ln, mut rn, mut skipped) = (vec![], vec![], vec![], vec![], vec![]);
+    let (mut lv, mut rv, mut names, mut skipped) = (vec![], vec![], vec![], vec![]);
     for i in 0..a.left.len() {
         match (&fl[i], &fr[i]) {
             (Some(l), Some(r)) => {
-                // The same corner must get the same index in both: of the two consistent
-                // labellings, the one that keeps the rows level (a side-by-side pair).
-                let mut r = r.clone();
-                let dy = |r: &[[f64; 2]]| l.iter().zip(r).map(|(p, q)| (p[1] - q[1]).powi(2)).sum::<f64>();
-                let mut flipped = r.clone();
-                rotate_180(&mut flipped);
-                if dy(&flipped) < dy(&r) {
-                    r = flipped;
-                }
+                rv.push(orient_like(l, r));
                 lv.push(l.clone());
-                rv.push(r);
-                ln.push(name(&a.left[i]));
-                rn.push(name(&a.right[i]));
+                names.push((name(&a.left[i]), name(&a.right[i])));
             }
             (l, r) => {
                 let mut why = vec![];
@@ -312,41 +291,20 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
     let fit_r = calibrate_camera(&obj, &rv, sl.0, sl.1).context("right camera")?;
     let st = stereo_calibrate(&obj, &lv, &rv, &fit_l.k, &fit_l.dist, &fit_r.k, &fit_r.dist).context("stereo fit")?;
     let rect = stereo_rectify(&fit_l.k, &fit_l.dist, &fit_r.k, &fit_r.dist, &st.r, &st.t, sl.0, sl.1);
-    let left = camera_result(&fit_l, &ln, sl, vec![]);
-    let right = camera_result(&fit_r, &rn, sl, vec![]);
+    let (ln, rn): (Vec<String>, Vec<String>) = names.iter().cloned().unzip();
+    let left = CameraCalibration::from_fit(&fit_l, &ln, sl, vec![]);
+    let right = CameraCalibration::from_fit(&fit_r, &rn, sl, vec![]);
     print_camera("left", &left);
     print_camera("right", &right);
-    let per_pair: Vec<(String, String, f64)> = ln
-        .iter()
-        .zip(&rn)
-        .zip(&st.per_view_rms)
-        .map(|((l, r), e)| (l.clone(), r.clone(), *e))
-        .collect();
-    for (l, r, e) in &per_pair {
+    let stereo = StereoCalibration::from_fit(left, right, &st, &names, skipped, rect);
+    for (l, r, e) in &stereo.per_pair_rms_px {
         println!("{l} + {r}: stereo reprojection RMS {e:.4} px");
     }
-    let m = st.r;
-    let t = [st.t[0], st.t[1], st.t[2]];
-    let baseline = st.t.norm();
+    let t = stereo.t;
     println!(
         "stereo: T = [{:.5}, {:.5}, {:.5}] m (baseline {:.4} m), RMS {:.4} px; rectified f {:.2} px, c ({:.2}, {:.2})",
-        t[0], t[1], t[2], baseline, st.rms, rect.f, rect.c[0], rect.c[1]
+        t[0], t[1], t[2], stereo.baseline_m, st.rms, stereo.rectification.f, stereo.rectification.c[0], stereo.rectification.c[1]
     );
-    let stereo = StereoCalibration {
-        left,
-        right,
-        r: [
-            [m[(0, 0)], m[(0, 1)], m[(0, 2)]],
-            [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
-            [m[(2, 0)], m[(2, 1)], m[(2, 2)]],
-        ],
-        t,
-        baseline_m: baseline,
-        rms_px: st.rms,
-        per_pair_rms_px: per_pair,
-        pairs_not_used: skipped,
-        rectification: rect,
-    };
     // Only a pair that can range is written (the loaders refuse the rest too).
     stereo.check(a.max_rms_px).map_err(|e| {
         anyhow::anyhow!(

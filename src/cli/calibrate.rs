@@ -17,10 +17,10 @@
 use super::common::ConfigArgs;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
+use rccar::calib::tilt::{self, backup_name, check_pairs, edit_override, line_diff};
 use rccar::camera::PinholeCamera;
-use rccar::config::LoadedConfig;
-use rccar::ranging::Pair;
-use rccar::ranging::{fit, parse_pairs_csv, FitOptions, TiltRanging};
+use rccar::config::{Config, LoadedConfig};
+use rccar::ranging::{fit, parse_pairs_csv, Fit, FitOptions, Pair};
 use std::path::Path;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -112,60 +112,14 @@ fn read_small(path: &Path, max: u64) -> Result<String> {
     }
     Ok(text)
 }
-/// Two fits of the same pairs, one started from the image centre and one from the configured
-/// values, must agree within this tilt, degrees, ...
-const START_TOL_DEG: f64 = 0.01;
-/// ... this v0, pixels ...
-const START_TOL_PX: f64 = 0.05;
-/// ... and this fraction of a_y; otherwise the start decided the answer and it is refused.
-const START_TOL_AY: f64 = 1e-3;
 
 fn ranging(a: RangingArgs) -> Result<ExitCode> {
     let loaded = a.config.load_full()?;
     let cfg = loaded.cfg.clone();
-    if !(a.max_rms_px > 0.0 && a.max_rms_px <= MAX_RMS_PX) {
-        bail!("--max-rms-px {}: must be > 0 and <= {MAX_RMS_PX} pixels", a.max_rms_px);
-    }
-    if !(a.v0_sigma_px >= 0.0 && a.v0_sigma_px <= MAX_V0_SIGMA_PX) {
-        bail!(
-            "--v0-sigma-px {}: must be 0..={MAX_V0_SIGMA_PX} pixels (0 = free)",
-            a.v0_sigma_px
-        );
-    }
+    check_bounds(&a)?;
     // 1. The pairs: measured, or made in the simulator's lab.
     let pairs = match (&a.pairs, a.from_sim) {
-        (_, Some(n)) => {
-            if !(3..=MAX_SIM_PAIRS).contains(&n) {
-                bail!("--from-sim {n}: must be 3..={MAX_SIM_PAIRS} pairs");
-            }
-            if !(a.sim_tilt_error_deg.is_finite() && a.sim_tilt_error_deg.abs() <= 30.0) {
-                bail!(
-                    "--sim-tilt-error-deg {}: must be -30..=30 degrees",
-                    a.sim_tilt_error_deg
-                );
-            }
-            if !(a.sim_tape_sigma_m.is_finite() && (0.0..=0.5).contains(&a.sim_tape_sigma_m)) {
-                bail!("--sim-tape-sigma-m {}: must be 0..=0.5 m", a.sim_tape_sigma_m);
-            }
-            let mut real = cfg.clone();
-            real.camera.tilt_deg += a.sim_tilt_error_deg;
-            let p = rccar::sim::scenario_lab::calibration_pairs(&real, n, a.sim_tape_sigma_m, a.sim_seed)?;
-            println!(
-                "lab: {} pairs from the simulator (true tilt {:.2} deg, tape sigma {} m)",
-                p.len(),
-                real.camera.tilt_deg,
-                a.sim_tape_sigma_m
-            );
-            if let Some(out) = &a.sim_pairs_out {
-                let mut text = String::from("row_px,distance_m,height_m\n");
-                for q in &p {
-                    text += &format!("{:.1},{:.4},{}\n", q.v, q.d, q.z);
-                }
-                write_file(out, &text)?;
-                println!("lab pairs written to {}", out.display());
-            }
-            p
-        }
+        (_, Some(n)) => lab_pairs(&a, &cfg, n)?,
         (Some(path), None) => {
             let text = read_small(path, MAX_CSV_BYTES)?;
             let p = parse_pairs_csv(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?;
@@ -181,19 +135,14 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         _ => "lab pairs".into(),
     };
     // 2. Refuse data that cannot determine the unknowns.
-    check_pairs(&pairs, &cfg, a.fit_ay).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
+    check_pairs(&pairs, cfg.camera.height, cfg.camera.height_m, a.fit_ay)
+        .map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 3. Fit. The prior on v0 sits at the image centre (a property of the image, not of the
     // last calibration: tilt and v0 trade off, so a prior at an earlier fit's v0 returns that
     // fit whatever the pairs say). Without --fit-ay, a_y is held at the configured scale.
     let cam = PinholeCamera::from(&cfg.camera);
     let centre = cam.v0;
-    let mut from_image = TiltRanging::from_camera(&cam);
-    if !a.fit_ay {
-        from_image.a_y *= cfg.ranging.a_y_scale;
-    }
-    let mut from_config = TiltRanging::from_camera(&cam);
-    from_config.v0 += cfg.ranging.v0_offset_px;
-    from_config.a_y *= cfg.ranging.a_y_scale;
+    let from_image = tilt::from_image_centre(&cam, cfg.ranging.a_y_scale, a.fit_ay);
     let opts = FitOptions {
         fit_ay: a.fit_ay,
         v0_sigma_px: if a.v0_sigma_px > 0.0 {
@@ -206,6 +155,74 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     };
     let f = fit(&pairs, from_image, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 4. Report.
+    print_fit(&pairs, &f);
+    let tilt = f.ranging.alpha.to_degrees();
+    let v0_off = f.ranging.v0 - cam.v0;
+    let ay_scale = f.ranging.a_y / cam.f_px;
+    println!(
+        "fit: tilt {tilt:.3} deg (was {:.3}), v0 {:.2} px (offset {v0_off:+.2}), a_y {:.1} px (scale {ay_scale:.4}); rms row error {:.2} px",
+        cfg.camera.tilt_deg, f.ranging.v0, f.ranging.a_y, f.rms_row_px
+    );
+    // 5. Refuse a fit that does not explain the data.
+    let fitted = [("tilt", tilt), ("v0 offset", v0_off), ("a_y scale", ay_scale)];
+    refuse_bad_fit(&origin, &pairs, &f, a.max_rms_px, fitted, cfg.camera.height)?;
+    refuse_start_dependent(&origin, &pairs, &f, opts, &cfg, a.v0_sigma_px)?;
+    // 6.-7. The override file.
+    let round = |v: f64| (v * 1e4).round() / 1e4;
+    let values = [
+        ("camera", "tilt_deg", round(tilt)),
+        ("ranging", "v0_offset_px", round(v0_off)),
+        ("ranging", "a_y_scale", round(ay_scale)),
+    ];
+    write_result(&a, &loaded, &values)
+}
+
+/// The flags' bounds.
+fn check_bounds(a: &RangingArgs) -> Result<()> {
+    if !(a.max_rms_px > 0.0 && a.max_rms_px <= MAX_RMS_PX) {
+        bail!("--max-rms-px {}: must be > 0 and <= {MAX_RMS_PX} pixels", a.max_rms_px);
+    }
+    if !(a.v0_sigma_px >= 0.0 && a.v0_sigma_px <= MAX_V0_SIGMA_PX) {
+        bail!(
+            "--v0-sigma-px {}: must be 0..={MAX_V0_SIGMA_PX} pixels (0 = free)",
+            a.v0_sigma_px
+        );
+    }
+    Ok(())
+}
+
+/// `n` pairs made in the simulator's calibration lab (and written to `--sim-pairs-out`).
+fn lab_pairs(a: &RangingArgs, cfg: &Config, n: usize) -> Result<Vec<Pair>> {
+    if !(3..=MAX_SIM_PAIRS).contains(&n) {
+        bail!("--from-sim {n}: must be 3..={MAX_SIM_PAIRS} pairs");
+    }
+    if !(a.sim_tilt_error_deg.is_finite() && a.sim_tilt_error_deg.abs() <= 30.0) {
+        bail!(
+            "--sim-tilt-error-deg {}: must be -30..=30 degrees",
+            a.sim_tilt_error_deg
+        );
+    }
+    if !(a.sim_tape_sigma_m.is_finite() && (0.0..=0.5).contains(&a.sim_tape_sigma_m)) {
+        bail!("--sim-tape-sigma-m {}: must be 0..=0.5 m", a.sim_tape_sigma_m);
+    }
+    let mut real = cfg.clone();
+    real.camera.tilt_deg += a.sim_tilt_error_deg;
+    let p = rccar::sim::scenario_lab::calibration_pairs(&real, n, a.sim_tape_sigma_m, a.sim_seed)?;
+    println!(
+        "lab: {} pairs from the simulator (true tilt {:.2} deg, tape sigma {} m)",
+        p.len(),
+        real.camera.tilt_deg,
+        a.sim_tape_sigma_m
+    );
+    if let Some(out) = &a.sim_pairs_out {
+        write_file(out, &tilt::pairs_csv(&p))?;
+        println!("lab pairs written to {}", out.display());
+    }
+    Ok(p)
+}
+
+/// The residuals' table.
+fn print_fit(pairs: &[Pair], f: &Fit) {
     println!(
         "{:>8} {:>9} {:>10} {:>10} {:>7}",
         "row px", "true m", "fitted m", "resid m", "resid %"
@@ -220,14 +237,18 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
             100.0 * r / p.d
         );
     }
-    let tilt = f.ranging.alpha.to_degrees();
-    let v0_off = f.ranging.v0 - cam.v0;
-    let ay_scale = f.ranging.a_y / cam.f_px;
-    println!(
-        "fit: tilt {tilt:.3} deg (was {:.3}), v0 {:.2} px (offset {v0_off:+.2}), a_y {:.1} px (scale {ay_scale:.4}); rms row error {:.2} px",
-        cfg.camera.tilt_deg, f.ranging.v0, f.ranging.a_y, f.rms_row_px
-    );
-    // 5. Refuse a fit that does not explain the data.
+}
+
+/// Refuses a fit with an undefined residual, an rms row error above `max_rms_px`, a value
+/// that is not finite or a v0 outside the image's `image_height` rows.
+fn refuse_bad_fit(
+    origin: &str,
+    pairs: &[Pair],
+    f: &Fit,
+    max_rms_px: f64,
+    values: [(&str, f64); 3],
+    image_height: u32,
+) -> Result<()> {
     if let Some(i) = f.residuals_m.iter().position(|r| !r.is_finite()) {
         bail!(
             "{origin}: pair {} (row {} px, {} m): the fitted camera does not see that row on the floor (above its horizon); the pairs do not belong together; nothing written",
@@ -236,34 +257,46 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
             pairs[i].d
         );
     }
-    if !(f.rms_row_px.is_finite() && f.rms_row_px <= a.max_rms_px) {
+    if !(f.rms_row_px.is_finite() && f.rms_row_px <= max_rms_px) {
         bail!(
             "{origin}: rms row error {:.2} px is above the bound {} px (--max-rms-px): the rows and distances do not fit one camera; check the measurements; nothing written",
             f.rms_row_px,
-            a.max_rms_px
+            max_rms_px
         );
     }
-    for (what, v) in [("tilt", tilt), ("v0 offset", v0_off), ("a_y scale", ay_scale)] {
+    for (what, v) in values {
         if !v.is_finite() {
             bail!("{origin}: the fitted {what} is {v}; nothing written");
         }
     }
-    if !(0.0..cfg.camera.height as f64).contains(&f.ranging.v0) {
+    if !(0.0..image_height as f64).contains(&f.ranging.v0) {
         bail!(
             "{origin}: the fitted principal point row v0 = {:.1} px is outside the image (rows 0..{}): the pairs do not pin tilt and v0 apart; measure at more distances spread over the image, or keep v0 near the centre (--v0-sigma-px 3); nothing written",
             f.ranging.v0,
-            cfg.camera.height - 1
+            image_height - 1
         );
     }
-    // 5b. A fit that lands elsewhere when started from the configured values (the last
-    // calibration) is decided by its start, not by the pairs: refused.
-    let g = fit(&pairs, from_config, opts);
+    Ok(())
+}
+
+/// 5b. Refuses a fit `f` that lands elsewhere when started from the configured values (the
+/// last calibration, [`tilt::nominal`]): it was decided by its start, not by the pairs.
+fn refuse_start_dependent(
+    origin: &str,
+    pairs: &[Pair],
+    f: &Fit,
+    opts: FitOptions,
+    cfg: &Config,
+    v0_sigma_px: f64,
+) -> Result<()> {
+    let from_config = tilt::nominal(
+        &PinholeCamera::from(&cfg.camera),
+        cfg.ranging.v0_offset_px,
+        cfg.ranging.a_y_scale,
+    );
+    let g = fit(pairs, from_config, opts);
     let disagree = match &g {
-        Ok(g) => {
-            (g.ranging.alpha - f.ranging.alpha).abs().to_degrees() > START_TOL_DEG
-                || (g.ranging.v0 - f.ranging.v0).abs() > START_TOL_PX
-                || (g.ranging.a_y - f.ranging.a_y).abs() > START_TOL_AY * f.ranging.a_y
-        }
+        Ok(g) => !tilt::same_fit(&f.ranging, &g.ranging),
         Err(_) => true,
     };
     if disagree {
@@ -283,25 +316,21 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
             f.ranging.a_y,
             cfg.ranging.v0_offset_px,
             cfg.ranging.a_y_scale,
-            if a.v0_sigma_px > 0.0 { "" } else { ", or keep v0 near the image centre (--v0-sigma-px 3)" }
+            if v0_sigma_px > 0.0 { "" } else { ", or keep v0 near the image centre (--v0-sigma-px 3)" }
         );
     }
-    // 6. The new override file, validated merged with the configuration before writing.
+    Ok(())
+}
+
+/// The new override file, validated merged with the configuration, then printed as a diff
+/// (`--dry-run`) or written (the old one backed up first, the new one replacing it atomically).
+fn write_result(a: &RangingArgs, loaded: &LoadedConfig, values: &[(&str, &str, f64)]) -> Result<ExitCode> {
     let target = a.write.clone().unwrap_or_else(|| loaded.dir.join("local.toml"));
     let old = match std::fs::metadata(&target) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
         _ => Some(read_small(&target, MAX_OVERRIDE_BYTES)?),
     };
-    let round = |v: f64| (v * 1e4).round() / 1e4;
-    let new = edit_override(
-        old.as_deref(),
-        &[
-            ("camera", "tilt_deg", round(tilt)),
-            ("ranging", "v0_offset_px", round(v0_off)),
-            ("ranging", "a_y_scale", round(ay_scale)),
-        ],
-    )
-    .with_context(|| format!("{}: cannot update", target.display()))?;
+    let new = edit_override(old.as_deref(), values).with_context(|| format!("{}: cannot update", target.display()))?;
     let base = &loaded.files[0];
     let others: Vec<PathBuf> = loaded.files[1..].to_vec();
     LoadedConfig::check_with_text(base, &others, &target, &new).map_err(|e| {
@@ -320,7 +349,7 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
         println!("dry run: nothing written");
         return Ok(ExitCode::SUCCESS);
     }
-    // 7. Back up, then replace atomically (a full disk leaves the old file in place).
+    // Back up, then replace atomically (a full disk leaves the old file in place).
     if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     }
@@ -338,161 +367,7 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Why these pairs cannot calibrate the camera, if they cannot. `pairs` are 1-based in
-/// messages, as a student counts the rows of the CSV.
-fn check_pairs(pairs: &[Pair], cfg: &rccar::config::Config, fit_ay: bool) -> Result<(), String> {
-    let h_img = cfg.camera.height as f64;
-    let h_cam = cfg.camera.height_m;
-    for (i, p) in pairs.iter().enumerate() {
-        let n = i + 1;
-        if !(p.v.is_finite() && p.d.is_finite() && p.z.is_finite()) {
-            return Err(format!(
-                "pair {n} ({}, {}, {}): every value must be a finite number (NaN and inf are not allowed)",
-                p.v, p.d, p.z
-            ));
-        }
-        if !(0.0..h_img).contains(&p.v) {
-            return Err(format!(
-                "pair {n}: row {} px is outside the image (rows 0..{} of camera.height = {})",
-                p.v,
-                h_img - 1.0,
-                cfg.camera.height
-            ));
-        }
-        if !(p.d > 0.0 && p.d <= 100.0) {
-            return Err(format!("pair {n}: distance {} m must be > 0 and <= 100 m", p.d));
-        }
-        if !(p.z >= 0.0 && p.z < h_cam) {
-            return Err(format!(
-                "pair {n}: height {} m must be >= 0 and below the camera (camera.height_m = {h_cam} m): a ray from the lens only reaches lower points",
-                p.z
-            ));
-        }
-    }
-    let need = if fit_ay { 4 } else { 3 };
-    let mut rows: Vec<f64> = pairs.iter().map(|p| p.v).collect();
-    rows.sort_by(f64::total_cmp);
-    rows.dedup_by(|a, b| (*a - *b).abs() < 0.5);
-    if rows.len() < need {
-        return Err(format!(
-            "{} pair(s) on only {} distinct row(s) (rows closer than 0.5 px count as one); fitting {} needs at least {need} distinct rows: measure at more distances",
-            pairs.len(),
-            rows.len(),
-            if fit_ay { "tilt, v0 and a_y" } else { "tilt and v0" }
-        ));
-    }
-    Ok(())
-}
-
-/// The override file's text with `values` set (section, key, value): existing comments,
-/// formatting and other keys are kept; a missing section or key is added.
-fn edit_override(old: Option<&str>, values: &[(&str, &str, f64)]) -> Result<String> {
-    let mut doc: toml_edit::DocumentMut = match old {
-        Some(t) => t.parse().context("not valid TOML (fix it or move it away first)")?,
-        None => "# Personal overrides of the car's configuration (git-ignored).\n# `rccar calibrate ranging` updates its keys here in place.\n"
-            .parse()
-            .context("header")?,
-    };
-    for &(section, key, v) in values {
-        let item = doc
-            .as_table_mut()
-            .entry(section)
-            .or_insert_with(|| toml_edit::Item::Table(toml_edit::Table::new()));
-        let table = item
-            .as_table_like_mut()
-            .with_context(|| format!("`{section}` is not a table"))?;
-        match table.get_mut(key) {
-            Some(it) => {
-                let decor = it
-                    .as_value()
-                    .with_context(|| format!("`{section}.{key}` is not a value"))?
-                    .decor()
-                    .clone();
-                let mut nv = toml_edit::Value::from(v);
-                *nv.decor_mut() = decor;
-                *it = toml_edit::Item::Value(nv);
-            }
-            None => {
-                table.insert(key, toml_edit::value(v));
-            }
-        }
-    }
-    Ok(doc.to_string())
-}
-
-/// `FILE.bak`, or `FILE.bak2`, `FILE.bak3`... when that exists (no backup is overwritten).
-fn backup_name(target: &Path) -> PathBuf {
-    let base = target.as_os_str().to_owned();
-    for n in 1..10_000 {
-        let mut name = base.clone();
-        name.push(if n == 1 { ".bak".to_string() } else { format!(".bak{n}") });
-        let p = PathBuf::from(name);
-        if !p.exists() {
-            return p;
-        }
-    }
-    let mut name = base;
-    name.push(".bak");
-    PathBuf::from(name)
-}
-
-/// Writes `text` to `path`; errors name `path`. A regular file (or a symlink to one) is
-/// replaced atomically: the text goes to a temporary file beside the real file, which is then
-/// renamed over it, so a full disk leaves the old file untouched and a symlink stays a
-/// symlink. Anything else (a new file, a device such as /dev/null) is written directly.
+/// [`tilt::write_file`]; errors name `path`.
 fn write_file(path: &Path, text: &str) -> Result<()> {
-    use std::io::Write;
-    let fail = |e: std::io::Error| anyhow::anyhow!("{}: cannot write: {e}", path.display());
-    let real = std::fs::canonicalize(path).ok().filter(|p| p.is_file());
-    let Some(real) = real else {
-        return std::fs::write(path, text).map_err(fail);
-    };
-    let mut tmp = real.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    let res = (|| -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(text.as_bytes())?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, &real)
-    })();
-    if let Err(e) = res {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(fail(e));
-    }
-    Ok(())
-}
-
-/// A line diff (`-` old, `+` new, two spaces unchanged) by longest common subsequence; the
-/// files are a few dozen lines.
-fn line_diff(old: &str, new: &str) -> String {
-    let a: Vec<&str> = old.lines().collect();
-    let b: Vec<&str> = new.lines().collect();
-    let (n, m) = (a.len(), b.len());
-    let mut l = vec![vec![0u32; m + 1]; n + 1];
-    for i in (0..n).rev() {
-        for j in (0..m).rev() {
-            l[i][j] = if a[i] == b[j] {
-                l[i + 1][j + 1] + 1
-            } else {
-                l[i + 1][j].max(l[i][j + 1])
-            };
-        }
-    }
-    let (mut i, mut j) = (0, 0);
-    let mut out = String::new();
-    while i < n || j < m {
-        if i < n && j < m && a[i] == b[j] {
-            out += &format!("  {}\n", a[i]);
-            i += 1;
-            j += 1;
-        } else if i < n && (j == m || l[i + 1][j] >= l[i][j + 1]) {
-            out += &format!("- {}\n", a[i]);
-            i += 1;
-        } else {
-            out += &format!("+ {}\n", b[j]);
-            j += 1;
-        }
-    }
-    out
+    tilt::write_file(path, text).map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", path.display()))
 }

@@ -210,7 +210,7 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         cfg.camera.fps,
         if a.arm { "arming from the first frame" } else { "disarmed (press the button, or arm on the dashboard)" }
     ));
-    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, &session, &stop, clock)?;
+    let mut dash = a.dash.start(&cfg, a.config.local_target()?, &session, &stop, clock)?;
     super::outdir::started(&mut run);
     let end = session.run(&mut dash);
     print_loop_stats(session.stats());
@@ -248,22 +248,10 @@ fn hooks(session: &Session) {
 
 /// The end of the run on the terminal, and summary.json (every way out writes it).
 fn report(run: &mut RunDir, o: &rccar::session::Outcome) -> Result<()> {
-    if let Some(rec) = &o.recorded {
-        let (dir, st) = &rec.main;
-        match st {
-            Ok(st) => say(&format!("  recording: {}/ ({st:?}); replay with `rccar replay {}`", dir.display(), dir.display())),
-            Err(e) => say_err(&format!("  recording: {}: {e}", dir.display())),
-        }
-        if let Some((d2, st)) = &rec.right {
-            match st {
-                Ok(st) => say(&format!(
-                    "  recording, other camera: {}/ ({st:?}); replay the pair with `rccar replay {} --right {} --set ranging.method=stereo`",
-                    d2.display(),
-                    dir.display(),
-                    d2.display()
-                )),
-                Err(e) => say_err(&format!("  recording: {}: {e}", d2.display())),
-            }
+    for (level, line) in o.recording_lines() {
+        match level {
+            Level::Info => say(&line),
+            Level::Warn => say_err(&line),
         }
     }
     if let Some((p, n)) = &o.telemetry {
@@ -281,15 +269,7 @@ fn report(run: &mut RunDir, o: &rccar::session::Outcome) -> Result<()> {
             sum.laps, sum.xte_rms_m, sum.xte_max_m, sum.lane_departures, sum.end
         ));
     }
-    let mut json = match &o.summary {
-        Some(s) => serde_json::to_value(s)?,
-        None => serde_json::json!({}),
-    };
-    json["drive"] = serde_json::json!({
-        "frames": o.stats.frames, "skipped": o.stats.skipped, "dropped": o.stats.dropped,
-        "stalls": o.stats.stalls, "fault": o.fault.as_ref().map(|f| f.to_string()),
-        "bits_flipped": o.bits_flipped,
-    });
+    let json = o.summary_json()?;
     run.write_json("summary.json", &json)?;
     Ok(())
 }
@@ -324,15 +304,5 @@ fn parse_stall(s: &str) -> Result<(f64, f64)> {
 }
 
 fn print_loop_stats(s: &LoopStats) {
-    let lat = LoopStats::median_max(&s.latency_ms);
-    let per = LoopStats::median_max(&s.period_ms);
-    say(&format!(
-        "drive: {} frames, {} dropped, {} skipped, {} stalls; latency capture->command {}; period {}",
-        s.frames,
-        s.dropped,
-        s.skipped,
-        s.stalls,
-        lat.map_or("-".into(), |(m, x)| format!("median {m:.1} ms, max {x:.1} ms")),
-        per.map_or("-".into(), |(m, x)| format!("median {m:.1} ms, max {x:.1} ms")),
-    ));
+    say(&format!("drive: {}", s.line()));
 }

@@ -53,7 +53,7 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
     use anyhow::Context;
     use rccar::link::protocol::status;
     use rccar::link::transport::{Link, LinkOptions};
-    use std::time::{Duration, Instant};
+    use std::time::Duration;
     check(&args)?;
 
     // Ctrl-C / SIGTERM end the loops (the Link disarms when dropped); a second one disarms
@@ -79,10 +79,41 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
         hello.fw_patch,
         status::name(hello.status)
     );
-    let (mut cfg, from_eeprom) = link.get_config()?;
+    let (cfg, from_eeprom) = link.get_config()?;
     println!("config ({}): {cfg:?}", if from_eeprom { "EEPROM" } else { "defaults" });
 
     if let Some(us) = args.trim_us {
+        serial::trim(&link, cfg, us, args.save)?;
+    }
+    if let Some(n) = args.latency {
+        serial::latency(&link, n, &stopped)?;
+    }
+    if args.sweep {
+        serial::sweep(&link, &stopped)?;
+    }
+    if args.trim_us.is_none() && !args.sweep && args.latency.is_none() {
+        serial::watch(&link, args.seconds, &stopped);
+    }
+    // disarm and a neutral DRIVE now (dropping the last `Link` does the same)
+    link.drive(0, 0);
+    let _ = link.disarm();
+    drop(link);
+    Ok(if stopped() {
+        ExitCode::from(130)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+/// The bench tool's modes, on an open link.
+#[cfg(feature = "serial")]
+mod serial {
+    use rccar::link::protocol::LinkConfig;
+    use rccar::link::transport::Link;
+    use std::time::{Duration, Instant};
+
+    /// `--trim-us`: the servo's centre (`save`: into EEPROM).
+    pub fn trim(link: &Link, mut cfg: LinkConfig, us: u16, save: bool) -> anyhow::Result<()> {
         cfg.servo_center_us = us;
         anyhow::ensure!(
             cfg.is_valid(),
@@ -90,13 +121,16 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
             cfg.servo_min_us,
             cfg.servo_max_us
         );
-        link.set_config(cfg, args.save)?;
+        link.set_config(cfg, save)?;
         println!(
             "servo centre = {us} µs{}",
-            if args.save { " (saved to EEPROM)" } else { "" }
+            if save { " (saved to EEPROM)" } else { "" }
         );
+        Ok(())
     }
-    if let Some(n) = args.latency {
+
+    /// `--latency N`: round trips of N pings.
+    pub fn latency(link: &Link, n: usize, stopped: &dyn Fn() -> bool) -> anyhow::Result<()> {
         let mut rtts = Vec::with_capacity(n);
         for _ in 0..n {
             if stopped() {
@@ -113,8 +147,11 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
                 rtts[rtts.len() - 1]
             );
         }
+        Ok(())
     }
-    if args.sweep {
+
+    /// `--sweep`: the servo left and right for 4 s, armed.
+    pub fn sweep(link: &Link, stopped: &dyn Fn() -> bool) -> anyhow::Result<()> {
         link.arm()?;
         let t0 = Instant::now();
         while !stopped() && t0.elapsed() < Duration::from_secs(4) {
@@ -126,10 +163,13 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
         }
         link.disarm()?;
         println!("sweep done");
+        Ok(())
     }
-    if args.trim_us.is_none() && !args.sweep && args.latency.is_none() {
+
+    /// The default: the firmware's telemetry for `seconds`.
+    pub fn watch(link: &Link, seconds: f64, stopped: &dyn Fn() -> bool) {
         let t0 = Instant::now();
-        while !stopped() && t0.elapsed().as_secs_f64() < args.seconds {
+        while !stopped() && t0.elapsed().as_secs_f64() < seconds {
             if let Some((t, n)) = link.telemetry() {
                 println!(
                     "#{n:<5} {:?} servo {} µs esc {} µs | crc {} framing {} overrun {} lost {} failsafe {} | up {:.1} s",
@@ -147,13 +187,4 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
             std::thread::sleep(Duration::from_millis(200));
         }
     }
-    // disarm and a neutral DRIVE now (dropping the last `Link` does the same)
-    link.drive(0, 0);
-    let _ = link.disarm();
-    drop(link);
-    Ok(if stopped() {
-        ExitCode::from(130)
-    } else {
-        ExitCode::SUCCESS
-    })
 }

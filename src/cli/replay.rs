@@ -5,9 +5,8 @@ use super::timer::WallTimer;
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use rccar::annotate::annotate;
-use rccar::lane::LaneStatus;
 use rccar::drive::{Clock, Flow, FrameContext, Level, LoopEnd, LoopError, NoClock, Observer, StopReason};
+use rccar::session::replay::ReplayTally;
 use rccar::session::{CameraSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
 use rccar::source::FrameError;
 use rccar::timing::{NoTimer, StageTimer};
@@ -39,59 +38,17 @@ pub struct ReplayArgs {
     pub config: ConfigArgs,
 }
 
-/// Summary of a replay, also used by tests through the JSONL; it also writes the annotated
-/// frames.
-struct Summary {
-    frames: u64,
-    skipped: Vec<String>,
-    status: [u64; 4],
-    abs_err_sum: f64,
-    total_us: Vec<u32>,
-    bar: ProgressBar,
-    annotate_dir: Option<PathBuf>,
-    warp_src: [[f64; 2]; 4],
-    /// Stereo pairs, boxes ranged by stereo, without a match, largest |skew| ms, pairs dropped.
-    stereo: (u64, u64, u64, f64, u64),
-}
+/// The progress bar: one step per frame, the skipped frames said above it.
+struct Bar(ProgressBar);
 
-impl Observer for Summary {
-    fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
-        self.bar.inc(1);
-        let out = ctx.output;
-        self.frames += 1;
-        self.status[out.lane.status as usize] += 1;
-        self.abs_err_sum += out.lane.error_px.map_or(0.0, f64::abs);
-        self.total_us.push(out.stage_us.total_us);
-        if let Some(dir) = &self.annotate_dir {
-            let img = annotate(
-                &ctx.frame.image,
-                &self.warp_src,
-                ctx.pipeline.lane().warp_map().homography(),
-                ctx.pipeline.lane().images(),
-                &out.lane,
-                &out.command,
-            );
-            let p = dir.join(rccar::source::output_name(&ctx.frame.name));
-            img.save(&p)
-                .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
-        }
+impl Observer for Bar {
+    fn on_frame(&mut self, _ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        self.0.inc(1);
         Ok(Flow::Continue)
     }
-
-    fn decorate(&mut self, record: &mut rccar::telemetry::FrameRecord) {
-        if let Some(st) = &record.stereo {
-            self.stereo.0 += 1;
-            self.stereo.1 += st.ranged;
-            self.stereo.2 += st.unmatched;
-            self.stereo.3 = self.stereo.3.max(st.skew_ms.abs());
-            self.stereo.4 = st.pairs_dropped;
-        }
-    }
-
     fn on_skip(&mut self, e: &FrameError) {
-        self.bar.inc(1);
-        self.bar.println(format!("skipped {e}"));
-        self.skipped.push(e.to_string());
+        self.0.inc(1);
+        self.0.println(format!("skipped {e}"));
     }
 }
 
@@ -152,21 +109,15 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let mut s = Summary {
-        frames: 0,
-        skipped: vec![],
-        status: [0; 4],
-        abs_err_sum: 0.0,
-        total_us: vec![],
-        bar,
-        annotate_dir: annotate_frames.then(|| annotate_dir.clone()),
-        warp_src: cfg.warp.src,
-        stereo: (0, 0, 0, 0.0, 0),
-    };
+    let mut bar = Bar(bar);
+    let mut s = ReplayTally::new(annotate_frames.then(|| annotate_dir.clone()), cfg.warp.src);
     // Replay moves nothing: its sink forgets the commands (they are in the telemetry).
     super::outdir::started(&mut run);
-    let end = session.run(&mut s);
-    s.bar.finish_and_clear();
+    let end = {
+        let mut obs: [&mut dyn Observer; 2] = [&mut bar, &mut s];
+        session.run(&mut obs)
+    };
+    bar.0.finish_and_clear();
     let outcome = session.finish()?;
     let end = end?;
     let stopped = match end {
@@ -175,39 +126,9 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     };
     super::outdir::finish(&mut run, rccar::run_dir::RunState::from_stop(stopped), outcome.telemetry.as_ref().map(|t| t.1))?;
 
-    let seen = s.status[LaneStatus::Both as usize]
-        + s.status[LaneStatus::LeftOnly as usize]
-        + s.status[LaneStatus::RightOnly as usize];
     println!("replayed {} frames from {}", s.frames, a.dir.display());
-    println!(
-        "  lane: both lines {}, left only {}, right only {}, lost {}",
-        s.status[0], s.status[1], s.status[2], s.status[3]
-    );
-    if seen > 0 {
-        println!(
-            "  mean |error| {:.2} px over {} frames with a lane",
-            s.abs_err_sum / seen as f64,
-            seen
-        );
-    }
-    if !a.no_timing && !s.total_us.is_empty() {
-        let mut t = s.total_us.clone();
-        t.sort_unstable();
-        println!(
-            "  pipeline time per frame: median {} us, max {} us (incl. first-frame warm-up)",
-            t[t.len() / 2],
-            t[t.len() - 1]
-        );
-    }
-    if a.right.is_some() {
-        let (pairs, ranged, unmatched, skew, dropped) = s.stereo;
-        println!(
-            "  stereo: {pairs} pairs (largest skew {skew:.1} ms, {dropped} frame(s) dropped without a partner); detector boxes ranged by stereo {ranged}, without a match {unmatched}"
-        );
-    }
-    println!("  skipped {} frame(s)", s.skipped.len());
-    for k in &s.skipped {
-        println!("    {k}");
+    for line in s.lines(!a.no_timing, a.right.is_some()) {
+        println!("{line}");
     }
     println!("  telemetry: {}", tel_path.display());
     if annotate_frames {

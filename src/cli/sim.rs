@@ -3,13 +3,13 @@
 //! `rccar replay`; `--sweep key=lo:hi:n` runs a gain sweep in parallel (given twice: a grid
 //! with a heat map); `--start-offset M` / `--kick T:DY` measure the step response.
 
-use super::common::ConfigArgs;
+use super::common::{load_font, ConfigArgs, FONT};
 use super::timer::WallTimer;
-use anyhow::{bail, Context, Result};
-use rccar::sim::step::{step_metrics, StepOptions};
+use anyhow::{bail, Result};
+use rccar::sim::step::{StepMetrics, StepRequest};
 use clap::Args;
-use rccar::config::{RangingMethod, StereoReference};
-use rccar::drive::{Clock, Level, LoopEnd, NoClock, Observer, StopReason};
+use rccar::config::{Config, RangingMethod, StereoReference};
+use rccar::drive::{Clock, Level, LoopEnd, NoClock, Observer, StopSignal};
 use rccar::session::{ArmAt, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
 use rccar::sim::plot;
 use rccar::sim::report::RunReport;
@@ -77,8 +77,8 @@ pub struct SimArgs {
     pub dash: super::dashboard::DashArgs,
 }
 
-/// Runs `rccar sim`.
-pub fn run(a: SimArgs) -> Result<ExitCode> {
+/// The configuration with `--laps`, `--seconds` and `--seed` applied.
+fn config(a: &SimArgs) -> Result<Config> {
     let mut cfg = a.config.load()?;
     if let Some(j) = a.jobs.filter(|j| !(1..=256).contains(j)) {
         bail!("--jobs {j}: must be 1..=256 parallel runs");
@@ -100,10 +100,11 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     for s in &sets {
         cfg = cfg.with_override(s)?;
     }
-    let track_path = a.track.clone().unwrap_or_else(|| PathBuf::from(&cfg.sim.track));
-    let track = Track::load(&track_path)?;
-    let font = load_font();
-    let step = parse_step(a.start_offset, a.kick.as_deref(), track.spec.road.lane_width_m)?;
+    Ok(cfg)
+}
+
+/// Flags that do not go together; returns whether the run is a stereo one.
+fn check_flags(a: &SimArgs, cfg: &Config, step: Option<StepRequest>) -> Result<bool> {
     if !a.sweep.is_empty() && step.is_some() {
         bail!("--start-offset/--kick: not with --sweep (one run at a time)");
     }
@@ -116,6 +117,49 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     if stereo && a.record.is_some() && a.record_right.is_none() {
         bail!("--record with ranging.method = \"stereo\": give --record-right DIR2 for the right camera's frames");
     }
+    Ok(stereo)
+}
+
+/// The simulated car, built by the library's session builder.
+fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, stop: &StopSignal, clock: Arc<dyn Clock + Send + Sync>, say: rccar::drive::Say) -> Result<Session> {
+    let mut spec = SessionSpec::new(
+        SourceSpec::Sim {
+            scene: SceneSpec::Shared(Arc::new(Scene::new(track))),
+            // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
+            timing: if a.dash.dashboard { Timing::RealTime } else { Timing::LockStep },
+            stall: None,
+            start_offset_m: a.start_offset,
+        },
+        SinkSpec::DryRun,
+    );
+    spec.arm = if a.dash.dashboard { ArmAt::Operator } else { ArmAt::Start };
+    spec.truth_boxes = a.truth_boxes;
+    spec.frames_viewed = a.record.is_some() || a.dash.dashboard;
+    spec.operator_ends_run = a.dash.dashboard;
+    spec.telemetry = Some(run.join("telemetry.jsonl"));
+    let timer: Box<dyn rccar::timing::StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
+    let env = SessionEnv { clock, stop: stop.clone(), timer, say };
+    let session = Session::build(cfg, spec, env)?;
+    if a.truth_boxes {
+        println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
+    }
+    for (level, line) in session.notes() {
+        match level {
+            Level::Info => println!("sim: {line}"),
+            Level::Warn => eprintln!("{line}"),
+        }
+    }
+    Ok(session)
+}
+
+/// Runs `rccar sim`.
+pub fn run(a: SimArgs) -> Result<ExitCode> {
+    let cfg = config(&a)?;
+    let track_path = a.track.clone().unwrap_or_else(|| PathBuf::from(&cfg.sim.track));
+    let track = Track::load(&track_path)?;
+    let font = load_font();
+    let step = StepRequest::parse(a.start_offset, a.kick.as_deref(), track.spec.road.lane_width_m)?;
+    let stereo = check_flags(&a, &cfg, step)?;
     // The run folder (and the --record folders): new, or refused before anything is written.
     let sweeping = !a.sweep.is_empty();
     let record: [(&str, Option<&Path>); 2] = if sweeping {
@@ -133,35 +177,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         Level::Info => super::signals::say(line),
         Level::Warn => super::signals::say_err(line),
     });
-    let mut spec = SessionSpec::new(
-        SourceSpec::Sim {
-            scene: SceneSpec::Shared(Arc::new(Scene::new(&track))),
-            // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
-            timing: if a.dash.dashboard { Timing::RealTime } else { Timing::LockStep },
-            stall: None,
-            start_offset_m: a.start_offset,
-        },
-        SinkSpec::DryRun,
-    );
-    spec.arm = if a.dash.dashboard { ArmAt::Operator } else { ArmAt::Start };
-    spec.truth_boxes = a.truth_boxes;
-    spec.frames_viewed = a.record.is_some() || a.dash.dashboard;
-    spec.operator_ends_run = a.dash.dashboard;
-    spec.telemetry = Some(run.join("telemetry.jsonl"));
-    let timer: Box<dyn rccar::timing::StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
-    let env = SessionEnv { clock: clock.clone(), stop: stop.clone(), timer, say: say.clone() };
-    let mut session = Session::build(&cfg, spec, env)?;
-    if a.truth_boxes {
-        println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
-    }
-    for (level, line) in session.notes() {
-        match level {
-            Level::Info => println!("sim: {line}"),
-            Level::Warn => eprintln!("{line}"),
-        }
-    }
+    let mut session = session(&a, &cfg, &track, &run, &stop, clock.clone(), say.clone())?;
     let world = session.world().expect("a simulation has a world").clone();
-    let mut dash = super::dashboard::Dash::start(&a.dash, &cfg, a.config.local_target()?, &session, &stop, clock)?;
+    let mut dash = a.dash.start(&cfg, a.config.local_target()?, &session, &stop, clock)?;
     println!(
         "sim: track {} ({:.2} m, tightest lane radius {:.2} m), {} lap(s), at most {} s",
         track.name,
@@ -191,10 +209,11 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let outcome = session.finish()?;
     end?;
     let summary = outcome.summary.clone().expect("a simulation has a score");
-    let tel_path = outcome.telemetry.as_ref().map(|t| t.0.clone()).unwrap_or_default();
     let scene = lock(&world).scene().clone();
     let wall_s = started.elapsed().as_secs_f64();
-    print_summary(&summary);
+    for line in summary.lines() {
+        println!("{line}");
+    }
     if stereo {
         let t = &report.stereo;
         println!(
@@ -208,26 +227,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         wall_s,
         summary.seconds / wall_s.max(1e-9)
     );
-    let mut sum_json = serde_json::to_value(&summary)?;
-    let mut step_fig = None;
-    if let Some(st) = step {
-        // After a kick the first frame that sees it is the one after the kick's frame.
-        let t0 = if st.kick { report.kicked_at.map(|t| t + 1e-6) } else { Some(0.0) };
-        match t0.map(|t0| step_metrics(&report.series.t, &report.series.xte, t0, &StepOptions::default())) {
-            Some(Ok(m)) => {
-                print_step(&m);
-                sum_json["step"] = serde_json::to_value(&m)?;
-                step_fig = Some(m);
-            }
-            Some(Err(e)) => println!("  step response: {e}"),
-            None => println!("  step response: the run ended before the kick at t = {} s", st.t),
-        }
-    }
-    // Summary and configuration (for `rccar report`), each whole or not at all.
-    let sum_path = run.write_json("summary.json", &sum_json)?;
-    run.write_json("config.json", &cfg)?;
-    println!("  telemetry: {}", tel_path.display());
-    println!("  summary:   {}", sum_path.display());
+    let step_fig = write_summary(&mut run, &cfg, &report, &summary, step, &outcome)?;
     write_plots(&mut run, font, &report, &summary, &scene, step_fig.as_ref())?;
     print_frames(&a, summary.frames);
     let tel_lines = outcome.telemetry.as_ref().map(|t| t.1);
@@ -235,7 +235,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     if let Some(why) = interrupted {
         println!(
             "sim: interrupted ({}) after {} frames; the summary and plots cover what ran",
-            signal_name(why),
+            why.said(),
             summary.frames
         );
         return Ok(ExitCode::from(why.exit_code()));
@@ -244,16 +244,30 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
-/// How a stop reason is said.
-fn signal_name(why: StopReason) -> &'static str {
-    match why {
-        StopReason::Terminate => "SIGTERM",
-        StopReason::Hangup => "SIGHUP",
-        StopReason::Quit => "SIGQUIT",
-        StopReason::Interrupt => "Ctrl-C",
-        StopReason::Fault => "a fault",
-        StopReason::Requested => "requested",
+/// The step response (when asked for), then summary.json and config.json (for `rccar
+/// report`), each whole or not at all.
+fn write_summary(run: &mut RunDir, cfg: &Config, report: &RunReport, summary: &Summary, step: Option<StepRequest>, outcome: &rccar::session::Outcome) -> Result<Option<StepMetrics>> {
+    let mut sum_json = serde_json::to_value(summary)?;
+    let mut step_fig = None;
+    if let Some(st) = step {
+        match report.step_response(&st) {
+            Some(Ok(m)) => {
+                for line in m.lines() {
+                    println!("{line}");
+                }
+                sum_json["step"] = serde_json::to_value(&m)?;
+                step_fig = Some(m);
+            }
+            Some(Err(e)) => println!("  step response: {e}"),
+            None => println!("  step response: the run ended before the kick at t = {} s", st.t),
+        }
     }
+    let sum_path = run.write_json("summary.json", &sum_json)?;
+    run.write_json("config.json", cfg)?;
+    let tel_path = outcome.telemetry.as_ref().map(|t| t.0.clone()).unwrap_or_default();
+    println!("  telemetry: {}", tel_path.display());
+    println!("  summary:   {}", sum_path.display());
+    Ok(step_fig)
 }
 
 /// The time and path plots (and the step plot), when the font is there.
@@ -263,18 +277,18 @@ fn write_plots(
     report: &RunReport,
     summary: &Summary,
     scene: &Scene,
-    step: Option<&rccar::sim::step::StepMetrics>,
+    step: Option<&StepMetrics>,
 ) -> Result<()> {
     let Some(font) = font else {
         println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
         return Ok(());
     };
     plot::register_font(font);
-    let p1 = save(run, "xte_steer.png", &plot::time_plot(&report.series, summary.lane_width_m)?)?;
-    let p2 = save(run, "path.png", &plot::path_plot(&report.series, scene)?)?;
+    let p1 = super::outdir::save_png(run, "xte_steer.png", &plot::time_plot(&report.series, summary.lane_width_m)?)?;
+    let p2 = super::outdir::save_png(run, "path.png", &plot::path_plot(&report.series, scene)?)?;
     println!("  plots:     {} {}", p1.display(), p2.display());
     if let Some(m) = step {
-        let p3 = save(run, "step.png", &plot::step_plot(&report.series.t, &report.series.xte, m)?)?;
+        let p3 = super::outdir::save_png(run, "step.png", &plot::step_plot(&report.series.t, &report.series.xte, m)?)?;
         println!("  step:      {}", p3.display());
     }
     Ok(())
@@ -299,89 +313,4 @@ fn print_frames(a: &SimArgs, frames: u64) {
         ),
         _ => {}
     }
-}
-
-pub(crate) const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
-
-/// The plot font, from the system (never committed).
-pub(crate) fn load_font() -> Option<&'static [u8]> {
-    std::fs::read(FONT).ok().map(|b| &*Box::leak(b.into_boxed_slice()))
-}
-
-/// Writes a plot into the run folder as `name` (PNG, atomically); returns its path.
-pub(crate) fn save(run: &mut RunDir, name: &str, img: &image::RgbImage) -> Result<PathBuf> {
-    let mut png = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut png, image::ImageFormat::Png)
-        .with_context(|| format!("{}: cannot encode PNG", run.join(name).display()))?;
-    Ok(run.write(name, &png.into_inner())?)
-}
-
-fn print_summary(s: &Summary) {
-    println!("sim: {} frames, {:.1} s, ended: {:?}", s.frames, s.seconds, s.end);
-    let times: Vec<String> = s.lap_times_s.iter().map(|t| format!("{t:.2}")).collect();
-    println!("  laps completed:   {} (lap times s: [{}])", s.laps, times.join(", "));
-    println!(
-        "  cross-track error: RMS {:.4} m ({:.1}% of the {:.2} m lane), max {:.4} m",
-        s.xte_rms_m,
-        100.0 * s.xte_rms_m / s.lane_width_m,
-        s.lane_width_m,
-        s.xte_max_m
-    );
-    println!(
-        "  lane departures:  {} ({:.2} s with a wheel outside)",
-        s.lane_departures, s.time_outside_s
-    );
-    println!(
-        "  steering reversals {:.2}/s, lane lost in {} frames",
-        s.steer_reversals_per_s, s.lane_lost_frames
-    );
-}
-
-/// A step-response request: a start offset (`kick` false, at t = 0) or a kick at `t`.
-#[derive(Debug, Clone, Copy)]
-struct StepReq {
-    kick: bool,
-    t: f64,
-    dy: f64,
-}
-
-/// Checks `--start-offset` and `--kick T:DY` (at most a lane width either way).
-fn parse_step(offset: Option<f64>, kick: Option<&str>, lane_width: f64) -> Result<Option<StepReq>> {
-    let check = |what: &str, dy: f64| -> Result<()> {
-        if !dy.is_finite() || dy.abs() > lane_width {
-            bail!("{what}: {dy} m is off the lane; give at most ±{lane_width} m (the lane width)");
-        }
-        Ok(())
-    };
-    match (offset, kick) {
-        (Some(_), Some(_)) => bail!("--start-offset and --kick: give one of them"),
-        (Some(m), None) => {
-            check("--start-offset", m)?;
-            Ok(Some(StepReq { kick: false, t: 0.0, dy: m }))
-        }
-        (None, Some(k)) => {
-            let form = || format!("--kick `{k}`: expected T:DY (seconds 0..=36000 : metres), e.g. 5:0.05");
-            let (t, dy) = k.split_once(':').with_context(form)?;
-            let t: f64 = t.trim().parse().ok().filter(|t: &f64| (0.0..=36_000.0).contains(t)).with_context(form)?;
-            let dy: f64 = dy.trim().parse().ok().filter(|d: &f64| d.is_finite()).with_context(form)?;
-            check("--kick", dy)?;
-            Ok(Some(StepReq { kick: true, t, dy }))
-        }
-        (None, None) => Ok(None),
-    }
-}
-
-fn print_step(m: &rccar::sim::step::StepMetrics) {
-    let s = |v: Option<f64>| v.map_or("not reached".to_string(), |v| format!("{v:.2} s"));
-    println!(
-        "  step response from {:+.4} m at t = {:.2} s (window {:.1} s):",
-        m.initial_offset_m, m.t0_s, m.window_s
-    );
-    println!("    rise time 10→90 %:  {}", s(m.rise_time_s));
-    println!("    overshoot:          {:.1} % of the offset", m.overshoot_pct);
-    println!(
-        "    settling time:      {} (band ±{:.1} mm = 5 % of the offset, at least 2 mm)",
-        s(m.settling_time_s),
-        m.band_m * 1000.0
-    );
 }

@@ -5,7 +5,7 @@
 //! that never started, and says which ran.
 
 use super::outdir;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use rccar::config::Config;
 use rccar::run_dir::{RunDir, RunState};
 use rccar::sim::plot;
@@ -29,7 +29,8 @@ pub fn run_sweep(
     let axes = sweep::parse_axes(args)?;
     let keys: Vec<&str> = axes.iter().map(|x| x.key.as_str()).collect();
     let points = sweep::grid(&axes);
-    let cfgs = sweep_configs(cfg, &keys, &points)?;
+    // Check every value before spending minutes.
+    let cfgs = sweep::configs(cfg, &keys, &points)?;
     let scene = Arc::new(Scene::new(track));
     let jobs = jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
@@ -43,38 +44,22 @@ pub fn run_sweep(
         track.name
     );
     let stop = super::signals::install();
-    let label = |p: &[f64]| -> String {
-        keys.iter()
-            .zip(p)
-            .map(|(k, v)| format!("{k}={v:.4}"))
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
     outdir::started(&mut run);
     let t0 = Instant::now();
     let ended = std::sync::atomic::AtomicUsize::new(0);
     let outcomes = sweep::run_all(&cfgs, &points, scene, jobs, &|| stop.is_set(), &|i, o| {
         let k = ended.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
-        let what = match o {
-            RunOutcome::Finished(r) => format!(
-                "laps {}, RMS {:.4} m, max {:.4} m, departures {}, {}",
-                r.summary.laps,
-                r.summary.xte_rms_m,
-                r.summary.xte_max_m,
-                r.summary.lane_departures,
-                end_name(&r.summary)
-            ),
-            RunOutcome::Interrupted(r) => format!("interrupted after {:.1} s simulated", r.summary.seconds),
-            RunOutcome::Failed(e) => format!("error: {e}"),
-            RunOutcome::NotRun => "not run".into(),
-        };
         println!(
-            "  [{k}/{n}] {}  {what}  ({:.1} s)",
-            label(&points[i]),
+            "  [{k}/{n}] {}  {}  ({:.1} s)",
+            sweep::label(&keys, &points[i]),
+            sweep::outcome_words(o),
             t0.elapsed().as_secs_f64()
         );
     });
-    print_table(&keys, &points, &outcomes);
+    println!("{}", sweep::table_head(&keys));
+    for (p, o) in points.iter().zip(&outcomes) {
+        println!("{}", sweep::table_row(p, o));
+    }
     let csv_path = run.write("sweep.csv", sweep::csv_outcomes(&keys, &outcomes).as_bytes())?;
     if let Some(why) = stop.reason() {
         let count = |f: fn(&RunOutcome) -> bool| outcomes.iter().filter(|o| f(o)).count();
@@ -84,7 +69,7 @@ pub fn run_sweep(
             .iter()
             .zip(&outcomes)
             .filter(|(_, o)| **o == RunOutcome::NotRun)
-            .map(|(p, _)| label(p))
+            .map(|(p, _)| sweep::label(&keys, p))
             .collect();
         println!(
             "sweep: interrupted; {finished} of {n} run(s) finished, {cut} cut short (rows ending `interrupted`), {} not run (no row): {}",
@@ -101,84 +86,14 @@ pub fn run_sweep(
         plot::register_font(font);
         if axes.len() == 1 {
             let rows: Vec<(f64, Summary)> = runs.iter().map(|r| (r.values[0], r.summary.clone())).collect();
-            let p = super::sim::save(&mut run, "sweep.png", &plot::sweep_plot(keys[0], &rows)?)?;
+            let p = outdir::save_png(&mut run, "sweep.png", &plot::sweep_plot(keys[0], &rows)?)?;
             println!("  plot:  {}", p.display());
         } else {
             let img = plot::grid_plot(keys[0], keys[1], &axes[0].values, &axes[1].values, &runs)?;
-            let p = super::sim::save(&mut run, "sweep_grid.png", &img)?;
+            let p = outdir::save_png(&mut run, "sweep_grid.png", &img)?;
             println!("  heat map: {}", p.display());
         }
     }
     outdir::finish(&mut run, RunState::Finished, None)?;
     Ok(ExitCode::SUCCESS)
-}
-
-/// One configuration per point of the grid, every value checked before minutes are spent; a
-/// key of another steering method than `cfg`'s is refused.
-fn sweep_configs(cfg: &Config, keys: &[&str], points: &[Vec<f64>]) -> Result<Vec<Config>> {
-    // A parameter of another steering method would change nothing: every row the same.
-    for k in keys {
-        if let Some(why) = rccar::control::steering::unused_by(cfg.steering.method, k) {
-            anyhow::bail!("--sweep {k}: {why}");
-        }
-    }
-    // Check every value before spending minutes.
-    points
-        .iter()
-        .map(|p| {
-            let mut c = cfg.clone();
-            for (k, v) in keys.iter().zip(p) {
-                c = c
-                    .with_override(&format!("{k}={v}"))
-                    .with_context(|| format!("--sweep {k}={v}"))?;
-            }
-            Ok(c)
-        })
-        .collect()
-}
-
-/// The table of the runs on stdout (one row per point, in grid order).
-fn print_table(keys: &[&str], points: &[Vec<f64>], outcomes: &[RunOutcome]) {
-    let head: Vec<String> = keys.iter().map(|k| format!("{k:>12}")).collect();
-    println!(
-        "{} {:>5} {:>10} {:>10} {:>6} {:>10} {:>9} {:>8}  end",
-        head.join(" "),
-        "laps",
-        "rms_m",
-        "max_m",
-        "dep",
-        "rev/s",
-        "dsteer",
-        "lost"
-    );
-    for (p, o) in points.iter().zip(outcomes) {
-        let vals: Vec<String> = p.iter().map(|v| format!("{v:>12.4}")).collect();
-        let vals = vals.join(" ");
-        match o {
-            RunOutcome::Finished(r) | RunOutcome::Interrupted(r) => {
-                let s = &r.summary;
-                println!(
-                    "{vals} {:>5} {:>10.4} {:>10.4} {:>6} {:>10.2} {:>9.4} {:>8}  {:?}",
-                    s.laps,
-                    s.xte_rms_m,
-                    s.xte_max_m,
-                    s.lane_departures,
-                    s.steer_reversals_per_s,
-                    r.steer_diff_rms,
-                    s.lane_lost_frames,
-                    s.end
-                );
-            }
-            RunOutcome::Failed(e) => println!("{vals} error: {e}"),
-            RunOutcome::NotRun => println!("{vals} not run"),
-        }
-    }
-}
-
-/// The end reason as in sweep.csv (`time_up`, `interrupted`, …).
-fn end_name(s: &Summary) -> String {
-    serde_json::to_value(s.end)
-        .ok()
-        .and_then(|v| v.as_str().map(String::from))
-        .unwrap_or_default()
 }

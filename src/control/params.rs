@@ -8,7 +8,7 @@
 //! - the configuration's range checks of `[steering]` and `[throttle]` (so `--set`,
 //!   `config/local.toml` and the dashboard refuse the same values);
 //! - the dashboard (which keys it may change live, their sliders, units and docs, the values in
-//!   force; src/dashboard/, src/cli/dashboard/);
+//!   force; src/dashboard/, its server src/dashboard/server/);
 //! - `sim --sweep` (axis units, and a key of a steering method the run does not use is refused);
 //! - saving to `config/local.toml` (only table keys; a new key gets its unit and range as a
 //!   comment).

@@ -1,6 +1,8 @@
-//! The live dashboard's loop side (issue 11): what the control loop hands to the web server
-//! and what it takes back. No sockets, no clock: the HTTP server lives in the binary
-//! (`src/cli/dashboard/`, feature `dashboard`).
+//! The live dashboard (issue 11): what the control loop hands to the web server and what it
+//! takes back (this file: no sockets, no clock), the dashboard of one run ([`run`]), and the
+//! HTTP server ([`server`], feature `dashboard`: the network side, on threads and a tokio
+//! runtime of its own, the one part of the library that reads the wall clock, for its
+//! connection deadlines and the operator's heartbeat).
 //!
 //! ```text
 //!   Driver ──on_frame──► DashObserver ──put──► Latest<Arc<Snapshot>>  ──► server threads
@@ -19,6 +21,13 @@
 //! [`Config::with_override`]), so the page can never set what `config/car.toml` could not.
 
 pub mod local_toml;
+pub mod run;
+pub mod shared;
+#[cfg(feature = "dashboard")]
+pub mod server;
+
+pub use run::Dash;
+pub use shared::{DashboardError, Sent};
 
 use crate::config::Config;
 use crate::control::behaviour::Transition;

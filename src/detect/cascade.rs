@@ -453,6 +453,55 @@ fn read_haar_feature(ctx: &Ctx, feat: Node) -> Result<HaarFeature, CascadeError>
     Ok(f)
 }
 
+/// One weak tree of a stage (`<_>` of `weakClassifiers`): its nodes (`node_step` numbers
+/// each; with `ncat` > 0 categorical, their subsets), then its leaves, appended to `c`.
+fn read_tree(ctx: &Ctx, w: Node, node_step: usize, ncat: i32, c: &mut Cascade) -> Result<(), CascadeError> {
+    let inodes = ctx.child(w, "internalNodes")?;
+    let lv = ctx.child(w, "leafValues")?;
+    let vals: Vec<f64> = ctx.numbers(inodes).collect::<Result<_, _>>()?;
+    if vals.is_empty() || !vals.len().is_multiple_of(node_step) {
+        return Err(ctx.err(
+            inodes,
+            format!("{} numbers is not a multiple of {node_step} per node", vals.len()),
+        ));
+    }
+    let tree = WeakTree {
+        first_node: c.nodes.len(),
+        node_count: vals.len() / node_step,
+        first_leaf: c.leaves.len(),
+    };
+    for n in vals.chunks(node_step) {
+        let int = |v: f64| {
+            as_int(v, i32::MIN as i64, i32::MAX as i64)
+                .ok_or_else(|| ctx.err(inodes, format!("`{v}` is not an integer")))
+        };
+        let feature = int(n[2])?;
+        if feature < 0 {
+            return Err(ctx.err(inodes, format!("negative feature index {feature}")));
+        }
+        let threshold = if ncat > 0 {
+            for &s in &n[3..] {
+                c.subsets.push(int(s)?);
+            }
+            0.0
+        } else {
+            n[3] as f32
+        };
+        c.nodes.push(TreeNode {
+            left: int(n[0])?,
+            right: int(n[1])?,
+            feature: feature as usize,
+            threshold,
+        });
+    }
+    for v in ctx.numbers(lv) {
+        c.leaves.push(v? as f32);
+    }
+    c.max_nodes_per_tree = c.max_nodes_per_tree.max(tree.node_count);
+    c.trees.push(tree);
+    Ok(())
+}
+
 /// The current `<cascade>` format.
 fn read_new(ctx: &Ctx, top: Node) -> Result<Cascade, CascadeError> {
     // 1. Header: stage type, feature type, window, category count.
@@ -503,49 +552,7 @@ fn read_new(ctx: &Ctx, top: Node) -> Result<Cascade, CascadeError> {
         let weak = ctx.child(st, "weakClassifiers")?;
         let first_tree = c.trees.len();
         for w in items(weak) {
-            let inodes = ctx.child(w, "internalNodes")?;
-            let lv = ctx.child(w, "leafValues")?;
-            let vals: Vec<f64> = ctx.numbers(inodes).collect::<Result<_, _>>()?;
-            if vals.is_empty() || !vals.len().is_multiple_of(node_step) {
-                return Err(ctx.err(
-                    inodes,
-                    format!("{} numbers is not a multiple of {node_step} per node", vals.len()),
-                ));
-            }
-            let tree = WeakTree {
-                first_node: c.nodes.len(),
-                node_count: vals.len() / node_step,
-                first_leaf: c.leaves.len(),
-            };
-            for n in vals.chunks(node_step) {
-                let int = |v: f64| {
-                    as_int(v, i32::MIN as i64, i32::MAX as i64)
-                        .ok_or_else(|| ctx.err(inodes, format!("`{v}` is not an integer")))
-                };
-                let feature = int(n[2])?;
-                if feature < 0 {
-                    return Err(ctx.err(inodes, format!("negative feature index {feature}")));
-                }
-                let threshold = if ncat > 0 {
-                    for &s in &n[3..] {
-                        c.subsets.push(int(s)?);
-                    }
-                    0.0
-                } else {
-                    n[3] as f32
-                };
-                c.nodes.push(TreeNode {
-                    left: int(n[0])?,
-                    right: int(n[1])?,
-                    feature: feature as usize,
-                    threshold,
-                });
-            }
-            for v in ctx.numbers(lv) {
-                c.leaves.push(v? as f32);
-            }
-            c.max_nodes_per_tree = c.max_nodes_per_tree.max(tree.node_count);
-            c.trees.push(tree);
+            read_tree(ctx, w, node_step, ncat, &mut c)?;
         }
         if c.trees.len() == first_tree {
             return Err(ctx.err(weak, "a stage without weak classifiers"));

@@ -246,6 +246,21 @@ impl LoopStats {
         s.sort_by(f64::total_cmp);
         Some((s[s.len() / 2], s[s.len() - 1]))
     }
+
+    /// The counters and the latency and period figures in one line (the end of a run).
+    pub fn line(&self) -> String {
+        let lat = LoopStats::median_max(&self.latency_ms);
+        let per = LoopStats::median_max(&self.period_ms);
+        format!(
+            "{} frames, {} dropped, {} skipped, {} stalls; latency capture->command {}; period {}",
+            self.frames,
+            self.dropped,
+            self.skipped,
+            self.stalls,
+            lat.map_or("-".into(), |(m, x)| format!("median {m:.1} ms, max {x:.1} ms")),
+            per.map_or("-".into(), |(m, x)| format!("median {m:.1} ms, max {x:.1} ms")),
+        )
+    }
 }
 
 /// What one call of [`Driver::step`] did.
@@ -358,11 +373,7 @@ impl Driver {
             Some(Ok(f)) => f,
         };
         let captured = frame.captured_s.unwrap_or_else(|| clock.now_s());
-        if frame.index > self.next_index && !self.resync {
-            self.stats.dropped += frame.index - self.next_index;
-        }
-        self.resync = false;
-        self.next_index = frame.index + 1;
+        self.count_index(frame.index);
         // 4. dt from the frames' own times: skipped and dropped frames still count as time.
         let dt = self.last_time_s.map_or(1.0 / self.fps, |t| frame.time_s - t);
         self.last_time_s = Some(frame.time_s);
@@ -378,14 +389,7 @@ impl Driver {
         pipeline.note_sent(sent_cmd);
         let sent = clock.now_s();
         // 6. The one telemetry record.
-        let latency_ms = (sent - captured) * 1e3;
-        let period_ms = self.last_cmd_clock.map(|t| (sent - t) * 1e3);
-        self.last_cmd_clock = Some(sent);
-        self.stats.frames += 1;
-        self.stats.latency_ms.push(latency_ms);
-        if let Some(p) = period_ms {
-            self.stats.period_ms.push(p);
-        }
+        let (latency_ms, period_ms) = self.count_frame(captured, sent);
         let mut record = FrameRecord::new(
             frame.index,
             &frame.name,
@@ -423,6 +427,30 @@ impl Driver {
             self.ended = Some(LoopEnd::ObserverStopped);
         }
         Ok(Step::Frame(Box::new((out, record))))
+    }
+
+    /// Frames the source numbered but never gave are dropped (not those missing after a
+    /// stall: never made).
+    fn count_index(&mut self, index: u64) {
+        if index > self.next_index && !self.resync {
+            self.stats.dropped += index - self.next_index;
+        }
+        self.resync = false;
+        self.next_index = index + 1;
+    }
+
+    /// Counts a processed frame with its latency (capture at `captured` → command `sent`,
+    /// clock seconds) and the period since the last command; returns both in ms.
+    fn count_frame(&mut self, captured: f64, sent: f64) -> (f64, Option<f64>) {
+        let latency_ms = (sent - captured) * 1e3;
+        let period_ms = self.last_cmd_clock.map(|t| (sent - t) * 1e3);
+        self.last_cmd_clock = Some(sent);
+        self.stats.frames += 1;
+        self.stats.latency_ms.push(latency_ms);
+        if let Some(p) = period_ms {
+            self.stats.period_ms.push(p);
+        }
+        (latency_ms, period_ms)
     }
 
     fn end(&mut self, why: LoopEnd) -> Step {

@@ -50,6 +50,17 @@ impl StopReason {
             _ => return None,
         })
     }
+    /// How the reason is said on the terminal (`SIGTERM`, `Ctrl-C`, ...).
+    pub fn said(self) -> &'static str {
+        match self {
+            StopReason::Terminate => "SIGTERM",
+            StopReason::Hangup => "SIGHUP",
+            StopReason::Quit => "SIGQUIT",
+            StopReason::Interrupt => "Ctrl-C",
+            StopReason::Fault => "a fault",
+            StopReason::Requested => "requested",
+        }
+    }
     /// The conventional exit code of a run ended this way (128 + signal number for signals).
     pub fn exit_code(self) -> u8 {
         match self {

@@ -613,41 +613,50 @@ fn handshake(conn: &mut Conn, shared: &Shared, opt: &mut LinkOptions) -> Result<
     Err("no HELLO_ACK".into())
 }
 
+/// Writes the queued requests, then the newest DRIVE (unless too old); `Some` when the
+/// connection must end (shut down, or a write failed).
+fn write_pending(conn: &mut Conn, shared: &Shared, opt: &mut LinkOptions) -> Option<Exit> {
+    let (requests, drive, shutdown) = {
+        let mut g = shared.lock();
+        (std::mem::take(&mut g.requests), g.drive.take(), g.shutdown)
+    };
+    if shutdown {
+        return Some(Exit::Shutdown);
+    }
+    for (ticket, msg) in requests {
+        match write_msg(conn, shared, opt, &msg) {
+            Ok(seq) if ticket != UNAWAITED => {
+                let mut g = shared.lock();
+                g.pending.push((seq, msg.id(), ticket));
+                g.sent_at.insert(ticket, Instant::now());
+            }
+            Ok(_) => {}
+            Err(e) => {
+                shared.lock().last_error = format!("write: {e}");
+                return Some(Exit::Reopen);
+            }
+        }
+    }
+    if let Some((d, at)) = drive {
+        if at.elapsed() > opt.max_drive_age {
+            shared.lock().stats.drives_expired += 1;
+        } else if let Err(e) = write_msg(conn, shared, opt, &d) {
+            shared.lock().last_error = format!("write: {e}");
+            return Some(Exit::Reopen);
+        } else {
+            shared.lock().stats.drives_sent += 1;
+        }
+    }
+    None
+}
+
 fn run(conn: &mut Conn, shared: &Shared, opt: &mut LinkOptions) -> Exit {
     let mut last_telemetry = Instant::now();
     let mut last_uptime: Option<u32> = None;
     loop {
         // 1. write: requests first (ARM must precede the DRIVE after it), then the newest DRIVE
-        let (requests, drive, shutdown) = {
-            let mut g = shared.lock();
-            (std::mem::take(&mut g.requests), g.drive.take(), g.shutdown)
-        };
-        if shutdown {
-            return Exit::Shutdown;
-        }
-        for (ticket, msg) in requests {
-            match write_msg(conn, shared, opt, &msg) {
-                Ok(seq) if ticket != UNAWAITED => {
-                    let mut g = shared.lock();
-                    g.pending.push((seq, msg.id(), ticket));
-                    g.sent_at.insert(ticket, Instant::now());
-                }
-                Ok(_) => {}
-                Err(e) => {
-                    shared.lock().last_error = format!("write: {e}");
-                    return Exit::Reopen;
-                }
-            }
-        }
-        if let Some((d, at)) = drive {
-            if at.elapsed() > opt.max_drive_age {
-                shared.lock().stats.drives_expired += 1;
-            } else if let Err(e) = write_msg(conn, shared, opt, &d) {
-                shared.lock().last_error = format!("write: {e}");
-                return Exit::Reopen;
-            } else {
-                shared.lock().stats.drives_sent += 1;
-            }
+        if let Some(exit) = write_pending(conn, shared, opt) {
+            return exit;
         }
         // 2. read and dispatch
         let frames = match read_frames(conn) {

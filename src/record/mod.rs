@@ -87,6 +87,35 @@ pub struct RecordedTimes {
     pub cut_lines: Vec<usize>,
 }
 
+/// Reads one line of `r` into `buf` (its newline kept), keeping at most
+/// `MAX_TELEMETRY_LINE` bytes; `None` at the end, else whether the line was longer.
+fn read_line(r: &mut impl std::io::BufRead, buf: &mut Vec<u8>) -> std::io::Result<Option<bool>> {
+    buf.clear();
+    let mut too_long = false;
+    let mut any = false;
+    loop {
+        let chunk = r.fill_buf()?;
+        if chunk.is_empty() {
+            break;
+        }
+        any = true;
+        let (take, done) = match chunk.iter().position(|&b| b == b'\n') {
+            Some(k) => (k + 1, true),
+            None => (chunk.len(), false),
+        };
+        if buf.len() + take <= MAX_TELEMETRY_LINE {
+            buf.extend_from_slice(&chunk[..take]);
+        } else {
+            too_long = true;
+        }
+        r.consume(take);
+        if done {
+            break;
+        }
+    }
+    Ok(any.then_some(too_long))
+}
+
 /// Reads `DIR/telemetry.jsonl` of a recording for the frames' times, so a replay can use the
 /// recorded time steps (the car skips late frames, so they are not always 1/fps apart).
 /// The drive loop must pass [`Recorder::write_frame`] the same index as the line's `frame`.
@@ -100,7 +129,6 @@ pub struct RecordedTimes {
 /// one), not a finite number (a NaN is written as `null`), negative, or not after the
 /// previous line's.
 pub fn recorded_times(dir: &Path) -> Result<RecordedTimes, RecordError> {
-    use std::io::BufRead;
     let path = dir.join(TELEMETRY_FILE);
     let file = File::open(&path).map_err(|source| RecordError::Read {
         path: path.clone(),
@@ -119,37 +147,11 @@ pub fn recorded_times(dir: &Path) -> Result<RecordedTimes, RecordError> {
     let mut with_time: Option<(bool, usize)> = None;
     let mut buf = Vec::with_capacity(4096);
     let mut line_no = 0;
-    loop {
-        // 1. One line, at most MAX_TELEMETRY_LINE bytes kept (a longer one counts as cut).
-        buf.clear();
-        let mut too_long = false;
-        let mut any = false;
-        loop {
-            let chunk = r.fill_buf().map_err(|source| RecordError::Read {
-                path: path.clone(),
-                source,
-            })?;
-            if chunk.is_empty() {
-                break;
-            }
-            any = true;
-            let (take, done) = match chunk.iter().position(|&b| b == b'\n') {
-                Some(k) => (k + 1, true),
-                None => (chunk.len(), false),
-            };
-            if buf.len() + take <= MAX_TELEMETRY_LINE {
-                buf.extend_from_slice(&chunk[..take]);
-            } else {
-                too_long = true;
-            }
-            r.consume(take);
-            if done {
-                break;
-            }
-        }
-        if !any {
-            break;
-        }
+    // 1. One line at a time, at most MAX_TELEMETRY_LINE bytes kept (a longer one counts as cut).
+    while let Some(too_long) = read_line(&mut r, &mut buf).map_err(|source| RecordError::Read {
+        path: path.clone(),
+        source,
+    })? {
         line_no += 1;
         if buf.iter().all(u8::is_ascii_whitespace) && !too_long {
             continue;

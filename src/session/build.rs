@@ -73,26 +73,8 @@ pub(super) fn build(cfg: &Config, spec: SessionSpec, env: SessionEnv) -> Result<
     );
     // 4. GPIO, recording, and last the telemetry file.
     let gpio = open_gpio(cfg, &arming)?;
-    let recorder = match &spec.record {
-        Some((dir, right)) => Some(RecordObserver::new(
-            Recorder::create(dir, cfg.record.options())?,
-            match right {
-                Some(d2) => Some(Recorder::create(d2, cfg.record.options())?),
-                None => None,
-            },
-        )),
-        None => None,
-    };
-    let telemetry = match &spec.telemetry {
-        Some(path) => {
-            let f = std::fs::File::create(path).map_err(|error| SessionError::Io {
-                path: path.clone(),
-                error: std::io::Error::new(error.kind(), format!("cannot create: {error}")),
-            })?;
-            Some((JsonlWriter::new(f, path.display().to_string()), path.clone()))
-        }
-        None => None,
-    };
+    let recorder = open_recorder(cfg, &spec)?;
+    let telemetry = open_telemetry(&spec)?;
     // 5. Arming on the flag (an operator arms otherwise).
     if spec.arm == ArmAt::Flag {
         arming.arm(Actor::Flag).map_err(|e| invalid(e.to_string()))?;
@@ -143,6 +125,34 @@ pub(super) fn build(cfg: &Config, spec: SessionSpec, env: SessionEnv) -> Result<
         env,
         notes: parts.notes,
         neutral_sent: true,
+    })
+}
+
+/// The recorder(s) of `spec.record` (their folders created).
+fn open_recorder(cfg: &Config, spec: &SessionSpec) -> Result<Option<RecordObserver>, SessionError> {
+    Ok(match &spec.record {
+        Some((dir, right)) => Some(RecordObserver::new(
+            Recorder::create(dir, cfg.record.options())?,
+            match right {
+                Some(d2) => Some(Recorder::create(d2, cfg.record.options())?),
+                None => None,
+            },
+        )),
+        None => None,
+    })
+}
+
+/// The telemetry file of `spec.telemetry`, created (the last output a build makes).
+fn open_telemetry(spec: &SessionSpec) -> Result<Option<(JsonlWriter<std::fs::File>, PathBuf)>, SessionError> {
+    Ok(match &spec.telemetry {
+        Some(path) => {
+            let f = std::fs::File::create(path).map_err(|error| SessionError::Io {
+                path: path.clone(),
+                error: std::io::Error::new(error.kind(), format!("cannot create: {error}")),
+            })?;
+            Some((JsonlWriter::new(f, path.display().to_string()), path.clone()))
+        }
+        None => None,
     })
 }
 

@@ -19,6 +19,7 @@
 
 mod build;
 pub mod observers;
+pub mod replay;
 pub mod spec;
 
 pub use spec::{ArmAt, CameraSpec, DetectorSpec, Level, SceneSpec, Say, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
@@ -144,6 +145,50 @@ pub struct Outcome {
     pub pulse_latency_ms: Option<(f64, f64)>,
     /// Bits flipped by the link's noise test hook.
     pub bits_flipped: Option<u64>,
+}
+
+impl Outcome {
+    /// The run's summary.json: the simulator's score (when there is one) and the loop's
+    /// counters and fault under `drive`.
+    pub fn summary_json(&self) -> Result<serde_json::Value, serde_json::Error> {
+        let mut json = match &self.summary {
+            Some(s) => serde_json::to_value(s)?,
+            None => serde_json::json!({}),
+        };
+        json["drive"] = serde_json::json!({
+            "frames": self.stats.frames, "skipped": self.stats.skipped, "dropped": self.stats.dropped,
+            "stalls": self.stats.stalls, "fault": self.fault.as_ref().map(|f| f.to_string()),
+            "bits_flipped": self.bits_flipped,
+        });
+        Ok(json)
+    }
+
+    /// What became of the recording(s), a line each, with the command that replays them.
+    pub fn recording_lines(&self) -> Vec<(Level, String)> {
+        let Some(rec) = &self.recorded else {
+            return Vec::new();
+        };
+        let (dir, st) = &rec.main;
+        let mut out = vec![match st {
+            Ok(st) => (Level::Info, format!("  recording: {}/ ({st:?}); replay with `rccar replay {}`", dir.display(), dir.display())),
+            Err(e) => (Level::Warn, format!("  recording: {}: {e}", dir.display())),
+        }];
+        if let Some((d2, st)) = &rec.right {
+            out.push(match st {
+                Ok(st) => (
+                    Level::Info,
+                    format!(
+                        "  recording, other camera: {}/ ({st:?}); replay the pair with `rccar replay {} --right {} --set ranging.method=stereo`",
+                        d2.display(),
+                        dir.display(),
+                        d2.display()
+                    ),
+                ),
+                Err(e) => (Level::Warn, format!("  recording: {}: {e}", d2.display())),
+            });
+        }
+        out
+    }
 }
 
 impl Session {

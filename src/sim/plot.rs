@@ -253,15 +253,7 @@ pub fn grid_plot(kx: &str, ky: &str, xs: &[f64], ys: &[f64], runs: &[SweepRun]) 
         let (main, _) = root.split_horizontally(w - 150);
         let (nx, ny) = (xs.len().max(1) as f64, ys.len().max(1) as f64);
         let rms_mm: Vec<f64> = runs.iter().map(|r| r.summary.xte_rms_m * 1000.0).collect();
-        let vmin = rms_mm.iter().copied().fold(f64::INFINITY, f64::min);
-        let vmax = rms_mm.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let (vmin, vmax) = if vmax > vmin {
-            (vmin, vmax)
-        } else if vmin.is_finite() {
-            (vmin - 0.5, vmin + 0.5)
-        } else {
-            (0.0, 1.0)
-        };
+        let (vmin, vmax) = value_range(&rms_mm);
         let frac = |v: f64| (v - vmin) / (vmax - vmin);
         // Cell (i, j) spans i−0.5..i+0.5 and j−0.5..j+0.5; ticks are drawn here at the
         // cells' centres, labelled with the swept values.
@@ -327,29 +319,56 @@ pub fn grid_plot(kx: &str, ky: &str, xs: &[f64], ys: &[f64], runs: &[SweepRun]) 
             root.draw(&PathElement::new(vec![(px - 5, py), (px, py)], ink)).map_err(err)?;
             root.draw(&Text::new(tick(*v, ys), (px - 8, py), left.clone())).map_err(err)?;
         }
-        // The colour bar: 100 bands bottom (vmin) to top (vmax), six labels, drawn in pixels.
-        let (bx, top, bottom) = (w as i32 - 120, 60i32, h as i32 - 80);
-        let n = 100;
-        for k in 0..n {
-            let y1 = bottom - (bottom - top) * k / n;
-            let y0 = bottom - (bottom - top) * (k + 1) / n;
-            root.draw(&Rectangle::new([(bx, y0), (bx + 28, y1)], viridis(k as f64 / (n - 1) as f64).filled()))
-                .map_err(err)?;
-        }
-        root.draw(&Rectangle::new([(bx, top), (bx + 28, bottom)], BLACK.stroke_width(1)))
-            .map_err(err)?;
-        let lab = ("sans-serif", 13).into_font().color(&BLACK).pos(Pos::new(HPos::Left, VPos::Center));
-        for k in 0..=5 {
-            let v = vmin + (vmax - vmin) * k as f64 / 5.0;
-            let py = bottom - (bottom - top) * k / 5;
-            root.draw(&PathElement::new(vec![(bx + 28, py), (bx + 33, py)], ink)).map_err(err)?;
-            root.draw(&Text::new(format!("{v:.decimals$}"), (bx + 36, py), lab.clone())).map_err(err)?;
-        }
-        let t = ("sans-serif", 15).into_font().color(&BLACK).pos(Pos::new(HPos::Center, VPos::Bottom));
-        root.draw(&Text::new("RMS (mm)", (bx + 14, top - 10), t)).map_err(err)?;
+        colour_bar(&root, (w, h), (vmin, vmax), decimals)?;
         root.present().map_err(err)?;
     }
     RgbImage::from_raw(w, h, buf).ok_or_else(|| PlotError("buffer size".into()))
+}
+
+/// The smallest and largest of `v` (a unit-wide range around a single value; 0..1 for none).
+fn value_range(v: &[f64]) -> (f64, f64) {
+    let vmin = v.iter().copied().fold(f64::INFINITY, f64::min);
+    let vmax = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if vmax > vmin {
+        (vmin, vmax)
+    } else if vmin.is_finite() {
+        (vmin - 0.5, vmin + 0.5)
+    } else {
+        (0.0, 1.0)
+    }
+}
+
+/// The heat map's colour bar right of the map, `vmin` (bottom) to `vmax` (top), in pixels of
+/// the `(w, h)` picture.
+fn colour_bar(
+    root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    (w, h): (u32, u32),
+    (vmin, vmax): (f64, f64),
+    decimals: usize,
+) -> Result<(), PlotError> {
+    use plotters::style::text_anchor::{HPos, Pos, VPos};
+    let ink = BLACK.stroke_width(1);
+    // The colour bar: 100 bands bottom (vmin) to top (vmax), six labels, drawn in pixels.
+    let (bx, top, bottom) = (w as i32 - 120, 60i32, h as i32 - 80);
+    let n = 100;
+    for k in 0..n {
+        let y1 = bottom - (bottom - top) * k / n;
+        let y0 = bottom - (bottom - top) * (k + 1) / n;
+        root.draw(&Rectangle::new([(bx, y0), (bx + 28, y1)], viridis(k as f64 / (n - 1) as f64).filled()))
+            .map_err(err)?;
+    }
+    root.draw(&Rectangle::new([(bx, top), (bx + 28, bottom)], BLACK.stroke_width(1)))
+        .map_err(err)?;
+    let lab = ("sans-serif", 13).into_font().color(&BLACK).pos(Pos::new(HPos::Left, VPos::Center));
+    for k in 0..=5 {
+        let v = vmin + (vmax - vmin) * k as f64 / 5.0;
+        let py = bottom - (bottom - top) * k / 5;
+        root.draw(&PathElement::new(vec![(bx + 28, py), (bx + 33, py)], ink)).map_err(err)?;
+        root.draw(&Text::new(format!("{v:.decimals$}"), (bx + 36, py), lab.clone())).map_err(err)?;
+    }
+    let t = ("sans-serif", 15).into_font().color(&BLACK).pos(Pos::new(HPos::Center, VPos::Bottom));
+    root.draw(&Text::new("RMS (mm)", (bx + 14, top - 10), t)).map_err(err)?;
+    Ok(())
 }
 
 /// A step response: cross-track error (cm) against time from just before the step to the

@@ -4,6 +4,7 @@
 //! sideways kick at a given time for step-response experiments.
 
 use super::plot::Series;
+use super::step::{step_metrics, StepError, StepMetrics, StepOptions, StepRequest};
 use super::world::{lock, SharedWorld};
 use crate::drive::{Flow, FrameContext, Level, LoopError, Observer, Say};
 use std::path::PathBuf;
@@ -40,6 +41,13 @@ pub struct RunReport {
 }
 
 impl RunReport {
+    /// The step response `st` asked for: `None` when the run ended before the kick.
+    pub fn step_response(&self, st: &StepRequest) -> Option<Result<StepMetrics, StepError>> {
+        // After a kick the first frame that sees it is the one after the kick's frame.
+        let t0 = if st.kick { self.kicked_at.map(|t| t + 1e-6) } else { Some(0.0) };
+        t0.map(|t0| step_metrics(&self.series.t, &self.series.xte, t0, &StepOptions::default()))
+    }
+
     /// A report of `world`'s run; lines (transitions, the kick) go to `say`.
     pub fn new(world: SharedWorld, say: Say) -> Self {
         Self {

@@ -85,6 +85,87 @@ pub enum StepError {
     TooSmall(f64),
 }
 
+/// A step-response request of `rccar sim`: a start offset (`kick` false, at t = 0) or a
+/// kick sideways by `dy` metres at `t` seconds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepRequest {
+    /// A kick during the run (else an offset at the start).
+    pub kick: bool,
+    /// When, seconds.
+    pub t: f64,
+    /// How far sideways, metres.
+    pub dy: f64,
+}
+
+/// A `--start-offset` or `--kick` that cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StepRequestError {
+    /// Both given.
+    #[error("--start-offset and --kick: give one of them")]
+    Both,
+    /// Further than a lane width, or not a number.
+    #[error("{what}: {dy} m is off the lane; give at most ±{lane_width} m (the lane width)")]
+    OffLane {
+        /// The flag.
+        what: &'static str,
+        /// The offset, metres.
+        dy: f64,
+        /// The lane width, metres.
+        lane_width: f64,
+    },
+    /// `--kick` not of the form T:DY.
+    #[error("--kick `{0}`: expected T:DY (seconds 0..=36000 : metres), e.g. 5:0.05")]
+    Form(String),
+}
+
+impl StepRequest {
+    /// Checks `--start-offset` and `--kick T:DY` (at most a lane width either way).
+    pub fn parse(offset: Option<f64>, kick: Option<&str>, lane_width: f64) -> Result<Option<StepRequest>, StepRequestError> {
+        let check = |what: &'static str, dy: f64| {
+            if !dy.is_finite() || dy.abs() > lane_width {
+                return Err(StepRequestError::OffLane { what, dy, lane_width });
+            }
+            Ok(())
+        };
+        match (offset, kick) {
+            (Some(_), Some(_)) => Err(StepRequestError::Both),
+            (Some(m), None) => {
+                check("--start-offset", m)?;
+                Ok(Some(StepRequest { kick: false, t: 0.0, dy: m }))
+            }
+            (None, Some(k)) => {
+                let form = || StepRequestError::Form(k.to_string());
+                let (t, dy) = k.split_once(':').ok_or_else(form)?;
+                let t: f64 = t.trim().parse().ok().filter(|t: &f64| (0.0..=36_000.0).contains(t)).ok_or_else(form)?;
+                let dy: f64 = dy.trim().parse().ok().filter(|d: &f64| d.is_finite()).ok_or_else(form)?;
+                check("--kick", dy)?;
+                Ok(Some(StepRequest { kick: true, t, dy }))
+            }
+            (None, None) => Ok(None),
+        }
+    }
+}
+
+impl StepMetrics {
+    /// The figures as the terminal shows them, a line each.
+    pub fn lines(&self) -> Vec<String> {
+        let s = |v: Option<f64>| v.map_or("not reached".to_string(), |v| format!("{v:.2} s"));
+        vec![
+            format!(
+                "  step response from {:+.4} m at t = {:.2} s (window {:.1} s):",
+                self.initial_offset_m, self.t0_s, self.window_s
+            ),
+            format!("    rise time 10→90 %:  {}", s(self.rise_time_s)),
+            format!("    overshoot:          {:.1} % of the offset", self.overshoot_pct),
+            format!(
+                "    settling time:      {} (band ±{:.1} mm = 5 % of the offset, at least 2 mm)",
+                s(self.settling_time_s),
+                self.band_m * 1000.0
+            ),
+        ]
+    }
+}
+
 /// The step-response figures of `x` (metres) over `t` (seconds, increasing) for a step at
 /// `t0` seconds.
 pub fn step_metrics(t: &[f64], x: &[f64], t0: f64, opt: &StepOptions) -> Result<StepMetrics, StepError> {

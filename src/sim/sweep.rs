@@ -45,6 +45,26 @@ pub enum SweepError {
     /// The grid would be too large.
     #[error("--sweep: {0} runs; a sweep may have at most 1000")]
     TooMany(usize),
+    /// A parameter of another steering method than the run's: it would change nothing (every
+    /// row the same).
+    #[error("--sweep {key}: {why}")]
+    OtherMethod {
+        /// The key.
+        key: String,
+        /// Which method it belongs to and how to steer with it
+        /// ([`crate::control::steering::unused_by`]).
+        why: String,
+    },
+    /// A value of the grid the configuration refuses (its message, with its causes).
+    #[error("--sweep {key}={value}: {message}")]
+    Value {
+        /// The key.
+        key: String,
+        /// The value.
+        value: f64,
+        /// Why the configuration refuses it.
+        message: String,
+    },
 }
 
 /// One swept key and its values.
@@ -322,6 +342,116 @@ pub fn run_all(
         .into_iter()
         .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()))
         .collect()
+}
+
+/// The configuration of every point of the grid (`keys` set to the point's values), each
+/// checked before any run starts; a key of another steering method than `cfg`'s is refused.
+pub fn configs(cfg: &Config, keys: &[&str], points: &[Vec<f64>]) -> Result<Vec<Config>, SweepError> {
+    // A parameter of another steering method would change nothing: every row the same.
+    for k in keys {
+        if let Some(why) = crate::control::steering::unused_by(cfg.steering.method, k) {
+            return Err(SweepError::OtherMethod {
+                key: k.to_string(),
+                why,
+            });
+        }
+    }
+    points
+        .iter()
+        .map(|p| {
+            let mut c = cfg.clone();
+            for (k, v) in keys.iter().zip(p) {
+                c = c.with_override(&format!("{k}={v}")).map_err(|e| {
+                    let mut message = e.to_string();
+                    let mut src = std::error::Error::source(&e);
+                    while let Some(s) = src {
+                        message += &format!(": {s}");
+                        src = s.source();
+                    }
+                    SweepError::Value {
+                        key: k.to_string(),
+                        value: *v,
+                        message,
+                    }
+                })?;
+            }
+            Ok(c)
+        })
+        .collect()
+}
+
+/// A point of the grid as `key=value` words.
+pub fn label(keys: &[&str], p: &[f64]) -> String {
+    keys.iter()
+        .zip(p)
+        .map(|(k, v)| format!("{k}={v:.4}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The end reason as in sweep.csv (`time_up`, `interrupted`, …).
+pub fn end_name(s: &Summary) -> String {
+    serde_json::to_value(s.end)
+        .ok()
+        .and_then(|v| v.as_str().map(String::from))
+        .unwrap_or_default()
+}
+
+/// How a run ended, in a few words (the progress line).
+pub fn outcome_words(o: &RunOutcome) -> String {
+    match o {
+        RunOutcome::Finished(r) => format!(
+            "laps {}, RMS {:.4} m, max {:.4} m, departures {}, {}",
+            r.summary.laps,
+            r.summary.xte_rms_m,
+            r.summary.xte_max_m,
+            r.summary.lane_departures,
+            end_name(&r.summary)
+        ),
+        RunOutcome::Interrupted(r) => format!("interrupted after {:.1} s simulated", r.summary.seconds),
+        RunOutcome::Failed(e) => format!("error: {e}"),
+        RunOutcome::NotRun => "not run".into(),
+    }
+}
+
+/// The printed table's head: the swept keys, then the figures.
+pub fn table_head(keys: &[&str]) -> String {
+    let head: Vec<String> = keys.iter().map(|k| format!("{k:>12}")).collect();
+    format!(
+        "{} {:>5} {:>10} {:>10} {:>6} {:>10} {:>9} {:>8}  end",
+        head.join(" "),
+        "laps",
+        "rms_m",
+        "max_m",
+        "dep",
+        "rev/s",
+        "dsteer",
+        "lost"
+    )
+}
+
+/// The printed table's row of the run at point `p`.
+pub fn table_row(p: &[f64], o: &RunOutcome) -> String {
+    let vals: Vec<String> = p.iter().map(|v| format!("{v:>12.4}")).collect();
+    let vals = vals.join(" ");
+    match o {
+        RunOutcome::Finished(r) | RunOutcome::Interrupted(r) => {
+            let s = &r.summary;
+            format!(
+                "{vals} {:>5} {:>10.4} {:>10.4} {:>6} {:>10.2} {:>9.4} {:>8}  {:?}",
+                s.laps,
+                s.xte_rms_m,
+                s.xte_max_m,
+                s.lane_departures,
+                s.steer_reversals_per_s,
+                r.steer_diff_rms,
+                s.lane_lost_frames,
+                s.end
+            )
+        }
+        RunOutcome::Failed(e) => format!("{vals} error: {e}"),
+        RunOutcome::NotRun => format!("{vals} not run"),
+    }
 }
 
 /// The sweep's table: a header naming the swept keys, then one row per run that ran (a run

@@ -91,6 +91,33 @@ pub struct Summary {
     pub end: EndReason,
 }
 
+impl Summary {
+    /// The score as the terminal shows it, a line each.
+    pub fn lines(&self) -> Vec<String> {
+        let s = self;
+        let times: Vec<String> = s.lap_times_s.iter().map(|t| format!("{t:.2}")).collect();
+        vec![
+            format!("sim: {} frames, {:.1} s, ended: {:?}", s.frames, s.seconds, s.end),
+            format!("  laps completed:   {} (lap times s: [{}])", s.laps, times.join(", ")),
+            format!(
+                "  cross-track error: RMS {:.4} m ({:.1}% of the {:.2} m lane), max {:.4} m",
+                s.xte_rms_m,
+                100.0 * s.xte_rms_m / s.lane_width_m,
+                s.lane_width_m,
+                s.xte_max_m
+            ),
+            format!(
+                "  lane departures:  {} ({:.2} s with a wheel outside)",
+                s.lane_departures, s.time_outside_s
+            ),
+            format!(
+                "  steering reversals {:.2}/s, lane lost in {} frames",
+                s.steer_reversals_per_s, s.lane_lost_frames
+            ),
+        ]
+    }
+}
+
 /// The camera rows the pipeline's bird's-eye warp reads (its ROI, bilinear taps, and the
 /// blur's reach).
 pub fn roi_rows(cfg: &Config) -> Range<usize> {

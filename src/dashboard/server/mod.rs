@@ -1,6 +1,6 @@
 //! The dashboard's HTTP server: axum routes on hyper's HTTP/1, in a small tokio runtime on
 //! threads of its own, so the control loop never waits on it (the loop's side,
-//! `rccar::dashboard`, is a newest-only slot and a bounded inbox).
+//! `crate::dashboard`, is a newest-only slot and a bounded inbox).
 //!
 //! - `GET /` the page (the run's secret embedded); `GET /stream.mjpg` the annotated camera
 //!   view and the bird's-eye view as MJPEG (`multipart/x-mixed-replace`): each viewer is sent
@@ -29,12 +29,11 @@ mod api;
 mod conn;
 mod hub;
 
-use super::Sent;
-use anyhow::{Context, Result};
-use rccar::config::Config;
-use rccar::dashboard::{ControlSender, Live, PlotPoint, Snapshot};
-use rccar::drive::{Arming, Latest, StopSignal};
-use rccar::sim::world::{lock, SharedWorld};
+use super::shared::{DashboardError, Sent};
+use crate::config::Config;
+use crate::dashboard::{ControlSender, Live, PlotPoint, Snapshot};
+use crate::drive::{Arming, Latest, StopSignal};
+use crate::sim::world::{lock, SharedWorld};
 use std::collections::{BTreeMap, VecDeque};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -128,11 +127,11 @@ impl Drop for Server {
 
 impl Server {
     /// Binds, then starts the web runtime's thread, the hub, the watchdog and the logger.
-    pub fn start(o: Options) -> Result<Server> {
-        let addr: SocketAddr = o
-            .listen
-            .parse()
-            .with_context(|| format!("--listen `{}`: expected IP:PORT, e.g. 127.0.0.1:8080", o.listen))?;
+    pub fn start(o: Options) -> Result<Server, DashboardError> {
+        let addr: SocketAddr = o.listen.parse().map_err(|source| DashboardError::Listen {
+            listen: o.listen.clone(),
+            source,
+        })?;
         let nofile = conn::raise_nofile_limit();
         let limits = conn::Limits::for_nofile(nofile);
         let rt = tokio::runtime::Builder::new_multi_thread()
@@ -142,10 +141,10 @@ impl Server {
             .enable_io()
             .enable_time()
             .build()
-            .context("dashboard: cannot start the web runtime")?;
+            .map_err(DashboardError::Runtime)?;
         let listener = rt
             .block_on(async { conn::listen(addr) })
-            .with_context(|| format!("dashboard: cannot listen on {addr}"))?;
+            .map_err(|source| DashboardError::Bind { addr, source })?;
         let bound = listener.local_addr()?;
         let access = access::Access::new(bound, &o.cfg.dashboard.token);
         let (log, log_rx) = hub::Log::new();

@@ -11,8 +11,8 @@ use axum::extract::State;
 use axum::http::{header, HeaderMap, HeaderValue, Method, Request, Response, StatusCode, Uri};
 use axum::routing::{get, post};
 use axum::{Extension, Router};
-use rccar::dashboard::{self, Control, PlaceRequest, PlotPoint, SetRequest};
-use rccar::drive::Actor;
+use crate::dashboard::{self, Control, PlaceRequest, PlotPoint, SetRequest};
+use crate::drive::Actor;
 use serde_json::{json, Value};
 use std::convert::Infallible;
 use std::sync::atomic::Ordering;
@@ -402,8 +402,8 @@ async fn state(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, u
 }
 
 /// The rows of the parameter table of a run steering with `method`, for the page's sliders.
-fn param_rows(method: rccar::control::steering::SteeringMethod) -> Vec<Value> {
-    rccar::control::params::of_method(method)
+fn param_rows(method: crate::control::steering::SteeringMethod) -> Vec<Value> {
+    crate::control::params::of_method(method)
         .iter()
         .map(|p| json!({"key": p.key, "unit": p.unit, "range": p.range, "slider": p.slider, "doc": p.doc}))
         .collect()

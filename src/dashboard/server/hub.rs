@@ -9,8 +9,8 @@ use axum::extract::State;
 use axum::http::{header, Response, StatusCode};
 use hyper::body::Frame;
 use image::{Rgb, RgbImage};
-use rccar::dashboard::{Control, ControlSender, Snapshot};
-use rccar::drive::{Actor, Latest, StopSignal};
+use crate::dashboard::{Control, ControlSender, Snapshot};
+use crate::drive::{Actor, Latest, StopSignal};
 use std::convert::Infallible;
 use std::future::Future;
 use std::pin::Pin;
@@ -187,7 +187,7 @@ pub fn hub(slot: Arc<Latest<Arc<Snapshot>>>, sh: Arc<Shared>) {
 /// The annotated camera frame and, to its right, the bird's-eye view (grey, the binary image
 /// in red, the column histogram in yellow, the lines found in green) at the same height.
 fn render(s: &Snapshot) -> RgbImage {
-    let ann = rccar::annotate::annotate(&s.image, &s.roi, &s.homography, &s.lane_images, &s.lane, &s.command);
+    let ann = crate::annotate::annotate(&s.image, &s.roi, &s.homography, &s.lane_images, &s.lane, &s.command);
     let li = &s.lane_images;
     let (bw, bh) = li.bird.dimensions();
     let h = ann.height();
