@@ -121,8 +121,9 @@ pub fn lookup<'a>(v: &'a Value, path: &str) -> Option<&'a Value> {
     path.split('.').try_fold(v, |v, k| v.get(k))
 }
 
-/// Every numeric leaf's dotted path in `v` (arrays not entered).
-pub fn numeric_paths(v: &Value, prefix: &str, out: &mut BTreeSet<String>) {
+/// Calls `each(dotted path, value)` for every leaf of `v` that is not an object (arrays are
+/// leaves: not entered). The one walk behind [`numeric_paths`] and the report's flattening.
+pub fn for_each_leaf(v: &Value, prefix: &str, each: &mut impl FnMut(&str, &Value)) {
     match v {
         Value::Object(m) => {
             for (k, x) in m {
@@ -131,14 +132,20 @@ pub fn numeric_paths(v: &Value, prefix: &str, out: &mut BTreeSet<String>) {
                 } else {
                     format!("{prefix}.{k}")
                 };
-                numeric_paths(x, &p, out);
+                for_each_leaf(x, &p, each);
             }
         }
-        Value::Number(_) => {
-            out.insert(prefix.to_string());
-        }
-        _ => {}
+        leaf => each(prefix, leaf),
     }
+}
+
+/// Every numeric leaf's dotted path in `v` (arrays not entered).
+pub fn numeric_paths(v: &Value, prefix: &str, out: &mut BTreeSet<String>) {
+    for_each_leaf(v, prefix, &mut |p, leaf| {
+        if leaf.is_number() {
+            out.insert(p.to_string());
+        }
+    });
 }
 
 /// Reads a telemetry file line by line and calls `each(line number, record)` for every record;

@@ -85,19 +85,7 @@ fn html_escape(s: &str) -> String {
 
 /// Every scalar leaf of `v` as (dotted key, value); arrays are kept whole.
 fn flatten(v: &Value, prefix: &str, out: &mut Vec<(String, Value)>) {
-    match v {
-        Value::Object(m) => {
-            for (k, x) in m {
-                let p = if prefix.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{prefix}.{k}")
-                };
-                flatten(x, &p, out);
-            }
-        }
-        other => out.push((prefix.to_string(), other.clone())),
-    }
+    crate::fields::for_each_leaf(v, prefix, &mut |p, leaf| out.push((p.to_string(), leaf.clone())));
 }
 
 /// The unit of a summary or config key, from its name.
