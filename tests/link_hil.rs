@@ -434,7 +434,14 @@ fn host_recovers_when_the_port_vanishes_and_reappears() {
     assert!(near(sim.last_width(false), 1500.0), "ESC moved without a fresh DRIVE");
     assert!(link.stats().drives_expired >= 1, "{:?}", link.stats());
     let ok = sim.wait_until(WAIT, || link.drive(0, 200), |s| near(s.last_width(false), 1600.0));
-    assert!(ok, "not recovered: ESC {:?}", sim.last_width(false));
+    assert!(
+        ok,
+        "not recovered: ESC {:?}, firmware {:?}, link {:?}, last error {:?}",
+        sim.last_width(false),
+        link.telemetry(),
+        link.stats(),
+        link.last_error()
+    );
     let st = link.stats();
     assert!(st.reconnects >= 1 && st.handshakes >= 2, "{st:?}");
 }
@@ -598,8 +605,11 @@ fn config_is_stored_in_eeprom_and_survives_a_reset() {
     );
     assert!(
         ok,
-        "after the reset the firmware did not load the EEPROM config: {:?}",
-        link.telemetry()
+        "after the reset the firmware did not load the EEPROM config: {:?}, link {:?}, last error {:?}, resets seen {:?}",
+        link.telemetry(),
+        link.stats(),
+        link.last_error(),
+        sim.events().iter().filter(|e| matches!(e, Event::Reset { .. })).count()
     );
     let (c, from_eeprom) = link.get_config().expect("config after reset");
     assert!(from_eeprom);
