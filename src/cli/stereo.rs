@@ -57,7 +57,7 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
         bail!("{} --box flags: at most {MAX_BOXES}", a.boxes.len());
     }
     let boxes: Vec<[i64; 4]> = a.boxes.iter().map(|s| parse_box(s)).collect::<Result<_>>()?;
-    let load = |p: &PathBuf| -> Result<image::RgbImage> { Ok(super::calib_board::open_image(p)?.to_rgb8()) };
+    let load = |p: &PathBuf| -> Result<image::RgbImage> { Ok(rccar::calib::photos::open_image(p)?.to_rgb8()) };
     let (l, r) = (load(&a.left)?, load(&a.right)?);
     if l.dimensions() != r.dimensions() {
         bail!(
