@@ -224,3 +224,40 @@ pub fn pair_views(left: &[PathBuf], right: &[PathBuf], fl: &Found, fr: &Found) -
     }
     v
 }
+
+/// Which fit of a stereo calibration failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PairFitError {
+    /// The left camera's intrinsics.
+    #[error("left camera")]
+    Left(#[source] super::CalibError),
+    /// The right camera's intrinsics.
+    #[error("right camera")]
+    Right(#[source] super::CalibError),
+    /// The pair's R and T.
+    #[error("stereo fit")]
+    Stereo(#[source] super::CalibError),
+}
+
+/// Both cameras' intrinsics, then the pair's R, T and rectification from the views `v` of a
+/// board with `square_m` squares in photos of `size`; `skipped`: the pairs left out, as the
+/// results file names them. Returns the calibration and the stereo fit's rms, pixels.
+pub fn fit_pair(
+    board: BoardSize,
+    square_m: f64,
+    v: &PairViews,
+    skipped: Vec<String>,
+    size: (u32, u32),
+) -> Result<(super::StereoCalibration, f64), PairFitError> {
+    use super::{calibrate_camera, stereo_calibrate, stereo_rectify, CameraCalibration, StereoCalibration};
+    let obj = super::intrinsics::board_points(board.cols, board.rows, square_m);
+    let fit_l = calibrate_camera(&obj, &v.left, size.0, size.1).map_err(PairFitError::Left)?;
+    let fit_r = calibrate_camera(&obj, &v.right, size.0, size.1).map_err(PairFitError::Right)?;
+    let st = stereo_calibrate(&obj, &v.left, &v.right, &fit_l.k, &fit_l.dist, &fit_r.k, &fit_r.dist)
+        .map_err(PairFitError::Stereo)?;
+    let rect = stereo_rectify(&fit_l.k, &fit_l.dist, &fit_r.k, &fit_r.dist, &st.r, &st.t, size.0, size.1);
+    let (ln, rn): (Vec<String>, Vec<String>) = v.names.iter().cloned().unzip();
+    let left = CameraCalibration::from_fit(&fit_l, &ln, size, vec![]);
+    let right = CameraCalibration::from_fit(&fit_r, &rn, size, vec![]);
+    Ok((StereoCalibration::from_fit(left, right, &st, &v.names, skipped, rect), st.rms))
+}

@@ -7,10 +7,9 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rccar::calib::corners::{BoardSize, CornerOptions};
-use rccar::calib::photos::{self, check_counts, Found, PairViews, Views};
-use rccar::calib::file::{CalibrationFile, CameraCalibration, StereoCalibration, MAX_STEREO_RMS_PX};
+use rccar::calib::photos::{self, check_counts, Found, Views};
+use rccar::calib::file::{CalibrationFile, CameraCalibration, MAX_STEREO_RMS_PX};
 use rccar::calib::intrinsics::{board_points, calibrate_camera};
-use rccar::calib::stereo::{stereo_calibrate, stereo_rectify};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -157,32 +156,24 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
             a.right[0].display()
         );
     }
-    let PairViews { left: lv, right: rv, names, skipped } = photos::pair_views(&a.left, &a.right, &fl, &fr);
-    let skipped: Vec<String> = skipped
+    let mut pairs = photos::pair_views(&a.left, &a.right, &fl, &fr);
+    let skipped: Vec<String> = std::mem::take(&mut pairs.skipped)
         .into_iter()
         .map(|(i, why)| {
             eprintln!("pair {}: board not found in {}", i + 1, why.join(" and "));
             why.join(" ")
         })
         .collect();
-    let obj = board_points(a.board.board.cols, a.board.board.rows, a.board.square);
-    let fit_l = calibrate_camera(&obj, &lv, sl.0, sl.1).context("left camera")?;
-    let fit_r = calibrate_camera(&obj, &rv, sl.0, sl.1).context("right camera")?;
-    let st = stereo_calibrate(&obj, &lv, &rv, &fit_l.k, &fit_l.dist, &fit_r.k, &fit_r.dist).context("stereo fit")?;
-    let rect = stereo_rectify(&fit_l.k, &fit_l.dist, &fit_r.k, &fit_r.dist, &st.r, &st.t, sl.0, sl.1);
-    let (ln, rn): (Vec<String>, Vec<String>) = names.iter().cloned().unzip();
-    let left = CameraCalibration::from_fit(&fit_l, &ln, sl, vec![]);
-    let right = CameraCalibration::from_fit(&fit_r, &rn, sl, vec![]);
-    print_camera("left", &left);
-    print_camera("right", &right);
-    let stereo = StereoCalibration::from_fit(left, right, &st, &names, skipped, rect);
+    let (stereo, rms) = photos::fit_pair(a.board.board, a.board.square, &pairs, skipped, sl)?;
+    print_camera("left", &stereo.left);
+    print_camera("right", &stereo.right);
     for (l, r, e) in &stereo.per_pair_rms_px {
         println!("{l} + {r}: stereo reprojection RMS {e:.4} px");
     }
     let t = stereo.t;
     println!(
         "stereo: T = [{:.5}, {:.5}, {:.5}] m (baseline {:.4} m), RMS {:.4} px; rectified f {:.2} px, c ({:.2}, {:.2})",
-        t[0], t[1], t[2], stereo.baseline_m, st.rms, stereo.rectification.f, stereo.rectification.c[0], stereo.rectification.c[1]
+        t[0], t[1], t[2], stereo.baseline_m, rms, stereo.rectification.f, stereo.rectification.c[0], stereo.rectification.c[1]
     );
     // Only a pair that can range is written (the loaders refuse the rest too).
     stereo.check(a.max_rms_px).map_err(|e| {

@@ -161,7 +161,7 @@ fn detect_one(
         json!({"image": shown, "width": gray.width(), "height": gray.height(), "boxes": boxes})
     );
     if !args.no_annotate {
-        let name = super::stages::unique(path.file_name().map(escape_name).unwrap_or_default(), used);
+        let name = rccar::source::unique_name(path.file_name().map(escape_name).unwrap_or_default(), used);
         let out = args.out.join(format!("{name}.detect.png"));
         annotate::annotated(&rgb, &found)
             .save(&out)
