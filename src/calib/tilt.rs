@@ -407,3 +407,36 @@ pub fn backup_override(target: &Path, exists: bool) -> Result<Option<PathBuf>, T
     })?;
     Ok(Some(backup))
 }
+
+/// The fit's options: a_y fitted or held, and the prior on v0 centred on the image's middle
+/// row (a property of the image, not of the last calibration: tilt and v0 trade off, so a
+/// prior at an earlier fit's v0 returns that fit whatever the pairs say); `v0_sigma_px` 0 =
+/// free.
+pub fn centre_prior(cam: &PinholeCamera, fit_ay: bool, v0_sigma_px: f64) -> crate::ranging::FitOptions {
+    crate::ranging::FitOptions {
+        fit_ay,
+        v0_sigma_px: if v0_sigma_px > 0.0 { v0_sigma_px } else { f64::INFINITY },
+        v0_prior_px: Some(cam.v0),
+        ..Default::default()
+    }
+}
+
+/// What a fit gives in the configuration's terms: `[camera] tilt_deg`, `[ranging]
+/// v0_offset_px` (from the image centre) and `a_y_scale` (of the focal length).
+pub fn fitted_values(f: &TiltRanging, cam: &PinholeCamera) -> [(&'static str, f64); 3] {
+    [
+        ("tilt", f.alpha.to_degrees()),
+        ("v0 offset", f.v0 - cam.v0),
+        ("a_y scale", f.a_y / cam.f_px),
+    ]
+}
+
+/// [`fitted_values`] as the override file's keys, rounded to 4 decimals.
+pub fn override_values(values: [(&str, f64); 3]) -> [(&'static str, &'static str, f64); 3] {
+    let round = |v: f64| (v * 1e4).round() / 1e4;
+    [
+        ("camera", "tilt_deg", round(values[0].1)),
+        ("ranging", "v0_offset_px", round(values[1].1)),
+        ("ranging", "a_y_scale", round(values[2].1)),
+    ]
+}

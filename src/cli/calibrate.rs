@@ -20,7 +20,7 @@ use clap::{Args, Subcommand};
 use rccar::calib::tilt::{self, check_pairs, edit_override, line_diff};
 use rccar::camera::PinholeCamera;
 use rccar::config::{Config, LoadedConfig};
-use rccar::ranging::{fit, parse_pairs_csv, Fit, FitOptions, Pair};
+use rccar::ranging::{fit, parse_pairs_csv, Fit, Pair};
 use std::path::Path;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -132,40 +132,23 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     // last calibration: tilt and v0 trade off, so a prior at an earlier fit's v0 returns that
     // fit whatever the pairs say). Without --fit-ay, a_y is held at the configured scale.
     let cam = PinholeCamera::from(&cfg.camera);
-    let centre = cam.v0;
     let from_image = tilt::from_image_centre(&cam, cfg.ranging.a_y_scale, a.fit_ay);
-    let opts = FitOptions {
-        fit_ay: a.fit_ay,
-        v0_sigma_px: if a.v0_sigma_px > 0.0 {
-            a.v0_sigma_px
-        } else {
-            f64::INFINITY
-        },
-        v0_prior_px: Some(centre),
-        ..Default::default()
-    };
+    let opts = tilt::centre_prior(&cam, a.fit_ay, a.v0_sigma_px);
     let f = fit(&pairs, from_image, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 4. Report.
     print_fit(&pairs, &f);
-    let tilt = f.ranging.alpha.to_degrees();
-    let v0_off = f.ranging.v0 - cam.v0;
-    let ay_scale = f.ranging.a_y / cam.f_px;
+    let fitted = tilt::fitted_values(&f.ranging, &cam);
+    let [(_, tilt), (_, v0_off), (_, ay_scale)] = fitted;
     println!(
         "fit: tilt {tilt:.3} deg (was {:.3}), v0 {:.2} px (offset {v0_off:+.2}), a_y {:.1} px (scale {ay_scale:.4}); rms row error {:.2} px",
         cfg.camera.tilt_deg, f.ranging.v0, f.ranging.a_y, f.rms_row_px
     );
     // 5. Refuse a fit that does not explain the data.
-    let fitted = [("tilt", tilt), ("v0 offset", v0_off), ("a_y scale", ay_scale)];
     tilt::check_fit(&pairs, &f, a.max_rms_px, fitted, cfg.camera.height)
         .and_then(|()| tilt::check_start(&pairs, &f, opts, &cam, cfg.ranging.v0_offset_px, cfg.ranging.a_y_scale))
         .map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 6.-7. The override file.
-    let round = |v: f64| (v * 1e4).round() / 1e4;
-    let values = [
-        ("camera", "tilt_deg", round(tilt)),
-        ("ranging", "v0_offset_px", round(v0_off)),
-        ("ranging", "a_y_scale", round(ay_scale)),
-    ];
+    let values = tilt::override_values(fitted);
     write_result(&a, &loaded, &values)
 }
 
