@@ -559,6 +559,40 @@ impl Pipeline {
         // 2. Detections (on every n-th frame; given boxes on every frame), ranged.
         let detect_now = given.is_some() || self.frame_index.is_multiple_of(self.every_n);
         self.frame_index += 1;
+        self.measure_objects(frame, other, given, detect_now);
+        self.track_objects(dt_s, detect_now);
+        // 5. Behaviour.
+        let obs = self.observations(lane.error.is_some());
+        let decision = self.behaviour.step(&obs, self.time_s);
+        let detect_us = timer.lap_us();
+        // 6. Control, then the behaviour's overrides.
+        let input = SteeringInput {
+            lane: &lane,
+            lane_detector: &self.lane,
+            frame,
+        };
+        let mut command = self.control.step(&input, dt_s);
+        command = apply(command, &decision);
+        if decision.steer.is_some() {
+            // The lane error means nothing during a lane change: start afresh afterwards.
+            self.control.steering_mut().reset();
+        }
+        self.last_throttle = command.throttle;
+        stage_us.control_us = timer.lap_us();
+        stage_us.sum();
+        FrameOutput {
+            lane,
+            command,
+            stage_us,
+            detect_us,
+            mode: decision.mode,
+            observations: obs,
+        }
+    }
+
+    /// Step 2: this frame's measured objects (`given` boxes, or on detection frames the
+    /// detector's, ranged by stereo when `other` is there, else by the tilt).
+    fn measure_objects(&mut self, frame: &RgbImage, other: Option<&RgbImage>, given: Option<&[GivenBox]>, detect_now: bool) {
         self.objects.clear();
         self.measurements.clear();
         match given {
@@ -605,6 +639,11 @@ impl Pipeline {
             }
             None => {}
         }
+    }
+
+    /// Steps 3 and 4: dead reckoning with the previous command, then the tracks (predicted by
+    /// odometry, updated on detection frames) and the objects they report.
+    fn track_objects(&mut self, dt_s: f64, detect_now: bool) {
         // 3. Dead reckoning: the previous command, held since the previous frame.
         let odometry_before = self.dead.odometry_m;
         if dt_s.is_finite() && dt_s > 0.0 {
@@ -631,33 +670,6 @@ impl Pipeline {
                 track_id: Some(t.id),
                 predicted: !t.matched_now,
             });
-        }
-        // 5. Behaviour.
-        let obs = self.observations(lane.error.is_some());
-        let decision = self.behaviour.step(&obs, self.time_s);
-        let detect_us = timer.lap_us();
-        // 6. Control, then the behaviour's overrides.
-        let input = SteeringInput {
-            lane: &lane,
-            lane_detector: &self.lane,
-            frame,
-        };
-        let mut command = self.control.step(&input, dt_s);
-        command = apply(command, &decision);
-        if decision.steer.is_some() {
-            // The lane error means nothing during a lane change: start afresh afterwards.
-            self.control.steering_mut().reset();
-        }
-        self.last_throttle = command.throttle;
-        stage_us.control_us = timer.lap_us();
-        stage_us.sum();
-        FrameOutput {
-            lane,
-            command,
-            stage_us,
-            detect_us,
-            mode: decision.mode,
-            observations: obs,
         }
     }
 

@@ -265,6 +265,18 @@ pub enum RunDirError {
         /// The serializer's message.
         message: String,
     },
+    /// A run folder to read is not a folder.
+    #[error("{path}: not a folder (give a run's output folder, e.g. out/sim/latest)", path = path.display())]
+    NotARunFolder {
+        /// The path given.
+        path: PathBuf,
+    },
+    /// A run folder to read holds neither summary.json nor telemetry.jsonl.
+    #[error("{path}: neither summary.json nor telemetry.jsonl here; run `rccar sim --out {path}` or `rccar replay FRAMES --out {path}` first", path = path.display())]
+    NoRun {
+        /// The folder.
+        path: PathBuf,
+    },
     /// Every name for this second is taken.
     #[error("{parent}: {max} runs already started at {stamp}; wait a second or give --out", parent = parent.display(), max = MAX_SAME_SECOND)]
     NoFreeName {
@@ -860,6 +872,29 @@ impl RunCheck {
     pub fn is_foreign(&self, name: &str) -> bool {
         self.foreign.iter().any(|f| f == name)
     }
+}
+
+/// The newest run of `given` when it is a folder of runs (no run's files of its own, and a
+/// `latest` folder), else `None` (`given` itself is the run); an error when `given` is not a
+/// folder.
+pub fn newest_run(given: &Path) -> Result<Option<PathBuf>, RunDirError> {
+    if !given.is_dir() {
+        return Err(RunDirError::NotARunFolder { path: given.to_path_buf() });
+    }
+    let is_run = |d: &Path| ["summary.json", "telemetry.jsonl", RUN_FILE].iter().any(|f| d.join(f).is_file());
+    let latest = given.join(LATEST);
+    if is_run(given) || !latest.is_dir() {
+        return Ok(None);
+    }
+    Ok(Some(std::fs::read_link(&latest).map_or_else(|_| latest.clone(), |t| given.join(t))))
+}
+
+/// Refuses a folder without summary.json or telemetry.jsonl (nothing to read as a run).
+pub fn has_run_files(dir: &Path) -> Result<(), RunDirError> {
+    if !dir.join("summary.json").is_file() && !dir.join("telemetry.jsonl").is_file() {
+        return Err(RunDirError::NoRun { path: dir.to_path_buf() });
+    }
+    Ok(())
 }
 
 /// Whether the files of run folder `dir` belong to one run: run.json, summary.json and

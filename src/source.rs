@@ -374,6 +374,18 @@ impl FrameSource for ReplayDir {
     }
 }
 
+/// `name`, or `name~2`, `name~3`... if an earlier image of this run already used it (the same
+/// file name in two folders).
+pub fn unique_name(name: String, used: &mut std::collections::HashSet<String>) -> String {
+    if used.insert(name.clone()) {
+        return name;
+    }
+    (2..)
+        .map(|k| format!("{name}~{k}"))
+        .find(|n| used.insert(n.clone()))
+        .unwrap_or(name)
+}
+
 /// A file name as text, lossless: valid UTF-8 is kept, a backslash becomes `\\`, and every
 /// byte that is not UTF-8 becomes `\xNN` (so two different names never give the same text).
 pub fn escape_name(name: &OsStr) -> String {

@@ -14,6 +14,7 @@ pub mod corners;
 pub mod file;
 pub mod intrinsics;
 pub mod lm;
+pub mod photos;
 pub mod stereo;
 pub mod tilt;
 

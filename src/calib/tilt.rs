@@ -227,3 +227,216 @@ pub fn line_diff(old: &str, new: &str) -> String {
     }
     out
 }
+
+/// Why a fit is refused before anything is written (the caller names the pairs' origin).
+#[derive(Debug, thiserror::Error)]
+pub enum FitRefused {
+    /// A pair's row is above the fitted camera's horizon.
+    #[error("pair {n} (row {v} px, {d} m): the fitted camera does not see that row on the floor (above its horizon); the pairs do not belong together")]
+    AboveHorizon {
+        /// The pair, 1-based.
+        n: usize,
+        /// Its row, pixels.
+        v: f64,
+        /// Its distance, metres.
+        d: f64,
+    },
+    /// The rms row error is above the bound.
+    #[error("rms row error {rms:.2} px is above the bound {max} px (--max-rms-px): the rows and distances do not fit one camera; check the measurements")]
+    Rms {
+        /// The fit's rms row error, pixels.
+        rms: f64,
+        /// The bound, pixels.
+        max: f64,
+    },
+    /// A fitted value is not finite.
+    #[error("the fitted {what} is {value}")]
+    NotFinite {
+        /// Which value.
+        what: String,
+        /// It.
+        value: f64,
+    },
+    /// v0 outside the image.
+    #[error("the fitted principal point row v0 = {v0:.1} px is outside the image (rows 0..{last_row}): the pairs do not pin tilt and v0 apart; measure at more distances spread over the image, or keep v0 near the centre (--v0-sigma-px 3)")]
+    V0Outside {
+        /// The fitted v0, pixels.
+        v0: f64,
+        /// The image's last row.
+        last_row: i64,
+    },
+    /// Started from the configured values, the fit lands elsewhere.
+    #[error("the fit depends on where it starts: from the image centre it gives tilt {:.3} deg, v0 {:.2} px, a_y {:.1} px; from the configured values (ranging.v0_offset_px = {v0_offset_px}, ranging.a_y_scale = {a_y_scale}) {other}; the pairs do not pin the camera down: measure at more distances spread over the image{}", fit.alpha.to_degrees(), fit.v0, fit.a_y, if *v0_free { ", or keep v0 near the image centre (--v0-sigma-px 3)" } else { "" })]
+    StartDependent {
+        /// The fit from the image centre.
+        fit: TiltRanging,
+        /// The configured v0 offset, pixels.
+        v0_offset_px: f64,
+        /// The configured a_y scale.
+        a_y_scale: f64,
+        /// What the fit from the configured values gave.
+        other: String,
+        /// v0 was fitted without a prior.
+        v0_free: bool,
+    },
+}
+
+/// Refuses a fit with an undefined residual, an rms row error above `max_rms_px`, a value
+/// that is not finite or a v0 outside the image's `image_height` rows.
+pub fn check_fit(
+    pairs: &[Pair],
+    f: &crate::ranging::Fit,
+    max_rms_px: f64,
+    values: [(&str, f64); 3],
+    image_height: u32,
+) -> Result<(), FitRefused> {
+    if let Some(i) = f.residuals_m.iter().position(|r| !r.is_finite()) {
+        return Err(FitRefused::AboveHorizon { n: i + 1, v: pairs[i].v, d: pairs[i].d });
+    }
+    if !(f.rms_row_px.is_finite() && f.rms_row_px <= max_rms_px) {
+        return Err(FitRefused::Rms { rms: f.rms_row_px, max: max_rms_px });
+    }
+    if let Some((what, value)) = values.into_iter().find(|(_, v)| !v.is_finite()) {
+        return Err(FitRefused::NotFinite { what: what.into(), value });
+    }
+    if !(0.0..image_height as f64).contains(&f.ranging.v0) {
+        return Err(FitRefused::V0Outside { v0: f.ranging.v0, last_row: image_height as i64 - 1 });
+    }
+    Ok(())
+}
+
+/// Refuses a fit `f` that lands elsewhere when started from the configured values (the last
+/// calibration, [`nominal`]): it was decided by its start, not by the pairs.
+pub fn check_start(
+    pairs: &[Pair],
+    f: &crate::ranging::Fit,
+    opts: crate::ranging::FitOptions,
+    cam: &PinholeCamera,
+    v0_offset_px: f64,
+    a_y_scale: f64,
+) -> Result<(), FitRefused> {
+    let g = crate::ranging::fit(pairs, nominal(cam, v0_offset_px, a_y_scale), opts);
+    let other = match &g {
+        Ok(g) if same_fit(&f.ranging, &g.ranging) => return Ok(()),
+        Ok(g) => format!(
+            "tilt {:.3} deg, v0 {:.2} px, a_y {:.1} px",
+            g.ranging.alpha.to_degrees(),
+            g.ranging.v0,
+            g.ranging.a_y
+        ),
+        Err(e) => format!("no fit ({e})"),
+    };
+    Err(FitRefused::StartDependent {
+        fit: f.ranging,
+        v0_offset_px,
+        a_y_scale,
+        other,
+        v0_free: !(opts.v0_sigma_px.is_finite()),
+    })
+}
+
+/// Why a small text file cannot be read, or the override file not backed up.
+#[derive(Debug, thiserror::Error)]
+pub enum TextFileError {
+    /// Reading failed.
+    #[error("{}: cannot read", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        err: std::io::Error,
+    },
+    /// Larger than the bound.
+    #[error("{}: larger than {max} bytes; not a file this command reads", path.display())]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The bound, bytes.
+        max: u64,
+    },
+    /// Its folder cannot be created.
+    #[error("{}: cannot create", path.display())]
+    CreateDir {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        err: std::io::Error,
+    },
+    /// The backup copy failed.
+    #[error("{}: cannot back up to {}", path.display(), backup.display())]
+    Backup {
+        /// The file.
+        path: PathBuf,
+        /// The backup's name.
+        backup: PathBuf,
+        /// Why.
+        #[source]
+        err: std::io::Error,
+    },
+}
+
+/// Reads a text file of at most `max` bytes; the error names the file and the bound.
+pub fn read_small(path: &Path, max: u64) -> Result<String, TextFileError> {
+    use std::io::Read;
+    let read = |err| TextFileError::Read { path: path.to_path_buf(), err };
+    let f = std::fs::File::open(path).map_err(read)?;
+    let mut text = String::new();
+    f.take(max + 1).read_to_string(&mut text).map_err(read)?;
+    if text.len() as u64 > max {
+        return Err(TextFileError::TooLarge { path: path.to_path_buf(), max });
+    }
+    Ok(text)
+}
+
+/// Before `target` is replaced: creates its folder, and copies the existing file (when
+/// `exists`) to [`backup_name`]; returns the backup's path.
+pub fn backup_override(target: &Path, exists: bool) -> Result<Option<PathBuf>, TextFileError> {
+    if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|err| TextFileError::CreateDir { path: dir.to_path_buf(), err })?;
+    }
+    if !exists {
+        return Ok(None);
+    }
+    let backup = backup_name(target);
+    std::fs::copy(target, &backup).map_err(|err| TextFileError::Backup {
+        path: target.to_path_buf(),
+        backup: backup.clone(),
+        err,
+    })?;
+    Ok(Some(backup))
+}
+
+/// The fit's options: a_y fitted or held, and the prior on v0 centred on the image's middle
+/// row (a property of the image, not of the last calibration: tilt and v0 trade off, so a
+/// prior at an earlier fit's v0 returns that fit whatever the pairs say); `v0_sigma_px` 0 =
+/// free.
+pub fn centre_prior(cam: &PinholeCamera, fit_ay: bool, v0_sigma_px: f64) -> crate::ranging::FitOptions {
+    crate::ranging::FitOptions {
+        fit_ay,
+        v0_sigma_px: if v0_sigma_px > 0.0 { v0_sigma_px } else { f64::INFINITY },
+        v0_prior_px: Some(cam.v0),
+        ..Default::default()
+    }
+}
+
+/// What a fit gives in the configuration's terms: `[camera] tilt_deg`, `[ranging]
+/// v0_offset_px` (from the image centre) and `a_y_scale` (of the focal length).
+pub fn fitted_values(f: &TiltRanging, cam: &PinholeCamera) -> [(&'static str, f64); 3] {
+    [
+        ("tilt", f.alpha.to_degrees()),
+        ("v0 offset", f.v0 - cam.v0),
+        ("a_y scale", f.a_y / cam.f_px),
+    ]
+}
+
+/// [`fitted_values`] as the override file's keys, rounded to 4 decimals.
+pub fn override_values(values: [(&str, f64); 3]) -> [(&'static str, &'static str, f64); 3] {
+    let round = |v: f64| (v * 1e4).round() / 1e4;
+    [
+        ("camera", "tilt_deg", round(values[0].1)),
+        ("ranging", "v0_offset_px", round(values[1].1)),
+        ("ranging", "a_y_scale", round(values[2].1)),
+    ]
+}

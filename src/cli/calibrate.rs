@@ -17,10 +17,10 @@
 use super::common::ConfigArgs;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use rccar::calib::tilt::{self, backup_name, check_pairs, edit_override, line_diff};
+use rccar::calib::tilt::{self, check_pairs, edit_override, line_diff};
 use rccar::camera::PinholeCamera;
 use rccar::config::{Config, LoadedConfig};
-use rccar::ranging::{fit, parse_pairs_csv, Fit, FitOptions, Pair};
+use rccar::ranging::{fit, parse_pairs_csv, Fit, Pair};
 use std::path::Path;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -99,18 +99,9 @@ const MAX_RMS_PX: f64 = 100.0;
 /// Largest `--v0-sigma-px`, pixels (4× the largest image side is no prior at all).
 const MAX_V0_SIGMA_PX: f64 = 1000.0;
 
-/// Reads a text file of at most `max` bytes; the error names the file and the bound.
+/// [`tilt::read_small`].
 fn read_small(path: &Path, max: u64) -> Result<String> {
-    use std::io::Read;
-    let f = std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let mut text = String::new();
-    f.take(max + 1)
-        .read_to_string(&mut text)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    if text.len() as u64 > max {
-        bail!("{}: larger than {max} bytes; not a file this command reads", path.display());
-    }
-    Ok(text)
+    Ok(tilt::read_small(path, max)?)
 }
 
 fn ranging(a: RangingArgs) -> Result<ExitCode> {
@@ -141,39 +132,23 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     // last calibration: tilt and v0 trade off, so a prior at an earlier fit's v0 returns that
     // fit whatever the pairs say). Without --fit-ay, a_y is held at the configured scale.
     let cam = PinholeCamera::from(&cfg.camera);
-    let centre = cam.v0;
     let from_image = tilt::from_image_centre(&cam, cfg.ranging.a_y_scale, a.fit_ay);
-    let opts = FitOptions {
-        fit_ay: a.fit_ay,
-        v0_sigma_px: if a.v0_sigma_px > 0.0 {
-            a.v0_sigma_px
-        } else {
-            f64::INFINITY
-        },
-        v0_prior_px: Some(centre),
-        ..Default::default()
-    };
+    let opts = tilt::centre_prior(&cam, a.fit_ay, a.v0_sigma_px);
     let f = fit(&pairs, from_image, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 4. Report.
     print_fit(&pairs, &f);
-    let tilt = f.ranging.alpha.to_degrees();
-    let v0_off = f.ranging.v0 - cam.v0;
-    let ay_scale = f.ranging.a_y / cam.f_px;
+    let fitted = tilt::fitted_values(&f.ranging, &cam);
+    let [(_, tilt), (_, v0_off), (_, ay_scale)] = fitted;
     println!(
         "fit: tilt {tilt:.3} deg (was {:.3}), v0 {:.2} px (offset {v0_off:+.2}), a_y {:.1} px (scale {ay_scale:.4}); rms row error {:.2} px",
         cfg.camera.tilt_deg, f.ranging.v0, f.ranging.a_y, f.rms_row_px
     );
     // 5. Refuse a fit that does not explain the data.
-    let fitted = [("tilt", tilt), ("v0 offset", v0_off), ("a_y scale", ay_scale)];
-    refuse_bad_fit(&origin, &pairs, &f, a.max_rms_px, fitted, cfg.camera.height)?;
-    refuse_start_dependent(&origin, &pairs, &f, opts, &cfg, a.v0_sigma_px)?;
+    tilt::check_fit(&pairs, &f, a.max_rms_px, fitted, cfg.camera.height)
+        .and_then(|()| tilt::check_start(&pairs, &f, opts, &cam, cfg.ranging.v0_offset_px, cfg.ranging.a_y_scale))
+        .map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 6.-7. The override file.
-    let round = |v: f64| (v * 1e4).round() / 1e4;
-    let values = [
-        ("camera", "tilt_deg", round(tilt)),
-        ("ranging", "v0_offset_px", round(v0_off)),
-        ("ranging", "a_y_scale", round(ay_scale)),
-    ];
+    let values = tilt::override_values(fitted);
     write_result(&a, &loaded, &values)
 }
 
@@ -239,89 +214,6 @@ fn print_fit(pairs: &[Pair], f: &Fit) {
     }
 }
 
-/// Refuses a fit with an undefined residual, an rms row error above `max_rms_px`, a value
-/// that is not finite or a v0 outside the image's `image_height` rows.
-fn refuse_bad_fit(
-    origin: &str,
-    pairs: &[Pair],
-    f: &Fit,
-    max_rms_px: f64,
-    values: [(&str, f64); 3],
-    image_height: u32,
-) -> Result<()> {
-    if let Some(i) = f.residuals_m.iter().position(|r| !r.is_finite()) {
-        bail!(
-            "{origin}: pair {} (row {} px, {} m): the fitted camera does not see that row on the floor (above its horizon); the pairs do not belong together; nothing written",
-            i + 1,
-            pairs[i].v,
-            pairs[i].d
-        );
-    }
-    if !(f.rms_row_px.is_finite() && f.rms_row_px <= max_rms_px) {
-        bail!(
-            "{origin}: rms row error {:.2} px is above the bound {} px (--max-rms-px): the rows and distances do not fit one camera; check the measurements; nothing written",
-            f.rms_row_px,
-            max_rms_px
-        );
-    }
-    for (what, v) in values {
-        if !v.is_finite() {
-            bail!("{origin}: the fitted {what} is {v}; nothing written");
-        }
-    }
-    if !(0.0..image_height as f64).contains(&f.ranging.v0) {
-        bail!(
-            "{origin}: the fitted principal point row v0 = {:.1} px is outside the image (rows 0..{}): the pairs do not pin tilt and v0 apart; measure at more distances spread over the image, or keep v0 near the centre (--v0-sigma-px 3); nothing written",
-            f.ranging.v0,
-            image_height - 1
-        );
-    }
-    Ok(())
-}
-
-/// 5b. Refuses a fit `f` that lands elsewhere when started from the configured values (the
-/// last calibration, [`tilt::nominal`]): it was decided by its start, not by the pairs.
-fn refuse_start_dependent(
-    origin: &str,
-    pairs: &[Pair],
-    f: &Fit,
-    opts: FitOptions,
-    cfg: &Config,
-    v0_sigma_px: f64,
-) -> Result<()> {
-    let from_config = tilt::nominal(
-        &PinholeCamera::from(&cfg.camera),
-        cfg.ranging.v0_offset_px,
-        cfg.ranging.a_y_scale,
-    );
-    let g = fit(pairs, from_config, opts);
-    let disagree = match &g {
-        Ok(g) => !tilt::same_fit(&f.ranging, &g.ranging),
-        Err(_) => true,
-    };
-    if disagree {
-        let other = match &g {
-            Ok(g) => format!(
-                "tilt {:.3} deg, v0 {:.2} px, a_y {:.1} px",
-                g.ranging.alpha.to_degrees(),
-                g.ranging.v0,
-                g.ranging.a_y
-            ),
-            Err(e) => format!("no fit ({e})"),
-        };
-        bail!(
-            "{origin}: the fit depends on where it starts: from the image centre it gives tilt {:.3} deg, v0 {:.2} px, a_y {:.1} px; from the configured values (ranging.v0_offset_px = {}, ranging.a_y_scale = {}) {other}; the pairs do not pin the camera down: measure at more distances spread over the image{}; nothing written",
-            f.ranging.alpha.to_degrees(),
-            f.ranging.v0,
-            f.ranging.a_y,
-            cfg.ranging.v0_offset_px,
-            cfg.ranging.a_y_scale,
-            if v0_sigma_px > 0.0 { "" } else { ", or keep v0 near the image centre (--v0-sigma-px 3)" }
-        );
-    }
-    Ok(())
-}
-
 /// The new override file, validated merged with the configuration, then printed as a diff
 /// (`--dry-run`) or written (the old one backed up first, the new one replacing it atomically).
 fn write_result(a: &RangingArgs, loaded: &LoadedConfig, values: &[(&str, &str, f64)]) -> Result<ExitCode> {
@@ -350,13 +242,7 @@ fn write_result(a: &RangingArgs, loaded: &LoadedConfig, values: &[(&str, &str, f
         return Ok(ExitCode::SUCCESS);
     }
     // Back up, then replace atomically (a full disk leaves the old file in place).
-    if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    }
-    if old.is_some() {
-        let backup = backup_name(&target);
-        std::fs::copy(&target, &backup)
-            .with_context(|| format!("{}: cannot back up to {}", target.display(), backup.display()))?;
+    if let Some(backup) = tilt::backup_override(&target, old.is_some())? {
         println!("old {} kept as {}", target.display(), backup.display());
     }
     write_file(&target, &new)?;

@@ -3,7 +3,6 @@
 use super::common::ConfigArgs;
 use anyhow::{bail, Result};
 use clap::Subcommand;
-use rccar::camera::PinholeCamera;
 use std::process::ExitCode;
 
 /// Configuration subcommands.
@@ -58,18 +57,7 @@ pub fn run(cmd: ConfigCmd) -> Result<ExitCode> {
                 bail!("--near {near} must be less than --far {far} (the near edge is closer to the car)");
             }
             let cfg = args.load()?;
-            let cam = PinholeCamera::from(&cfg.camera);
-            let roi = cam
-                .roi_of_ground_rect(near, far, half_width)
-                .ok_or_else(|| anyhow::anyhow!("the rectangle is behind or above the camera"))?;
-            // The result must pass the same check as a file (ordering, not degenerate).
-            let mut warp = cfg.warp.clone();
-            warp.src = roi;
-            let mut check = cfg.clone();
-            check.warp = warp;
-            check
-                .validate()
-                .map_err(|e| anyhow::anyhow!("the ROI of this rectangle is not usable:\n{e}"))?;
+            let roi = cfg.roi_of_ground_rect(near, far, half_width)?;
             let pts: Vec<String> = roi.iter().map(|p| format!("[{:.2}, {:.2}]", p[0], p[1])).collect();
             println!("[warp]\nsrc = [{}]", pts.join(", "));
             let w = cfg.warp.out_width as f64 - 1.0;

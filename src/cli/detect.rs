@@ -6,8 +6,7 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
-use image::{Rgb, RgbImage};
-use rccar::detect::{gray_from_rgb, light_state, Cascade, DetectParams, Detector, Rect};
+use rccar::detect::{annotate, Cascade, DetectParams, Detector};
 use rccar::source::escape_name;
 use serde_json::json;
 use std::path::PathBuf;
@@ -59,15 +58,6 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     };
     Ok((p(w)?, p(h)?))
 }
-
-const COLOURS: [[u8; 3]; 6] = [
-    [255, 40, 40],
-    [40, 220, 40],
-    [60, 120, 255],
-    [255, 200, 0],
-    [255, 0, 255],
-    [0, 220, 220],
-];
 
 /// Bounds of `--scale-factor`: at 1.01 a 4096-pixel image already has ~500 pyramid levels.
 const SCALE_FACTOR: (f64, f64) = (1.01, 4.0);
@@ -150,66 +140,33 @@ fn detect_one(
     used: &mut std::collections::HashSet<String>,
 ) -> Result<(), DetectFailure> {
     let img = rccar::source::read_image(path).map_err(DetectFailure::Skip)?;
-    let rgb = img.to_rgb8();
-    let gray = match &img {
-        image::DynamicImage::ImageLuma8(g) => g.clone(),
-        _ => {
-            let mut g = image::GrayImage::new(0, 0);
-            gray_from_rgb(&rgb, &mut g);
-            g
-        }
-    };
-    let mut annotated = rgb.clone();
+    let (rgb, gray) = annotate::rgb_and_gray(&img);
+    let found = annotate::detect_all(detectors.iter_mut().map(|d| &mut d.1), &gray, &rgb, params, args.light)
+        .map_err(|(ci, e)| DetectFailure::Skip(format!("{}: {e}", detectors[ci].0)))?;
     let mut boxes = Vec::new();
-    for (ci, (name, det)) in detectors.iter_mut().enumerate() {
-        let found = det
-            .detect(&gray, params)
-            .map_err(|e| DetectFailure::Skip(format!("{name}: {e}")))?;
-        for d in found {
-            let mut b = json!({
-                "cascade": name,
-                "x": d.rect.x, "y": d.rect.y, "width": d.rect.width, "height": d.rect.height,
-                "neighbors": d.neighbors,
-            });
-            if args.light {
-                b["light"] =
-                    serde_json::to_value(light_state(&rgb, d.rect)).map_err(|e| DetectFailure::Fatal(e.into()))?;
-            }
-            boxes.push(b);
-            draw_box(&mut annotated, d.rect, COLOURS[ci % COLOURS.len()]);
+    for f in &found {
+        let d = &f.detection;
+        let mut b = json!({
+            "cascade": detectors[f.cascade].0,
+            "x": d.rect.x, "y": d.rect.y, "width": d.rect.width, "height": d.rect.height,
+            "neighbors": d.neighbors,
+        });
+        if let Some(light) = f.light {
+            b["light"] = serde_json::to_value(light).map_err(|e| DetectFailure::Fatal(e.into()))?;
         }
+        boxes.push(b);
     }
     println!(
         "{}",
         json!({"image": shown, "width": gray.width(), "height": gray.height(), "boxes": boxes})
     );
     if !args.no_annotate {
-        let name = super::stages::unique(path.file_name().map(escape_name).unwrap_or_default(), used);
+        let name = rccar::source::unique_name(path.file_name().map(escape_name).unwrap_or_default(), used);
         let out = args.out.join(format!("{name}.detect.png"));
-        annotated
+        annotate::annotated(&rgb, &found)
             .save(&out)
             .with_context(|| format!("{}: cannot write", out.display()))
             .map_err(DetectFailure::Fatal)?;
     }
     Ok(())
-}
-
-/// A 2-pixel outline, clipped to the image.
-fn draw_box(img: &mut RgbImage, r: Rect, colour: [u8; 3]) {
-    let (w, h) = (img.width() as i32, img.height() as i32);
-    let mut put = |x: i32, y: i32| {
-        if x >= 0 && y >= 0 && x < w && y < h {
-            img.put_pixel(x as u32, y as u32, Rgb(colour));
-        }
-    };
-    for t in 0..2 {
-        for x in r.x..r.x + r.width {
-            put(x, r.y + t);
-            put(x, r.y + r.height - 1 - t);
-        }
-        for y in r.y..r.y + r.height {
-            put(r.x + t, y);
-            put(r.x + r.width - 1 - t, y);
-        }
-    }
 }

@@ -19,7 +19,7 @@ use super::signals::{say, say_err};
 use super::timer::{WallClock, WallTimer};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rccar::drive::{Actor, LoopEnd, LoopStats};
+use rccar::drive::{Actor, LoopEnd};
 use rccar::run_dir::{RunDir, RunState};
 use rccar::session::{ArmAt, CameraSpec, Level, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
 use std::path::PathBuf;
@@ -213,7 +213,7 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     let mut dash = a.dash.start(&cfg, a.config.local_target()?, &session, &stop, clock)?;
     super::outdir::started(&mut run);
     let end = session.run(&mut dash);
-    print_loop_stats(session.stats());
+    say(&format!("drive: {}", session.stats().line()));
     // Neutral has gone out (the session's gate); now the files.
     let outcome = session.finish()?;
     report(&mut run, &outcome)?;
@@ -248,26 +248,11 @@ fn hooks(session: &Session) {
 
 /// The end of the run on the terminal, and summary.json (every way out writes it).
 fn report(run: &mut RunDir, o: &rccar::session::Outcome) -> Result<()> {
-    for (level, line) in o.recording_lines() {
+    for (level, line) in o.end_lines() {
         match level {
             Level::Info => say(&line),
             Level::Warn => say_err(&line),
         }
-    }
-    if let Some((p, n)) = &o.telemetry {
-        say(&format!("  telemetry: {} ({n} frames)", p.display()));
-    }
-    if let Some((med, max)) = o.pulse_latency_ms {
-        say(&format!("  capture -> pulse latency: median {med:.1} ms, max {max:.1} ms"));
-    }
-    if let Some(n) = o.bits_flipped {
-        say(&format!("  link noise: {n} bits flipped"));
-    }
-    if let Some(sum) = &o.summary {
-        say(&format!(
-            "  sim: {} laps, RMS cross-track {:.4} m, max {:.4} m, departures {}, ended {:?}",
-            sum.laps, sum.xte_rms_m, sum.xte_max_m, sum.lane_departures, sum.end
-        ));
     }
     let json = o.summary_json()?;
     run.write_json("summary.json", &json)?;
@@ -301,8 +286,4 @@ fn parse_stall(s: &str) -> Result<(f64, f64)> {
     let t: f64 = t.parse().ok().filter(|t: &f64| t.is_finite() && *t >= 0.0).with_context(form)?;
     let d: f64 = d.parse().ok().filter(|d: &f64| d.is_finite() && *d > 0.0).with_context(form)?;
     Ok((t, d))
-}
-
-fn print_loop_stats(s: &LoopStats) {
-    say(&format!("drive: {}", s.line()));
 }

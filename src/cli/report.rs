@@ -86,33 +86,13 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
 
 /// The run folder `given` names: itself, or the newest run of a folder of runs.
 fn run_folder(given: &Path) -> Result<PathBuf> {
-    let mut dir = given.to_path_buf();
-    if !dir.is_dir() {
-        bail!(
-            "{}: not a folder (give a run's output folder, e.g. out/sim/latest)",
-            dir.display()
-        );
-    }
-    let is_run = |d: &Path| {
-        ["summary.json", "telemetry.jsonl", rccar::run_dir::RUN_FILE]
-            .iter()
-            .any(|f| d.join(f).is_file())
+    let dir = match rccar::run_dir::newest_run(given)? {
+        Some(target) => {
+            println!("report: {} is a folder of runs; reporting the newest, {}", given.display(), target.display());
+            target
+        }
+        None => given.to_path_buf(),
     };
-    let latest = dir.join(rccar::run_dir::LATEST);
-    if !is_run(&dir) && latest.is_dir() {
-        let target = std::fs::read_link(&latest).map_or_else(|_| latest.clone(), |t| dir.join(t));
-        println!(
-            "report: {} is a folder of runs; reporting the newest, {}",
-            dir.display(),
-            target.display()
-        );
-        dir = target;
-    }
-    if !dir.join("summary.json").is_file() && !dir.join("telemetry.jsonl").is_file() {
-        bail!(
-            "{}: neither summary.json nor telemetry.jsonl here; run `rccar sim --out {0}` or `rccar replay FRAMES --out {0}` first",
-            dir.display()
-        );
-    }
+    rccar::run_dir::has_run_files(&dir)?;
     Ok(dir)
 }

@@ -6,7 +6,7 @@
 use super::common::ConfigArgs;
 use anyhow::{Context, Result};
 use clap::Args;
-use rccar::source::{escape_name, load_frame, min_frame_size};
+use rccar::source::{escape_name, load_frame, min_frame_size, unique_name};
 use rccar::timing::{NoTimer, StageTimes};
 use std::io::Write;
 use std::path::PathBuf;
@@ -51,7 +51,7 @@ pub fn run(a: StagesArgs) -> Result<ExitCode> {
             }
         };
         let lane = det.measure(&img, &mut NoTimer, &mut StageTimes::default());
-        let stem = unique(path.file_name().map(escape_name).unwrap_or_default(), &mut used);
+        let stem = unique_name(path.file_name().map(escape_name).unwrap_or_default(), &mut used);
         let im = det.images();
         for (what, pic) in [("bird", &im.bird), ("edges", &im.edges), ("binary", &im.binary)] {
             let p = a.out.join(format!("{stem}.{what}.png"));
@@ -86,16 +86,4 @@ pub fn run(a: StagesArgs) -> Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
-}
-
-/// `name`, or `name~2`, `name~3`... if an earlier image of this run already used it (the same
-/// file name in two folders).
-pub fn unique(name: String, used: &mut std::collections::HashSet<String>) -> String {
-    if used.insert(name.clone()) {
-        return name;
-    }
-    (2..)
-        .map(|k| format!("{name}~{k}"))
-        .find(|n| used.insert(n.clone()))
-        .unwrap_or(name)
 }

@@ -8,11 +8,8 @@
 use super::common::{load_detector, ConfigArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rccar::calib::file::CalibrationFile;
-use rccar::calib::stereo::RectifyMaps;
-use rccar::camera::PinholeCamera;
 use rccar::stereo::matching::Matcher;
-use rccar::stereo::{MatchOptions, StereoGeometry};
+use rccar::stereo::still::StillPair;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -57,7 +54,7 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
         bail!("{} --box flags: at most {MAX_BOXES}", a.boxes.len());
     }
     let boxes: Vec<[i64; 4]> = a.boxes.iter().map(|s| parse_box(s)).collect::<Result<_>>()?;
-    let load = |p: &PathBuf| -> Result<image::RgbImage> { Ok(super::calib_board::open_image(p)?.to_rgb8()) };
+    let load = |p: &PathBuf| -> Result<image::RgbImage> { Ok(rccar::calib::photos::open_image(p)?.to_rgb8()) };
     let (l, r) = (load(&a.left)?, load(&a.right)?);
     if l.dimensions() != r.dimensions() {
         bail!(
@@ -70,38 +67,17 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
             r.height()
         );
     }
-    let (w, h) = l.dimensions();
-    let reference_left = cfg.stereo.reference.is_left();
-    let (mut gl, mut gr) = (image::GrayImage::new(0, 0), image::GrayImage::new(0, 0));
-    rccar::detect::gray_from_rgb(&l, &mut gl);
-    rccar::detect::gray_from_rgb(&r, &mut gr);
     // 1. Rectify with the calibration file, or take the pair as ideal.
-    let geo = if cfg.stereo.calibration.is_empty() {
-        let mut cam_cfg = cfg.camera.clone();
-        cam_cfg.width = w;
-        cam_cfg.height = h;
-        StereoGeometry::ideal(&PinholeCamera::from(&cam_cfg), cfg.stereo.base_m)
-    } else {
-        let path = PathBuf::from(&cfg.stereo.calibration);
-        let st = CalibrationFile::load_stereo(&path, w, h).context("[stereo] calibration")?;
-        let rc = &st.rectification;
-        let ml = RectifyMaps::new(&st.left.intrinsics, &st.left.distortion, &rc.r1, rc.f, rc.c, w, h);
-        let mr = RectifyMaps::new(&st.right.intrinsics, &st.right.distortion, &rc.r2, rc.f, rc.c, w, h);
-        let (mut a2, mut b2) = (image::GrayImage::new(0, 0), image::GrayImage::new(0, 0));
-        ml.remap_gray(&gl, &mut a2);
-        mr.remap_gray(&gr, &mut b2);
-        gl = a2;
-        gr = b2;
-        StereoGeometry::from_calibration(&st, cfg.camera.tilt_deg.to_radians(), reference_left)
-    };
-    let (gref, gother) = if reference_left { (&gl, &gr) } else { (&gr, &gl) };
+    let (w, h) = l.dimensions();
+    let pair = StillPair::new(&cfg.still_pair_setup(w, h), &l, &r).context("[stereo] calibration")?;
+    let reference_left = pair.matching.reference_left;
     // 2. The boxes: given, or detected in the (rectified) reference image.
     let labelled: Vec<(String, [i64; 4])> = if boxes.is_empty() {
         let Some(mut stage) = load_detector(&cfg)? else {
             bail!("no --box given and no detector configured ([detect] cascades missing or off)");
         };
         stage
-            .run(gref, None)?
+            .run(pair.reference(), None)?
             .into_iter()
             .map(|d| {
                 (
@@ -129,22 +105,10 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
             }
         );
     }
-    let opts = MatchOptions {
-        min_disparity: 0,
-        max_disparity: cfg.stereo.max_disparity_px,
-        min_score: cfg.stereo.min_ncc,
-        reference_left,
-        near_peak_ratio: cfg.stereo.near_peak_ratio,
-        reject_repeats: cfg.stereo.reject_repeats,
-    };
     // 3. Match and range each box.
     let mut m = Matcher::new();
     for (label, b) in labelled {
-        let v = b[1] as f64 + (b[3] as f64 - 1.0) / 2.0;
-        let line = match m
-            .match_box(gref, gother, b, &opts)
-            .map(|mm| (mm, geo.range(&mm, v, reference_left)))
-        {
+        let line = match pair.range_box(&mut m, b) {
             Ok((mm, Some(rg))) => serde_json::json!({
                 "label": label, "box": b, "disparity_px": mm.disparity, "ncc": mm.score,
                 "depth_m": {"eq16": rg.depth_eq16, "exact": rg.depth_exact, "bfd": rg.depth_bfd},

@@ -48,7 +48,7 @@ pub use steering::SteeringConfig;
 pub use stereo::{StereoConfig, StereoReference};
 pub use throttle::ThrottleConfig;
 pub use vehicle::VehicleConfig;
-pub use warp::WarpConfig;
+pub use warp::{RoiError, WarpConfig};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;

@@ -7,9 +7,11 @@ use super::Config;
 use crate::calib::file::StereoCalibration;
 use crate::camera::PinholeCamera;
 use crate::stereo::ranging::StereoRanging;
+use crate::stereo::still::PairSetup;
 use crate::stereo::{MatchOptions, StereoGeometry};
 use serde::{Deserialize, Serialize};
 use std::fmt;
+use std::path::PathBuf;
 
 /// `stereo.reference`: the camera of the pair that lane keeping and detection run on (the
 /// other is only searched for matches). A value other than these is refused when the
@@ -121,6 +123,22 @@ impl From<&StereoConfig> for MatchOptions {
 }
 
 impl Config {
+    /// How `rccar stereo` readies a still pair of `width`×`height` images: `[stereo]`'s
+    /// calibration file (none: an ideal pair of `[camera]` at that size with `[stereo]`'s base),
+    /// `[camera]`'s tilt and `[stereo]`'s matcher.
+    pub fn still_pair_setup(&self, width: u32, height: u32) -> PairSetup {
+        let mut cam = self.camera.clone();
+        cam.width = width;
+        cam.height = height;
+        PairSetup {
+            calibration: (!self.stereo.calibration.is_empty()).then(|| PathBuf::from(&self.stereo.calibration)),
+            camera: PinholeCamera::from(&cam),
+            base_m: self.stereo.base_m,
+            tilt_rad: self.camera.tilt_deg.to_radians(),
+            matching: (&self.stereo).into(),
+        }
+    }
+
     /// Stereo ranging of an ideal, rectified pair of `[camera]` with `[stereo]`'s base and
     /// reference.
     pub fn stereo_ranging(&self) -> StereoRanging {

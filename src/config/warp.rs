@@ -100,3 +100,28 @@ mod tests {
         }
     }
 }
+
+/// Why no `[warp] src` can be made for a floor rectangle.
+#[derive(Debug, thiserror::Error)]
+pub enum RoiError {
+    /// A corner is behind or above the camera.
+    #[error("the rectangle is behind or above the camera")]
+    Behind,
+    /// The quad does not pass the configuration's checks.
+    #[error("the ROI of this rectangle is not usable:\n{0}")]
+    Unusable(super::ConfigError),
+}
+
+impl super::Config {
+    /// The `[warp] src` quad that sees the floor rectangle `near`..`far` metres ahead and
+    /// `half_width` metres either side, through `[camera]`; checked as a file's would be
+    /// (ordering, not degenerate).
+    pub fn roi_of_ground_rect(&self, near: f64, far: f64, half_width: f64) -> Result<[[f64; 2]; 4], RoiError> {
+        let cam = crate::camera::PinholeCamera::from(&self.camera);
+        let roi = cam.roi_of_ground_rect(near, far, half_width).ok_or(RoiError::Behind)?;
+        let mut check = self.clone();
+        check.warp.src = roi;
+        check.validate().map_err(RoiError::Unusable)?;
+        Ok(roi)
+    }
+}

@@ -15,6 +15,7 @@
 //! The boxes are OpenCV 4's `detectMultiScale` boxes for the same grey image (see
 //! `docs/detect.md` and `tests/parity/detect_parity.py` for the measured agreement).
 
+pub mod annotate;
 pub mod cascade;
 pub mod detector;
 pub mod group;

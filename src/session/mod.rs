@@ -189,6 +189,31 @@ impl Outcome {
         }
         out
     }
+
+    /// The end of a wall-clock run, a line each: the recordings, the telemetry, the capture to
+    /// pulse latency, the link noise and the simulator's score (what `rccar drive` prints).
+    pub fn end_lines(&self) -> Vec<(Level, String)> {
+        let mut out = self.recording_lines();
+        if let Some((p, n)) = &self.telemetry {
+            out.push((Level::Info, format!("  telemetry: {} ({n} frames)", p.display())));
+        }
+        if let Some((med, max)) = self.pulse_latency_ms {
+            out.push((Level::Info, format!("  capture -> pulse latency: median {med:.1} ms, max {max:.1} ms")));
+        }
+        if let Some(n) = self.bits_flipped {
+            out.push((Level::Info, format!("  link noise: {n} bits flipped")));
+        }
+        if let Some(sum) = &self.summary {
+            out.push((
+                Level::Info,
+                format!(
+                    "  sim: {} laps, RMS cross-track {:.4} m, max {:.4} m, departures {}, ended {:?}",
+                    sum.laps, sum.xte_rms_m, sum.xte_max_m, sum.lane_departures, sum.end
+                ),
+            ));
+        }
+        out
+    }
 }
 
 impl Session {

@@ -24,6 +24,7 @@ pub mod ranging;
 pub mod rectify;
 pub mod source;
 pub mod speed;
+pub mod still;
 
 pub use geometry::{StereoGeometry, StereoRange};
 pub use matching::{match_box, MatchOptions, StereoMatch};
