@@ -6,7 +6,7 @@
 //! frame only, a stall or unplug detected within the stall time, the device reopened until it
 //! comes back, a wrong frame size a clear error.
 
-use crate::capture::{CaptureSource, Grabber};
+use crate::capture::{CaptureSource, GrabError, Grabber};
 use crate::drive::Clock;
 use image::RgbImage;
 use nokhwa::pixel_format::RgbFormat;
@@ -55,7 +55,7 @@ impl V4l2Grabber {
 }
 
 impl Grabber for V4l2Grabber {
-    fn open(&mut self) -> Result<(), String> {
+    fn open(&mut self) -> Result<(), GrabError> {
         if self.cam.is_some() {
             return Ok(());
         }
@@ -67,11 +67,11 @@ impl Grabber for V4l2Grabber {
         Ok(())
     }
 
-    fn grab(&mut self) -> Result<RgbImage, String> {
-        let cam = self.cam.as_mut().ok_or("not open")?;
+    fn grab(&mut self) -> Result<RgbImage, GrabError> {
+        let cam = self.cam.as_mut().ok_or_else(|| GrabError::Lost("not open".into()))?;
         cam.frame()
             .and_then(|b| b.decode_image::<RgbFormat>())
-            .map_err(|e| e.to_string())
+            .map_err(|e| GrabError::Lost(e.to_string()))
     }
 
     fn close(&mut self) {
@@ -96,7 +96,12 @@ pub fn open(
     stall_after: Duration,
 ) -> Result<CaptureSource, CameraError> {
     let mut g = V4l2Grabber::new(index, fps, width, height);
-    g.open().map_err(|reason| CameraError { index, reason })?;
+    g.open().map_err(|e| CameraError {
+        index,
+        reason: match e {
+            GrabError::Lost(r) | GrabError::Bad(r) | GrabError::Fatal(r) => r,
+        },
+    })?;
     let label = g.label();
     g.close();
     drop(g);

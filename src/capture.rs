@@ -8,24 +8,49 @@
 //! delivers again. A device that delivers the wrong size is a fatal error (the source ends and
 //! [`CaptureSource::fatal`] says why) rather than a silent resize of a mis-configured camera.
 //!
+//! A grab can also fail for one frame only ([`GrabError::Bad`]: a producer that wrote garbage):
+//! that frame is counted and handed to the loop as an unusable frame, the source goes on. A
+//! source that cannot go on at all ([`GrabError::Fatal`]: the camera program exited) ends with
+//! [`CaptureSource::fatal`] saying why.
+//!
 //! The device itself is behind [`Grabber`] (nokhwa's V4L2 camera in `camera_source.rs`, a
-//! scripted one in tests). Capture times come from the [`Clock`] the caller passes in.
+//! camera program's pipe in `pipecam`, a scripted one in tests). Capture times come from the
+//! [`Clock`] the caller passes in.
 
 use crate::drive::{Clock, Latest};
 use crate::source::{Frame, FrameError, FrameSource};
 use image::RgbImage;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+/// Why a grab (or an open) gave no image.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum GrabError {
+    /// The device is gone or failing (unplugged): it is closed and reopened.
+    Lost(String),
+    /// This one frame is unusable (a producer wrote garbage, a short frame): it is counted
+    /// and handed on as an unusable frame; the device stays open.
+    Bad(String),
+    /// The source cannot go on (the camera program exited, cannot be started): it ends and
+    /// [`CaptureSource::fatal_reason`] says why.
+    Fatal(String),
+}
+
+impl From<String> for GrabError {
+    fn from(why: String) -> Self {
+        GrabError::Lost(why)
+    }
+}
+
 /// A device that delivers images.
 pub trait Grabber {
     /// Opens (or reopens) the device.
-    fn open(&mut self) -> Result<(), String>;
-    /// The next image; blocks until the device delivers one. An error closes the device and
-    /// the thread reopens it.
-    fn grab(&mut self) -> Result<RgbImage, String>;
+    fn open(&mut self) -> Result<(), GrabError>;
+    /// The next image; blocks until the device delivers one. [`GrabError::Lost`] closes the
+    /// device and the thread reopens it.
+    fn grab(&mut self) -> Result<RgbImage, GrabError>;
     /// Closes the device (before a reopen, and at the end).
     fn close(&mut self) {}
     /// A label for frame names and messages (`/dev/video0`).
@@ -35,7 +60,8 @@ pub trait Grabber {
 struct Shot {
     index: u64,
     captured_s: f64,
-    image: RgbImage,
+    /// The image, or why this frame is unusable.
+    image: Result<RgbImage, String>,
 }
 
 /// Frames from a [`Grabber`] on a thread of its own (see the module notes).
@@ -43,6 +69,7 @@ pub struct CaptureSource {
     slot: Arc<Latest<Shot>>,
     fatal: Arc<Mutex<Option<String>>>,
     quit: Arc<AtomicBool>,
+    bad: Arc<AtomicU64>,
     thread: Option<JoinHandle<()>>,
     stall_after: Duration,
     label: String,
@@ -65,7 +92,8 @@ impl CaptureSource {
         let slot = Arc::new(Latest::new());
         let fatal = Arc::new(Mutex::new(None));
         let quit = Arc::new(AtomicBool::new(false));
-        let (s, f, q) = (slot.clone(), fatal.clone(), quit.clone());
+        let bad = Arc::new(AtomicU64::new(0));
+        let (s, f, q, b) = (slot.clone(), fatal.clone(), quit.clone(), bad.clone());
         let thread = std::thread::Builder::new()
             .name("rccar-capture".into())
             .spawn(move || {
@@ -73,10 +101,18 @@ impl CaptureSource {
                 let mut grabber = make();
                 let mut open = false;
                 let mut index = 0u64;
+                let end = |msg: String| {
+                    *f.lock().unwrap_or_else(|e| e.into_inner()) = Some(msg);
+                    s.close();
+                };
                 while !q.load(Ordering::SeqCst) {
                     if !open {
                         match grabber.open() {
                             Ok(()) => open = true,
+                            Err(GrabError::Fatal(msg)) => {
+                                end(msg);
+                                break;
+                            }
                             Err(_) => {
                                 std::thread::sleep(retry);
                                 continue;
@@ -94,18 +130,30 @@ impl CaptureSource {
                                     size.0,
                                     size.1
                                 );
-                                *f.lock().unwrap_or_else(|e| e.into_inner()) = Some(msg);
-                                s.close();
+                                end(msg);
                                 break;
                             }
                             s.put(Shot {
                                 index,
                                 captured_s: clock.now_s(),
-                                image,
+                                image: Ok(image),
                             });
                             index += 1;
                         }
-                        Err(_) => {
+                        Err(GrabError::Bad(why)) => {
+                            b.fetch_add(1, Ordering::SeqCst);
+                            s.put(Shot {
+                                index,
+                                captured_s: clock.now_s(),
+                                image: Err(why),
+                            });
+                            index += 1;
+                        }
+                        Err(GrabError::Fatal(msg)) => {
+                            end(msg);
+                            break;
+                        }
+                        Err(GrabError::Lost(_)) => {
                             grabber.close();
                             open = false;
                             std::thread::sleep(retry);
@@ -119,6 +167,7 @@ impl CaptureSource {
             slot,
             fatal,
             quit,
+            bad,
             thread,
             stall_after,
             label,
@@ -136,6 +185,31 @@ impl CaptureSource {
     pub fn dropped(&self) -> u64 {
         self.slot.dropped()
     }
+
+    /// Unusable frames the device delivered ([`GrabError::Bad`]), whether the loop saw them
+    /// or a newer frame replaced them first.
+    pub fn bad_frames(&self) -> u64 {
+        self.bad.load(Ordering::SeqCst)
+    }
+
+    /// Waits until the device has delivered its first frame (good or bad): `Ok`; or the
+    /// source ended first (`Err` with [`CaptureSource::fatal_reason`]), or `timeout` passed
+    /// or `give_up()` said so (`Err(None)`). The frame stays for the loop.
+    pub fn wait_first(&self, timeout: Duration, give_up: impl Fn() -> bool) -> Result<(), Option<String>> {
+        let t0 = std::time::Instant::now();
+        loop {
+            if self.slot.version() > 0 {
+                return Ok(());
+            }
+            if self.slot.is_closed() {
+                return Err(self.fatal_reason());
+            }
+            if t0.elapsed() >= timeout || give_up() {
+                return Err(None);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
 }
 
 impl FrameSource for CaptureSource {
@@ -147,12 +221,12 @@ impl FrameSource for CaptureSource {
         match self.slot.wait_take(self.stall_after) {
             Some(shot) => {
                 let t0 = *self.t0.get_or_insert(shot.captured_s);
-                let mut f = Frame::new(
-                    shot.index,
-                    shot.captured_s - t0,
-                    format!("camera_{:06}", shot.index),
-                    shot.image,
-                );
+                let name = format!("camera_{:06}", shot.index);
+                let image = match shot.image {
+                    Ok(image) => image,
+                    Err(why) => return Some(Err(FrameError::bad(shot.index, name, why))),
+                };
+                let mut f = Frame::new(shot.index, shot.captured_s - t0, name, image);
                 f.captured_s = Some(shot.captured_s);
                 Some(Ok(f))
             }
@@ -203,19 +277,19 @@ mod tests {
         opens: Arc<AtomicU64>,
     }
     impl Grabber for Script {
-        fn open(&mut self) -> Result<(), String> {
+        fn open(&mut self) -> Result<(), GrabError> {
             let t = self.t0.elapsed().as_secs_f64();
             if t >= self.stall.0 && t < self.stall.1 {
-                return Err("no such device".into());
+                return Err(GrabError::Lost("no such device".into()));
             }
             self.opens.fetch_add(1, Ordering::SeqCst);
             Ok(())
         }
-        fn grab(&mut self) -> Result<RgbImage, String> {
+        fn grab(&mut self) -> Result<RgbImage, GrabError> {
             std::thread::sleep(Duration::from_millis(10));
             let t = self.t0.elapsed().as_secs_f64();
             if t >= self.stall.0 && t < self.stall.1 {
-                return Err("unplugged".into());
+                return Err(GrabError::Lost("unplugged".into()));
             }
             Ok(RgbImage::new(self.size.0, self.size.1))
         }
