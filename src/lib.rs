@@ -34,6 +34,8 @@ pub mod imageio;
 pub mod lane;
 pub mod link;
 pub mod pipeline;
+#[cfg(unix)]
+pub mod pipecam;
 pub mod ranging;
 pub mod record;
 pub mod report;

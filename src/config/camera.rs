@@ -21,6 +21,13 @@ pub struct CameraConfig {
     pub tilt_deg: f64,
     /// Horizontal field of view, degrees.
     pub hfov_deg: f64,
+    /// The camera module (`--camera picam:N`): a fixed exposure time, microseconds; 0 =
+    /// automatic exposure. Auto-exposure flicker moves the fixed lane threshold.
+    pub shutter_us: u32,
+    /// The camera module: a fixed analogue gain (1.0 ..= 16); 0 = automatic.
+    pub gain: f64,
+    /// The camera module: fixed white balance, [red gain, blue gain]; [0, 0] = automatic.
+    pub awb_gains: [f64; 2],
 }
 
 impl Default for CameraConfig {
@@ -32,6 +39,9 @@ impl Default for CameraConfig {
             height_m: 0.20,
             tilt_deg: 20.0,
             hfov_deg: 62.2,
+            shutter_us: 0,
+            gain: 0.0,
+            awb_gains: [0.0, 0.0],
         }
     }
 }
@@ -45,6 +55,10 @@ impl CameraConfig {
         c.range("camera.height_m", self.height_m, 0.01, 5.0);
         c.range("camera.tilt_deg", self.tilt_deg, -10.0, 89.0);
         c.range("camera.hfov_deg", self.hfov_deg, 10.0, 170.0);
+        c.range("camera.shutter_us", self.shutter_us, 0, 1_000_000);
+        c.range("camera.gain", self.gain, 0.0, 16.0);
+        c.range("camera.awb_gains[0]", self.awb_gains[0], 0.0, 8.0);
+        c.range("camera.awb_gains[1]", self.awb_gains[1], 0.0, 8.0);
     }
 }
 

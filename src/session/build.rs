@@ -50,7 +50,12 @@ pub(super) fn build(cfg: &Config, spec: SessionSpec, env: SessionEnv) -> Result<
     setup_pipeline(cfg, &spec, &mut pipeline, &mut parts)?;
     // 2. The frame source (the simulated world first).
     let source = open_source(cfg, &spec, &env, &pipeline, &mut parts)?;
-    let device = matches!(&spec.source, SourceSpec::Cameras { left: CameraSpec::V4l(_), .. });
+    // A camera's end is a fault; a folder's, or a replayed pipe's, is not.
+    let device = match &spec.source {
+        SourceSpec::Cameras { left: CameraSpec::V4l(_), .. } => true,
+        SourceSpec::Cameras { left, timing, .. } => left.is_device() && *timing == Timing::WallClock,
+        SourceSpec::Sim { .. } => false,
+    };
     // 3. The sink behind the one gate.
     let (actuators, link, pwm) = open_sink(cfg, &spec, &env, &mut parts)?;
     if matches!(spec.sink, SinkSpec::Link { .. }) {
@@ -349,7 +354,8 @@ fn sim_camera(
     }
 }
 
-/// One camera: a V4L2 device, or a folder (lock-step, or paced on the wall clock).
+/// One camera: a V4L2 device, a camera program, or a folder (lock-step, or paced on the wall
+/// clock).
 fn open_camera(
     cfg: &Config,
     env: &SessionEnv,
@@ -360,6 +366,7 @@ fn open_camera(
 ) -> Result<Box<dyn FrameSource>, SessionError> {
     match cam {
         CameraSpec::V4l(index) => open_v4l(cfg, env, *index),
+        CameraSpec::Pipe { .. } | CameraSpec::Picam { .. } => open_pipe(cfg, env, cam, timing, notes),
         CameraSpec::Folder(dir) => {
             let src = open_folder(cfg, pipeline, dir, notes)?;
             Ok(if timing == Timing::WallClock {
@@ -369,6 +376,62 @@ fn open_camera(
             })
         }
     }
+}
+
+/// A camera program's stdout (src/pipecam/): on the wall clock, newest frame only with stall
+/// detection; lock-step (a replay), every frame.
+#[cfg(unix)]
+fn open_pipe(
+    cfg: &Config,
+    env: &SessionEnv,
+    cam: &CameraSpec,
+    timing: Timing,
+    notes: &mut Vec<(Level, String)>,
+) -> Result<Box<dyn FrameSource>, SessionError> {
+    use crate::pipecam::{format::RawFormat, rpicam, PipeCommand};
+    let c = &cfg.camera;
+    let cmd = match cam {
+        CameraSpec::Pipe { format, command } => {
+            let f = RawFormat::parse(format, c.width).ok_or_else(|| invalid(format!("--camera {}: unknown format", cam.label())))?;
+            PipeCommand::parse(f, command).map_err(|e| invalid(format!("--camera {}: {e}", cam.label())))?
+        }
+        CameraSpec::Picam { index, mjpeg } => {
+            let program = rpicam::find_program().ok_or_else(|| {
+                SessionError::Camera(format!(
+                    "--camera {}: neither rpicam-vid nor libcamera-vid is on PATH (Raspberry Pi OS: sudo apt install rpicam-apps; docs/pi.md)",
+                    cam.label()
+                ))
+            })?;
+            let codec = if *mjpeg { rpicam::Codec::Mjpeg } else { rpicam::Codec::Yuv420 };
+            rpicam::command(&program.to_string_lossy(), &rpicam::Picam { index: *index, codec }, c)
+        }
+        _ => return Err(invalid("not a camera program")),
+    };
+    let line = cmd.line();
+    let what = format!("{} {}×{}", cmd.format.name(), c.width, c.height);
+    if timing == Timing::WallClock {
+        let src = crate::pipecam::open_wallclock(cmd, (c.width, c.height), c.fps, env.clock.clone(), &env.stop)
+            .map_err(SessionError::Camera)?;
+        notes.push((
+            Level::Info,
+            format!(
+                "camera {}: `{line}` ({what}) as process {} in its own process group; stall after {} ms",
+                cam.label(),
+                src.pid().unwrap_or(0),
+                crate::pipecam::stall_time(c.fps).as_millis()
+            ),
+        ));
+        Ok(Box::new(src))
+    } else {
+        let src = crate::pipecam::open_lockstep(cmd, (c.width, c.height), c.fps, env.stop.clone()).map_err(SessionError::Camera)?;
+        notes.push((Level::Info, format!("camera {}: `{line}` ({what}), every frame in order at {} fps", cam.label(), c.fps)));
+        Ok(Box::new(src))
+    }
+}
+
+#[cfg(not(unix))]
+fn open_pipe(_: &Config, _: &SessionEnv, cam: &CameraSpec, _: Timing, _: &mut Vec<(Level, String)>) -> Result<Box<dyn FrameSource>, SessionError> {
+    Err(SessionError::Camera(format!("--camera {}: camera programs need Linux", cam.label())))
 }
 
 #[cfg(feature = "camera")]

@@ -18,16 +18,55 @@ pub enum CameraSpec {
     /// A folder of PNG/JPEG frames (name order; a recording's own frame times when it has
     /// its telemetry).
     Folder(PathBuf),
+    /// Frames a command writes to its stdout, `pipe:FORMAT:COMMAND` (src/pipecam/).
+    Pipe {
+        /// rgb24, yuv420, yuvj420 or mjpeg.
+        format: String,
+        /// The command line (split as a shell would, run without one).
+        command: String,
+    },
+    /// The Raspberry Pi camera module through rpicam-vid, `picam:N` (raw YUV 4:2:0) or
+    /// `picam:N:mjpeg` (src/pipecam/rpicam.rs).
+    Picam {
+        /// The camera's index (`rpicam-vid --list-cameras`).
+        index: u32,
+        /// Motion JPEG instead of raw frames.
+        mjpeg: bool,
+    },
 }
 
 impl CameraSpec {
-    /// Reads `v4l:N` or a folder path (what `--camera` takes).
+    /// Reads `v4l:N`, `picam:N[:mjpeg]`, `pipe:FORMAT:COMMAND` or a folder path (what
+    /// `--camera` takes).
     pub fn parse(spec: &str) -> Result<CameraSpec, String> {
         if let Some(n) = spec.strip_prefix("v4l:") {
             return n
                 .parse()
                 .map(CameraSpec::V4l)
                 .map_err(|_| format!("--camera {spec}: expected v4l:INDEX, e.g. v4l:0"));
+        }
+        if let Some(rest) = spec.strip_prefix("picam:") {
+            let (n, codec) = rest.split_once(':').unwrap_or((rest, "yuv420"));
+            return match (n.parse(), codec) {
+                (Ok(index), "yuv420" | "mjpeg") => Ok(CameraSpec::Picam { index, mjpeg: codec == "mjpeg" }),
+                _ => Err(format!("--camera {spec}: expected picam:INDEX or picam:INDEX:mjpeg, e.g. picam:0")),
+            };
+        }
+        if let Some(rest) = spec.strip_prefix("pipe:") {
+            let form = || {
+                format!(
+                    "--camera {spec}: expected pipe:FORMAT:COMMAND with FORMAT rgb24, yuv420, yuvj420 or mjpeg, e.g. \
+                     'pipe:yuv420:ffmpeg -loglevel error -re -f lavfi -i testsrc=size=320x240:rate=30 -pix_fmt yuv420p -f rawvideo -'"
+                )
+            };
+            let (format, command) = rest.split_once(':').ok_or_else(form)?;
+            if !matches!(format, "rgb24" | "yuv420" | "yuvj420" | "mjpeg") {
+                return Err(form());
+            }
+            if shlex::split(command).is_none_or(|a| a.is_empty()) {
+                return Err(format!("--camera {spec}: the command is empty or its quotes do not close"));
+            }
+            return Ok(CameraSpec::Pipe { format: format.into(), command: command.into() });
         }
         Ok(CameraSpec::Folder(PathBuf::from(spec)))
     }
@@ -37,7 +76,14 @@ impl CameraSpec {
         match self {
             CameraSpec::V4l(n) => format!("v4l:{n}"),
             CameraSpec::Folder(p) => p.display().to_string(),
+            CameraSpec::Pipe { format, command } => format!("pipe:{format}:{command}"),
+            CameraSpec::Picam { index, mjpeg } => format!("picam:{index}{}", if *mjpeg { ":mjpeg" } else { "" }),
         }
+    }
+
+    /// A device that runs on the wall clock (a V4L2 camera, a camera program), not a folder.
+    pub fn is_device(&self) -> bool {
+        !matches!(self, CameraSpec::Folder(_))
     }
 }
 
