@@ -41,6 +41,10 @@ enum Cmd {
     Calibrate(cli::calibrate::CalibrateCmd),
     /// Range objects in a stereo pair: NCC along the rows, Eq. 16 / exact angles / b·f/d.
     Stereo(cli::stereo::StereoRangeArgs),
+    /// Check a camera: list what is there, open one, report size, fps and latency, save a
+    /// frame (`camera check`).
+    #[command(subcommand)]
+    Camera(cli::camera::CameraCmd),
     /// Plot telemetry fields of one or more runs against time (`--y error,steer`).
     Plot(cli::plot::PlotArgs),
     /// Write DIR/report.md and a self-contained DIR/report.html for a run's output folder.
@@ -60,6 +64,7 @@ fn main() -> ExitCode {
         Cmd::Drive(a) => cli::drive::run(a),
         Cmd::Calibrate(c) => cli::calibrate::run(c),
         Cmd::Stereo(a) => cli::stereo::run(a),
+        Cmd::Camera(c) => cli::camera::run(c),
         Cmd::Plot(a) => cli::plot::run(a),
         Cmd::Report(a) => cli::report::run(a),
     };

@@ -29,8 +29,10 @@ use std::sync::Arc;
 /// Flags of `rccar drive`.
 #[derive(Args, Debug)]
 pub struct DriveArgs {
-    /// Frame source: `v4l:INDEX` (the car's camera, /dev/videoINDEX; feature `camera`), `sim`
-    /// (the simulator's camera), or a folder of PNG/JPEG frames played at the configured fps.
+    /// Frame source: `picam:INDEX[:mjpeg]` (the camera module through rpicam-vid), `v4l:INDEX`
+    /// (a USB webcam, /dev/videoINDEX; feature `camera`), `'pipe:FORMAT:COMMAND'` (frames a
+    /// command writes: FORMAT rgb24|yuv420|yuvj420|mjpeg at [camera] width×height), `sim` (the
+    /// simulator's camera), or a folder of PNG/JPEG frames played at the configured fps.
     #[arg(long, default_value = "v4l:0")]
     pub camera: String,
     /// The right camera of a stereo pair (`--camera` is then the left one): `v4l:INDEX` or a
@@ -125,7 +127,9 @@ fn spec(a: &DriveArgs, track: PathBuf, stereo: bool, run: &RunDir) -> Result<Ses
             );
         }
         let cam = |s: &str| match CameraSpec::parse(s).map_err(anyhow::Error::msg)? {
-            CameraSpec::Folder(p) if !p.is_dir() => bail!("--camera {s}: not `sim`, `v4l:INDEX` or a folder of frames"),
+            CameraSpec::Folder(p) if !p.is_dir() => {
+                bail!("--camera {s}: not `sim`, `picam:INDEX`, `v4l:INDEX`, `pipe:FORMAT:COMMAND` or a folder of frames")
+            }
             c => Ok(c),
         };
         SourceSpec::Cameras {
@@ -231,6 +235,8 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
 /// SIGUSR1 (the desk's start/stop button) toggles arming; a second signal sends neutral
 /// through the link from the signal thread.
 fn hooks(session: &Session) {
+    // An exit that skips the destructors still ends the camera program.
+    super::signals::on_emergency(rccar::pipecam::child::kill_all);
     let arming = session.arming().clone();
     super::signals::on_button(move || match arming.toggle(Actor::Button) {
         Ok(true) => say("button: armed"),

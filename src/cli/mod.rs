@@ -3,6 +3,7 @@
 
 pub mod calib_board;
 pub mod calibrate;
+pub mod camera;
 pub mod common;
 pub mod config;
 pub mod dashboard;

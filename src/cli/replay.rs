@@ -17,7 +17,8 @@ use std::sync::Arc;
 /// Flags of `rccar replay`.
 #[derive(Args, Debug)]
 pub struct ReplayArgs {
-    /// Folder of PNG/JPEG frames, replayed in name order.
+    /// Folder of PNG/JPEG frames, replayed in name order; or `'pipe:FORMAT:COMMAND'`: every
+    /// frame the command writes, in order, frame i at i/fps (e.g. `rccar sim --frames-to -`).
     pub dir: PathBuf,
     /// A stereo pair: DIR holds the left camera's frames and DIR2 the right camera's, with the
     /// same file names (as `rccar sim --record DIR --record-right DIR2` writes them); needs
@@ -67,7 +68,10 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let timer: Box<dyn StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
     let mut spec = SessionSpec::new(
         SourceSpec::Cameras {
-            left: CameraSpec::Folder(a.dir.clone()),
+            left: match a.dir.to_str().filter(|d| d.starts_with("pipe:")) {
+                Some(p) => CameraSpec::parse(p).map_err(anyhow::Error::msg)?,
+                None => CameraSpec::Folder(a.dir.clone()),
+            },
             right: a.right.clone().map(CameraSpec::Folder),
             timing: Timing::LockStep,
         },
@@ -120,6 +124,9 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     bar.0.finish_and_clear();
     let outcome = session.finish()?;
     let end = end?;
+    if let Some(f) = &outcome.fault {
+        eprintln!("replay: {f}");
+    }
     let stopped = match end {
         LoopEnd::Stopped(why) => Some(why),
         _ => None,

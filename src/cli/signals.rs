@@ -95,7 +95,6 @@ pub fn on_button(f: impl Fn() + Send + Sync + 'static) {
     *button().lock().unwrap_or_else(|e| e.into_inner()) = Some(Box::new(f));
 }
 
-#[cfg_attr(not(feature = "serial"), allow(dead_code))]
 /// Registers something that brings the car to rest from any thread (e.g. neutral through the
 /// link). Run on the second signal, before the process exits.
 pub fn on_emergency(f: impl Fn() + Send + Sync + 'static) {

@@ -42,6 +42,13 @@ pub struct SimArgs {
     /// Write every camera frame as PNG into this folder (for `rccar replay DIR`).
     #[arg(long)]
     pub record: Option<PathBuf>,
+    /// Write every camera frame to this file, `-` for stdout (all text then goes to stderr):
+    /// raw frames for `rccar replay 'pipe:FORMAT:rccar sim … --frames-to -'` or a player.
+    #[arg(long, value_name = "FILE")]
+    pub frames_to: Option<PathBuf>,
+    /// The format of `--frames-to`: rgb24, yuv420 (I420, BT.601 16..235) or mjpeg.
+    #[arg(long, default_value = "rgb24", value_parser = ["rgb24", "yuv420", "mjpeg"])]
+    pub frames_format: String,
     /// With `ranging.method = "stereo"`: write the right camera's frames as PNG into this
     /// folder (`--record` then holds the left camera's), for `rccar replay DIR --right DIR2`.
     #[arg(long, value_name = "DIR2")]
@@ -134,7 +141,7 @@ fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, stop: &StopSi
     );
     spec.arm = if a.dash.dashboard { ArmAt::Operator } else { ArmAt::Start };
     spec.truth_boxes = a.truth_boxes;
-    spec.frames_viewed = a.record.is_some() || a.dash.dashboard;
+    spec.frames_viewed = a.record.is_some() || a.frames_to.is_some() || a.dash.dashboard;
     spec.operator_ends_run = a.dash.dashboard;
     spec.telemetry = Some(run.join("telemetry.jsonl"));
     let timer: Box<dyn rccar::timing::StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
@@ -171,6 +178,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     if sweeping {
         return super::sweep::run_sweep(&a.sweep, a.jobs, &cfg, &track, font, run);
     }
+    let mut frames = rccar::pipecam::export::FrameWriter::open(a.frames_to.as_deref(), &a.frames_format, cfg.camera.width)?;
     let stop = super::signals::install();
     let clock: Arc<dyn Clock + Send + Sync> = if a.no_timing { Arc::new(NoClock) } else { Arc::new(super::timer::WallClock::new()) };
     let say: rccar::drive::Say = Arc::new(|level, line: &str| match level {
@@ -196,9 +204,12 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let started = std::time::Instant::now();
     super::outdir::started(&mut run);
     let end = {
-        let mut obs: [&mut dyn Observer; 2] = [&mut report, &mut dash];
+        let mut obs: [&mut dyn Observer; 3] = [&mut report, &mut dash, &mut frames];
         session.run(&mut obs)
     };
+    if let Some(e) = frames.as_ref().and_then(|f| f.error.as_ref()) {
+        eprintln!("sim: {e}; the run ended there");
+    }
     let interrupted = match end {
         Ok(LoopEnd::Stopped(why)) => {
             lock(&world).interrupt();
