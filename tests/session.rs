@@ -2,7 +2,7 @@
 //! the same parts `rccar drive` wires, run from a test, and the faults that end a run (issue
 //! 24): a camera of the wrong size is a camera fault the exit code reads, not a quiet end.
 
-use rccar::capture::{CaptureSource, Grabber};
+use rccar::capture::{CaptureSource, GrabError, Grabber};
 use rccar::config::Config;
 use rccar::drive::{Level, LoopEnd, NoObserver, StopSignal};
 use rccar::health::Part;
@@ -44,10 +44,10 @@ fn config() -> Config {
 /// A camera that delivers 640×480 frames while the car is configured for 320×240.
 struct WrongSize;
 impl Grabber for WrongSize {
-    fn open(&mut self) -> Result<(), String> {
+    fn open(&mut self) -> Result<(), GrabError> {
         Ok(())
     }
-    fn grab(&mut self) -> Result<image::RgbImage, String> {
+    fn grab(&mut self) -> Result<image::RgbImage, GrabError> {
         std::thread::sleep(Duration::from_millis(10));
         Ok(image::RgbImage::new(640, 480))
     }
