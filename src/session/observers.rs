@@ -120,6 +120,10 @@ impl Observer for StatusLine {
 
     fn on_skip(&mut self, e: &FrameError) {
         (self.say)(Level::Warn, &format!("t={:6.1} s  skipped {e}", self.t()));
+        // A camera that delivers only unusable frames still ends at the deadline.
+        if self.deadline.is_some_and(|d| self.t() >= d) {
+            self.stop.request(StopReason::Requested);
+        }
     }
 }
 
