@@ -271,9 +271,14 @@ fn exit_code(end: LoopEnd, o: &rccar::session::Outcome) -> ExitCode {
         say_err(&format!("drive: fault: {f}; neutral sent"));
         return ExitCode::from(rccar::drive::StopReason::Fault.exit_code());
     }
-    if let LoopEnd::Stopped(why) = end {
-        say(&format!("drive: stopped ({why:?}); neutral sent"));
-        return ExitCode::from(why.exit_code());
+    match end {
+        // A run that reached its --seconds without one usable frame did not work: exit 1 below.
+        LoopEnd::Stopped(rccar::drive::StopReason::Requested) if o.stats.frames == 0 => {}
+        LoopEnd::Stopped(why) => {
+            say(&format!("drive: stopped ({why:?}); neutral sent"));
+            return ExitCode::from(why.exit_code());
+        }
+        _ => {}
     }
     if o.stats.frames == 0 {
         say_err(&format!(
