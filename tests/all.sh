@@ -23,6 +23,7 @@ DEB_PACKAGES=(
   socat                                        # a silent pty pair for rccar drive's bad-port test
   jq                                           # the labs' key (docs/labs/key/make.sh)
   opencv-doc                                   # OpenCV's stereo chessboard pairs (calib parity stage)
+  ffmpeg                                       # testsrc as a camera for the pipe source (tests/pipe_camera.rs)
 )
 # The Pi cross-build stage (tests/cross/run.sh) and its packages (skip with RCCAR_CROSS=0). Cold
 # it compiles every dependency for aarch64: ~6 min of CPU with `serial,gpio` (axum, hyper and
