@@ -385,14 +385,14 @@ fn a_slow_loop_gets_the_newest_frame_and_the_rest_are_dropped() {
     assert!(alive(&tok).is_empty(), "{:?}", alive(&tok));
 }
 
-/// Starts `rccar drive` on testsrc; returns it once it has written `n` frames.
-fn drive_until(tok: &str, out: &Path, n: usize) -> Child {
+/// Starts `rccar drive` on `camera`; returns it once it has written `n` frames.
+fn drive_until(camera: &str, out: &Path, n: usize) -> Child {
     let mut child = Command::new(EXE)
         .current_dir(root())
         .args([
             "drive",
             "--camera",
-            &testsrc(tok),
+            camera,
             "--dry-run",
             "--arm",
             "--set",
@@ -440,7 +440,7 @@ fn int_term_and_hup_leave_no_camera_program() {
     ] {
         let tok = token(&format!("sig{name}"));
         let out = scratch(&format!("sig{name}"));
-        let mut child = drive_until(&tok, &out, 30);
+        let mut child = drive_until(&testsrc(&tok), &out, 30);
         let producer = alive(&tok);
         assert_eq!(producer.len(), 1, "one camera program: {producer:?}");
         let t0 = Instant::now();
@@ -465,28 +465,35 @@ fn int_term_and_hup_leave_no_camera_program() {
 }
 
 /// SIGKILL of rccar runs none of its code: the kernel's parent-death signal ends the camera
-/// program (so nothing holds the camera after a crash).
+/// program, so nothing holds the camera after a crash. The program here would live on
+/// otherwise: it ignores SIGHUP and SIGPIPE and writes nothing more after its one frame (as a
+/// camera program stuck in its driver), so neither the broken pipe nor the orphaned process
+/// group's SIGHUP would end it.
 #[test]
-fn sigkill_of_rccar_ends_the_camera_program_too() {
-    need_ffmpeg();
-    let tok = token("kill9");
+fn sigkill_of_rccar_ends_a_camera_program_that_would_live_on() {
+    let secs = format!("3000.{}", std::process::id());
+    let cam = format!("pipe:rgb24:sh -c \"trap '' HUP PIPE; head -c 230400 /dev/zero; exec sleep {secs}\"");
     let out = scratch("kill9");
-    let mut child = drive_until(&tok, &out, 30);
-    let producer = alive(&tok);
+    let mut child = drive_until(&cam, &out, 1);
+    let producer = alive(&secs);
     assert_eq!(producer.len(), 1, "{producer:?}");
     child.kill().unwrap();
     child.wait().unwrap();
     let t0 = Instant::now();
-    while !alive(&tok).is_empty() && t0.elapsed() < Duration::from_secs(5) {
+    while !alive(&secs).is_empty() && t0.elapsed() < Duration::from_secs(3) {
         std::thread::sleep(Duration::from_millis(10));
     }
+    let left = alive(&secs);
     println!(
-        "SIGKILL of rccar: camera program {} gone after {} ms (left as zombie: {:?})",
+        "SIGKILL of rccar: its camera program {} {} after {} ms",
         producer[0].0,
+        if left.is_empty() { "gone" } else { "STILL THERE" },
         t0.elapsed().as_millis(),
-        left_behind(&tok)
     );
-    assert!(alive(&tok).is_empty(), "{:?}", alive(&tok));
+    for p in &left {
+        unsafe { libc::kill(p.0 as i32, libc::SIGKILL) };
+    }
+    assert!(left.is_empty(), "{left:?}");
 }
 
 /// A short frame and a producer that ends are named (a counted unusable frame, then a camera
@@ -515,19 +522,44 @@ fn short_frames_and_garbage_are_counted_unusable_frames() {
     assert_eq!(o.status.code(), Some(3), "a camera fault: {stderr}");
     assert!(stderr.contains("short frame: 1000 of 230400 bytes"), "{stderr}");
     assert!(stderr.contains("`head` ended (exit status: 0)"), "{stderr}");
-    // Endless random bytes as "MJPEG" for 3 s.
-    let out = scratch("garbage");
+    // Endless random bytes as "MJPEG" for 3 s: unusable frames, each named.
+    let (code, stderr, peak_kb) = drive_watching_memory("garbage", "pipe:mjpeg:cat /dev/urandom");
+    let skipped = stderr.lines().filter(|l| l.contains("not a JPEG frame")).count();
+    let last = stderr.lines().last().unwrap_or("").to_string();
+    println!(
+        "random bytes as MJPEG for 3 s: exit {code:?}, {skipped} unusable frames named, peak RSS {:.1} MB; {last}",
+        peak_kb as f64 / 1024.0
+    );
+    assert_eq!(code, Some(1), "no usable frame: {last}");
+    assert!(skipped >= 10, "{skipped} unusable frames");
+    assert!(stderr.contains("no usable frame"), "{last}");
+    assert!(!stderr.contains("panicked"));
+    assert!(peak_kb < 200 * 1024, "peak RSS {peak_kb} kB");
+    // A JPEG that starts (SOI, SOS) and never ends: 300 MB of image data without a marker.
+    // The reader gives up at its bound (2 × W×H×3 + 1 MiB), never holding the 300 MB.
+    let endless = "pipe:mjpeg:sh -c \"printf '\\377\\330\\377\\332\\000\\002'; head -c 300000000 /dev/zero; sleep 5\"";
+    let (code, stderr, peak_kb) = drive_watching_memory("endless", endless);
+    let too_long = stderr.lines().filter(|l| l.contains("a JPEG longer than")).count();
+    println!(
+        "a JPEG of 300 MB: exit {code:?}, {too_long} too long, peak RSS {:.1} MB",
+        peak_kb as f64 / 1024.0
+    );
+    assert_eq!(code, Some(1));
+    assert!(
+        too_long >= 1,
+        "{}",
+        stderr.lines().take(5).collect::<Vec<_>>().join("\n")
+    );
+    assert!(peak_kb < 200 * 1024, "peak RSS {peak_kb} kB");
+}
+
+/// Runs `drive --camera CAMERA --dry-run --seconds 3`; its exit code, stderr, and its peak
+/// resident memory, kB (sampled every 20 ms).
+fn drive_watching_memory(name: &str, camera: &str) -> (Option<i32>, String, u64) {
+    let out = scratch(name);
     let mut child = Command::new(EXE)
         .current_dir(root())
-        .args([
-            "drive",
-            "--camera",
-            "pipe:mjpeg:cat /dev/urandom",
-            "--dry-run",
-            "--seconds",
-            "3",
-            "--out",
-        ])
+        .args(["drive", "--camera", camera, "--dry-run", "--seconds", "3", "--out"])
         .arg(&out)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -548,27 +580,7 @@ fn short_frames_and_garbage_are_counted_unusable_frames() {
         std::thread::sleep(Duration::from_millis(20));
     }
     let code = child.wait().unwrap().code();
-    let stderr = reader.join().unwrap();
-    let skipped = stderr.lines().filter(|l| l.contains("not a JPEG frame")).count();
-    println!(
-        "garbage as MJPEG for 3 s: exit {code:?}, {skipped} unusable frames named, peak RSS {:.1} MB; last line: {}",
-        peak_kb as f64 / 1024.0,
-        stderr.lines().last().unwrap_or("")
-    );
-    assert_eq!(
-        code,
-        Some(1),
-        "no usable frame: {}",
-        stderr.lines().last().unwrap_or("")
-    );
-    assert!(skipped >= 10, "{skipped} unusable frames");
-    assert!(
-        stderr.contains("no usable frame"),
-        "{}",
-        stderr.lines().last().unwrap_or("")
-    );
-    assert!(!stderr.contains("panicked"));
-    assert!(peak_kb < 200 * 1024, "peak RSS {peak_kb} kB");
+    (code, reader.join().unwrap(), peak_kb)
 }
 
 /// The decision fields of a telemetry record.
