@@ -49,7 +49,7 @@ pub fn found() -> Vec<String> {
     }
     match super::rpicam::find_program() {
         None => out.push(
-            "camera module: no rpicam-vid or libcamera-vid on PATH (Raspberry Pi OS: sudo apt install rpicam-apps)"
+            "camera module: no rpicam-vid or libcamera-vid on PATH (Raspberry Pi OS: sudo apt install rpicam-apps-lite)"
                 .into(),
         ),
         Some(p) => match super::rpicam::list_cameras(&p) {

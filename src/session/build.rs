@@ -398,7 +398,7 @@ fn open_pipe(
         CameraSpec::Picam { index, mjpeg } => {
             let program = rpicam::find_program().ok_or_else(|| {
                 SessionError::Camera(format!(
-                    "--camera {}: neither rpicam-vid nor libcamera-vid is on PATH (Raspberry Pi OS: sudo apt install rpicam-apps; docs/pi.md)",
+                    "--camera {}: neither rpicam-vid nor libcamera-vid is on PATH (Raspberry Pi OS: sudo apt install rpicam-apps-lite, or rpicam-apps; docs/pi.md section 11)",
                     cam.label()
                 ))
             })?;
