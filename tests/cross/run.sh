@@ -3,7 +3,8 @@
 # with Debian's own Rust (rustc-web 1.96 + libstd-rust-web-dev:arm64) and linker
 # (gcc-aarch64-linux-gnu), runs `rccar replay` of the shipped sample and a short lane-only
 # `rccar sim` under qemu-aarch64, and checks that every decision is the one the native build
-# makes (tests/cross/compare.py). Closes with "N passed, N failed".
+# makes (tests/cross/compare.py); then reads a camera program's frames through a pipe (the
+# native simulator as the camera). Closes with "N passed, N failed".
 #
 #   bash tests/cross/run.sh                     the check (tests/all.sh runs it)
 #   RCCAR_CROSS_SIM_SECONDS=60 bash ...         a longer simulated drive (default 20 s)
@@ -158,7 +159,27 @@ else
   FAILED=$((FAILED + 1)); echo "$out"
 fi
 
-# ---- 3. the wiring picture of docs/pi.md follows config/car.toml [gpio] ----------------
+# ---- 3. a camera program on a pipe (src/pipecam/) -----------------------------------------
+# The aarch64 rccar starts a child (its own process group, the parent-death signal set in the
+# child before exec, under qemu) and reads its raw frames: the native simulator writing 10 s
+# of frames to stdout. Both builds must make the same decisions from them.
+PSIM=(sim --seconds 10 --no-timing --set detect.enabled=false --frames-to -)
+echo "== replay 'pipe:rgb24:rccar ${PSIM[*]}' (native, then aarch64 under qemu)"
+rm -rf "$OUT/native/pipe-sim" "$OUT/aarch64/pipe-sim"
+run native "$OUT/native/pipe" "$NATIVE" replay "pipe:rgb24:$NATIVE ${PSIM[*]} -o $OUT/native/pipe-sim" \
+  --no-annotate --no-timing --set detect.enabled=false --out "$OUT/native/pipe"; rn=$?
+run aarch64 "$OUT/aarch64/pipe" "${QEMU[@]}" "$BIN" replay "pipe:rgb24:$NATIVE ${PSIM[*]} -o $OUT/aarch64/pipe-sim" \
+  --no-annotate --no-timing --set detect.enabled=false --out "$OUT/aarch64/pipe"; ra=$?
+if [ $rn -ne 0 ] || [ $ra -ne 0 ]; then
+  fail "pipe replay exit codes: native $rn, aarch64 $ra (logs $OUT/*/pipe.log)"
+  tail -3 "$OUT/aarch64/pipe.log"
+elif out=$(python3 tests/cross/compare.py pipe "$OUT/native/pipe/telemetry.jsonl" "$OUT/aarch64/pipe/telemetry.jsonl"); then
+  PASSED=$((PASSED + 1)); echo "$out"
+else
+  FAILED=$((FAILED + 1)); echo "$out"
+fi
+
+# ---- 4. the wiring picture of docs/pi.md follows config/car.toml [gpio] ----------------
 if out=$(python3 docs/img/wiring.py --check 2>&1); then pass "$out"; else fail "$out"; fi
 
 echo "note: the camera (V4L2) and the GPIO are compiled, not opened: no device under qemu."
