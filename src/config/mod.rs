@@ -18,6 +18,7 @@
 mod behaviour;
 mod camera;
 mod check;
+mod classes;
 mod dashboard;
 mod detect;
 mod gpio;
@@ -35,11 +36,12 @@ mod warp;
 
 pub use behaviour::BehaviourConfig;
 pub use camera::CameraConfig;
+pub use classes::{ClassConfig, ClassesConfig};
 pub use dashboard::DashboardConfig;
-pub use detect::{DetectClass, DetectConfig};
+pub use detect::DetectConfig;
 pub use gpio::GpioConfig;
 pub use lane::{LaneConfig, PeakMode, ThresholdMode};
-pub use layers::{find_config, LoadedConfig, PATH_KEYS};
+pub use layers::{find_config, path_keys, LoadedConfig};
 pub use ranging::{RangingConfig, RangingMethod};
 pub use record::RecordConfig;
 pub use replay::ReplayConfig;
@@ -184,8 +186,11 @@ pub struct Config {
     pub sim: SimConfig,
     /// Object detection: which cascades the pipeline runs.
     pub detect: DetectConfig,
-    /// Monocular tilt ranging of detected boxes: calibration corrections, contact heights.
+    /// Monocular tilt ranging of detected boxes: calibration corrections, box noise, tracks.
     pub ranging: RangingConfig,
+    /// `[classes.<name>]`: each object class's model file, search region, box width and what
+    /// its box frames (one section per entry of src/classes.rs).
+    pub classes: ClassesConfig,
     /// The behaviour state machine: stop signs, lights, obstacles, lane lost.
     pub behaviour: BehaviourConfig,
     /// The Raspberry Pi's GPIO: start/stop button, status LED, HC-SR04 ultrasonic brake.

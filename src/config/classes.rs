@@ -1,0 +1,180 @@
+//! `[classes.<name>]`: one section per object class of the registry (src/classes.rs), all with
+//! the same keys: its model file (a path), where it is searched (fractions of the frame), the
+//! width of its detector box (metres), and what that box frames for ranging (sizes and heights,
+//! metres; a margin). Each class's defaults are in its registry entry
+//! ([`crate::classes::ClassDefaults`]); a file sets only the keys it changes. An unknown class
+//! name is refused like any unknown key (the loader checks against the serialised defaults).
+
+use super::check::Checker;
+use crate::classes::{ObjectClass, CLASSES};
+use crate::ranging::ClassBox;
+use serde::de::{self, MapAccess, Visitor};
+use serde::ser::SerializeMap;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use std::fmt;
+use std::ops::{Index, IndexMut};
+
+/// `[classes.<name>]`: the tunables of one object class (docs/detect.md, docs/ranging.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClassConfig {
+    /// Its cascade (OpenCV XML); a relative path is relative to the folder of the config file
+    /// that names it; "" = the class is not detected. A named file that is missing is an error.
+    pub model: String,
+    /// Where it is searched: [left, top, right, bottom], fractions of the frame (0..1); a box
+    /// must lie inside.
+    pub region: [f64; 4],
+    /// Width of what its cascade's box frames, [min, max] metres (the box, not the object:
+    /// trained boxes carry a margin); with `detect.range_m` it bounds the cascade's window size.
+    pub box_m: [f64; 2],
+    /// [width, height] of the face its box frames, metres (0 = unknown: not used for ranging).
+    pub size_m: [f64; 2],
+    /// Height above the floor of its box's bottom edge (the face's lower edge), metres (0: it
+    /// stands on the floor).
+    pub bottom_m: f64,
+    /// Its detector box's size over the face's outline (the training crops' margin plus the
+    /// detector's own bias; 1 = tight).
+    pub box_margin: f64,
+}
+
+impl ClassConfig {
+    /// The defaults of `class` (its registry entry).
+    pub fn default_for(class: ObjectClass) -> Self {
+        let d = class.info().defaults;
+        ClassConfig {
+            model: d.model.into(),
+            region: d.region,
+            box_m: d.box_m,
+            size_m: d.size_m,
+            bottom_m: d.bottom_m,
+            box_margin: d.box_margin,
+        }
+    }
+
+    /// What a detector box of this class frames, for ranging (`size_m`, `bottom_m`,
+    /// `box_margin`).
+    pub fn class_box(&self) -> ClassBox {
+        ClassBox {
+            width_m: self.size_m[0],
+            height_m: self.size_m[1],
+            bottom_m: self.bottom_m,
+            margin: self.box_margin,
+        }
+    }
+
+    /// Checks of one section, keys named `classes.<name>.<key>`: the region inside the frame,
+    /// an ordered box width, sizes, height and margin in range.
+    fn check(&self, class: ObjectClass, c: &mut Checker) {
+        let key = |k: &str| format!("classes.{class}.{k}");
+        let r = self.region;
+        if !(r.iter().all(|v| (0.0..=1.0).contains(v)) && r[0] < r[2] && r[1] < r[3]) {
+            c.fail(
+                &key("region"),
+                format!("{r:?}"),
+                "[left, top, right, bottom] in 0..=1 with left < right, top < bottom",
+            );
+        }
+        let b = self.box_m;
+        if !(b[0] > 0.0 && b[0] <= b[1] && b[1] <= 5.0) {
+            c.fail(
+                &key("box_m"),
+                format!("{b:?}"),
+                "[min, max] metres, 0 < min <= max <= 5",
+            );
+        }
+        c.range(&key("size_m[0]"), self.size_m[0], 0.0, 3.0);
+        c.range(&key("size_m[1]"), self.size_m[1], 0.0, 3.0);
+        c.range(&key("bottom_m"), self.bottom_m, 0.0, 3.0);
+        c.range(&key("box_margin"), self.box_margin, 0.5, 3.0);
+    }
+}
+
+/// `[classes]`: one [`ClassConfig`] per class, indexed by [`ObjectClass`]; in TOML a table
+/// keyed by the class names (`[classes.stop_sign]`, …), in registry order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClassesConfig([ClassConfig; ObjectClass::COUNT]);
+
+impl Default for ClassesConfig {
+    fn default() -> Self {
+        ClassesConfig(ObjectClass::ALL.map(ClassConfig::default_for))
+    }
+}
+
+impl Index<ObjectClass> for ClassesConfig {
+    type Output = ClassConfig;
+    fn index(&self, class: ObjectClass) -> &ClassConfig {
+        &self.0[class.index()]
+    }
+}
+
+impl IndexMut<ObjectClass> for ClassesConfig {
+    fn index_mut(&mut self, class: ObjectClass) -> &mut ClassConfig {
+        &mut self.0[class.index()]
+    }
+}
+
+impl ClassesConfig {
+    /// Every class with its section, in registry order.
+    pub fn iter(&self) -> impl Iterator<Item = (ObjectClass, &ClassConfig)> {
+        ObjectClass::ALL.into_iter().zip(self.0.iter())
+    }
+
+    /// Every class's section, mutable, in registry order.
+    pub fn iter_mut(&mut self) -> impl Iterator<Item = &mut ClassConfig> {
+        self.0.iter_mut()
+    }
+
+    /// Every section's checks.
+    pub(super) fn check(&self, c: &mut Checker) {
+        for (class, k) in self.iter() {
+            k.check(class, c);
+        }
+    }
+}
+
+impl Serialize for ClassesConfig {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut m = s.serialize_map(Some(ObjectClass::COUNT))?;
+        for (class, k) in self.iter() {
+            m.serialize_entry(class.name(), k)?;
+        }
+        m.end()
+    }
+}
+
+impl<'de> Deserialize<'de> for ClassesConfig {
+    /// A table keyed by class names; a class not named keeps its defaults (the loader merges
+    /// every file over the defaults, so each section read here is complete).
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct ByName;
+        impl<'de> Visitor<'de> for ByName {
+            type Value = ClassesConfig;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a table of object classes ([classes.<name>])")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut m: A) -> Result<ClassesConfig, A::Error> {
+                let mut out = ClassesConfig::default();
+                while let Some(name) = m.next_key::<String>()? {
+                    let Some(class) = ObjectClass::ALL.into_iter().find(|c| c.name() == name) else {
+                        return Err(de::Error::custom(format!(
+                            "unknown class `{name}`, expected one of {}",
+                            class_names()
+                        )));
+                    };
+                    out.0[class.index()] = m.next_value()?;
+                }
+                Ok(out)
+            }
+        }
+        d.deserialize_map(ByName)
+    }
+}
+
+/// The class names, quoted and comma-separated (for messages).
+pub(super) fn class_names() -> String {
+    CLASSES
+        .iter()
+        .map(|c| format!("`{}`", c.name))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
