@@ -178,3 +178,25 @@ pub(super) fn class_names() -> String {
         .collect::<Vec<_>>()
         .join(", ")
 }
+
+/// Where a key of the former flat layout lives now: `detect.<name>` is
+/// `classes.<name>.model`, `detect.<name>_region` `classes.<name>.region`,
+/// `ranging.<name>_bottom_m` `classes.<name>.bottom_m`, and so on (`None`: no such key).
+pub(super) fn moved_key(key: &str) -> Option<String> {
+    let (section, rest) = key.split_once('.')?;
+    if !matches!(section, "detect" | "ranging") {
+        return None;
+    }
+    let fields = super::layers::to_table(&ClassConfig::default_for(ObjectClass::ALL[0]));
+    CLASSES.iter().find_map(|c| {
+        let tail = rest.strip_prefix(c.name)?;
+        let field = if tail.is_empty() {
+            "model"
+        } else {
+            tail.strip_prefix('_')?
+        };
+        fields
+            .contains_key(field)
+            .then(|| format!("classes.{}.{field}", c.name))
+    })
+}

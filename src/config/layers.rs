@@ -401,9 +401,7 @@ fn check_known(layer: &toml::Table, known: &toml::Table, prefix: &str, origin: &
         };
         match known.get(k) {
             None => {
-                let hint = closest(k, known.keys())
-                    .map(|c| format!(", did you mean `{c}`?"))
-                    .unwrap_or_default();
+                let hint = unknown_key_hint(k, &full, prefix, known);
                 return Err(ConfigError::UnknownKey {
                     origin: origin.into(),
                     key: full,
@@ -424,6 +422,29 @@ fn check_known(layer: &toml::Table, known: &toml::Table, prefix: &str, origin: &
         }
     }
     Ok(())
+}
+
+/// The hint after an unknown key `k` (`full` with its section): a close spelling among its
+/// siblings; for a key of the former flat layout (`detect.stop_sign`) the key it is now
+/// (`classes.stop_sign.model`); for an unknown class, the class an alias names or the known
+/// ones.
+fn unknown_key_hint(k: &str, full: &str, prefix: &str, known: &toml::Table) -> String {
+    if let Some(c) = closest(k, known.keys()) {
+        return format!(", did you mean `{c}`?");
+    }
+    if let Some(new) = super::classes::moved_key(full) {
+        return format!(", each class has its own section now: `{new}`");
+    }
+    if prefix == "classes" {
+        return match crate::classes::ObjectClass::from_label(k) {
+            Some(c) => format!(", did you mean `{c}`?"),
+            None => format!(
+                ", the classes are {} (a new one needs its entry in src/classes.rs)",
+                super::classes::class_names()
+            ),
+        };
+    }
+    String::new()
 }
 
 fn merge(into: &mut toml::Table, from: &toml::Table) {
