@@ -200,3 +200,178 @@ pub(super) fn moved_key(key: &str) -> Option<String> {
             .then(|| format!("classes.{}.{field}", c.name))
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{path_keys, Config, LoadedConfig};
+
+    /// A section that sets one key keeps the class's other defaults, and the other classes
+    /// keep theirs; a model path given in a file or with `--set` is resolved like before.
+    #[test]
+    fn a_partial_class_section_merges_over_the_defaults() {
+        let c = Config::from_toml_str("[classes.stop_sign]\nregion = [0.5, 0.1, 0.9, 0.5]\n", "t.toml").unwrap();
+        let mut want = ClassesConfig::default();
+        want[ObjectClass::StopSign].region = [0.5, 0.1, 0.9, 0.5];
+        assert_eq!(c.classes, want);
+        assert_eq!(c.classes[ObjectClass::StopSign].box_m, [0.11, 0.16]);
+        assert_eq!(c.classes[ObjectClass::StopSign].model, "cascades/stop_sign.xml");
+        let c = Config::default()
+            .with_override("classes.obstacle.bottom_m=0.02")
+            .unwrap();
+        assert_eq!(c.classes[ObjectClass::Obstacle].bottom_m, 0.02);
+        assert_eq!(c.classes[ObjectClass::Obstacle].box_margin, 1.36);
+        assert_eq!(c.number("classes.obstacle.bottom_m"), Some(0.02));
+
+        // A relative model path in an override file is read from that file's folder; a default
+        // from the base file's.
+        let t = tempfile::tempdir().unwrap();
+        let dir = std::path::absolute(t.path()).unwrap();
+        std::fs::create_dir(dir.join("sub")).unwrap();
+        std::fs::write(dir.join("car.toml"), "").unwrap();
+        std::fs::write(
+            dir.join("sub/local.toml"),
+            "[classes.traffic_light]\nmodel = \"mine/light.xml\"\n",
+        )
+        .unwrap();
+        let set = ["classes.stop_sign.model=/x.xml".to_string()];
+        let l = LoadedConfig::load(&dir.join("car.toml"), &[dir.join("sub/local.toml")], &set).unwrap();
+        let model = |c: ObjectClass| std::path::PathBuf::from(&l.cfg.classes[c].model);
+        assert_eq!(model(ObjectClass::StopSign), std::path::Path::new("/x.xml"));
+        assert_eq!(model(ObjectClass::TrafficLight), dir.join("sub/mine/light.xml"));
+        assert_eq!(model(ObjectClass::Obstacle), dir.join("cascades/obstacle.xml"));
+        assert_eq!(l.cfg.classes[ObjectClass::TrafficLight].box_m, [0.065, 0.10]);
+        // Every path key names a string of the defaults (each class's model among them).
+        let defaults = crate::config::layers::to_table(&Config::default());
+        let keys: Vec<&str> = path_keys().collect();
+        assert!(keys.contains(&"classes.obstacle.model"), "{keys:?}");
+        for k in keys {
+            let (section, rest) = k.split_once('.').unwrap();
+            let mut v = &defaults[section];
+            for p in rest.split('.') {
+                v = &v[p];
+            }
+            assert!(v.is_str(), "{k}");
+        }
+    }
+
+    /// A class the registry does not have is an unknown key, named, with the classes there are
+    /// (or the one an alias means); so is a key no class has.
+    #[test]
+    fn an_unknown_class_or_class_key_is_refused_naming_it() {
+        let e = Config::from_toml_str("[classes.bicycle]\nregion = [0.0, 0.0, 1.0, 1.0]\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "t.toml: unknown key `classes.bicycle`, the classes are `stop_sign`, `traffic_light`, \
+             `obstacle` (a new one needs its entry in src/classes.rs)"
+        );
+        let e = Config::from_toml_str("[classes.stop_signs]\nbottom_m = 0.1\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "t.toml: unknown key `classes.stop_signs`, did you mean `stop_sign`?");
+        let e = Config::default()
+            .with_override("classes.light.bottom_m=0.1")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "command line: unknown key `classes.light`, did you mean `traffic_light`?"
+        );
+        let e = Config::from_toml_str("[classes.obstacle]\nmargin = 1.2\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "t.toml: unknown key `classes.obstacle.margin`");
+    }
+
+    /// A key of the former flat layout names the key it is now.
+    #[test]
+    fn an_old_flat_key_names_its_new_key() {
+        for (text, old, new) in [
+            (
+                "[detect]\nstop_sign = \"x.xml\"\n",
+                "detect.stop_sign",
+                "classes.stop_sign.model",
+            ),
+            (
+                "[detect]\ntraffic_light_region = [0.0, 0.0, 1.0, 1.0]\n",
+                "detect.traffic_light_region",
+                "classes.traffic_light.region",
+            ),
+            (
+                "[detect]\nobstacle_box_m = [0.1, 0.2]\n",
+                "detect.obstacle_box_m",
+                "classes.obstacle.box_m",
+            ),
+            (
+                "[ranging]\nobstacle_bottom_m = 0.0\n",
+                "ranging.obstacle_bottom_m",
+                "classes.obstacle.bottom_m",
+            ),
+            (
+                "[ranging]\nstop_sign_size_m = [0.1, 0.1]\n",
+                "ranging.stop_sign_size_m",
+                "classes.stop_sign.size_m",
+            ),
+            (
+                "[ranging]\ntraffic_light_box_margin = 1.2\n",
+                "ranging.traffic_light_box_margin",
+                "classes.traffic_light.box_margin",
+            ),
+        ] {
+            let e = Config::from_toml_str(text, "t.toml").unwrap_err().to_string();
+            assert_eq!(
+                e,
+                format!("t.toml: unknown key `{old}`, each class has its own section now: `{new}`")
+            );
+        }
+        let e = Config::default()
+            .with_override("detect.obstacle=o.xml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.ends_with("`classes.obstacle.model`"), "{e}");
+        // Not every unknown key of those sections is an old class key.
+        let e = Config::from_toml_str("[detect]\nstop_sign_colour = 1\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "t.toml: unknown key `detect.stop_sign_colour`");
+    }
+
+    /// The checks name the class's key: a region outside the frame or reversed, an unordered
+    /// box width, a box bottom above the lens, a value of the wrong type.
+    #[test]
+    fn a_bad_class_value_names_its_key() {
+        let e = Config::from_toml_str("[classes.traffic_light]\nregion = [0.6, 0.0, 0.4, 0.5]\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "t.toml: classes.traffic_light.region = [0.6, 0.0, 0.4, 0.5] is out of range \
+             (allowed: [left, top, right, bottom] in 0..=1 with left < right, top < bottom)"
+        );
+        let e = Config::default()
+            .with_override("classes.obstacle.region=[0.0, 0.0, 1.0, 1.5]")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("classes.obstacle.region = [0.0, 0.0, 1.0, 1.5]"), "{e}");
+        let e = Config::from_toml_str("[classes.stop_sign]\nbox_m = [0.2, 0.1]\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("t.toml: classes.stop_sign.box_m = [0.2, 0.1]"), "{e}");
+        let e = Config::from_toml_str(
+            "[camera]\nheight_m = 0.1\n[classes.stop_sign]\nbottom_m = 0.15\n",
+            "t.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("t.toml: classes.stop_sign.bottom_m = 0.15 is out of range (allowed: below camera.height_m"),
+            "{e}"
+        );
+        let e = Config::from_toml_str("[classes.stop_sign]\nregion = \"right\"\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("t.toml: `classes.stop_sign.region` = \"right\""), "{e}");
+    }
+}
