@@ -1,5 +1,6 @@
 //! Loading a configuration in layers: the base file, override files (e.g. `config/local.toml`)
-//! and `key=value` assignments from the command line, merged table by table; unknown keys are
+//! and `key=value` assignments from the command line, merged table by table over the defaults
+//! (so a section, e.g. one `[classes.<name>]`, needs only the keys it changes); unknown keys are
 //! refused with a hint, relative paths resolved against the file that names them, and the
 //! result deserialised and checked ([`Config::validate`]). Also where the configuration is
 //! found ([`find_config`]).

@@ -1,9 +1,10 @@
 //! The car's configuration: `config/car.toml`, the one file students edit.
 //!
 //! Loading goes in three steps (`layers.rs`):
-//! 1. the base file is parsed as TOML (a syntax error names its line);
+//! 1. the base file is parsed as TOML (a syntax error names its line) and merged over the
+//!    defaults, table by table;
 //! 2. an optional personal override file (git-ignored, e.g. `config/local.toml`) is merged on
-//!    top, table by table, and `key=value` overrides from the command line after it;
+//!    top, and `key=value` overrides from the command line after it;
 //! 3. the merged tree is checked for unknown keys (a typo such as `steering.kpp` is an error
 //!    naming it, never silently ignored), deserialised into [`Config`] and every value is
 //!    range-checked by [`Config::validate`] (`check.rs`); an error names the key, the value and
@@ -13,7 +14,9 @@
 //! conversion into the option type of the stage it configures (which lives in the stage: the
 //! stages never read the configuration). Every section has defaults, so tests and the
 //! simulator can start from `Config::default()` and a file only needs the keys it changes. The
-//! shipped `car.toml` lists them all, with units and advice.
+//! shipped `car.toml` lists them all, with units and advice. The object classes' sections
+//! (`[classes.<name>]`, `classes.rs`) are one table keyed by class name, each class's defaults
+//! from its entry in the registry (src/classes.rs).
 
 mod behaviour;
 mod camera;
