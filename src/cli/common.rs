@@ -100,11 +100,11 @@ impl ConfigArgs {
     }
 }
 
-/// Loads the `[detect]` cascades; a configured one that is missing is an error naming the key,
-/// the file and the fix (an empty path switches a class off). The paths in `cfg` are absolute
-/// after [`ConfigArgs::load`].
+/// Loads the classes' cascades (`classes.<name>.model`); a configured one that is missing is an
+/// error naming the key, the file and the fix (an empty path switches a class off). The paths
+/// in `cfg` are absolute after [`ConfigArgs::load`].
 pub fn load_detector(cfg: &Config) -> Result<Option<rccar::detect::DetectStage>> {
-    let (stage, missing) = rccar::pipeline::load_detector(&cfg.detect, Path::new("."))?;
+    let (stage, missing) = rccar::pipeline::load_detector(cfg, Path::new("."))?;
     if let Some(m) = missing.first() {
         bail!("{m}");
     }
