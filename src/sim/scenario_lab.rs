@@ -11,7 +11,7 @@
 use super::rng::SplitMix64;
 use super::run::{SimError, Simulation};
 use super::track::Track;
-use crate::classes::ObjectClass;
+use crate::classes::SimShape;
 use crate::config::Config;
 use crate::ranging::Pair;
 
@@ -148,7 +148,7 @@ yaw_deg = 180
 /// `None` if the track has no object.
 pub fn pose_before_object(cfg: &Config, track: &Track, d_m: f64) -> Option<super::vehicle::Pose> {
     let ob = track.enabled_objects().next()?;
-    let near = if ob.kind == ObjectClass::Obstacle {
+    let near = if ob.kind.info().shape == SimShape::Box {
         ob.size[0] / 2.0
     } else {
         0.0

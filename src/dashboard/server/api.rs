@@ -427,6 +427,8 @@ fn state_json(sh: &Shared, since: f64, session: bool) -> Value {
         "track_length": sh.track_length,
         "armed": sh.arm.is_armed(),
         "estop": sh.arm.is_estopped(),
+        // who last armed, disarmed or stopped the car (flag, button, page, heartbeat, link, …)
+        "arm_actor": sh.arm.last_actor().name(),
         "viewers": sh.viewers.load(Ordering::SeqCst),
         "stream_frames": sh.frames_sent.load(Ordering::SeqCst),
         "wall_s": s.now(),
