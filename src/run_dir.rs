@@ -265,6 +265,14 @@ pub enum RunDirError {
         /// The serializer's message.
         message: String,
     },
+    /// An image cannot be encoded as PNG.
+    #[error("{path}: cannot encode PNG: {message}", path = path.display())]
+    Png {
+        /// The file.
+        path: PathBuf,
+        /// The encoder's message.
+        message: String,
+    },
     /// A run folder to read is not a folder.
     #[error("{path}: not a folder (give a run's output folder, e.g. out/sim/latest)", path = path.display())]
     NotARunFolder {
@@ -486,6 +494,16 @@ impl RunDir {
         })?;
         self.files.insert(name.to_string());
         Ok(path)
+    }
+
+    /// Writes `img` as PNG (a plot), atomically, as `name`; returns its path.
+    pub fn write_png(&mut self, name: &str, img: &image::RgbImage) -> Result<PathBuf, RunDirError> {
+        let mut png = std::io::Cursor::new(Vec::new());
+        img.write_to(&mut png, image::ImageFormat::Png).map_err(|e| RunDirError::Png {
+            path: self.path.join(name),
+            message: e.to_string(),
+        })?;
+        self.write(name, &png.into_inner())
     }
 
     /// Writes `value` as pretty JSON, atomically, with the run's id as its first key

@@ -118,11 +118,3 @@ fn built_from_config() -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config").join("car.toml");
     p.is_file().then_some(p)
 }
-
-pub const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
-
-/// The plot font, from the system (never committed).
-pub fn load_font() -> Option<&'static [u8]> {
-    std::fs::read(FONT).ok().map(|b| &*Box::leak(b.into_boxed_slice()))
-}
-

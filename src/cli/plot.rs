@@ -71,8 +71,8 @@ pub fn run(a: PlotArgs) -> Result<ExitCode> {
         println!("plot: {} ({records} records) as `{label}`", file.display());
         traces.push(Trace { label, panels });
     }
-    let font = super::common::load_font()
-        .with_context(|| format!("no font at {}; apt install fonts-dejavu-core", super::common::FONT))?;
+    let font = plot::system_font()
+        .with_context(|| format!("no font at {}; apt install fonts-dejavu-core", plot::SYSTEM_FONT))?;
     plot::register_font(font);
     // Panel titles and axis names: the field as typed, and what an alias stands for.
     let names: Vec<String> = fields.iter().map(|f| shown(f)).collect();

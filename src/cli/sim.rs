@@ -3,7 +3,7 @@
 //! `rccar replay`; `--sweep key=lo:hi:n` runs a gain sweep in parallel (given twice: a grid
 //! with a heat map); `--start-offset M` / `--kick T:DY` measure the step response.
 
-use super::common::{load_font, ConfigArgs, FONT};
+use super::common::ConfigArgs;
 use super::timer::WallTimer;
 use anyhow::{bail, Result};
 use rccar::sim::step::{StepMetrics, StepRequest};
@@ -11,7 +11,7 @@ use clap::Args;
 use rccar::config::{Config, RangingMethod, StereoReference};
 use rccar::drive::{Clock, Level, LoopEnd, NoClock, Observer, StopSignal};
 use rccar::session::{ArmAt, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
-use rccar::sim::plot;
+use rccar::sim::plot::{self, system_font, SYSTEM_FONT};
 use rccar::sim::report::RunReport;
 use rccar::run_dir::{RunDir, RunState};
 use rccar::sim::run::Summary;
@@ -157,7 +157,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let cfg = config(&a)?;
     let track_path = a.track.clone().unwrap_or_else(|| PathBuf::from(&cfg.sim.track));
     let track = Track::load(&track_path)?;
-    let font = load_font();
+    let font = system_font();
     let step = StepRequest::parse(a.start_offset, a.kick.as_deref(), track.spec.road.lane_width_m)?;
     let stereo = check_flags(&a, &cfg, step)?;
     // The run folder (and the --record folders): new, or refused before anything is written.
@@ -215,11 +215,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         println!("{line}");
     }
     if stereo {
-        let t = &report.stereo;
-        println!(
-            "  stereo: {} pairs, detector boxes ranged by stereo {}, without a match {}",
-            t.pairs, t.ranged, t.unmatched
-        );
+        println!("{}", report.stereo.line());
     }
     println!(
         "  {:.1} s simulated in {:.1} s wall: {:.1}x real time",
@@ -229,7 +225,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     );
     let step_fig = write_summary(&mut run, &cfg, &report, &summary, step, &outcome)?;
     write_plots(&mut run, font, &report, &summary, &scene, step_fig.as_ref())?;
-    print_frames(&a, summary.frames);
+    if let Some(line) = report.frames_line(summary.frames) {
+        println!("{line}");
+    }
     let tel_lines = outcome.telemetry.as_ref().map(|t| t.1);
     super::outdir::finish(&mut run, RunState::from_stop(interrupted), tel_lines)?;
     if let Some(why) = interrupted {
@@ -248,19 +246,12 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
 /// report`), each whole or not at all.
 fn write_summary(run: &mut RunDir, cfg: &Config, report: &RunReport, summary: &Summary, step: Option<StepRequest>, outcome: &rccar::session::Outcome) -> Result<Option<StepMetrics>> {
     let mut sum_json = serde_json::to_value(summary)?;
-    let mut step_fig = None;
-    if let Some(st) = step {
-        match report.step_response(&st) {
-            Some(Ok(m)) => {
-                for line in m.lines() {
-                    println!("{line}");
-                }
-                sum_json["step"] = serde_json::to_value(&m)?;
-                step_fig = Some(m);
-            }
-            Some(Err(e)) => println!("  step response: {e}"),
-            None => println!("  step response: the run ended before the kick at t = {} s", st.t),
-        }
+    let (lines, step_fig) = step.map(|st| report.step_summary(&st)).unwrap_or_default();
+    for line in lines {
+        println!("{line}");
+    }
+    if let Some(m) = &step_fig {
+        sum_json["step"] = serde_json::to_value(m)?;
     }
     let sum_path = run.write_json("summary.json", &sum_json)?;
     run.write_json("config.json", cfg)?;
@@ -280,37 +271,14 @@ fn write_plots(
     step: Option<&StepMetrics>,
 ) -> Result<()> {
     let Some(font) = font else {
-        println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
+        println!("  plots:     skipped (no font at {SYSTEM_FONT}; apt install fonts-dejavu-core)");
         return Ok(());
     };
     plot::register_font(font);
-    let p1 = super::outdir::save_png(run, "xte_steer.png", &plot::time_plot(&report.series, summary.lane_width_m)?)?;
-    let p2 = super::outdir::save_png(run, "path.png", &plot::path_plot(&report.series, scene)?)?;
-    println!("  plots:     {} {}", p1.display(), p2.display());
-    if let Some(m) = step {
-        let p3 = super::outdir::save_png(run, "step.png", &plot::step_plot(&report.series.t, &report.series.xte, m)?)?;
-        println!("  step:      {}", p3.display());
+    let p = report.write_plots(run, summary.lane_width_m, scene, step)?;
+    println!("  plots:     {} {}", p.time.display(), p.path.display());
+    if let Some(step) = p.step {
+        println!("  step:      {}", step.display());
     }
     Ok(())
-}
-
-/// Where the recorded frames went.
-fn print_frames(a: &SimArgs, frames: u64) {
-    match (&a.record, &a.record_right) {
-        (Some(dir), Some(right)) => println!(
-            "  frames:    {}/ and {}/ ({} PNG each; replay with `rccar replay {} --right {} --set ranging.method=stereo`)",
-            dir.display(),
-            right.display(),
-            frames,
-            dir.display(),
-            right.display()
-        ),
-        (Some(dir), None) => println!(
-            "  frames:    {}/ ({} PNG; replay with `rccar replay {}`)",
-            dir.display(),
-            frames,
-            dir.display()
-        ),
-        _ => {}
-    }
 }

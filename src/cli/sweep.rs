@@ -86,11 +86,11 @@ pub fn run_sweep(
         plot::register_font(font);
         if axes.len() == 1 {
             let rows: Vec<(f64, Summary)> = runs.iter().map(|r| (r.values[0], r.summary.clone())).collect();
-            let p = outdir::save_png(&mut run, "sweep.png", &plot::sweep_plot(keys[0], &rows)?)?;
+            let p = run.write_png("sweep.png", &plot::sweep_plot(keys[0], &rows)?)?;
             println!("  plot:  {}", p.display());
         } else {
             let img = plot::grid_plot(keys[0], keys[1], &axes[0].values, &axes[1].values, &runs)?;
-            let p = outdir::save_png(&mut run, "sweep_grid.png", &img)?;
+            let p = run.write_png("sweep_grid.png", &img)?;
             println!("  heat map: {}", p.display());
         }
     }
