@@ -39,7 +39,7 @@ pub use dashboard::DashboardConfig;
 pub use detect::{DetectClass, DetectConfig};
 pub use gpio::GpioConfig;
 pub use lane::{LaneConfig, PeakMode, ThresholdMode};
-pub use layers::{find_config, LoadedConfig, PATH_KEYS};
+pub use layers::{find_config, find_local, local_beside, source_tree_config, LoadedConfig, MissingLocal, PATH_KEYS};
 pub use ranging::{RangingConfig, RangingMethod};
 pub use record::RecordConfig;
 pub use replay::ReplayConfig;
