@@ -8,7 +8,6 @@ use anyhow::{Context, Result};
 use clap::Args;
 use rccar::detect::{annotate, Cascade, DetectParams, Detector};
 use rccar::source::escape_name;
-use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -98,9 +97,10 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
         max_size: args.max_size,
         parallel: args.parallel,
     };
+    let names: Vec<String> = args.cascades.iter().map(|p| escape_name(p.as_os_str())).collect();
     let mut detectors = Vec::new();
     for path in &args.cascades {
-        detectors.push((escape_name(path.as_os_str()), Detector::new(Cascade::from_file(path)?)));
+        detectors.push(Detector::new(Cascade::from_file(path)?));
     }
     if !args.no_annotate {
         std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create", args.out.display()))?;
@@ -109,7 +109,7 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
     let mut used = std::collections::HashSet::new();
     for path in &args.images {
         let shown = escape_name(path.as_os_str());
-        match detect_one(&args, &params, &mut detectors, path, &shown, &mut used) {
+        match detect_one(&args, &params, (&names, &mut detectors), path, &shown, &mut used) {
             Ok(()) => {}
             Err(DetectFailure::Skip(why)) => {
                 eprintln!("skipped {shown}: {why}");
@@ -134,32 +134,16 @@ enum DetectFailure {
 fn detect_one(
     args: &DetectArgs,
     params: &DetectParams,
-    detectors: &mut [(String, Detector)],
+    (names, detectors): (&[String], &mut [Detector]),
     path: &std::path::Path,
     shown: &str,
     used: &mut std::collections::HashSet<String>,
 ) -> Result<(), DetectFailure> {
     let img = rccar::source::read_image(path).map_err(DetectFailure::Skip)?;
     let (rgb, gray) = annotate::rgb_and_gray(&img);
-    let found = annotate::detect_all(detectors.iter_mut().map(|d| &mut d.1), &gray, &rgb, params, args.light)
-        .map_err(|(ci, e)| DetectFailure::Skip(format!("{}: {e}", detectors[ci].0)))?;
-    let mut boxes = Vec::new();
-    for f in &found {
-        let d = &f.detection;
-        let mut b = json!({
-            "cascade": detectors[f.cascade].0,
-            "x": d.rect.x, "y": d.rect.y, "width": d.rect.width, "height": d.rect.height,
-            "neighbors": d.neighbors,
-        });
-        if let Some(light) = f.light {
-            b["light"] = serde_json::to_value(light).map_err(|e| DetectFailure::Fatal(e.into()))?;
-        }
-        boxes.push(b);
-    }
-    println!(
-        "{}",
-        json!({"image": shown, "width": gray.width(), "height": gray.height(), "boxes": boxes})
-    );
+    let found = annotate::detect_all(detectors.iter_mut(), &gray, &rgb, params, args.light)
+        .map_err(|(ci, e)| DetectFailure::Skip(format!("{}: {e}", names[ci])))?;
+    println!("{}", annotate::image_record(shown, gray.dimensions(), &found, names));
     if !args.no_annotate {
         let name = rccar::source::unique_name(path.file_name().map(escape_name).unwrap_or_default(), used);
         let out = args.out.join(format!("{name}.detect.png"));

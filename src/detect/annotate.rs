@@ -1,6 +1,7 @@
 //! Several cascades on one still image, as `rccar detect` runs them: the image in grey (as
 //! OpenCV's `cvtColor`), every cascade's boxes (with the traffic-light reading inside each when
-//! asked), and a copy of the image with the boxes drawn, one colour per cascade.
+//! asked), the image's JSON line ([`image_record`]), and a copy of the image with the boxes
+//! drawn, one colour per cascade.
 
 use super::{gray_from_rgb, light_state, DetectError, DetectParams, Detection, Detector, LightReading, Rect};
 use image::{DynamicImage, GrayImage, Rgb, RgbImage};
@@ -39,6 +40,28 @@ pub fn rgb_and_gray(img: &DynamicImage) -> (RgbImage, GrayImage) {
         }
     };
     (rgb, gray)
+}
+
+/// The JSON line of one image of `rccar detect`: its name, width and height, and every box
+/// with the name (`names[cascade]`) of the cascade that found it, its raw hits and, when read,
+/// the traffic light inside it.
+pub fn image_record(image: &str, (width, height): (u32, u32), found: &[FoundBox], names: &[String]) -> serde_json::Value {
+    let boxes: Vec<serde_json::Value> = found
+        .iter()
+        .map(|f| {
+            let d = &f.detection;
+            let mut b = serde_json::json!({
+                "cascade": names[f.cascade],
+                "x": d.rect.x, "y": d.rect.y, "width": d.rect.width, "height": d.rect.height,
+                "neighbors": d.neighbors,
+            });
+            if let Some(light) = f.light {
+                b["light"] = serde_json::json!(light);
+            }
+            b
+        })
+        .collect();
+    serde_json::json!({"image": image, "width": width, "height": height, "boxes": boxes})
 }
 
 /// Every detector's boxes in `gray`, in detector order (`light`: with the light reading of
