@@ -86,15 +86,6 @@ fn find_all(paths: &[PathBuf], b: &BoardArgs) -> Result<(Found, (u32, u32))> {
     Ok((found, size))
 }
 
-fn print_camera(label: &str, c: &CameraCalibration) {
-    let k = &c.intrinsics;
-    let d = &c.distortion.0;
-    println!(
-        "{label}: fx {:.3} fy {:.3} cx {:.3} cy {:.3} px; k1 {:.5} k2 {:.5} p1 {:.6} p2 {:.6} k3 {:.5}; RMS {:.4} px",
-        k.fx, k.fy, k.cx, k.cy, d[0], d[1], d[2], d[3], d[4], c.rms_px
-    );
-}
-
 /// Runs `rccar calibrate camera`.
 pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
     let (found, size) = find_all(&a.images, &a.board)?;
@@ -115,7 +106,7 @@ pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
     for (n, e) in &cam.per_image_rms_px {
         println!("{n}: reprojection RMS {e:.4} px");
     }
-    print_camera("camera", &cam);
+    println!("{}", cam.summary_line("camera"));
     let file = CalibrationFile::Camera {
         board: a.board.board,
         square_m: a.board.square,
@@ -165,8 +156,8 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
         })
         .collect();
     let (stereo, rms) = photos::fit_pair(a.board.board, a.board.square, &pairs, skipped, sl)?;
-    print_camera("left", &stereo.left);
-    print_camera("right", &stereo.right);
+    println!("{}", stereo.left.summary_line("left"));
+    println!("{}", stereo.right.summary_line("right"));
     for (l, r, e) in &stereo.per_pair_rms_px {
         println!("{l} + {r}: stereo reprojection RMS {e:.4} px");
     }
