@@ -13,7 +13,8 @@
 //! terminal is gone: everything the commands print goes through [`say`], which never panics on
 //! a closed stdout or stderr.
 
-use rccar::drive::{StopReason, StopSignal};
+use rccar::drive::{Level, Say, StopReason, StopSignal};
+use rccar::session::Session;
 use signal_hook::consts::{SIGHUP, SIGINT, SIGQUIT, SIGTERM, SIGUSR1};
 use std::io::Write;
 use std::sync::{Mutex, OnceLock};
@@ -30,13 +31,13 @@ fn button() -> &'static Mutex<Option<Hook>> {
     B.get_or_init(|| Mutex::new(None))
 }
 
-/// The stop reason and name of a terminating signal.
-fn reason(sig: i32) -> (StopReason, &'static str) {
+/// The stop reason of a terminating signal.
+fn reason(sig: i32) -> StopReason {
     match sig {
-        SIGTERM => (StopReason::Terminate, "SIGTERM"),
-        SIGHUP => (StopReason::Hangup, "SIGHUP"),
-        SIGQUIT => (StopReason::Quit, "SIGQUIT"),
-        _ => (StopReason::Interrupt, "Ctrl-C"),
+        SIGTERM => StopReason::Terminate,
+        SIGHUP => StopReason::Hangup,
+        SIGQUIT => StopReason::Quit,
+        _ => StopReason::Interrupt,
     }
 }
 
@@ -79,7 +80,8 @@ fn watch(signals: &mut signal_hook::iterator::Signals, stop: &StopSignal) {
             continue;
         }
         count += 1;
-        let (why, name) = reason(sig);
+        let why = reason(sig);
+        let name = why.said();
         stop.request(why);
         if count >= 2 {
             say_err(&format!("second {name}: stopping now"));
@@ -106,6 +108,26 @@ pub fn on_emergency(f: impl Fn() + Send + Sync + 'static) {
 pub fn emergency() {
     for h in hooks().lock().unwrap_or_else(|e| e.into_inner()).iter() {
         h();
+    }
+}
+
+/// The library's way to print ([`Say`]): information through [`say`], warnings through
+/// [`say_err`].
+pub fn sayer() -> Say {
+    std::sync::Arc::new(|level, line: &str| match level {
+        Level::Info => say(line),
+        Level::Warn => say_err(line),
+    })
+}
+
+/// The session's notes: information as `command: line` on stdout, warnings as they are on
+/// stderr.
+pub fn notes(command: &str, session: &Session) {
+    for (level, line) in session.notes() {
+        match level {
+            Level::Info => say(&format!("{command}: {line}")),
+            Level::Warn => say_err(line),
+        }
     }
 }
 

@@ -4,12 +4,11 @@
 //! with a heat map); `--start-offset M` / `--kick T:DY` measure the step response.
 
 use super::common::ConfigArgs;
-use super::timer::WallTimer;
 use anyhow::{bail, Result};
 use rccar::sim::step::{StepMetrics, StepRequest};
 use clap::Args;
 use rccar::config::{Config, RangingMethod, StereoReference};
-use rccar::drive::{Clock, Level, LoopEnd, NoClock, Observer, StopSignal};
+use rccar::drive::{LoopEnd, Observer};
 use rccar::session::{ArmAt, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
 use rccar::sim::plot::{self, system_font, SYSTEM_FONT};
 use rccar::sim::report::RunReport;
@@ -18,7 +17,6 @@ use rccar::sim::run::Summary;
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
 use rccar::sim::world::lock;
-use rccar::timing::NoTimer;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -121,7 +119,7 @@ fn check_flags(a: &SimArgs, cfg: &Config, step: Option<StepRequest>) -> Result<b
 }
 
 /// The simulated car, built by the library's session builder.
-fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, stop: &StopSignal, clock: Arc<dyn Clock + Send + Sync>, say: rccar::drive::Say) -> Result<Session> {
+fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, env: SessionEnv) -> Result<Session> {
     let mut spec = SessionSpec::new(
         SourceSpec::Sim {
             scene: SceneSpec::Shared(Arc::new(Scene::new(track))),
@@ -137,18 +135,11 @@ fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, stop: &StopSi
     spec.frames_viewed = a.record.is_some() || a.dash.dashboard;
     spec.operator_ends_run = a.dash.dashboard;
     spec.telemetry = Some(run.join("telemetry.jsonl"));
-    let timer: Box<dyn rccar::timing::StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
-    let env = SessionEnv { clock, stop: stop.clone(), timer, say };
     let session = Session::build(cfg, spec, env)?;
     if a.truth_boxes {
         println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
     }
-    for (level, line) in session.notes() {
-        match level {
-            Level::Info => println!("sim: {line}"),
-            Level::Warn => eprintln!("{line}"),
-        }
-    }
+    super::signals::notes("sim", &session);
     Ok(session)
 }
 
@@ -172,12 +163,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         return super::sweep::run_sweep(&a.sweep, a.jobs, &cfg, &track, font, run);
     }
     let stop = super::signals::install();
-    let clock: Arc<dyn Clock + Send + Sync> = if a.no_timing { Arc::new(NoClock) } else { Arc::new(super::timer::WallClock::new()) };
-    let say: rccar::drive::Say = Arc::new(|level, line: &str| match level {
-        Level::Info => super::signals::say(line),
-        Level::Warn => super::signals::say_err(line),
-    });
-    let mut session = session(&a, &cfg, &track, &run, &stop, clock.clone(), say.clone())?;
+    let env = super::timer::session_env(a.no_timing, stop.clone());
+    let (clock, say) = (env.clock.clone(), env.say.clone());
+    let mut session = session(&a, &cfg, &track, &run, env)?;
     let world = session.world().expect("a simulation has a world").clone();
     let mut dash = a.dash.start(&cfg, a.config.local_target()?, &session, &stop, clock)?;
     println!(
