@@ -58,38 +58,8 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((p(w)?, p(h)?))
 }
 
-/// Bounds of `--scale-factor`: at 1.01 a 4096-pixel image already has ~500 pyramid levels.
-const SCALE_FACTOR: (f64, f64) = (1.01, 4.0);
-/// Most `--cascade` files (each runs on every image).
-const MAX_CASCADES: usize = 16;
-/// Largest `--min-neighbors` (as `detect.min_neighbors`).
-const MAX_MIN_NEIGHBORS: u32 = 100;
-
 /// Runs the detectors and reports.
 pub fn run(args: DetectArgs) -> Result<ExitCode> {
-    if !(args.scale_factor >= SCALE_FACTOR.0 && args.scale_factor <= SCALE_FACTOR.1) {
-        anyhow::bail!(
-            "--scale-factor {}: must be {}..={} (the ratio between pyramid levels; nearer 1 means more levels: 1.0000001 would ask for millions)",
-            args.scale_factor,
-            SCALE_FACTOR.0,
-            SCALE_FACTOR.1
-        );
-    }
-    if args.cascades.len() > MAX_CASCADES {
-        anyhow::bail!(
-            "{} --cascade files: at most {MAX_CASCADES} (each runs on every image)",
-            args.cascades.len()
-        );
-    }
-    if args.min_neighbors > MAX_MIN_NEIGHBORS {
-        anyhow::bail!("--min-neighbors {}: must be 0..={MAX_MIN_NEIGHBORS}", args.min_neighbors);
-    }
-    let side = rccar::config::limits::MAX_IMAGE_SIDE;
-    for (flag, (w, h)) in [("--min-size", args.min_size), ("--max-size", args.max_size)] {
-        if w > side || h > side {
-            anyhow::bail!("{flag} {w}x{h}: each side must be 0..={side} pixels (the largest image side)");
-        }
-    }
     let params = DetectParams {
         scale_factor: args.scale_factor,
         min_neighbors: args.min_neighbors,
@@ -97,6 +67,7 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
         max_size: args.max_size,
         parallel: args.parallel,
     };
+    annotate::check_options(&params, args.cascades.len(), rccar::config::limits::MAX_IMAGE_SIDE)?;
     let names: Vec<String> = args.cascades.iter().map(|p| escape_name(p.as_os_str())).collect();
     let mut detectors = Vec::new();
     for path in &args.cascades {
