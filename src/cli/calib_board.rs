@@ -119,13 +119,7 @@ pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
 
 /// Runs `rccar calibrate stereo`.
 pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
-    if a.left.len() != a.right.len() {
-        bail!(
-            "{} left images but {} right images: --left and --right must pair up one to one",
-            a.left.len(),
-            a.right.len()
-        );
-    }
+    photos::check_paired(&a.left, &a.right)?;
     if !(a.max_rms_px.is_finite() && a.max_rms_px > 0.0 && a.max_rms_px <= MAX_STEREO_RMS_PX) {
         bail!(
             "--max-rms-px {}: must be > 0 and <= {MAX_STEREO_RMS_PX} pixels",
@@ -136,17 +130,7 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
     check_counts("left images", a.left.len(), &fl)?;
     let (fr, sr) = find_all(&a.right, &a.board)?;
     check_counts("right images", a.right.len(), &fr)?;
-    if sl != sr {
-        bail!(
-            "left images are {}x{} but right images are {}x{} ({} vs {}): the pair must have one size",
-            sl.0,
-            sl.1,
-            sr.0,
-            sr.1,
-            a.left[0].display(),
-            a.right[0].display()
-        );
-    }
+    photos::check_pair_size(&a.left, sl, &a.right, sr)?;
     let mut pairs = photos::pair_views(&a.left, &a.right, &fl, &fr);
     let skipped: Vec<String> = std::mem::take(&mut pairs.skipped)
         .into_iter()
