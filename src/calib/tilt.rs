@@ -15,6 +15,33 @@ pub const MAX_PAIRS: usize = 10_000;
 pub const MAX_CSV_BYTES: u64 = 1 << 20;
 /// Largest override file edited in place, bytes.
 pub const MAX_OVERRIDE_BYTES: u64 = 1 << 20;
+/// Largest `--max-rms-px`, pixels.
+pub const MAX_RMS_PX: f64 = 100.0;
+/// Largest `--v0-sigma-px`, pixels (4× the largest image side is no prior at all).
+pub const MAX_V0_SIGMA_PX: f64 = 1000.0;
+
+/// A fit option out of its bounds (the message names the flag and the bound).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FitOptionsError {
+    /// `--max-rms-px` not in (0, [`MAX_RMS_PX`]].
+    #[error("--max-rms-px {0}: must be > 0 and <= {MAX_RMS_PX} pixels")]
+    MaxRms(f64),
+    /// `--v0-sigma-px` not in [0, [`MAX_V0_SIGMA_PX`]].
+    #[error("--v0-sigma-px {0}: must be 0..={MAX_V0_SIGMA_PX} pixels (0 = free)")]
+    V0Sigma(f64),
+}
+
+/// Checks the fit's refusal bound `max_rms_px` and the width `v0_sigma_px` of the prior on v0
+/// (0 = free; see [`centre_prior`]).
+pub fn check_options(max_rms_px: f64, v0_sigma_px: f64) -> Result<(), FitOptionsError> {
+    if !(max_rms_px > 0.0 && max_rms_px <= MAX_RMS_PX) {
+        return Err(FitOptionsError::MaxRms(max_rms_px));
+    }
+    if !(v0_sigma_px >= 0.0 && v0_sigma_px <= MAX_V0_SIGMA_PX) {
+        return Err(FitOptionsError::V0Sigma(v0_sigma_px));
+    }
+    Ok(())
+}
 
 /// Why the override file cannot be updated.
 #[derive(Debug, thiserror::Error)]

@@ -89,15 +89,10 @@ pub fn run(c: CalibrateCmd) -> Result<ExitCode> {
     }
 }
 
-/// Largest `--max-rms-px`, pixels.
-const MAX_RMS_PX: f64 = 100.0;
-/// Largest `--v0-sigma-px`, pixels (4× the largest image side is no prior at all).
-const MAX_V0_SIGMA_PX: f64 = 1000.0;
-
 fn ranging(a: RangingArgs) -> Result<ExitCode> {
     let loaded = a.config.load_full()?;
     let cfg = loaded.cfg.clone();
-    check_bounds(&a)?;
+    tilt::check_options(a.max_rms_px, a.v0_sigma_px)?;
     // 1. The pairs: measured, or made in the simulator's lab.
     let pairs = match (&a.pairs, a.from_sim) {
         (_, Some(n)) => from_lab(&a, &cfg, n)?,
@@ -135,20 +130,6 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     // 6.-7. The override file.
     let values = tilt::override_values(fitted);
     write_result(&a, &loaded, &values)
-}
-
-/// The flags' bounds.
-fn check_bounds(a: &RangingArgs) -> Result<()> {
-    if !(a.max_rms_px > 0.0 && a.max_rms_px <= MAX_RMS_PX) {
-        bail!("--max-rms-px {}: must be > 0 and <= {MAX_RMS_PX} pixels", a.max_rms_px);
-    }
-    if !(a.v0_sigma_px >= 0.0 && a.v0_sigma_px <= MAX_V0_SIGMA_PX) {
-        bail!(
-            "--v0-sigma-px {}: must be 0..={MAX_V0_SIGMA_PX} pixels (0 = free)",
-            a.v0_sigma_px
-        );
-    }
-    Ok(())
 }
 
 /// `n` pairs made in the simulator's calibration lab (and written to `--sim-pairs-out`).
