@@ -8,6 +8,7 @@
 //! tests/ must be listed here (or in tests/car.rs), which `every_test_file_is_compiled` checks.
 
 mod behaviour_scenarios;
+mod broken_pipe;
 mod calib_sim;
 mod cli_robustness;
 mod detect_bad_input;

@@ -46,10 +46,10 @@ impl ConfigArgs {
                     Some(p) => {
                         static SAID: std::sync::Once = std::sync::Once::new();
                         SAID.call_once(|| {
-                            eprintln!(
+                            super::signals::say_err(&format!(
                                 "rccar: no config/car.toml here or above; using {} (the source tree rccar was built from; --config FILE to choose)",
                                 p.display()
-                            )
+                            ))
                         });
                         Ok(p)
                     }

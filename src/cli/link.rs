@@ -52,6 +52,7 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
 #[cfg(feature = "serial")]
 pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
     use anyhow::Context;
+    use super::signals::say;
     use rccar::link::bench;
     use rccar::link::protocol::status;
     use rccar::link::transport::{Link, LinkOptions};
@@ -72,7 +73,7 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
     let hello = link
         .wait_connected(Duration::from_secs(3))
         .with_context(|| format!("no firmware answering on {}", args.port))?;
-    println!(
+    say(&format!(
         "connected to {}: protocol {}, firmware {}.{}.{} ({})",
         args.port,
         hello.protocol_version,
@@ -80,25 +81,25 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
         hello.fw_minor,
         hello.fw_patch,
         status::name(hello.status)
-    );
+    ));
     let (cfg, from_eeprom) = link.get_config()?;
-    println!("config ({}): {cfg:?}", if from_eeprom { "EEPROM" } else { "defaults" });
+    say(&format!("config ({}): {cfg:?}", if from_eeprom { "EEPROM" } else { "defaults" }));
 
     if let Some(us) = args.trim_us {
         bench::set_trim(&link, cfg, us, args.save)?;
-        println!("servo centre = {us} µs{}", if args.save { " (saved to EEPROM)" } else { "" });
+        say(&format!("servo centre = {us} µs{}", if args.save { " (saved to EEPROM)" } else { "" }));
     }
     if let Some(n) = args.latency {
         if let Some(line) = bench::latency_line(&bench::round_trips(&link, n, &stopped)?) {
-            println!("{line}");
+            say(&line);
         }
     }
     if args.sweep {
         bench::sweep(&link, 4.0, &stopped)?;
-        println!("sweep done");
+        say("sweep done");
     }
     if args.trim_us.is_none() && !args.sweep && args.latency.is_none() {
-        bench::watch(&link, args.seconds, &stopped, &mut |line| println!("{line}"));
+        bench::watch(&link, args.seconds, &stopped, &mut |line| say(line));
     }
     // disarm and a neutral DRIVE now (dropping the last `Link` does the same)
     link.drive(0, 0);

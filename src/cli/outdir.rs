@@ -3,6 +3,7 @@
 //! went. `sim`, `replay` and `drive` call [`create`] once before they write anything,
 //! [`started`] just before their loop and [`finish`] at the end.
 
+use super::signals::{say, say_err};
 use anyhow::Result;
 use rccar::run_dir::{RunDir, RunEnd, RunRequest, RunStart, RunState, Target};
 use std::path::Path;
@@ -66,7 +67,7 @@ pub fn create(
         .collect();
     let run = RunDir::create(&req, &start(command))?;
     if out.is_none() {
-        println!("{command}: run folder {}/", run.path().display());
+        say(&format!("{command}: run folder {}/", run.path().display()));
     }
     Ok(run)
 }
@@ -75,7 +76,7 @@ pub fn create(
 /// warning, not the end of the run.
 pub fn started(run: &mut RunDir) {
     if let Err(e) = run.started() {
-        eprintln!("warning: {e} (the run goes on; its folder is {})", run.path().display());
+        say_err(&format!("warning: {e} (the run goes on; its folder is {})", run.path().display()));
     }
 }
 

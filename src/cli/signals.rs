@@ -12,6 +12,12 @@
 //! handler); a panic in any thread also raises the stop signal (as a fault). After SIGHUP the
 //! terminal is gone: everything the commands print goes through [`say`], which never panics on
 //! a closed stdout or stderr.
+//!
+//! SIGPIPE (the reader of a pipe went away, `rccar sim | head -1`): Rust ignores it, so the
+//! next `println!` would panic. Commands that move nothing and serve no socket let it end the
+//! process, as it ends any Unix filter ([`let_sigpipe_end_the_process`]); `drive`, `link` and
+//! `sim --dashboard` keep ignoring it (a reader or a viewer that goes away must never end a run
+//! before neutral is sent, and a write to a socket can raise it too) and print through [`say`].
 
 use rccar::drive::{Level, Say, StopReason, StopSignal};
 use rccar::session::Session;
@@ -128,6 +134,16 @@ pub fn notes(command: &str, session: &Session) {
             Level::Info => say(&format!("{command}: {line}")),
             Level::Warn => say_err(line),
         }
+    }
+}
+
+/// Lets SIGPIPE end the process without a word (the shell sees 128 + 13), as for any Unix
+/// filter: for the commands that move nothing and serve no socket (see the module notes).
+pub fn let_sigpipe_end_the_process() {
+    // SAFETY: sets one signal's disposition back to the default, before any thread is started.
+    #[cfg(unix)]
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

@@ -3,6 +3,7 @@
 //! `rccar replay`; `--sweep key=lo:hi:n` runs a gain sweep in parallel (given twice: a grid
 //! with a heat map); `--start-offset M` / `--kick T:DY` measure the step response.
 
+use super::signals::say;
 use super::common::ConfigArgs;
 use anyhow::{bail, Result};
 use rccar::sim::step::{StepMetrics, StepRequest};
@@ -137,7 +138,7 @@ fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, env: SessionE
     spec.telemetry = Some(run.join("telemetry.jsonl"));
     let session = Session::build(cfg, spec, env)?;
     if a.truth_boxes {
-        println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
+        say("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
     }
     super::signals::notes("sim", &session);
     Ok(session)
@@ -164,19 +165,19 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     }
     let stop = super::signals::install();
     let env = super::timer::session_env(a.no_timing, stop.clone());
-    let (clock, say) = (env.clock.clone(), env.say.clone());
+    let (clock, lines) = (env.clock.clone(), env.say.clone());
     let mut session = session(&a, &cfg, &track, &run, env)?;
     let world = session.world().expect("a simulation has a world").clone();
     let mut dash = a.dash.start(&cfg, a.config.local_target()?, &session, &stop, clock)?;
-    println!(
+    say(&format!(
         "sim: track {} ({:.2} m, tightest lane radius {:.2} m), {} lap(s), at most {} s",
         track.name,
         track.length,
         track.tightest_lane_radius(),
         cfg.sim.laps,
         cfg.sim.max_seconds
-    );
-    let mut report = RunReport::new(world.clone(), say);
+    ));
+    let mut report = RunReport::new(world.clone(), lines);
     report.record = a.record.clone();
     report.record_right = a.record_right.clone();
     report.reference_left = cfg.stereo.reference != StereoReference::Right;
@@ -200,30 +201,30 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let scene = lock(&world).scene().clone();
     let wall_s = started.elapsed().as_secs_f64();
     for line in summary.lines() {
-        println!("{line}");
+        say(&line);
     }
     if stereo {
-        println!("{}", report.stereo.line());
+        say(&report.stereo.line());
     }
-    println!(
+    say(&format!(
         "  {:.1} s simulated in {:.1} s wall: {:.1}x real time",
         summary.seconds,
         wall_s,
         summary.seconds / wall_s.max(1e-9)
-    );
+    ));
     let step_fig = write_summary(&mut run, &cfg, &report, &summary, step, &outcome)?;
     write_plots(&mut run, font, &report, &summary, &scene, step_fig.as_ref())?;
     if let Some(line) = report.frames_line(summary.frames) {
-        println!("{line}");
+        say(&line);
     }
     let tel_lines = outcome.telemetry.as_ref().map(|t| t.1);
     super::outdir::finish(&mut run, RunState::from_stop(interrupted), tel_lines)?;
     if let Some(why) = interrupted {
-        println!(
+        say(&format!(
             "sim: interrupted ({}) after {} frames; the summary and plots cover what ran",
             why.said(),
             summary.frames
-        );
+        ));
         return Ok(ExitCode::from(why.exit_code()));
     }
     let ok = summary.laps >= cfg.sim.laps && summary.lane_departures == 0;
@@ -236,7 +237,7 @@ fn write_summary(run: &mut RunDir, cfg: &Config, report: &RunReport, summary: &S
     let mut sum_json = serde_json::to_value(summary)?;
     let (lines, step_fig) = step.map(|st| report.step_summary(&st)).unwrap_or_default();
     for line in lines {
-        println!("{line}");
+        say(&line);
     }
     if let Some(m) = &step_fig {
         sum_json["step"] = serde_json::to_value(m)?;
@@ -244,8 +245,8 @@ fn write_summary(run: &mut RunDir, cfg: &Config, report: &RunReport, summary: &S
     let sum_path = run.write_json("summary.json", &sum_json)?;
     run.write_json("config.json", cfg)?;
     let tel_path = outcome.telemetry.as_ref().map(|t| t.0.clone()).unwrap_or_default();
-    println!("  telemetry: {}", tel_path.display());
-    println!("  summary:   {}", sum_path.display());
+    say(&format!("  telemetry: {}", tel_path.display()));
+    say(&format!("  summary:   {}", sum_path.display()));
     Ok(step_fig)
 }
 
@@ -259,14 +260,14 @@ fn write_plots(
     step: Option<&StepMetrics>,
 ) -> Result<()> {
     let Some(font) = font else {
-        println!("  plots:     skipped (no font at {SYSTEM_FONT}; apt install fonts-dejavu-core)");
+        say(&format!("  plots:     skipped (no font at {SYSTEM_FONT}; apt install fonts-dejavu-core)"));
         return Ok(());
     };
     plot::register_font(font);
     let p = report.write_plots(run, summary.lane_width_m, scene, step)?;
-    println!("  plots:     {} {}", p.time.display(), p.path.display());
+    say(&format!("  plots:     {} {}", p.time.display(), p.path.display()));
     if let Some(step) = p.step {
-        println!("  step:      {}", step.display());
+        say(&format!("  step:      {}", step.display()));
     }
     Ok(())
 }

@@ -21,7 +21,7 @@
 //! `/api/state` (`refused`) and noted in the telemetry once a second. The e-stop needs none of
 //! this: stopping is the safe direction; it is logged with its origin.
 
-use super::log::Log;
+use super::log::{out, Log};
 use super::reply::error;
 use axum::body::Body;
 use axum::http::{header, HeaderMap, HeaderValue, Method, Response, StatusCode};
@@ -156,10 +156,10 @@ impl Access {
     /// The start-up lines: the plain URL, and off loopback the token on a line of its own.
     pub fn print_start_up(&self, bound: SocketAddr) {
         match &self.mode {
-            Mode::Loopback => println!("dashboard: http://{bound}/"),
+            Mode::Loopback => out(&format!("dashboard: http://{bound}/")),
             Mode::Token { token, .. } => {
-                println!("dashboard: http://{bound}/  (not loopback: enter the token below once on the page; it is never put in a URL)");
-                println!("dashboard token: {token}");
+                out(&format!("dashboard: http://{bound}/  (not loopback: enter the token below once on the page; it is never put in a URL)"));
+                out(&format!("dashboard token: {token}"));
             }
         }
     }

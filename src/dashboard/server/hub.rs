@@ -55,7 +55,7 @@ pub fn watchdog(sh: Arc<Shared>, stop: StopSignal) {
                 sh.heartbeat_ms,
                 sh.sent.now()
             );
-            println!("dashboard: {msg}");
+            super::log::out(&format!("dashboard: {msg}"));
             sh.tx.send(Control::Note(msg));
         }
     }

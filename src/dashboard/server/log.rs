@@ -1,8 +1,11 @@
 //! The server's printing: the handlers, the hub and the watchdog queue their lines ([`Log`])
 //! for one logger thread ([`start_logger`]), so no request ever waits on stdout; notes for
-//! the telemetry go to the loop's inbox from there. Imports none of the server's modules.
+//! the telemetry go to the loop's inbox from there. Lines go out through [`out`] and [`err`],
+//! which never panic: a closed terminal (SIGHUP, a reader that went away) must not stop the
+//! car. Imports none of the server's modules.
 
 use crate::dashboard::messages::{Control, ControlSender};
+use std::io::Write;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 
@@ -53,8 +56,8 @@ pub fn start_logger(rx: Receiver<Msg>, tx: ControlSender) -> std::io::Result<()>
     std::thread::Builder::new().name("dash-log".into()).spawn(move || {
         for m in rx {
             match m {
-                Msg::Out(s) => println!("{s}"),
-                Msg::Err(s) => eprintln!("{s}"),
+                Msg::Out(s) => out(&s),
+                Msg::Err(s) => err(&s),
                 Msg::Note(s) => {
                     tx.send(Control::Note(s));
                 }
@@ -62,4 +65,16 @@ pub fn start_logger(rx: Receiver<Msg>, tx: ControlSender) -> std::io::Result<()>
         }
     })?;
     Ok(())
+}
+
+/// One line on stdout; a closed stdout is not an error (the line is dropped).
+pub fn out(line: &str) {
+    let mut o = std::io::stdout().lock();
+    let _ = writeln!(o, "{line}");
+    let _ = o.flush();
+}
+
+/// One line on stderr; a closed stderr is not an error.
+pub fn err(line: &str) {
+    let _ = writeln!(std::io::stderr().lock(), "{line}");
 }

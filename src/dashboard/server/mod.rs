@@ -141,10 +141,10 @@ impl Server {
         });
         shared.access.print_start_up(bound);
         if let Some(n) = nofile.filter(|_| limits.reduced) {
-            println!(
+            log::out(&format!(
                 "dashboard: open-file limit {n}: at most {} connections (+{} for the e-stop)",
                 limits.max, limits.reserve
-            );
+            ));
         }
         log::start_logger(log_rx, o.tx)?;
         {
