@@ -15,6 +15,7 @@ mod detect_bad_input;
 mod detect_band;
 mod detect_cascades;
 mod detect_pyramid;
+mod errors_once;
 mod fuzz_inputs;
 mod interrupt;
 mod labs_tools;
