@@ -44,16 +44,16 @@ use std::path::{Path, PathBuf};
 pub enum PipelineError {
     /// The ROI does not define a bird's-eye view.
     #[error("warp.src: {0}")]
-    Warp(#[from] WarpError),
+    Warp(WarpError),
     /// A cascade file exists but cannot be read or parsed.
     #[error("detect: {0}")]
-    Cascade(#[from] CascadeError),
+    Cascade(CascadeError),
     /// `stereo.calibration` names a file that cannot be read, is not a stereo calibration, or
     /// was made for another image size.
     #[error("stereo.calibration: {0}")]
     StereoCalibration(crate::calib::file::FileError),
     /// The steering method `steering.method` picks cannot be built from this configuration.
-    #[error("{0}")]
+    #[error(transparent)]
     Steering(#[from] crate::control::steering::SteeringError),
 }
 
@@ -61,6 +61,18 @@ pub enum PipelineError {
 impl From<crate::calib::file::FileError> for PipelineError {
     fn from(e: crate::calib::file::FileError) -> Self {
         PipelineError::StereoCalibration(e)
+    }
+}
+
+impl From<WarpError> for PipelineError {
+    fn from(e: WarpError) -> Self {
+        PipelineError::Warp(e)
+    }
+}
+
+impl From<CascadeError> for PipelineError {
+    fn from(e: CascadeError) -> Self {
+        PipelineError::Cascade(e)
     }
 }
 

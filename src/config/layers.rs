@@ -3,7 +3,8 @@
 //! (so a section, e.g. one `[classes.<name>]`, needs only the keys it changes); unknown keys are
 //! refused with a hint, relative paths resolved against the file that names them, and the
 //! result deserialised and checked ([`Config::validate`]). Also where the configuration is
-//! found ([`find_config`]).
+//! found ([`find_config`], [`source_tree_config`]) and its personal override file
+//! ([`find_local`], [`local_beside`]).
 
 use super::{Config, ConfigError};
 use serde::Serialize;
@@ -196,6 +197,41 @@ pub fn find_config(start: &Path, env: Option<&std::ffi::OsStr>) -> Result<PathBu
         }
     }
     Err(ConfigError::NotFound { start })
+}
+
+/// `config/car.toml` of the source tree this crate was compiled from, if it is still there: a
+/// student who built rccar with cargo can run it from any folder. A binary copied to the car
+/// has no such tree (`None`).
+pub fn source_tree_config() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config").join("car.toml");
+    p.is_file().then_some(p)
+}
+
+/// The personal override file that goes with the configuration `base`: `local.toml` in its
+/// folder (git-ignored; it need not exist).
+pub fn local_beside(base: &Path) -> PathBuf {
+    base.parent().unwrap_or(Path::new("")).join("local.toml")
+}
+
+/// An override file named with `--local` that does not exist.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "--local {}: no such file (leave --local out to use local.toml beside the configuration when it exists)",
+    .0.display()
+)]
+pub struct MissingLocal(pub PathBuf);
+
+/// The override file layered on `base`: `named` (`--local`), which must exist, else
+/// [`local_beside`] `base` when it exists, else none.
+pub fn find_local(base: &Path, named: Option<&Path>) -> Result<Option<PathBuf>, MissingLocal> {
+    match named {
+        Some(p) if p.is_file() => Ok(Some(p.to_path_buf())),
+        Some(p) => Err(MissingLocal(p.to_path_buf())),
+        None => {
+            let p = local_beside(base);
+            Ok(p.is_file().then_some(p))
+        }
+    }
 }
 
 /// `p` made absolute against the working directory (no symlinks resolved; unchanged if the
@@ -539,5 +575,22 @@ mod tests {
         assert_eq!(cfg.lane.threshold_mode, ThresholdMode::Otsu);
         assert!(Config::default().with_override("steering.kq=1").is_err());
         assert!(Config::default().with_override("nonsense").is_err());
+    }
+
+    /// `--local` must exist; without it, local.toml beside the configuration counts only when
+    /// it is there.
+    #[test]
+    fn the_override_file_is_named_or_beside_the_configuration() {
+        let t = tempfile::tempdir().unwrap();
+        let base = t.path().join("car.toml");
+        assert_eq!(local_beside(&base), t.path().join("local.toml"));
+        assert_eq!(find_local(&base, None).unwrap(), None);
+        std::fs::write(t.path().join("local.toml"), "").unwrap();
+        assert_eq!(find_local(&base, None).unwrap(), Some(t.path().join("local.toml")));
+        let named = t.path().join("mine.toml");
+        let e = find_local(&base, Some(&named)).unwrap_err().to_string();
+        assert!(e.starts_with(&format!("--local {}: no such file", named.display())), "{e}");
+        std::fs::write(&named, "").unwrap();
+        assert_eq!(find_local(&base, Some(&named)).unwrap(), Some(named));
     }
 }

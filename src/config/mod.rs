@@ -44,7 +44,7 @@ pub use dashboard::DashboardConfig;
 pub use detect::DetectConfig;
 pub use gpio::GpioConfig;
 pub use lane::{LaneConfig, PeakMode, ThresholdMode};
-pub use layers::{find_config, path_keys, LoadedConfig};
+pub use layers::{find_config, find_local, local_beside, path_keys, source_tree_config, LoadedConfig, MissingLocal};
 pub use ranging::{RangingConfig, RangingMethod};
 pub use record::RecordConfig;
 pub use replay::ReplayConfig;

@@ -24,6 +24,15 @@ fn err<E: std::fmt::Display>(e: E) -> PlotError {
     PlotError(e.to_string())
 }
 
+/// Where the plot font is looked for (Debian's fonts-dejavu-core; never committed).
+pub const SYSTEM_FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
+
+/// The plot font read from [`SYSTEM_FONT`], kept for the life of the process (`None`: not
+/// installed).
+pub fn system_font() -> Option<&'static [u8]> {
+    std::fs::read(SYSTEM_FONT).ok().map(|b| &*Box::leak(b.into_boxed_slice()))
+}
+
 /// Registers the TTF font used for all text (call once, before plotting).
 pub fn register_font(bytes: &'static [u8]) {
     let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, bytes);
