@@ -32,7 +32,7 @@ fn file_and_cascade_errors_name_their_cause_once() {
     // A cascade that is not XML: the session's error, with the parser's.
     let bad = t.path().join("bad.xml");
     std::fs::write(&bad, "x").unwrap();
-    let set = format!("detect.stop_sign={}", bad.display());
+    let set = format!("classes.stop_sign.model={}", bad.display());
     let out = t.path().join("out");
     let (code, err) = rccar(&["sim", "--no-local", "--seconds", "1", "--set", &set, "-o", out.to_str().unwrap()]);
     assert_eq!(code, Some(2), "{err}");
