@@ -37,7 +37,7 @@ pub fn check_options(max_rms_px: f64, v0_sigma_px: f64) -> Result<(), FitOptions
     if !(max_rms_px > 0.0 && max_rms_px <= MAX_RMS_PX) {
         return Err(FitOptionsError::MaxRms(max_rms_px));
     }
-    if !(v0_sigma_px >= 0.0 && v0_sigma_px <= MAX_V0_SIGMA_PX) {
+    if !(0.0..=MAX_V0_SIGMA_PX).contains(&v0_sigma_px) {
         return Err(FitOptionsError::V0Sigma(v0_sigma_px));
     }
     Ok(())
