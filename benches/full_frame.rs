@@ -23,6 +23,7 @@
 //!    behaviour machine are a few µs and have no OpenCV counterpart).
 //! 4. Prints median and min per frame of both, and the ratios (ours / OpenCV).
 
+use rccar::classes::ObjectClass;
 use rccar::config::Config;
 use rccar::pipeline::Pipeline;
 use rccar::sim::run::Simulation;
@@ -134,9 +135,10 @@ fn main() {
         frames.push(sim.image().clone());
     }
     // 2. Cascades.
-    let shipped: Vec<PathBuf> = [&cfg.detect.stop_sign, &cfg.detect.traffic_light, &cfg.detect.obstacle]
+    let shipped: Vec<PathBuf> = cfg
+        .classes
         .iter()
-        .map(|p| root.join("config").join(p))
+        .map(|(_, k)| root.join("config").join(&k.model))
         .collect();
     let cascades: Vec<PathBuf> = if shipped.iter().all(|p| p.is_file()) {
         shipped
@@ -144,10 +146,10 @@ fn main() {
         STOCK.iter().map(PathBuf::from).collect()
     };
     let stock = cascades[0].starts_with("/usr");
-    cfg.detect.stop_sign = cascades[0].display().to_string();
-    cfg.detect.traffic_light = cascades[1].display().to_string();
-    cfg.detect.obstacle = cascades[2].display().to_string();
-    let (det, missing) = rccar::pipeline::load_detector(&cfg.detect, &root.join("config")).expect("cascades load");
+    for (class, file) in ObjectClass::ALL.into_iter().zip(&cascades) {
+        cfg.classes[class].model = file.display().to_string();
+    }
+    let (det, missing) = rccar::pipeline::load_detector(&cfg, &root.join("config")).expect("cascades load");
     assert!(missing.is_empty(), "missing cascades {missing:?}");
     let mut det = det;
     if let Some(d) = &mut det {

@@ -67,7 +67,7 @@ fn main() {
     // Detection on (issue 13): the pipeline with the shipped cascades (regions and size
     // limits from [detect]), and the render of only the rows it reads (`rows_needed`).
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let (det, _) = rccar::pipeline::load_detector(&cfg.detect, &root.join("config")).expect("cascades");
+    let (det, _) = rccar::pipeline::load_detector(&cfg, &root.join("config")).expect("cascades");
     let mut pipeline_det = Pipeline::new(&cfg).expect("pipeline");
     pipeline_det.set_detector(det);
     let has_det = pipeline_det.has_detector();
@@ -104,7 +104,7 @@ fn main() {
     // `detect.every_n_frames`-th frame, only the rows the pipeline reads rendered on each frame
     // (`Pipeline::row_plan`). 900 steps (30 s) from the start of the default track, past the
     // stop sign; the mean over them (detection and lane-only frames alternate).
-    let (det2, _) = rccar::pipeline::load_detector(&cfg.detect, &root.join("config")).expect("cascades");
+    let (det2, _) = rccar::pipeline::load_detector(&cfg, &root.join("config")).expect("cascades");
     let mut sim_det = Simulation::new(&cfg, &track).expect("sim");
     sim_det.set_detector(det2);
     sim_det.set_full_frames(false);

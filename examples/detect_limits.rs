@@ -19,7 +19,7 @@ fn main() {
     let mut cfg = Config::default();
     cfg.sim.noise_sigma = 2.0;
     let track = Track::load(&root.join("config/tracks/scenarios.toml")).unwrap();
-    let (det, _) = rccar::pipeline::load_detector(&cfg.detect, root).unwrap();
+    let (det, _) = rccar::pipeline::load_detector(&cfg, root).unwrap();
     let mut det = det.expect("cascades");
     for l in ["stop_sign", "traffic_light", "obstacle"] {
         det.set_limits(l, None, (0, 0), (0, 0));

@@ -5,13 +5,12 @@
 //! Chu et al. 2004): a camera at height `h` tilted down by `α` sees a floor point at distance
 //! `d` on image row `v` with `d = h / tan(α + atan((v − v0) / a_y))`, `a_y = f / d_y`. The same
 //! model places the default ROI (see `rccar config roi`), draws the sample frames and renders
-//! the simulator's view, so all of them agree by construction.
+//! the simulator's view, so all of them agree by construction (the bird's-eye view's map to
+//! the floor through it is `lane::warp::bird_to_floor`).
 //!
 //! Frames: the car frame has x forward, y left, z up, metres, origin on the floor below the
 //! lens. Pixels follow OpenCV: pixel (i, j) has its centre at (u, v) = (i, j), so the principal
 //! point of a W×H image is ((W − 1)/2, (H − 1)/2). Square pixels (a_x = a_y = f).
-
-use crate::lane::warp::{rect_corners, Homography};
 
 /// A pinhole camera mounted on the car, looking forward and tilted down.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -123,21 +122,6 @@ impl PinholeCamera {
             p(near, -half_width)?,
             p(near, half_width)?,
         ])
-    }
-
-    /// The map from bird's-eye pixels to the floor: a bird's-eye image `out_w`×`out_h` made
-    /// from the ROI `roi` (camera pixels, `[warp] src` order) shows the floor point `(x
-    /// forward, y left)`, metres from the floor point below the lens, at pixel `(u, v)` where
-    /// `H (u, v) = (x, y)`. Camera pixel → floor is a homography of the plane, and so is the
-    /// warp, so one homography through the four corners is exact for any ROI. `None` when a
-    /// corner does not see the floor (at or above the horizon) or the corners are degenerate.
-    pub fn bird_to_floor(&self, roi: &[[f64; 2]; 4], out_w: u32, out_h: u32) -> Option<Homography> {
-        let mut floor = [[0.0; 2]; 4];
-        for (f, c) in floor.iter_mut().zip(roi) {
-            let (x, y) = self.ground_of_pixel(c[0], c[1])?;
-            *f = [x, y];
-        }
-        Homography::from_points(&rect_corners(out_w, out_h), &floor).ok()
     }
 }
 

@@ -3,12 +3,11 @@
 //! Everything else iterates over [`ObjectClass::ALL`] or reads [`ObjectClass::info`]; label
 //! strings are turned into a class only when parsing ([`ObjectClass::from_label`]).
 //!
-//! Adding a class: a variant of [`ObjectClass`] and its [`ClassInfo`] entry here, its config
-//! keys (`detect.<name>`, `detect.<name>_region`, `detect.<name>_box_m`,
-//! `ranging.<name>_bottom_m`, `_size_m`, `_box_margin`; docs/architecture.md lists them) and a
-//! model file. A class that reuses an existing [`Reaction`], [`ColourCue`] and [`SimShape`]
-//! needs no other code. Depends on nothing in the crate (every stage may import it).
-//! Units: metres, pixels where said.
+//! Adding a class: a variant of [`ObjectClass`] and its [`ClassInfo`] entry here (with the
+//! defaults of its `[classes.<name>]` section, [`ClassDefaults`]), that section in
+//! `config/car.toml` and a model file (docs/architecture.md). A class that reuses an existing
+//! [`Reaction`], [`ColourCue`] and [`SimShape`] needs no other code. Depends on nothing in the
+//! crate (every stage may import it). Units: metres, pixels where said.
 
 use serde::{Deserialize, Serialize};
 
@@ -68,19 +67,39 @@ impl SimShape {
     }
 }
 
-/// Everything about one class that is not a tunable of `car.toml`.
+/// The defaults of a class's `[classes.<name>]` section of `car.toml` (the section's keys,
+/// units and checks: `config::ClassConfig`, src/config/classes.rs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClassDefaults {
+    /// Its model file (a cascade), relative to the config's folder.
+    pub model: &'static str,
+    /// Where it is searched: [left, top, right, bottom], fractions of the frame.
+    pub region: [f64; 4],
+    /// Width of what its detector box frames, [min, max] metres.
+    pub box_m: [f64; 2],
+    /// [width, height] of the face its box frames, metres (0 = unknown).
+    pub size_m: [f64; 2],
+    /// Height above the floor of its box's bottom edge, metres.
+    pub bottom_m: f64,
+    /// Its detector box's size over the face's outline.
+    pub box_margin: f64,
+}
+
+/// Everything about one class: what it is and does, and the defaults of its tunables.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClassInfo {
     /// The class.
     pub class: ObjectClass,
-    /// Its name: telemetry, track files, the cascade's label, the config keys' stem.
+    /// Its name: telemetry, track files, the cascade's label, its config section
+    /// (`[classes.<name>]`).
     pub name: &'static str,
     /// Other spellings accepted when parsing a label (`stop`, `light`).
     pub aliases: &'static [&'static str],
-    /// The model file `detect.<name>` defaults to (relative to the config's folder).
-    pub model_file: &'static str,
-    /// The config key naming its model file (`detect.<name>`), for messages.
+    /// The config key naming its model file (`classes.<name>.model`): messages, and the path
+    /// keys the loader resolves (`config::path_keys`).
     pub model_key: &'static str,
+    /// The defaults of its `[classes.<name>]` section.
+    pub defaults: ClassDefaults,
     /// The detect stage reads the lamp colour inside its boxes.
     pub reads_light: bool,
     /// The colour cue that refines its boxes before ranging.
@@ -104,8 +123,15 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         class: ObjectClass::StopSign,
         name: "stop_sign",
         aliases: &["stop"],
-        model_file: "cascades/stop_sign.xml",
-        model_key: "detect.stop_sign",
+        model_key: "classes.stop_sign.model",
+        defaults: ClassDefaults {
+            model: "cascades/stop_sign.xml",
+            region: [0.45, 0.0, 1.0, 0.6],
+            box_m: [0.11, 0.16],
+            size_m: [0.10, 0.10],
+            bottom_m: 0.12,
+            box_margin: 1.085,
+        },
         reads_light: false,
         colour_cue: ColourCue::RedFace,
         reaction: Reaction::StopThenGo,
@@ -118,8 +144,15 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         class: ObjectClass::TrafficLight,
         name: "traffic_light",
         aliases: &["light"],
-        model_file: "cascades/traffic_light.xml",
-        model_key: "detect.traffic_light",
+        model_key: "classes.traffic_light.model",
+        defaults: ClassDefaults {
+            model: "cascades/traffic_light.xml",
+            region: [0.45, 0.0, 1.0, 0.6],
+            box_m: [0.065, 0.10],
+            size_m: [0.0, 0.12],
+            bottom_m: 0.10,
+            box_margin: 1.21,
+        },
         reads_light: true,
         colour_cue: ColourCue::LitHousing,
         reaction: Reaction::WaitForGreen,
@@ -132,8 +165,15 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         class: ObjectClass::Obstacle,
         name: "obstacle",
         aliases: &[],
-        model_file: "cascades/obstacle.xml",
-        model_key: "detect.obstacle",
+        model_key: "classes.obstacle.model",
+        defaults: ClassDefaults {
+            model: "cascades/obstacle.xml",
+            region: [0.0, 0.08, 1.0, 1.0],
+            box_m: [0.18, 0.45],
+            size_m: [0.0, 0.0],
+            bottom_m: 0.0,
+            box_margin: 1.36,
+        },
         reads_light: false,
         colour_cue: ColourCue::None,
         reaction: Reaction::StopOrPass,
@@ -191,7 +231,7 @@ mod tests {
             assert_eq!(CLASSES[i].class, *c);
             assert_eq!(c.index(), i);
             assert_eq!(ObjectClass::from_label(c.name()), Some(*c));
-            assert_eq!(c.info().model_key, format!("detect.{}", c.name()));
+            assert_eq!(c.info().model_key, format!("classes.{}.model", c.name()));
             let json = serde_json::to_string(c).unwrap();
             assert_eq!(json, format!("\"{}\"", c.name()));
         }

@@ -3,8 +3,8 @@
 //! `truth.xte` = `truth.offset_m`), and each run's panels of (x, y) points. `null` (e.g.
 //! `error` while the lane is lost) is NaN: a gap in the plot.
 //!
-//! Bounded: at most [`MAX_FIELDS`] panels (the image is 1000 × (40 + 260·fields) pixels),
-//! [`MAX_FILES`] runs (one colour each), [`MAX_POINTS`] points over all of them, lines of at
+//! Bounded ([`plot_fields`] checks a request): at most [`MAX_FIELDS`] panels (the image is
+//! 1000 × (40 + 260·fields) pixels), [`MAX_FILES`] runs (one colour each), [`MAX_POINTS`] points over all of them, lines of at
 //! most [`MAX_LINE_BYTES`]; the files are read line by line, keeping only the plotted numbers.
 
 use serde_json::Value;
@@ -95,6 +95,47 @@ pub enum FieldsError {
         /// The numeric fields the file has, comma-separated.
         available: String,
     },
+}
+
+/// A plot request out of its bounds (the message names the flag and the bound).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RequestError {
+    /// More `--label`s than files.
+    #[error("--label given {labels} times for {files} file(s)")]
+    Labels {
+        /// `--label`s given.
+        labels: usize,
+        /// Files given.
+        files: usize,
+    },
+    /// No field named.
+    #[error("--y: name at least one field, e.g. --y error,steer")]
+    NoField,
+    /// More than [`MAX_FIELDS`] fields.
+    #[error("--y: {0} fields; at most {MAX_FIELDS} (one panel each, 260 px tall): plot them in several images")]
+    TooManyFields(usize),
+    /// More than [`MAX_FILES`] files.
+    #[error("{0} telemetry files; at most {MAX_FILES} in one plot (one colour each): plot them in groups")]
+    TooManyFiles(usize),
+}
+
+/// The fields to plot from `--y` (trimmed, empty ones dropped), with `files` telemetry files
+/// and `labels` legend names checked against the bounds.
+pub fn plot_fields(y: &[String], files: usize, labels: usize) -> Result<Vec<String>, RequestError> {
+    if labels > files {
+        return Err(RequestError::Labels { labels, files });
+    }
+    let fields: Vec<String> = y.iter().map(|f| f.trim().to_string()).filter(|f| !f.is_empty()).collect();
+    if fields.is_empty() {
+        return Err(RequestError::NoField);
+    }
+    if fields.len() > MAX_FIELDS {
+        return Err(RequestError::TooManyFields(fields.len()));
+    }
+    if files > MAX_FILES {
+        return Err(RequestError::TooManyFiles(files));
+    }
+    Ok(fields)
 }
 
 /// Field aliases for students: the short names used in the labs.

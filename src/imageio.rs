@@ -25,12 +25,12 @@ use std::path::Path;
 #[derive(Debug, thiserror::Error)]
 pub enum ImageIoError {
     /// The file could not be read.
-    #[error("{path}: {source}")]
+    #[error("{path}: {err}")]
     Read {
         /// The file.
         path: String,
         /// The I/O error.
-        source: std::io::Error,
+        err: std::io::Error,
     },
     /// The bytes are not a decodable image.
     #[error("{path}: not a readable image: {msg}")]
@@ -52,9 +52,9 @@ pub fn is_jpeg(bytes: &[u8]) -> bool {
 
 /// Reads and decodes an image file (see [`decode`]).
 pub fn open(path: &Path) -> Result<DynamicImage, ImageIoError> {
-    let bytes = std::fs::read(path).map_err(|source| ImageIoError::Read {
+    let bytes = std::fs::read(path).map_err(|err| ImageIoError::Read {
         path: path.display().to_string(),
-        source,
+        err,
     })?;
     decode(&bytes, &path.display().to_string())
 }

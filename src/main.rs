@@ -53,6 +53,13 @@ enum Cmd {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // A vanished reader ends a filter quietly; the car's commands and a served dashboard
+    // ignore it and go on to their own end (cli/signals.rs).
+    match &cli.cmd {
+        Cmd::Drive(_) | Cmd::Link(_) => {}
+        Cmd::Sim(a) if a.dash.dashboard && a.sweep.is_empty() => {}
+        _ => cli::signals::let_sigpipe_end_the_process(),
+    }
     let result = match cli.cmd {
         Cmd::Config(c) => cli::config::run(c),
         Cmd::Replay(a) => cli::replay::run(a),
@@ -71,7 +78,7 @@ fn main() -> ExitCode {
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            cli::signals::say_err(&format!("error: {e:#}"));
             ExitCode::from(2)
         }
     }

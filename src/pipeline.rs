@@ -4,7 +4,7 @@
 //!
 //! One frame (`dt` seconds after the previous one):
 //! 1. lane: bird's-eye warp, edges, histogram → `LaneMeasurement` (src/lane);
-//! 2. detect: the `[detect]` cascades on the frame (src/detect), or boxes handed in
+//! 2. detect: the classes' cascades on the frame (src/detect), or boxes handed in
 //!    ([`Pipeline::step_with`], the simulator's ground-truth switch), light state per light box;
 //! 3. dead reckoning: speed and distance from the previous command through `[vehicle]`;
 //! 4. ranging and tracking: each detector box's distance from its size and row, fused, with a
@@ -21,7 +21,7 @@
 //! the car keeps its lane; the behaviour machine still handles a lost lane.
 
 use crate::classes::{ColourCue, Reaction};
-use crate::config::{Config, DetectClass, DetectConfig};
+use crate::config::Config;
 use crate::control::behaviour::{Behaviour, DeadReckoning, Decision, LightColor, Mode, Observations, Ranged};
 use crate::control::steering::SteeringInput;
 use crate::control::{Command, Controller};
@@ -44,16 +44,16 @@ use std::path::{Path, PathBuf};
 pub enum PipelineError {
     /// The ROI does not define a bird's-eye view.
     #[error("warp.src: {0}")]
-    Warp(#[from] WarpError),
+    Warp(WarpError),
     /// A cascade file exists but cannot be read or parsed.
     #[error("detect: {0}")]
-    Cascade(#[from] CascadeError),
+    Cascade(CascadeError),
     /// `stereo.calibration` names a file that cannot be read, is not a stereo calibration, or
     /// was made for another image size.
     #[error("stereo.calibration: {0}")]
     StereoCalibration(crate::calib::file::FileError),
     /// The steering method `steering.method` picks cannot be built from this configuration.
-    #[error("{0}")]
+    #[error(transparent)]
     Steering(#[from] crate::control::steering::SteeringError),
 }
 
@@ -61,6 +61,18 @@ pub enum PipelineError {
 impl From<crate::calib::file::FileError> for PipelineError {
     fn from(e: crate::calib::file::FileError) -> Self {
         PipelineError::StereoCalibration(e)
+    }
+}
+
+impl From<WarpError> for PipelineError {
+    fn from(e: WarpError) -> Self {
+        PipelineError::Warp(e)
+    }
+}
+
+impl From<CascadeError> for PipelineError {
+    fn from(e: CascadeError) -> Self {
+        PipelineError::Cascade(e)
     }
 }
 
@@ -120,10 +132,11 @@ pub struct RangedObject {
     pub predicted: bool,
 }
 
-/// A `[detect]` cascade that is configured (a non-empty path) but not a file.
+/// A class's cascade (`classes.<name>.model`) that is configured (a non-empty path) but not a
+/// file.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct MissingCascade {
-    /// The config key (`detect.stop_sign`, `detect.traffic_light`, `detect.obstacle`).
+    /// The config key (`classes.stop_sign.model`, …; the registry's `model_key`).
     pub key: &'static str,
     /// The path that was looked for.
     pub path: PathBuf,
@@ -142,23 +155,20 @@ impl std::fmt::Display for MissingCascade {
     }
 }
 
-/// Loads the `[detect]` cascades that exist (paths relative to `base`; an empty path switches
-/// that class off). Returns the stage (`None` when no file exists or detection is off) and the
-/// configured files that were missing, which the binary refuses (a configured model that is
-/// not there is an error, not a silently weaker car). This is the pipeline's only filesystem
-/// access.
-pub fn load_detector(
-    cfg: &DetectConfig,
-    base: &Path,
-) -> Result<(Option<DetectStage>, Vec<MissingCascade>), CascadeError> {
-    if !cfg.enabled {
+/// Loads the classes' cascades (`classes.<name>.model`) that exist (paths relative to `base`;
+/// an empty path switches that class off). Returns the stage (`None` when no file exists or
+/// `detect.enabled` is off) and the configured files that were missing, which the binary
+/// refuses (a configured model that is not there is an error, not a silently weaker car).
+/// This is the pipeline's only filesystem access.
+pub fn load_detector(cfg: &Config, base: &Path) -> Result<(Option<DetectStage>, Vec<MissingCascade>), CascadeError> {
+    if !cfg.detect.enabled {
         return Ok((None, Vec::new()));
     }
-    let params = DetectParams::from(cfg);
+    let params = DetectParams::from(&cfg.detect);
     let mut specs = Vec::new();
     let mut missing = Vec::new();
-    for class in ObjectClass::ALL {
-        let file = cfg.class(class).model;
+    for (class, k) in cfg.classes.iter() {
+        let file = &k.model;
         if file.is_empty() {
             continue;
         }
@@ -183,7 +193,8 @@ pub fn load_detector(
     Ok((Some(DetectStage::load(&specs)?), missing))
 }
 
-/// Where and at which sizes one class is searched (from `[detect]` and the camera).
+/// Where and at which sizes one class is searched (from `[classes.<name>]`, `[detect]` and the
+/// camera).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DetectLimits {
     /// The class (its name is the cascade's label).
@@ -196,19 +207,18 @@ pub struct DetectLimits {
     pub max_size: (u32, u32),
 }
 
-/// The `[detect]` regions and size limits of each class in frame pixels. An object `W` metres
-/// wide at `d` metres is about `f·W/d` pixels wide (pinhole, `f` from `camera.hfov_deg`), so a
-/// box of width `[W_min, W_max]` seen within `range_m = [near, far]` is at least
-/// `⌊f·W_min/far⌋` and at most `⌈f·W_max/near⌉` pixels wide; `min_size_px` still applies.
-/// Only widths are limited (the window's aspect is the cascade's).
+/// The regions and size limits of each class (`classes.<name>.region`, `box_m`) in frame
+/// pixels. An object `W` metres wide at `d` metres is about `f·W/d` pixels wide (pinhole, `f`
+/// from `camera.hfov_deg`), so a box of width `[W_min, W_max]` seen within
+/// `range_m = [near, far]` is at least `⌊f·W_min/far⌋` and at most `⌈f·W_max/near⌉` pixels
+/// wide; `min_size_px` still applies. Only widths are limited (the window's aspect is the
+/// cascade's).
 pub fn detect_limits(cfg: &Config) -> [DetectLimits; ObjectClass::COUNT] {
     let d = &cfg.detect;
     let f = crate::camera::PinholeCamera::from(&cfg.camera).f_px;
     let (w, h) = (cfg.camera.width as f64, cfg.camera.height as f64);
     ObjectClass::ALL.map(|class| {
-        let DetectClass {
-            region: r, box_m: b, ..
-        } = d.class(class);
+        let (r, b) = (cfg.classes[class].region, cfg.classes[class].box_m);
         let (x0, y0) = ((r[0] * w).floor() as i32, (r[1] * h).floor() as i32);
         let (x1, y1) = ((r[2] * w).ceil() as i32, (r[3] * h).ceil() as i32);
         let min_w = ((f * b[0] / d.range_m[1]).floor() as u32).max(d.min_size_px);
@@ -235,21 +245,20 @@ pub const BAND_SIZE_SLACK: f64 = 1.25;
 
 /// The ground-plane band of each class, in the order of [`detect_limits`] (`None` for all
 /// when `detect.ground_band` is off). An object whose box is `W ∈ [W_min, W_max]` metres wide
-/// (`detect.*_box_m`) and whose box bottom is `z` metres above the floor
-/// (`ranging.*_bottom_m`), at a forward distance `d` within `detect.range_m` (from 0.7·near,
-/// for objects off to the side; both `W` and `far` widened by [`BAND_SIZE_SLACK`]), is
-/// `f·W/Z(d)` pixels wide and has its box bottom on row
-/// `v(d, z)` of the calibrated pinhole camera (`Z` = depth along the optical axis; Rivera &
-/// Andaluz Eq. 5 read backwards). For every box width the band is the span of those rows,
-/// widened by [`BAND_SLACK`] of the window height plus [`BAND_SLACK_PX`]; windows whose box
-/// bottom lies outside are not scanned. Units: pixels, metres.
+/// (`classes.<name>.box_m`) and whose box bottom is `z` metres above the floor
+/// (`classes.<name>.bottom_m`), at a forward distance `d` within `detect.range_m` (from
+/// 0.7·near, for objects off to the side; both `W` and `far` widened by [`BAND_SIZE_SLACK`]),
+/// is `f·W/Z(d)` pixels wide and has its box bottom on row `v(d, z)` of the calibrated
+/// pinhole camera (`Z` = depth along the optical axis; Rivera & Andaluz Eq. 5 read backwards).
+/// For every box width the band is the span of those rows, widened by [`BAND_SLACK`] of the
+/// window height plus [`BAND_SLACK_PX`]; windows whose box bottom lies outside are not
+/// scanned. Units: pixels, metres.
 pub fn detect_bands(cfg: &Config) -> [Option<crate::detect::RowBand>; ObjectClass::COUNT] {
     if !cfg.detect.ground_band {
         return std::array::from_fn(|_| None);
     }
     let d = &cfg.detect;
-    let r = &cfg.ranging;
-    let cam = cfg.ranging.box_ranging(&cfg.camera).camera;
+    let cam = cfg.box_ranging().camera;
     let w_img = cfg.camera.width as usize;
     let band = |box_m: [f64; 2], z: f64| {
         // (lowest, highest) box-bottom row per box width; width up to twice the frame's.
@@ -290,7 +299,7 @@ pub fn detect_bands(cfg: &Config) -> [Option<crate::detect::RowBand>; ObjectClas
             slack_px: BAND_SLACK_PX,
         }
     };
-    ObjectClass::ALL.map(|c| Some(band(d.class(c).box_m, r.class_box(c).bottom_m)))
+    ObjectClass::ALL.map(|c| Some(band(cfg.classes[c].box_m, cfg.classes[c].bottom_m)))
 }
 
 /// The frame rows a [`Pipeline`] reads step by step ([`Pipeline::row_plan`]): the lane
@@ -365,7 +374,7 @@ impl Pipeline {
     /// Builds the pipeline for `cfg` (precomputes the warp map), without a detector: see
     /// [`Pipeline::set_detector`] and [`load_detector`].
     pub fn new(cfg: &Config) -> Result<Self, PipelineError> {
-        let ranging = cfg.ranging.box_ranging(&cfg.camera);
+        let ranging = cfg.box_ranging();
         Ok(Self {
             lane: cfg.lane_detector()?,
             control: cfg.controller()?,
@@ -390,7 +399,7 @@ impl Pipeline {
         })
     }
 
-    /// Installs (or removes) the detection stage, with the `[detect]` regions and size
+    /// Installs (or removes) the detection stage, with the `[classes.<name>]` regions and size
     /// limits of each class ([`detect_limits`]).
     pub fn set_detector(&mut self, detect: Option<DetectStage>) {
         self.detect = detect;

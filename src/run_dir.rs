@@ -234,28 +234,28 @@ pub enum RunDirError {
         input: PathBuf,
     },
     /// A folder cannot be created.
-    #[error("{path}: cannot create: {source}", path = path.display())]
+    #[error("{path}: cannot create: {err}", path = path.display())]
     Create {
         /// The folder.
         path: PathBuf,
-        /// Underlying error.
-        source: std::io::Error,
+        /// Underlying error (in the message, not a `source`: printed once).
+        err: std::io::Error,
     },
     /// A file of the run cannot be written.
-    #[error("{path}: cannot write: {source}", path = path.display())]
+    #[error("{path}: cannot write: {err}", path = path.display())]
     Write {
         /// The file.
         path: PathBuf,
-        /// Underlying error.
-        source: std::io::Error,
+        /// Underlying error (in the message, not a `source`: printed once).
+        err: std::io::Error,
     },
     /// A file cannot be read.
-    #[error("{path}: cannot read: {source}", path = path.display())]
+    #[error("{path}: cannot read: {err}", path = path.display())]
     Read {
         /// The file.
         path: PathBuf,
-        /// Underlying error.
-        source: std::io::Error,
+        /// Underlying error (in the message, not a `source`: printed once).
+        err: std::io::Error,
     },
     /// A value cannot be written as JSON.
     #[error("{path}: cannot write as JSON: {message}", path = path.display())]
@@ -263,6 +263,14 @@ pub enum RunDirError {
         /// The file.
         path: PathBuf,
         /// The serializer's message.
+        message: String,
+    },
+    /// An image cannot be encoded as PNG.
+    #[error("{path}: cannot encode PNG: {message}", path = path.display())]
+    Png {
+        /// The file.
+        path: PathBuf,
+        /// The encoder's message.
         message: String,
     },
     /// A run folder to read is not a folder.
@@ -480,12 +488,22 @@ impl RunDir {
     /// renamed over the name): a reader sees the old file or the whole new one.
     pub fn write(&mut self, name: &str, bytes: &[u8]) -> Result<PathBuf, RunDirError> {
         let path = self.path.join(name);
-        write_atomic(&path, bytes).map_err(|source| RunDirError::Write {
+        write_atomic(&path, bytes).map_err(|err| RunDirError::Write {
             path: path.clone(),
-            source,
+            err,
         })?;
         self.files.insert(name.to_string());
         Ok(path)
+    }
+
+    /// Writes `img` as PNG (a plot), atomically, as `name`; returns its path.
+    pub fn write_png(&mut self, name: &str, img: &image::RgbImage) -> Result<PathBuf, RunDirError> {
+        let mut png = std::io::Cursor::new(Vec::new());
+        img.write_to(&mut png, image::ImageFormat::Png).map_err(|e| RunDirError::Png {
+            path: self.path.join(name),
+            message: e.to_string(),
+        })?;
+        self.write(name, &png.into_inner())
     }
 
     /// Writes `value` as pretty JSON, atomically, with the run's id as its first key
@@ -532,7 +550,7 @@ impl RunDir {
             message: e.to_string(),
         })? + "\n";
         let path = self.path.join(RUN_FILE);
-        write_atomic(&path, text.as_bytes()).map_err(|source| RunDirError::Write { path, source })
+        write_atomic(&path, text.as_bytes()).map_err(|err| RunDirError::Write { path, err })
     }
 
     /// Makes an explicit folder (checked new or empty before), remembering what it made.
@@ -555,9 +573,9 @@ impl RunDir {
             missing.push(d.to_path_buf());
             a = d.parent();
         }
-        std::fs::create_dir_all(p).map_err(|source| RunDirError::Create {
+        std::fs::create_dir_all(p).map_err(|err| RunDirError::Create {
             path: p.to_path_buf(),
-            source,
+            err,
         })?;
         self.ancestors.extend(missing);
         self.made.push(p.to_path_buf());
@@ -576,9 +594,9 @@ impl RunDir {
                 missing.push(d.to_path_buf());
                 a = d.parent();
             }
-            std::fs::create_dir_all(parent).map_err(|source| RunDirError::Create {
+            std::fs::create_dir_all(parent).map_err(|err| RunDirError::Create {
                 path: parent.to_path_buf(),
-                source,
+                err,
             })?;
             self.ancestors.extend(missing);
         }
@@ -595,7 +613,7 @@ impl RunDir {
                     return Ok(dir);
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
-                Err(source) => return Err(RunDirError::Create { path: dir, source }),
+                Err(err) => return Err(RunDirError::Create { path: dir, err }),
             }
         }
         Err(RunDirError::NoFreeName {
@@ -663,9 +681,9 @@ fn point_latest(parent: &Path, run: &Path) -> Result<(), RunDirError> {
         let _ = std::fs::remove_file(&tmp);
         std::os::unix::fs::symlink(&name, &tmp)
             .and_then(|()| std::fs::rename(&tmp, &latest))
-            .map_err(|source| {
+            .map_err(|err| {
                 let _ = std::fs::remove_file(&tmp);
-                RunDirError::Write { path: latest, source }
+                RunDirError::Write { path: latest, err }
             })
     }
     #[cfg(not(unix))]
@@ -713,10 +731,10 @@ pub fn check_new_or_empty(flag: &str, p: &Path, utc_offset_s: i32) -> Result<(),
     let meta = match std::fs::metadata(p) {
         Ok(m) => m,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-        Err(source) => {
+        Err(err) => {
             return Err(RunDirError::Read {
                 path: p.to_path_buf(),
-                source,
+                err,
             })
         }
     };
@@ -727,9 +745,9 @@ pub fn check_new_or_empty(flag: &str, p: &Path, utc_offset_s: i32) -> Result<(),
         });
     }
     let mut names: Vec<String> = std::fs::read_dir(p)
-        .map_err(|source| RunDirError::Read {
+        .map_err(|err| RunDirError::Read {
             path: p.to_path_buf(),
-            source,
+            err,
         })?
         .flatten()
         .map(|e| e.file_name().to_string_lossy().into_owned())
@@ -829,16 +847,16 @@ fn count_frames(dir: &Path) -> usize {
 
 /// Lines of a file (a last line without its newline counts), read in blocks.
 pub fn count_lines(path: &Path) -> Result<u64, RunDirError> {
-    let mut f = std::fs::File::open(path).map_err(|source| RunDirError::Read {
+    let mut f = std::fs::File::open(path).map_err(|err| RunDirError::Read {
         path: path.to_path_buf(),
-        source,
+        err,
     })?;
     let mut buf = vec![0u8; 64 * 1024];
     let (mut n, mut last) = (0u64, b'\n');
     loop {
-        let k = f.read(&mut buf).map_err(|source| RunDirError::Read {
+        let k = f.read(&mut buf).map_err(|err| RunDirError::Read {
             path: path.to_path_buf(),
-            source,
+            err,
         })?;
         if k == 0 {
             break;
@@ -964,9 +982,9 @@ fn check_ids(dir: &Path, c: &mut RunCheck) -> Result<Option<u64>, RunDirError> {
         if !p.is_file() {
             continue;
         }
-        let text = std::fs::read_to_string(&p).map_err(|source| RunDirError::Read {
+        let text = std::fs::read_to_string(&p).map_err(|err| RunDirError::Read {
             path: p.clone(),
-            source,
+            err,
         })?;
         let v: serde_json::Value = match serde_json::from_str(&text) {
             Ok(v) => v,
@@ -1008,9 +1026,9 @@ fn check_ids(dir: &Path, c: &mut RunCheck) -> Result<Option<u64>, RunDirError> {
 /// Every data file and plot in `dir` is one run `r` wrote: a data file that is not is a
 /// problem, a plot that is not is left out (foreign).
 fn check_files(dir: &Path, r: &RunRecord, c: &mut RunCheck) -> Result<(), RunDirError> {
-    let rd = std::fs::read_dir(dir).map_err(|source| RunDirError::Read {
+    let rd = std::fs::read_dir(dir).map_err(|err| RunDirError::Read {
         path: dir.to_path_buf(),
-        source,
+        err,
     })?;
     let mut names: Vec<String> = rd
         .flatten()

@@ -29,9 +29,10 @@ fn use_detector(cfg: &Config) -> bool {
     if std::env::var("RCCAR_SCENARIO_BOXES").is_ok_and(|v| v == "detector") {
         return true;
     }
-    let all = [&cfg.detect.stop_sign, &cfg.detect.traffic_light, &cfg.detect.obstacle]
+    let all = cfg
+        .classes
         .iter()
-        .all(|p| Path::new(ROOT).join(p).is_file());
+        .all(|(_, k)| Path::new(ROOT).join(&k.model).is_file());
     all && !forced_truth
 }
 
@@ -42,9 +43,9 @@ fn cfg() -> Config {
     // Cascades from elsewhere (e.g. a training run not yet committed).
     if let Ok(dir) = std::env::var("RCCAR_CASCADES") {
         let d = Path::new(&dir);
-        c.detect.stop_sign = d.join("stop_sign.xml").display().to_string();
-        c.detect.traffic_light = d.join("traffic_light.xml").display().to_string();
-        c.detect.obstacle = d.join("obstacle.xml").display().to_string();
+        for class in ObjectClass::ALL {
+            c.classes[class].model = d.join(format!("{class}.xml")).display().to_string();
+        }
     }
     c
 }
@@ -62,7 +63,7 @@ fn run(cfg: &Config, track: &Track, start: f64, seconds: f64) -> (Summary, Vec<S
     let mut sim = Simulation::new(&cfg, track).unwrap();
     if use_detector(&cfg) {
         eprintln!("SCENARIO BOXES: detector (config/cascades/*.xml)");
-        let (det, missing) = rccar::pipeline::load_detector(&cfg.detect, Path::new(ROOT)).unwrap();
+        let (det, missing) = rccar::pipeline::load_detector(&cfg, Path::new(ROOT)).unwrap();
         if !missing.is_empty() {
             eprintln!("SCENARIO BOXES: detector WITHOUT {missing:?}");
         }

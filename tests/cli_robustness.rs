@@ -823,7 +823,7 @@ fn every_size_a_flag_or_file_controls_is_bounded() {
 fn a_missing_cascade_is_an_error_naming_the_key_and_the_fix() {
     let p = project();
     let d = p.path();
-    let set = "detect.stop_sign=/nonexistent.xml";
+    let set = "classes.stop_sign.model=/nonexistent.xml";
     std::fs::create_dir_all(d.join("frames")).unwrap();
     std::fs::copy(sample_png(0), d.join("frames/a.png")).unwrap();
     let runs: [&[&str]; 4] = [
@@ -836,8 +836,8 @@ fn a_missing_cascade_is_an_error_naming_the_key_and_the_fix() {
         let o = rccar(d, args);
         assert_eq!(o.code, Some(2), "{args:?}: {}", o.all());
         assert!(
-            o.stderr.contains("detect.stop_sign = \"/nonexistent.xml\": no such cascade file")
-                && o.stderr.contains("detect.stop_sign = \"\" to run without that detector")
+            o.stderr.contains("classes.stop_sign.model = \"/nonexistent.xml\": no such cascade file")
+                && o.stderr.contains("classes.stop_sign.model = \"\" to run without that detector")
                 && o.stderr.contains("detect.enabled = false"),
             "{args:?}: {}",
             o.stderr
@@ -848,7 +848,7 @@ fn a_missing_cascade_is_an_error_naming_the_key_and_the_fix() {
     assert_eq!(o.code, Some(2), "{}", o.all());
     assert!(o.stderr.contains("/nonexistent.xml"), "{}", o.stderr);
     // The shipped cascades, and one class switched off on purpose: the run goes on.
-    for (extra, out) in [(None, "out/sim2"), (Some("detect.stop_sign="), "out/sim3")] {
+    for (extra, out) in [(None, "out/sim2"), (Some("classes.stop_sign.model="), "out/sim3")] {
         let mut args = vec!["sim", "--seconds", "1", "--no-timing", "-o", out];
         if let Some(e) = extra {
             args.extend(["--set", e]);

@@ -34,7 +34,7 @@ fn the_band_keeps_every_object_box_in_range() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let cfg = Config::default();
     assert!(cfg.detect.ground_band, "shipped on");
-    let (Some(stage), missing) = load_detector(&cfg.detect, &root.join("config")).unwrap() else {
+    let (Some(stage), missing) = load_detector(&cfg, &root.join("config")).unwrap() else {
         panic!("no cascades");
     };
     assert!(missing.is_empty(), "the shipped cascades are missing: {missing:?}");

@@ -351,3 +351,28 @@ fn every_frame_unreadable_exits_1_and_says_so() {
     assert_eq!(code, Some(1));
     assert!(err.contains("no usable frame (3 skipped)"), "{err}");
 }
+
+/// A reader that goes away (`rccar drive ... | head -1`) never ends a drive before its own
+/// end: the run goes on with its lines dropped, sends neutral, writes its files and exits 0
+/// (it used to panic on the run folder's line).
+#[test]
+fn a_closed_stdout_does_not_end_the_drive() {
+    let dir = scratch("closed-stdout");
+    let cfg = root().join("config/car.toml");
+    let mut child = Command::new(EXE)
+        .current_dir(&dir)
+        .args(["drive", "--camera", "sim", "--dry-run", "--seconds", "1", "--no-local", "--config"])
+        .arg(&cfg)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    let run = dir.join("out/drive/latest");
+    assert!(run.join("summary.json").is_file() && !records(&run).is_empty(), "{err}");
+}

@@ -8,12 +8,14 @@
 //! tests/ must be listed here (or in tests/car.rs), which `every_test_file_is_compiled` checks.
 
 mod behaviour_scenarios;
+mod broken_pipe;
 mod calib_sim;
 mod cli_robustness;
 mod detect_bad_input;
 mod detect_band;
 mod detect_cascades;
 mod detect_pyramid;
+mod errors_once;
 mod fuzz_inputs;
 mod interrupt;
 mod labs_tools;

@@ -363,6 +363,46 @@ fn bit_errors_at_1e_3_never_apply_a_corrupted_command_and_every_loss_is_counted(
     }
 }
 
+/// An ARM the firmware never answers (its frame corrupted on the wire, so the firmware drops
+/// it) is asked again: `Link::arm` succeeds and the car arms, instead of the run staying
+/// disarmed after one reply timeout (seen on a busy machine: "no ARM within 300 ms").
+#[test]
+fn an_unanswered_arm_is_asked_again() {
+    let sim = Sim::start("armretry");
+    let corrupted = Arc::new(AtomicBool::new(false));
+    let c = corrupted.clone();
+    let link = Link::open(
+        &sim.tty,
+        LinkOptions {
+            // short, so the retry is what arms the car; long enough for the emulator's reply
+            reply_timeout: Duration::from_millis(1500),
+            silence_timeout: Duration::from_millis(3000),
+            wire_fault: Some(Box::new(move |bytes: &mut Vec<u8>| {
+                // the first ARM only: flip one payload/CRC byte so the firmware's CRC check drops it
+                if bytes.get(2) == Some(&protocol::id::ARM) && !c.swap(true, Ordering::SeqCst) {
+                    let last = bytes.len() - 2;
+                    bytes[last] ^= 0x5A;
+                }
+            })),
+            ..LinkOptions::default()
+        },
+    );
+    link.wait_connected(WAIT).expect("handshake");
+    link.arm().expect("ARM answered on the second attempt");
+    assert!(
+        corrupted.load(Ordering::SeqCst),
+        "the first ARM was corrupted on the wire"
+    );
+    // two ARMs written, one reached the firmware's decoder intact (the harness decodes the
+    // UART's input with the firmware's own protocol code)
+    let arms = sim.rx_times(protocol::id::ARM).len();
+    assert_eq!(arms, 1, "ARM frames the firmware received intact: {arms}");
+    let t = link
+        .wait_telemetry(WAIT, |t| t.state == State::Armed)
+        .expect("the firmware reports armed");
+    assert_eq!(t.state, State::Armed);
+}
+
 #[test]
 fn host_recovers_from_a_firmware_reset() {
     let mut sim = Sim::start("reset");

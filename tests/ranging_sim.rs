@@ -33,7 +33,7 @@ fn measure(kind: &str, class: ObjectClass, ds: &[f64]) -> Vec<(f64, f64, f64, f6
     let cfg = Config::default();
     let t = track(kind);
     let ob = t.enabled_objects().next().unwrap().clone();
-    let ranging = cfg.ranging.box_ranging(&cfg.camera);
+    let ranging = cfg.box_ranging();
     // The point the box bottom stands for: the obstacle's near face, else the object itself.
     let near = if ob.kind == ObjectClass::Obstacle {
         ob.size[0] / 2.0
@@ -217,7 +217,7 @@ fn approach(kind: &str, stage: &mut rccar::detect::DetectStage, from: f64, to: f
     let cfg = Config::default();
     let t = track(kind);
     let ob = t.enabled_objects().next().unwrap().clone();
-    let ranging = cfg.ranging.box_ranging(&cfg.camera);
+    let ranging = cfg.box_ranging();
     let mut sim = Simulation::new(&cfg, &t).unwrap();
     sim.set_full_frames(true);
     let lens_ahead = cfg.vehicle.camera_x_m - cfg.vehicle.wheelbase_m / 2.0;
@@ -264,7 +264,7 @@ fn approach(kind: &str, stage: &mut rccar::detect::DetectStage, from: f64, to: f
 fn ranging_accuracy_with_the_detectors_boxes() {
     use rccar::ranging::track::{Measurement, Tracker, TrackerOptions};
     let cfg = Config::default();
-    let ranging = cfg.ranging.box_ranging(&cfg.camera);
+    let ranging = cfg.box_ranging();
     let opts = TrackerOptions {
         accel_sigma: cfg.ranging.track_accel_sigma,
         odometry_sigma: cfg.ranging.track_odometry_sigma,
@@ -386,7 +386,7 @@ fn ranging_accuracy_with_the_detectors_boxes() {
 #[ignore = "a measurement aid that prints CSV"]
 fn detector_boxes_against_the_face_model() {
     let cfg = Config::default();
-    let ranging = cfg.ranging.box_ranging(&cfg.camera);
+    let ranging = cfg.box_ranging();
     println!("kind,truth_m,left,top,right,bottom,h_box,h_model,c_box,c_model,bottom_model");
     for (kind, class) in CLASSES {
         let Some(mut stage) = detector(kind) else { continue };
@@ -425,7 +425,7 @@ fn the_pipeline_tracks_objects_between_detections() {
     let ob = t.enabled_objects().next().unwrap().clone();
     let mut sim = Simulation::new(&cfg, &t).unwrap();
     // `[detect]` cascade paths are relative to the config file's folder.
-    let (det, missing) = rccar::pipeline::load_detector(&cfg.detect, &root.join("config")).unwrap();
+    let (det, missing) = rccar::pipeline::load_detector(&cfg, &root.join("config")).unwrap();
     assert!(missing.is_empty(), "the shipped cascades are missing: {missing:?}");
     sim.set_detector(det);
     let lens_ahead = cfg.vehicle.camera_x_m - cfg.vehicle.wheelbase_m / 2.0;

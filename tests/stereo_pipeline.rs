@@ -45,7 +45,7 @@ fn run(method: RangingMethod) -> Run {
     );
     let track = Track::from_toml_str(&text, "scenarios.toml").unwrap();
     let mut pipeline = Pipeline::new(&cfg).unwrap();
-    let (det, missing) = rccar::pipeline::load_detector(&cfg.detect, Path::new(ROOT)).unwrap();
+    let (det, missing) = rccar::pipeline::load_detector(&cfg, Path::new(ROOT)).unwrap();
     assert!(missing.is_empty(), "cascades missing: {missing:?}");
     pipeline.set_detector(det);
     let mut rig = StereoRig::new(

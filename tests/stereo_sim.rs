@@ -106,9 +106,7 @@ fn measure(s: &mut Setup, base: f64, d: f64, matcher: &mut Matcher) -> Option<Ro
         (rect.x + rect.width) as f64 - 0.5,
         (rect.y + rect.height) as f64 - 0.5,
     ];
-    let mono = cfg.ranging.box_ranging(&cfg.camera)
-        .range(s.class, bbox)
-        .map(|r| r.0);
+    let mono = cfg.box_ranging().range(s.class, bbox).map(|r| r.0);
     let mut planes = PairPlanes::default();
     planes.set(&l, &r);
     let geo = StereoGeometry::ideal(&rig.left.mount().camera, base);

@@ -27,6 +27,16 @@ pub struct CameraCalibration {
 }
 
 impl CameraCalibration {
+    /// One line of the calibration (`label`: which camera): focal lengths, principal point,
+    /// the lens coefficients and the RMS reprojection error.
+    pub fn summary_line(&self, label: &str) -> String {
+        let (k, d) = (&self.intrinsics, &self.distortion.0);
+        format!(
+            "{label}: fx {:.3} fy {:.3} cx {:.3} cy {:.3} px; k1 {:.5} k2 {:.5} p1 {:.6} p2 {:.6} k3 {:.5}; RMS {:.4} px",
+            k.fx, k.fy, k.cx, k.cy, d[0], d[1], d[2], d[3], d[4], self.rms_px
+        )
+    }
+
     /// The results of `fit` over the images `names` (in the fit's order) of `size`
     /// (width, height); `not_found`: the images without a board.
     pub fn from_fit(fit: &CameraFit, names: &[String], size: (u32, u32), not_found: Vec<String>) -> CameraCalibration {

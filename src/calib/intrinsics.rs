@@ -1,5 +1,6 @@
 //! One camera's intrinsics from views of a planar board (Zhang 2000, the method OpenCV's
-//! `calibrateCamera` implements), with OpenCV's lens model:
+//! `calibrateCamera` implements), with OpenCV's lens model (and [`CalibError`], why a
+//! calibration of one camera or a pair fails):
 //!
 //! ```text
 //! x' = X/Z, y' = Y/Z, r² = x'² + y'²
@@ -17,9 +18,46 @@
 //!    the reprojection error (pixels). RMS = √(Σ|e|² / points), as OpenCV reports it.
 
 use super::lm::{minimize, view_blocks, LmOptions};
-use super::CalibError;
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
+
+/// What can go wrong while calibrating.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibError {
+    /// Too few views with a board to calibrate from.
+    #[error("need at least {need} images with the board found, got {got}")]
+    TooFewViews {
+        /// Minimum number of views.
+        need: usize,
+        /// Views available.
+        got: usize,
+    },
+    /// The views do not all have the same image size.
+    #[error("image {name} is {got_w}x{got_h}, the first one is {want_w}x{want_h}")]
+    SizeMismatch {
+        /// The image that differs.
+        name: String,
+        /// Its width, pixels.
+        got_w: u32,
+        /// Its height, pixels.
+        got_h: u32,
+        /// Expected width.
+        want_w: u32,
+        /// Expected height.
+        want_h: u32,
+    },
+    /// The left and right lists pair up differently.
+    #[error("{left} left images but {right} right images: they must pair up one to one")]
+    PairCount {
+        /// Number of left images.
+        left: usize,
+        /// Number of right images.
+        right: usize,
+    },
+    /// The closed-form start or the fit broke down (degenerate views, e.g. all fronto-parallel).
+    #[error("calibration failed: {0}")]
+    Degenerate(String),
+}
 
 /// Focal lengths and principal point, pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -79,6 +79,26 @@ pub enum PhotoError {
         /// The file.
         path: PathBuf,
     },
+    /// `--left` and `--right` of different lengths.
+    #[error("{left} left images but {right} right images: --left and --right must pair up one to one")]
+    Unpaired {
+        /// Left photos.
+        left: usize,
+        /// Right photos.
+        right: usize,
+    },
+    /// The left photos are of another size than the right ones.
+    #[error("left images are {}x{} but right images are {}x{} ({} vs {}): the pair must have one size", left_size.0, left_size.1, right_size.0, right_size.1, left.display(), right.display())]
+    PairSize {
+        /// The first left photo.
+        left: PathBuf,
+        /// The left photos' size.
+        left_size: (u32, u32),
+        /// The first right photo.
+        right: PathBuf,
+        /// The right photos' size.
+        right_size: (u32, u32),
+    },
     /// The corners file cannot be written.
     #[error("{}: cannot write", path.display())]
     Write {
@@ -113,6 +133,28 @@ pub fn check_counts(what: &str, n_images: usize, found: &Found) -> Result<(), Ph
         return Err(PhotoError::TooManyCorners { corners, n: n_images, what: what.into() });
     }
     Ok(())
+}
+
+/// Refuses `--left` and `--right` photo lists that do not pair up one to one.
+pub fn check_paired(left: &[PathBuf], right: &[PathBuf]) -> Result<(), PhotoError> {
+    if left.len() != right.len() {
+        return Err(PhotoError::Unpaired { left: left.len(), right: right.len() });
+    }
+    Ok(())
+}
+
+/// Refuses a pair whose left photos (of `left_size`) and right photos (of `right_size`) differ
+/// in size; the error names the first photo of each side.
+pub fn check_pair_size(left: &[PathBuf], left_size: (u32, u32), right: &[PathBuf], right_size: (u32, u32)) -> Result<(), PhotoError> {
+    match (left.first(), right.first()) {
+        (Some(l), Some(r)) if left_size != right_size => Err(PhotoError::PairSize {
+            left: l.clone(),
+            left_size,
+            right: r.clone(),
+            right_size,
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// The board's corners in each photo (at most [`MAX_IMAGES`], all of one size) and that size

@@ -17,7 +17,7 @@ use super::intrinsics::{
     homography, pose_from_homography, refine_pose, rodrigues, rodrigues_inv, Distortion, Intrinsics, Pose,
 };
 use super::lm::{minimize, view_blocks, LmOptions};
-use super::CalibError;
+use super::intrinsics::CalibError;
 use image::{GrayImage, RgbImage};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};

@@ -1,13 +1,47 @@
-//! Calibrating tilt ranging from measured pairs (`rccar calibrate ranging`): which pairs can
-//! determine the camera ([`check_pairs`]), where the fit starts ([`from_image_centre`]; the
-//! check start [`nominal`], [`same_fit`]), and writing the
-//! result into the student's override file in place ([`edit_override`], [`backup_name`],
-//! [`write_file`], the dry run's [`line_diff`]). The fit itself is
-//! [`crate::ranging::fit`].
+//! Calibrating tilt ranging from measured pairs (`rccar calibrate ranging`): the pairs file
+//! ([`read_pairs_csv`]), which pairs can determine the camera ([`check_pairs`]), where the fit
+//! starts ([`from_image_centre`]; the check start [`nominal`], [`same_fit`]), the residuals'
+//! table ([`residual_lines`]), and writing the result into the student's override file in
+//! place ([`read_override`], [`edit_override`], [`backup_name`], [`write_file`], the dry
+//! run's [`line_diff`]). The fit itself is [`crate::ranging::fit`].
 
 use crate::camera::PinholeCamera;
-use crate::ranging::{Pair, TiltRanging};
+use crate::ranging::{parse_pairs_csv, Fit, Pair, TiltRanging};
 use std::path::{Path, PathBuf};
+
+/// Most pairs a calibration takes: a CSV's, and `--from-sim N` (one rendered frame per pair).
+pub const MAX_PAIRS: usize = 10_000;
+/// Largest pairs CSV, bytes (10,000 pairs of ~25 bytes fit 25 times over).
+pub const MAX_CSV_BYTES: u64 = 1 << 20;
+/// Largest override file edited in place, bytes.
+pub const MAX_OVERRIDE_BYTES: u64 = 1 << 20;
+/// Largest `--max-rms-px`, pixels.
+pub const MAX_RMS_PX: f64 = 100.0;
+/// Largest `--v0-sigma-px`, pixels (4× the largest image side is no prior at all).
+pub const MAX_V0_SIGMA_PX: f64 = 1000.0;
+
+/// A fit option out of its bounds (the message names the flag and the bound).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FitOptionsError {
+    /// `--max-rms-px` not in (0, [`MAX_RMS_PX`]].
+    #[error("--max-rms-px {0}: must be > 0 and <= {MAX_RMS_PX} pixels")]
+    MaxRms(f64),
+    /// `--v0-sigma-px` not in [0, [`MAX_V0_SIGMA_PX`]].
+    #[error("--v0-sigma-px {0}: must be 0..={MAX_V0_SIGMA_PX} pixels (0 = free)")]
+    V0Sigma(f64),
+}
+
+/// Checks the fit's refusal bound `max_rms_px` and the width `v0_sigma_px` of the prior on v0
+/// (0 = free; see [`centre_prior`]).
+pub fn check_options(max_rms_px: f64, v0_sigma_px: f64) -> Result<(), FitOptionsError> {
+    if !(max_rms_px > 0.0 && max_rms_px <= MAX_RMS_PX) {
+        return Err(FitOptionsError::MaxRms(max_rms_px));
+    }
+    if !(0.0..=MAX_V0_SIGMA_PX).contains(&v0_sigma_px) {
+        return Err(FitOptionsError::V0Sigma(v0_sigma_px));
+    }
+    Ok(())
+}
 
 /// Why the override file cannot be updated.
 #[derive(Debug, thiserror::Error)]
@@ -375,6 +409,65 @@ pub enum TextFileError {
         #[source]
         err: std::io::Error,
     },
+}
+
+/// Why a pairs CSV cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum PairsFileError {
+    /// Not readable, or larger than [`MAX_CSV_BYTES`].
+    #[error(transparent)]
+    Read(#[from] TextFileError),
+    /// A line that is not `row_px,distance_m[,height_m]` (the message names it).
+    #[error("{0}")]
+    Parse(String),
+    /// More than [`MAX_PAIRS`] pairs.
+    #[error("{}: {count} pairs; at most {MAX_PAIRS}", path.display())]
+    TooMany {
+        /// The file.
+        path: PathBuf,
+        /// Its pairs.
+        count: usize,
+    },
+}
+
+/// The pairs of a CSV of `row_px,distance_m[,height_m]` lines (header and `#` comments
+/// allowed; at most [`MAX_CSV_BYTES`] and [`MAX_PAIRS`] pairs).
+pub fn read_pairs_csv(path: &Path) -> Result<Vec<Pair>, PairsFileError> {
+    let text = read_small(path, MAX_CSV_BYTES)?;
+    let pairs = parse_pairs_csv(&text, &path.display().to_string()).map_err(PairsFileError::Parse)?;
+    if pairs.len() > MAX_PAIRS {
+        return Err(PairsFileError::TooMany { path: path.to_path_buf(), count: pairs.len() });
+    }
+    Ok(pairs)
+}
+
+/// The residuals of fit `f` to `pairs` as a table: a header, then per pair its row, true and
+/// fitted distance and the residual in metres and per cent.
+pub fn residual_lines(pairs: &[Pair], f: &Fit) -> Vec<String> {
+    let mut lines = vec![format!(
+        "{:>8} {:>9} {:>10} {:>10} {:>7}",
+        "row px", "true m", "fitted m", "resid m", "resid %"
+    )];
+    for (p, r) in pairs.iter().zip(&f.residuals_m) {
+        lines.push(format!(
+            "{:>8.1} {:>9.4} {:>10.4} {:>+10.4} {:>+7.2}",
+            p.v,
+            p.d,
+            p.d + r,
+            r,
+            100.0 * r / p.d
+        ));
+    }
+    lines
+}
+
+/// The override file's text as it is now (at most [`MAX_OVERRIDE_BYTES`]); `None` when it does
+/// not exist yet.
+pub fn read_override(path: &Path) -> Result<Option<String>, TextFileError> {
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        _ => read_small(path, MAX_OVERRIDE_BYTES).map(Some),
+    }
 }
 
 /// Reads a text file of at most `max` bytes; the error names the file and the bound.

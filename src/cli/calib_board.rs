@@ -86,15 +86,6 @@ fn find_all(paths: &[PathBuf], b: &BoardArgs) -> Result<(Found, (u32, u32))> {
     Ok((found, size))
 }
 
-fn print_camera(label: &str, c: &CameraCalibration) {
-    let k = &c.intrinsics;
-    let d = &c.distortion.0;
-    println!(
-        "{label}: fx {:.3} fy {:.3} cx {:.3} cy {:.3} px; k1 {:.5} k2 {:.5} p1 {:.6} p2 {:.6} k3 {:.5}; RMS {:.4} px",
-        k.fx, k.fy, k.cx, k.cy, d[0], d[1], d[2], d[3], d[4], c.rms_px
-    );
-}
-
 /// Runs `rccar calibrate camera`.
 pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
     let (found, size) = find_all(&a.images, &a.board)?;
@@ -115,7 +106,7 @@ pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
     for (n, e) in &cam.per_image_rms_px {
         println!("{n}: reprojection RMS {e:.4} px");
     }
-    print_camera("camera", &cam);
+    println!("{}", cam.summary_line("camera"));
     let file = CalibrationFile::Camera {
         board: a.board.board,
         square_m: a.board.square,
@@ -128,13 +119,7 @@ pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
 
 /// Runs `rccar calibrate stereo`.
 pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
-    if a.left.len() != a.right.len() {
-        bail!(
-            "{} left images but {} right images: --left and --right must pair up one to one",
-            a.left.len(),
-            a.right.len()
-        );
-    }
+    photos::check_paired(&a.left, &a.right)?;
     if !(a.max_rms_px.is_finite() && a.max_rms_px > 0.0 && a.max_rms_px <= MAX_STEREO_RMS_PX) {
         bail!(
             "--max-rms-px {}: must be > 0 and <= {MAX_STEREO_RMS_PX} pixels",
@@ -145,17 +130,7 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
     check_counts("left images", a.left.len(), &fl)?;
     let (fr, sr) = find_all(&a.right, &a.board)?;
     check_counts("right images", a.right.len(), &fr)?;
-    if sl != sr {
-        bail!(
-            "left images are {}x{} but right images are {}x{} ({} vs {}): the pair must have one size",
-            sl.0,
-            sl.1,
-            sr.0,
-            sr.1,
-            a.left[0].display(),
-            a.right[0].display()
-        );
-    }
+    photos::check_pair_size(&a.left, sl, &a.right, sr)?;
     let mut pairs = photos::pair_views(&a.left, &a.right, &fl, &fr);
     let skipped: Vec<String> = std::mem::take(&mut pairs.skipped)
         .into_iter()
@@ -165,8 +140,8 @@ pub fn run_stereo(a: StereoArgs) -> Result<ExitCode> {
         })
         .collect();
     let (stereo, rms) = photos::fit_pair(a.board.board, a.board.square, &pairs, skipped, sl)?;
-    print_camera("left", &stereo.left);
-    print_camera("right", &stereo.right);
+    println!("{}", stereo.left.summary_line("left"));
+    println!("{}", stereo.right.summary_line("right"));
     for (l, r, e) in &stereo.per_pair_rms_px {
         println!("{l} + {r}: stereo reprojection RMS {e:.4} px");
     }

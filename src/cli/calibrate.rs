@@ -17,10 +17,11 @@
 use super::common::ConfigArgs;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use rccar::calib::tilt::{self, check_pairs, edit_override, line_diff};
+use rccar::calib::tilt::{self, check_pairs, edit_override, line_diff, MAX_PAIRS};
 use rccar::camera::PinholeCamera;
 use rccar::config::{Config, LoadedConfig};
-use rccar::ranging::{fit, parse_pairs_csv, Fit, Pair};
+use rccar::ranging::{fit, Pair};
+use rccar::sim::scenario_lab::{lab_pairs, LabOptions};
 use std::path::Path;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -88,37 +89,14 @@ pub fn run(c: CalibrateCmd) -> Result<ExitCode> {
     }
 }
 
-/// Largest `--from-sim` pair count (the lab renders one frame per pair), and of a CSV.
-const MAX_SIM_PAIRS: usize = 10_000;
-/// Largest pairs CSV, bytes (10,000 pairs of ~25 bytes fit 25 times over).
-const MAX_CSV_BYTES: u64 = 1 << 20;
-/// Largest override file edited in place, bytes.
-const MAX_OVERRIDE_BYTES: u64 = 1 << 20;
-/// Largest `--max-rms-px`, pixels.
-const MAX_RMS_PX: f64 = 100.0;
-/// Largest `--v0-sigma-px`, pixels (4× the largest image side is no prior at all).
-const MAX_V0_SIGMA_PX: f64 = 1000.0;
-
-/// [`tilt::read_small`].
-fn read_small(path: &Path, max: u64) -> Result<String> {
-    Ok(tilt::read_small(path, max)?)
-}
-
 fn ranging(a: RangingArgs) -> Result<ExitCode> {
     let loaded = a.config.load_full()?;
     let cfg = loaded.cfg.clone();
-    check_bounds(&a)?;
+    tilt::check_options(a.max_rms_px, a.v0_sigma_px)?;
     // 1. The pairs: measured, or made in the simulator's lab.
     let pairs = match (&a.pairs, a.from_sim) {
-        (_, Some(n)) => lab_pairs(&a, &cfg, n)?,
-        (Some(path), None) => {
-            let text = read_small(path, MAX_CSV_BYTES)?;
-            let p = parse_pairs_csv(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?;
-            if p.len() > MAX_SIM_PAIRS {
-                bail!("{}: {} pairs; at most {MAX_SIM_PAIRS}", path.display(), p.len());
-            }
-            p
-        }
+        (_, Some(n)) => from_lab(&a, &cfg, n)?,
+        (Some(path), None) => tilt::read_pairs_csv(path)?,
         (None, None) => bail!("give a PAIRS.csv or --from-sim N"),
     };
     let origin = match (&a.pairs, a.from_sim) {
@@ -136,7 +114,9 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     let opts = tilt::centre_prior(&cam, a.fit_ay, a.v0_sigma_px);
     let f = fit(&pairs, from_image, opts).map_err(|e| anyhow::anyhow!("{origin}: {e}; nothing written"))?;
     // 4. Report.
-    print_fit(&pairs, &f);
+    for line in tilt::residual_lines(&pairs, &f) {
+        println!("{line}");
+    }
     let fitted = tilt::fitted_values(&f.ranging, &cam);
     let [(_, tilt), (_, v0_off), (_, ay_scale)] = fitted;
     println!(
@@ -152,41 +132,17 @@ fn ranging(a: RangingArgs) -> Result<ExitCode> {
     write_result(&a, &loaded, &values)
 }
 
-/// The flags' bounds.
-fn check_bounds(a: &RangingArgs) -> Result<()> {
-    if !(a.max_rms_px > 0.0 && a.max_rms_px <= MAX_RMS_PX) {
-        bail!("--max-rms-px {}: must be > 0 and <= {MAX_RMS_PX} pixels", a.max_rms_px);
-    }
-    if !(a.v0_sigma_px >= 0.0 && a.v0_sigma_px <= MAX_V0_SIGMA_PX) {
-        bail!(
-            "--v0-sigma-px {}: must be 0..={MAX_V0_SIGMA_PX} pixels (0 = free)",
-            a.v0_sigma_px
-        );
-    }
-    Ok(())
-}
-
 /// `n` pairs made in the simulator's calibration lab (and written to `--sim-pairs-out`).
-fn lab_pairs(a: &RangingArgs, cfg: &Config, n: usize) -> Result<Vec<Pair>> {
-    if !(3..=MAX_SIM_PAIRS).contains(&n) {
-        bail!("--from-sim {n}: must be 3..={MAX_SIM_PAIRS} pairs");
-    }
-    if !(a.sim_tilt_error_deg.is_finite() && a.sim_tilt_error_deg.abs() <= 30.0) {
-        bail!(
-            "--sim-tilt-error-deg {}: must be -30..=30 degrees",
-            a.sim_tilt_error_deg
-        );
-    }
-    if !(a.sim_tape_sigma_m.is_finite() && (0.0..=0.5).contains(&a.sim_tape_sigma_m)) {
-        bail!("--sim-tape-sigma-m {}: must be 0..=0.5 m", a.sim_tape_sigma_m);
-    }
-    let mut real = cfg.clone();
-    real.camera.tilt_deg += a.sim_tilt_error_deg;
-    let p = rccar::sim::scenario_lab::calibration_pairs(&real, n, a.sim_tape_sigma_m, a.sim_seed)?;
+fn from_lab(a: &RangingArgs, cfg: &Config, n: usize) -> Result<Vec<Pair>> {
+    let o = LabOptions {
+        tilt_error_deg: a.sim_tilt_error_deg,
+        tape_sigma_m: a.sim_tape_sigma_m,
+        seed: a.sim_seed,
+    };
+    let (p, true_tilt) = lab_pairs(cfg, n, MAX_PAIRS, &o)?;
     println!(
-        "lab: {} pairs from the simulator (true tilt {:.2} deg, tape sigma {} m)",
+        "lab: {} pairs from the simulator (true tilt {true_tilt:.2} deg, tape sigma {} m)",
         p.len(),
-        real.camera.tilt_deg,
         a.sim_tape_sigma_m
     );
     if let Some(out) = &a.sim_pairs_out {
@@ -196,32 +152,11 @@ fn lab_pairs(a: &RangingArgs, cfg: &Config, n: usize) -> Result<Vec<Pair>> {
     Ok(p)
 }
 
-/// The residuals' table.
-fn print_fit(pairs: &[Pair], f: &Fit) {
-    println!(
-        "{:>8} {:>9} {:>10} {:>10} {:>7}",
-        "row px", "true m", "fitted m", "resid m", "resid %"
-    );
-    for (p, r) in pairs.iter().zip(&f.residuals_m) {
-        println!(
-            "{:>8.1} {:>9.4} {:>10.4} {:>+10.4} {:>+7.2}",
-            p.v,
-            p.d,
-            p.d + r,
-            r,
-            100.0 * r / p.d
-        );
-    }
-}
-
 /// The new override file, validated merged with the configuration, then printed as a diff
 /// (`--dry-run`) or written (the old one backed up first, the new one replacing it atomically).
 fn write_result(a: &RangingArgs, loaded: &LoadedConfig, values: &[(&str, &str, f64)]) -> Result<ExitCode> {
     let target = a.write.clone().unwrap_or_else(|| loaded.dir.join("local.toml"));
-    let old = match std::fs::metadata(&target) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-        _ => Some(read_small(&target, MAX_OVERRIDE_BYTES)?),
-    };
+    let old = tilt::read_override(&target)?;
     let new = edit_override(old.as_deref(), values).with_context(|| format!("{}: cannot update", target.display()))?;
     let base = &loaded.files[0];
     let others: Vec<PathBuf> = loaded.files[1..].to_vec();

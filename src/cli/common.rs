@@ -7,7 +7,8 @@
 //! tree this binary was built from, when it still exists (said on stderr). Overrides: `--local FILE` (must exist when named), else
 //! `local.toml` beside the base file when it exists (`--no-local`: none); then
 //! `--set key=value`. Relative paths inside a file resolve against that file's folder (see
-//! `rccar::config::LoadedConfig`).
+//! `rccar::config::LoadedConfig`). The lookups themselves are the library's
+//! (`rccar::config::{find_config, source_tree_config, find_local}`); here: the flags.
 
 use anyhow::{bail, Result};
 use clap::Args;
@@ -41,14 +42,14 @@ impl ConfigArgs {
             Some(p) => Ok(p.clone()),
             None => match rccar::config::find_config(Path::new("."), std::env::var_os("RCCAR_CONFIG").as_deref()) {
                 Ok(p) => Ok(p),
-                Err(e) => match built_from_config() {
+                Err(e) => match rccar::config::source_tree_config() {
                     Some(p) => {
                         static SAID: std::sync::Once = std::sync::Once::new();
                         SAID.call_once(|| {
-                            eprintln!(
+                            super::signals::say_err(&format!(
                                 "rccar: no config/car.toml here or above; using {} (the source tree rccar was built from; --config FILE to choose)",
                                 p.display()
-                            )
+                            ))
                         });
                         Ok(p)
                     }
@@ -63,27 +64,16 @@ impl ConfigArgs {
         if self.no_local {
             return Ok(None);
         }
-        match &self.local {
-            Some(p) if p.is_file() => Ok(Some(p.clone())),
-            Some(p) => bail!(
-                "--local {}: no such file (leave --local out to use local.toml beside the configuration when it exists)",
-                p.display()
-            ),
-            None => {
-                let p = base.parent().unwrap_or(Path::new("")).join("local.toml");
-                Ok(p.is_file().then_some(p))
-            }
-        }
+        Ok(rccar::config::find_local(base, self.local.as_deref())?)
     }
 
     /// Where a change saved by this command goes (a dashboard's "save"): `--local` if named,
     /// else `local.toml` beside the configuration (created when missing).
     pub fn local_target(&self) -> Result<PathBuf> {
-        if let Some(p) = &self.local {
-            return Ok(p.clone());
+        match &self.local {
+            Some(p) => Ok(p.clone()),
+            None => Ok(rccar::config::local_beside(&self.base_file()?)),
         }
-        let base = self.base_file()?;
-        Ok(base.parent().unwrap_or(Path::new("")).join("local.toml"))
     }
 
     /// Loads, merges and validates the configuration: the values, the base file's folder and
@@ -100,29 +90,13 @@ impl ConfigArgs {
     }
 }
 
-/// Loads the `[detect]` cascades; a configured one that is missing is an error naming the key,
-/// the file and the fix (an empty path switches a class off). The paths in `cfg` are absolute
-/// after [`ConfigArgs::load`].
+/// Loads the classes' cascades (`classes.<name>.model`); a configured one that is missing is an
+/// error naming the key, the file and the fix (an empty path switches a class off). The paths
+/// in `cfg` are absolute after [`ConfigArgs::load`].
 pub fn load_detector(cfg: &Config) -> Result<Option<rccar::detect::DetectStage>> {
-    let (stage, missing) = rccar::pipeline::load_detector(&cfg.detect, Path::new("."))?;
+    let (stage, missing) = rccar::pipeline::load_detector(cfg, Path::new("."))?;
     if let Some(m) = missing.first() {
         bail!("{m}");
     }
     Ok(stage)
 }
-
-/// `config/car.toml` of the source tree this binary was compiled from, if it is still there:
-/// a student who built rccar with cargo can run it from any folder. A binary copied to the
-/// car has no such tree and gets the usual "no config/car.toml" error.
-fn built_from_config() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config").join("car.toml");
-    p.is_file().then_some(p)
-}
-
-pub const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
-
-/// The plot font, from the system (never committed).
-pub fn load_font() -> Option<&'static [u8]> {
-    std::fs::read(FONT).ok().map(|b| &*Box::leak(b.into_boxed_slice()))
-}
-

@@ -8,7 +8,6 @@ use anyhow::{Context, Result};
 use clap::Args;
 use rccar::detect::{annotate, Cascade, DetectParams, Detector};
 use rccar::source::escape_name;
-use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -59,38 +58,8 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((p(w)?, p(h)?))
 }
 
-/// Bounds of `--scale-factor`: at 1.01 a 4096-pixel image already has ~500 pyramid levels.
-const SCALE_FACTOR: (f64, f64) = (1.01, 4.0);
-/// Most `--cascade` files (each runs on every image).
-const MAX_CASCADES: usize = 16;
-/// Largest `--min-neighbors` (as `detect.min_neighbors`).
-const MAX_MIN_NEIGHBORS: u32 = 100;
-
 /// Runs the detectors and reports.
 pub fn run(args: DetectArgs) -> Result<ExitCode> {
-    if !(args.scale_factor >= SCALE_FACTOR.0 && args.scale_factor <= SCALE_FACTOR.1) {
-        anyhow::bail!(
-            "--scale-factor {}: must be {}..={} (the ratio between pyramid levels; nearer 1 means more levels: 1.0000001 would ask for millions)",
-            args.scale_factor,
-            SCALE_FACTOR.0,
-            SCALE_FACTOR.1
-        );
-    }
-    if args.cascades.len() > MAX_CASCADES {
-        anyhow::bail!(
-            "{} --cascade files: at most {MAX_CASCADES} (each runs on every image)",
-            args.cascades.len()
-        );
-    }
-    if args.min_neighbors > MAX_MIN_NEIGHBORS {
-        anyhow::bail!("--min-neighbors {}: must be 0..={MAX_MIN_NEIGHBORS}", args.min_neighbors);
-    }
-    let side = rccar::config::limits::MAX_IMAGE_SIDE;
-    for (flag, (w, h)) in [("--min-size", args.min_size), ("--max-size", args.max_size)] {
-        if w > side || h > side {
-            anyhow::bail!("{flag} {w}x{h}: each side must be 0..={side} pixels (the largest image side)");
-        }
-    }
     let params = DetectParams {
         scale_factor: args.scale_factor,
         min_neighbors: args.min_neighbors,
@@ -98,9 +67,11 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
         max_size: args.max_size,
         parallel: args.parallel,
     };
+    annotate::check_options(&params, args.cascades.len(), rccar::config::limits::MAX_IMAGE_SIDE)?;
+    let names: Vec<String> = args.cascades.iter().map(|p| escape_name(p.as_os_str())).collect();
     let mut detectors = Vec::new();
     for path in &args.cascades {
-        detectors.push((escape_name(path.as_os_str()), Detector::new(Cascade::from_file(path)?)));
+        detectors.push(Detector::new(Cascade::from_file(path)?));
     }
     if !args.no_annotate {
         std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create", args.out.display()))?;
@@ -109,7 +80,7 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
     let mut used = std::collections::HashSet::new();
     for path in &args.images {
         let shown = escape_name(path.as_os_str());
-        match detect_one(&args, &params, &mut detectors, path, &shown, &mut used) {
+        match detect_one(&args, &params, (&names, &mut detectors), path, &shown, &mut used) {
             Ok(()) => {}
             Err(DetectFailure::Skip(why)) => {
                 eprintln!("skipped {shown}: {why}");
@@ -134,32 +105,16 @@ enum DetectFailure {
 fn detect_one(
     args: &DetectArgs,
     params: &DetectParams,
-    detectors: &mut [(String, Detector)],
+    (names, detectors): (&[String], &mut [Detector]),
     path: &std::path::Path,
     shown: &str,
     used: &mut std::collections::HashSet<String>,
 ) -> Result<(), DetectFailure> {
     let img = rccar::source::read_image(path).map_err(DetectFailure::Skip)?;
     let (rgb, gray) = annotate::rgb_and_gray(&img);
-    let found = annotate::detect_all(detectors.iter_mut().map(|d| &mut d.1), &gray, &rgb, params, args.light)
-        .map_err(|(ci, e)| DetectFailure::Skip(format!("{}: {e}", detectors[ci].0)))?;
-    let mut boxes = Vec::new();
-    for f in &found {
-        let d = &f.detection;
-        let mut b = json!({
-            "cascade": detectors[f.cascade].0,
-            "x": d.rect.x, "y": d.rect.y, "width": d.rect.width, "height": d.rect.height,
-            "neighbors": d.neighbors,
-        });
-        if let Some(light) = f.light {
-            b["light"] = serde_json::to_value(light).map_err(|e| DetectFailure::Fatal(e.into()))?;
-        }
-        boxes.push(b);
-    }
-    println!(
-        "{}",
-        json!({"image": shown, "width": gray.width(), "height": gray.height(), "boxes": boxes})
-    );
+    let found = annotate::detect_all(detectors.iter_mut(), &gray, &rgb, params, args.light)
+        .map_err(|(ci, e)| DetectFailure::Skip(format!("{}: {e}", names[ci])))?;
+    println!("{}", annotate::image_record(shown, gray.dimensions(), &found, names));
     if !args.no_annotate {
         let name = rccar::source::unique_name(path.file_name().map(escape_name).unwrap_or_default(), used);
         let out = args.out.join(format!("{name}.detect.png"));

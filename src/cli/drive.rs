@@ -16,15 +16,13 @@
 
 use super::common::ConfigArgs;
 use super::signals::{say, say_err};
-use super::timer::{WallClock, WallTimer};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rccar::drive::{Actor, LoopEnd};
 use rccar::run_dir::{RunDir, RunState};
-use rccar::session::{ArmAt, CameraSpec, Level, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
+use rccar::session::{ArmAt, CameraSpec, Level, SceneSpec, Session, SessionSpec, SinkSpec, SourceSpec, Timing};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::Arc;
 
 /// Flags of `rccar drive`.
 #[derive(Args, Debug)]
@@ -186,26 +184,13 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     let mut run = super::outdir::create("drive", a.out.as_deref(), "out/drive", &record, &reads)?;
     let spec = spec(&a, PathBuf::from(&cfg.sim.track), cfg.ranging.method == rccar::config::RangingMethod::Stereo, &run)?;
     let stop = super::signals::install();
-    let clock = Arc::new(WallClock::new());
-    let env = SessionEnv {
-        clock: clock.clone(),
-        stop: stop.clone(),
-        timer: Box::new(WallTimer::new()),
-        say: Arc::new(|level, line: &str| match level {
-            Level::Info => say(line),
-            Level::Warn => say_err(line),
-        }),
-    };
+    let env = super::timer::session_env(false, stop.clone());
+    let clock = env.clock.clone();
     let mut session = Session::build(&cfg, spec, env).map_err(|e| match e {
         rccar::session::SessionError::Pair(m) => anyhow::anyhow!("--camera-right: {m}"),
         e => e.into(),
     })?;
-    for (level, line) in session.notes() {
-        match level {
-            Level::Info => say(&format!("drive: {line}")),
-            Level::Warn => say_err(line),
-        }
-    }
+    super::signals::notes("drive", &session);
     hooks(&session);
     say(&format!(
         "drive: camera {}, {}, {} fps configured; {}",

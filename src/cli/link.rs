@@ -1,6 +1,7 @@
 //! `rccar link --port PATH`: the students' bench tool for the Arduino link. Handshake and
 //! versions, then one of: live telemetry (default), a servo sweep (`--sweep`), trim editing
-//! (`--trim-us`, `--save` to store it in EEPROM), round-trip latency (`--latency N`).
+//! (`--trim-us`, `--save` to store it in EEPROM), round-trip latency (`--latency N`); the
+//! modes themselves are `rccar::link::bench`.
 //! Every exit path disarms: the `Link` sends DISARM + neutral when dropped, and Ctrl-C only
 //! raises a flag that ends the loops so that drop runs; a second Ctrl-C/SIGTERM disarms from
 //! the signal thread and exits.
@@ -51,6 +52,8 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
 #[cfg(feature = "serial")]
 pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
     use anyhow::Context;
+    use super::signals::say;
+    use rccar::link::bench;
     use rccar::link::protocol::status;
     use rccar::link::transport::{Link, LinkOptions};
     use std::time::Duration;
@@ -70,7 +73,7 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
     let hello = link
         .wait_connected(Duration::from_secs(3))
         .with_context(|| format!("no firmware answering on {}", args.port))?;
-    println!(
+    say(&format!(
         "connected to {}: protocol {}, firmware {}.{}.{} ({})",
         args.port,
         hello.protocol_version,
@@ -78,21 +81,25 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
         hello.fw_minor,
         hello.fw_patch,
         status::name(hello.status)
-    );
+    ));
     let (cfg, from_eeprom) = link.get_config()?;
-    println!("config ({}): {cfg:?}", if from_eeprom { "EEPROM" } else { "defaults" });
+    say(&format!("config ({}): {cfg:?}", if from_eeprom { "EEPROM" } else { "defaults" }));
 
     if let Some(us) = args.trim_us {
-        serial::trim(&link, cfg, us, args.save)?;
+        bench::set_trim(&link, cfg, us, args.save)?;
+        say(&format!("servo centre = {us} µs{}", if args.save { " (saved to EEPROM)" } else { "" }));
     }
     if let Some(n) = args.latency {
-        serial::latency(&link, n, &stopped)?;
+        if let Some(line) = bench::latency_line(&bench::round_trips(&link, n, &stopped)?) {
+            say(&line);
+        }
     }
     if args.sweep {
-        serial::sweep(&link, &stopped)?;
+        bench::sweep(&link, 4.0, &stopped)?;
+        say("sweep done");
     }
     if args.trim_us.is_none() && !args.sweep && args.latency.is_none() {
-        serial::watch(&link, args.seconds, &stopped);
+        bench::watch(&link, args.seconds, &stopped, &mut |line| say(line));
     }
     // disarm and a neutral DRIVE now (dropping the last `Link` does the same)
     link.drive(0, 0);
@@ -103,88 +110,4 @@ pub fn run(args: LinkArgs) -> anyhow::Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
-}
-
-/// The bench tool's modes, on an open link.
-#[cfg(feature = "serial")]
-mod serial {
-    use rccar::link::protocol::LinkConfig;
-    use rccar::link::transport::Link;
-    use std::time::{Duration, Instant};
-
-    /// `--trim-us`: the servo's centre (`save`: into EEPROM).
-    pub fn trim(link: &Link, mut cfg: LinkConfig, us: u16, save: bool) -> anyhow::Result<()> {
-        cfg.servo_center_us = us;
-        anyhow::ensure!(
-            cfg.is_valid(),
-            "--trim-us {us}: must lie strictly between servo_min_us {} and servo_max_us {}",
-            cfg.servo_min_us,
-            cfg.servo_max_us
-        );
-        link.set_config(cfg, save)?;
-        println!(
-            "servo centre = {us} µs{}",
-            if save { " (saved to EEPROM)" } else { "" }
-        );
-        Ok(())
-    }
-
-    /// `--latency N`: round trips of N pings.
-    pub fn latency(link: &Link, n: usize, stopped: &dyn Fn() -> bool) -> anyhow::Result<()> {
-        let mut rtts = Vec::with_capacity(n);
-        for _ in 0..n {
-            if stopped() {
-                break;
-            }
-            rtts.push(link.ping()?.1.as_secs_f64() * 1e3);
-        }
-        rtts.sort_by(f64::total_cmp);
-        if !rtts.is_empty() {
-            println!(
-                "round trip PING -> TELEMETRY over {} pings: median {:.2} ms, max {:.2} ms",
-                rtts.len(),
-                rtts[rtts.len() / 2],
-                rtts[rtts.len() - 1]
-            );
-        }
-        Ok(())
-    }
-
-    /// `--sweep`: the servo left and right for 4 s, armed.
-    pub fn sweep(link: &Link, stopped: &dyn Fn() -> bool) -> anyhow::Result<()> {
-        link.arm()?;
-        let t0 = Instant::now();
-        while !stopped() && t0.elapsed() < Duration::from_secs(4) {
-            // triangle wave, 2 s per full left -> right -> left
-            let ph = (t0.elapsed().as_secs_f64() / 2.0).fract();
-            let steer = if ph < 0.5 { -1.0 + 4.0 * ph } else { 3.0 - 4.0 * ph };
-            link.drive((steer * 1000.0) as i16, 0);
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        link.disarm()?;
-        println!("sweep done");
-        Ok(())
-    }
-
-    /// The default: the firmware's telemetry for `seconds`.
-    pub fn watch(link: &Link, seconds: f64, stopped: &dyn Fn() -> bool) {
-        let t0 = Instant::now();
-        while !stopped() && t0.elapsed().as_secs_f64() < seconds {
-            if let Some((t, n)) = link.telemetry() {
-                println!(
-                    "#{n:<5} {:?} servo {} µs esc {} µs | crc {} framing {} overrun {} lost {} failsafe {} | up {:.1} s",
-                    t.state,
-                    t.servo_us,
-                    t.esc_us,
-                    t.crc_errors,
-                    t.framing_errors,
-                    t.overruns,
-                    t.lost_frames,
-                    t.failsafe_trips,
-                    f64::from(t.uptime_ms) / 1e3
-                );
-            }
-            std::thread::sleep(Duration::from_millis(200));
-        }
-    }
 }

@@ -3,9 +3,10 @@
 //! went. `sim`, `replay` and `drive` call [`create`] once before they write anything,
 //! [`started`] just before their loop and [`finish`] at the end.
 
-use anyhow::{Context, Result};
+use super::signals::{say, say_err};
+use anyhow::Result;
 use rccar::run_dir::{RunDir, RunEnd, RunRequest, RunStart, RunState, Target};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// The start of a run of `command`, now.
 pub fn start(command: &str) -> RunStart {
@@ -66,7 +67,7 @@ pub fn create(
         .collect();
     let run = RunDir::create(&req, &start(command))?;
     if out.is_none() {
-        println!("{command}: run folder {}/", run.path().display());
+        say(&format!("{command}: run folder {}/", run.path().display()));
     }
     Ok(run)
 }
@@ -75,7 +76,7 @@ pub fn create(
 /// warning, not the end of the run.
 pub fn started(run: &mut RunDir) {
     if let Err(e) = run.started() {
-        eprintln!("warning: {e} (the run goes on; its folder is {})", run.path().display());
+        say_err(&format!("warning: {e} (the run goes on; its folder is {})", run.path().display()));
     }
 }
 
@@ -86,12 +87,4 @@ pub fn finish(run: &mut RunDir, state: RunState, telemetry_frames: Option<u64>) 
         telemetry_frames,
     })?;
     Ok(())
-}
-
-/// Writes a plot into the run folder as `name` (PNG, atomically); returns its path.
-pub fn save_png(run: &mut RunDir, name: &str, img: &image::RgbImage) -> Result<PathBuf> {
-    let mut png = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut png, image::ImageFormat::Png)
-        .with_context(|| format!("{}: cannot encode PNG", run.join(name).display()))?;
-    Ok(run.write(name, &png.into_inner())?)
 }

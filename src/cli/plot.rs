@@ -11,9 +11,9 @@
 //! 260·fields) pixels), 8 runs (one colour each), 10 million points over all of them, lines of
 //! at most 1 MiB; the files are read line by line, keeping only the plotted numbers.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
-use rccar::fields::{default_label, panels, resolve, shown, MAX_FIELDS, MAX_FILES};
+use rccar::fields::{default_label, panels, plot_fields, resolve, shown};
 use rccar::sim::plot::{self, Trace};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -42,25 +42,7 @@ pub struct PlotArgs {
 
 /// Runs `rccar plot`.
 pub fn run(a: PlotArgs) -> Result<ExitCode> {
-    if a.label.len() > a.files.len() {
-        bail!("--label given {} times for {} file(s)", a.label.len(), a.files.len());
-    }
-    let fields: Vec<String> = a.y.iter().map(|f| f.trim().to_string()).filter(|f| !f.is_empty()).collect();
-    if fields.is_empty() {
-        bail!("--y: name at least one field, e.g. --y error,steer");
-    }
-    if fields.len() > MAX_FIELDS {
-        bail!(
-            "--y: {} fields; at most {MAX_FIELDS} (one panel each, 260 px tall): plot them in several images",
-            fields.len()
-        );
-    }
-    if a.files.len() > MAX_FILES {
-        bail!(
-            "{} telemetry files; at most {MAX_FILES} in one plot (one colour each): plot them in groups",
-            a.files.len()
-        );
-    }
+    let fields = plot_fields(&a.y, a.files.len(), a.label.len())?;
     let x = resolve(a.x.trim()).to_string();
     let mut traces = Vec::new();
     let mut points = 0usize;
@@ -71,8 +53,8 @@ pub fn run(a: PlotArgs) -> Result<ExitCode> {
         println!("plot: {} ({records} records) as `{label}`", file.display());
         traces.push(Trace { label, panels });
     }
-    let font = super::common::load_font()
-        .with_context(|| format!("no font at {}; apt install fonts-dejavu-core", super::common::FONT))?;
+    let font = plot::system_font()
+        .with_context(|| format!("no font at {}; apt install fonts-dejavu-core", plot::SYSTEM_FONT))?;
     plot::register_font(font);
     // Panel titles and axis names: the field as typed, and what an alias stands for.
     let names: Vec<String> = fields.iter().map(|f| shown(f)).collect();

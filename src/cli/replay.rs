@@ -1,18 +1,15 @@
 //! `rccar replay DIR`: the pipeline over a folder of recorded frames.
 
 use super::common::ConfigArgs;
-use super::timer::WallTimer;
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use rccar::drive::{Clock, Flow, FrameContext, Level, LoopEnd, LoopError, NoClock, Observer, StopReason};
+use rccar::drive::{Flow, FrameContext, LoopEnd, LoopError, Observer};
 use rccar::session::replay::ReplayTally;
-use rccar::session::{CameraSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
+use rccar::session::{CameraSpec, Session, SessionSpec, SinkSpec, SourceSpec, Timing};
 use rccar::source::FrameError;
-use rccar::timing::{NoTimer, StageTimer};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::Arc;
 
 /// Flags of `rccar replay`.
 #[derive(Args, Debug)]
@@ -64,8 +61,6 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
         );
     }
     let stop = super::signals::install();
-    let clock: Arc<dyn Clock + Send + Sync> = if a.no_timing { Arc::new(NoClock) } else { Arc::new(super::timer::WallClock::new()) };
-    let timer: Box<dyn StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
     let mut spec = SessionSpec::new(
         SourceSpec::Cameras {
             left: match a.dir.to_str().filter(|d| d.starts_with("pipe:")) {
@@ -83,25 +78,12 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     let mut run = super::outdir::create("replay", a.out.as_deref(), "out/replay", &[], &reads)?;
     let tel_path = run.join("telemetry.jsonl");
     spec.telemetry = Some(tel_path.clone());
-    let env = SessionEnv {
-        clock,
-        stop,
-        timer,
-        say: Arc::new(|level, line: &str| match level {
-            Level::Info => super::signals::say(line),
-            Level::Warn => super::signals::say_err(line),
-        }),
-    };
+    let env = super::timer::session_env(a.no_timing, stop);
     let mut session = Session::build(&cfg, spec, env).map_err(|e| match e {
         rccar::session::SessionError::Pair(m) => anyhow::anyhow!("--right: {m}"),
         e => e.into(),
     })?;
-    for (level, line) in session.notes() {
-        match level {
-            Level::Info => println!("replay: {line}"),
-            Level::Warn => eprintln!("{line}"),
-        }
-    }
+    super::signals::notes("replay", &session);
     let annotate_dir = run.join("annotated");
     let annotate_frames = cfg.replay.annotate && !a.no_annotate;
     if annotate_frames {
@@ -144,12 +126,7 @@ pub fn run(a: ReplayArgs) -> Result<ExitCode> {
     if let LoopEnd::Stopped(why) = end {
         println!(
             "replay: interrupted ({}) after {} frames; telemetry holds every frame processed",
-            match why {
-                StopReason::Terminate => "SIGTERM",
-                StopReason::Hangup => "SIGHUP",
-                StopReason::Quit => "SIGQUIT",
-                _ => "Ctrl-C",
-            },
+            why.said(),
             s.frames
         );
         return Ok(ExitCode::from(why.exit_code()));

@@ -12,8 +12,15 @@
 //! handler); a panic in any thread also raises the stop signal (as a fault). After SIGHUP the
 //! terminal is gone: everything the commands print goes through [`say`], which never panics on
 //! a closed stdout or stderr.
+//!
+//! SIGPIPE (the reader of a pipe went away, `rccar sim | head -1`): Rust ignores it, so the
+//! next `println!` would panic. Commands that move nothing and serve no socket let it end the
+//! process, as it ends any Unix filter ([`let_sigpipe_end_the_process`]); `drive`, `link` and
+//! `sim --dashboard` keep ignoring it (a reader or a viewer that goes away must never end a run
+//! before neutral is sent, and a write to a socket can raise it too) and print through [`say`].
 
-use rccar::drive::{StopReason, StopSignal};
+use rccar::drive::{Level, Say, StopReason, StopSignal};
+use rccar::session::Session;
 use signal_hook::consts::{SIGHUP, SIGINT, SIGQUIT, SIGTERM, SIGUSR1};
 use std::io::Write;
 use std::sync::{Mutex, OnceLock};
@@ -30,13 +37,13 @@ fn button() -> &'static Mutex<Option<Hook>> {
     B.get_or_init(|| Mutex::new(None))
 }
 
-/// The stop reason and name of a terminating signal.
-fn reason(sig: i32) -> (StopReason, &'static str) {
+/// The stop reason of a terminating signal.
+fn reason(sig: i32) -> StopReason {
     match sig {
-        SIGTERM => (StopReason::Terminate, "SIGTERM"),
-        SIGHUP => (StopReason::Hangup, "SIGHUP"),
-        SIGQUIT => (StopReason::Quit, "SIGQUIT"),
-        _ => (StopReason::Interrupt, "Ctrl-C"),
+        SIGTERM => StopReason::Terminate,
+        SIGHUP => StopReason::Hangup,
+        SIGQUIT => StopReason::Quit,
+        _ => StopReason::Interrupt,
     }
 }
 
@@ -79,7 +86,8 @@ fn watch(signals: &mut signal_hook::iterator::Signals, stop: &StopSignal) {
             continue;
         }
         count += 1;
-        let (why, name) = reason(sig);
+        let why = reason(sig);
+        let name = why.said();
         stop.request(why);
         if count >= 2 {
             say_err(&format!("second {name}: stopping now"));
@@ -105,6 +113,36 @@ pub fn on_emergency(f: impl Fn() + Send + Sync + 'static) {
 pub fn emergency() {
     for h in hooks().lock().unwrap_or_else(|e| e.into_inner()).iter() {
         h();
+    }
+}
+
+/// The library's way to print ([`Say`]): information through [`say`], warnings through
+/// [`say_err`].
+pub fn sayer() -> Say {
+    std::sync::Arc::new(|level, line: &str| match level {
+        Level::Info => say(line),
+        Level::Warn => say_err(line),
+    })
+}
+
+/// The session's notes: information as `command: line` on stdout, warnings as they are on
+/// stderr.
+pub fn notes(command: &str, session: &Session) {
+    for (level, line) in session.notes() {
+        match level {
+            Level::Info => say(&format!("{command}: {line}")),
+            Level::Warn => say_err(line),
+        }
+    }
+}
+
+/// Lets SIGPIPE end the process without a word (the shell sees 128 + 13), as for any Unix
+/// filter: for the commands that move nothing and serve no socket (see the module notes).
+pub fn let_sigpipe_end_the_process() {
+    // SAFETY: sets one signal's disposition back to the default, before any thread is started.
+    #[cfg(unix)]
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

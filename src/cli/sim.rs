@@ -3,22 +3,21 @@
 //! `rccar replay`; `--sweep key=lo:hi:n` runs a gain sweep in parallel (given twice: a grid
 //! with a heat map); `--start-offset M` / `--kick T:DY` measure the step response.
 
-use super::common::{load_font, ConfigArgs, FONT};
-use super::timer::WallTimer;
+use super::signals::say;
+use super::common::ConfigArgs;
 use anyhow::{bail, Result};
 use rccar::sim::step::{StepMetrics, StepRequest};
 use clap::Args;
 use rccar::config::{Config, RangingMethod, StereoReference};
-use rccar::drive::{Clock, Level, LoopEnd, NoClock, Observer, StopSignal};
+use rccar::drive::{LoopEnd, Observer};
 use rccar::session::{ArmAt, SceneSpec, Session, SessionEnv, SessionSpec, SinkSpec, SourceSpec, Timing};
-use rccar::sim::plot;
+use rccar::sim::plot::{self, system_font, SYSTEM_FONT};
 use rccar::sim::report::RunReport;
 use rccar::run_dir::{RunDir, RunState};
 use rccar::sim::run::Summary;
 use rccar::sim::scene::Scene;
 use rccar::sim::track::Track;
 use rccar::sim::world::lock;
-use rccar::timing::NoTimer;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -128,7 +127,7 @@ fn check_flags(a: &SimArgs, cfg: &Config, step: Option<StepRequest>) -> Result<b
 }
 
 /// The simulated car, built by the library's session builder.
-fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, stop: &StopSignal, clock: Arc<dyn Clock + Send + Sync>, say: rccar::drive::Say) -> Result<Session> {
+fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, env: SessionEnv) -> Result<Session> {
     let mut spec = SessionSpec::new(
         SourceSpec::Sim {
             scene: SceneSpec::Shared(Arc::new(Scene::new(track))),
@@ -144,18 +143,11 @@ fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, stop: &StopSi
     spec.frames_viewed = a.record.is_some() || a.frames_to.is_some() || a.dash.dashboard;
     spec.operator_ends_run = a.dash.dashboard;
     spec.telemetry = Some(run.join("telemetry.jsonl"));
-    let timer: Box<dyn rccar::timing::StageTimer + Send> = if a.no_timing { Box::new(NoTimer) } else { Box::new(WallTimer::new()) };
-    let env = SessionEnv { clock, stop: stop.clone(), timer, say };
     let session = Session::build(cfg, spec, env)?;
     if a.truth_boxes {
-        println!("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
+        say("sim: behaviours see the objects' true boxes (--truth-boxes), not the detector's");
     }
-    for (level, line) in session.notes() {
-        match level {
-            Level::Info => println!("sim: {line}"),
-            Level::Warn => eprintln!("{line}"),
-        }
-    }
+    super::signals::notes("sim", &session);
     Ok(session)
 }
 
@@ -164,7 +156,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let cfg = config(&a)?;
     let track_path = a.track.clone().unwrap_or_else(|| PathBuf::from(&cfg.sim.track));
     let track = Track::load(&track_path)?;
-    let font = load_font();
+    let font = system_font();
     let step = StepRequest::parse(a.start_offset, a.kick.as_deref(), track.spec.road.lane_width_m)?;
     let stereo = check_flags(&a, &cfg, step)?;
     // The run folder (and the --record folders): new, or refused before anything is written.
@@ -180,23 +172,20 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     }
     let mut frames = rccar::pipecam::export::FrameWriter::open(a.frames_to.as_deref(), &a.frames_format, cfg.camera.width)?;
     let stop = super::signals::install();
-    let clock: Arc<dyn Clock + Send + Sync> = if a.no_timing { Arc::new(NoClock) } else { Arc::new(super::timer::WallClock::new()) };
-    let say: rccar::drive::Say = Arc::new(|level, line: &str| match level {
-        Level::Info => super::signals::say(line),
-        Level::Warn => super::signals::say_err(line),
-    });
-    let mut session = session(&a, &cfg, &track, &run, &stop, clock.clone(), say.clone())?;
+    let env = super::timer::session_env(a.no_timing, stop.clone());
+    let (clock, lines) = (env.clock.clone(), env.say.clone());
+    let mut session = session(&a, &cfg, &track, &run, env)?;
     let world = session.world().expect("a simulation has a world").clone();
     let mut dash = a.dash.start(&cfg, a.config.local_target()?, &session, &stop, clock)?;
-    println!(
+    say(&format!(
         "sim: track {} ({:.2} m, tightest lane radius {:.2} m), {} lap(s), at most {} s",
         track.name,
         track.length,
         track.tightest_lane_radius(),
         cfg.sim.laps,
         cfg.sim.max_seconds
-    );
-    let mut report = RunReport::new(world.clone(), say);
+    ));
+    let mut report = RunReport::new(world.clone(), lines);
     report.record = a.record.clone();
     report.record_right = a.record_right.clone();
     report.reference_left = cfg.stereo.reference != StereoReference::Right;
@@ -223,32 +212,30 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let scene = lock(&world).scene().clone();
     let wall_s = started.elapsed().as_secs_f64();
     for line in summary.lines() {
-        println!("{line}");
+        say(&line);
     }
     if stereo {
-        let t = &report.stereo;
-        println!(
-            "  stereo: {} pairs, detector boxes ranged by stereo {}, without a match {}",
-            t.pairs, t.ranged, t.unmatched
-        );
+        say(&report.stereo.line());
     }
-    println!(
+    say(&format!(
         "  {:.1} s simulated in {:.1} s wall: {:.1}x real time",
         summary.seconds,
         wall_s,
         summary.seconds / wall_s.max(1e-9)
-    );
+    ));
     let step_fig = write_summary(&mut run, &cfg, &report, &summary, step, &outcome)?;
     write_plots(&mut run, font, &report, &summary, &scene, step_fig.as_ref())?;
-    print_frames(&a, summary.frames);
+    if let Some(line) = report.frames_line(summary.frames) {
+        say(&line);
+    }
     let tel_lines = outcome.telemetry.as_ref().map(|t| t.1);
     super::outdir::finish(&mut run, RunState::from_stop(interrupted), tel_lines)?;
     if let Some(why) = interrupted {
-        println!(
+        say(&format!(
             "sim: interrupted ({}) after {} frames; the summary and plots cover what ran",
             why.said(),
             summary.frames
-        );
+        ));
         return Ok(ExitCode::from(why.exit_code()));
     }
     let ok = summary.laps >= cfg.sim.laps && summary.lane_departures == 0;
@@ -259,25 +246,18 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
 /// report`), each whole or not at all.
 fn write_summary(run: &mut RunDir, cfg: &Config, report: &RunReport, summary: &Summary, step: Option<StepRequest>, outcome: &rccar::session::Outcome) -> Result<Option<StepMetrics>> {
     let mut sum_json = serde_json::to_value(summary)?;
-    let mut step_fig = None;
-    if let Some(st) = step {
-        match report.step_response(&st) {
-            Some(Ok(m)) => {
-                for line in m.lines() {
-                    println!("{line}");
-                }
-                sum_json["step"] = serde_json::to_value(&m)?;
-                step_fig = Some(m);
-            }
-            Some(Err(e)) => println!("  step response: {e}"),
-            None => println!("  step response: the run ended before the kick at t = {} s", st.t),
-        }
+    let (lines, step_fig) = step.map(|st| report.step_summary(&st)).unwrap_or_default();
+    for line in lines {
+        say(&line);
+    }
+    if let Some(m) = &step_fig {
+        sum_json["step"] = serde_json::to_value(m)?;
     }
     let sum_path = run.write_json("summary.json", &sum_json)?;
     run.write_json("config.json", cfg)?;
     let tel_path = outcome.telemetry.as_ref().map(|t| t.0.clone()).unwrap_or_default();
-    println!("  telemetry: {}", tel_path.display());
-    println!("  summary:   {}", sum_path.display());
+    say(&format!("  telemetry: {}", tel_path.display()));
+    say(&format!("  summary:   {}", sum_path.display()));
     Ok(step_fig)
 }
 
@@ -291,37 +271,14 @@ fn write_plots(
     step: Option<&StepMetrics>,
 ) -> Result<()> {
     let Some(font) = font else {
-        println!("  plots:     skipped (no font at {FONT}; apt install fonts-dejavu-core)");
+        say(&format!("  plots:     skipped (no font at {SYSTEM_FONT}; apt install fonts-dejavu-core)"));
         return Ok(());
     };
     plot::register_font(font);
-    let p1 = super::outdir::save_png(run, "xte_steer.png", &plot::time_plot(&report.series, summary.lane_width_m)?)?;
-    let p2 = super::outdir::save_png(run, "path.png", &plot::path_plot(&report.series, scene)?)?;
-    println!("  plots:     {} {}", p1.display(), p2.display());
-    if let Some(m) = step {
-        let p3 = super::outdir::save_png(run, "step.png", &plot::step_plot(&report.series.t, &report.series.xte, m)?)?;
-        println!("  step:      {}", p3.display());
+    let p = report.write_plots(run, summary.lane_width_m, scene, step)?;
+    say(&format!("  plots:     {} {}", p.time.display(), p.path.display()));
+    if let Some(step) = p.step {
+        say(&format!("  step:      {}", step.display()));
     }
     Ok(())
-}
-
-/// Where the recorded frames went.
-fn print_frames(a: &SimArgs, frames: u64) {
-    match (&a.record, &a.record_right) {
-        (Some(dir), Some(right)) => println!(
-            "  frames:    {}/ and {}/ ({} PNG each; replay with `rccar replay {} --right {} --set ranging.method=stereo`)",
-            dir.display(),
-            right.display(),
-            frames,
-            dir.display(),
-            right.display()
-        ),
-        (Some(dir), None) => println!(
-            "  frames:    {}/ ({} PNG; replay with `rccar replay {}`)",
-            dir.display(),
-            frames,
-            dir.display()
-        ),
-        _ => {}
-    }
 }

@@ -36,7 +36,7 @@ pub fn run(a: StagesArgs) -> Result<ExitCode> {
     let mut index = std::io::BufWriter::new(
         std::fs::File::create(&index_path).with_context(|| format!("{}: cannot create", index_path.display()))?,
     );
-    let m = det.warp_map().homography().inverse().map(|h| h.0).unwrap_or_default();
+    let bird_to_camera = det.bird_to_camera();
     let min_size = min_frame_size(&cfg.warp.src, cfg.camera.width, cfg.camera.height);
     let mut failed = 0;
     let mut used = std::collections::HashSet::new();
@@ -52,23 +52,16 @@ pub fn run(a: StagesArgs) -> Result<ExitCode> {
         };
         let lane = det.measure(&img, &mut NoTimer, &mut StageTimes::default());
         let stem = unique_name(path.file_name().map(escape_name).unwrap_or_default(), &mut used);
-        let im = det.images();
-        for (what, pic) in [("bird", &im.bird), ("edges", &im.edges), ("binary", &im.binary)] {
+        for (what, pic) in det.images().stages() {
             let p = a.out.join(format!("{stem}.{what}.png"));
             pic.save(&p).with_context(|| format!("{}: cannot write", p.display()))?;
         }
-        // The bird's-eye → camera matrix, row-major, so another tool can warp identically.
-        let inv: Vec<f64> = (0..3).flat_map(|r| (0..3).map(move |c| m[(r, c)])).collect();
-        writeln!(
-            index,
-            "{}",
-            serde_json::json!({
-                "image": shown, "stem": stem, "level": im.level,
-                "band_rows": im.band_rows, "hist": im.hist, "bird_to_camera": inv, "lane": lane,
-            })
-        )
-        .and_then(|_| index.flush())
-        .with_context(|| format!("{}: cannot write", index_path.display()))?;
+        let mut record = det.images().stage_record(&bird_to_camera, &lane);
+        record["image"] = shown.into();
+        record["stem"] = stem.into();
+        writeln!(index, "{record}")
+            .and_then(|_| index.flush())
+            .with_context(|| format!("{}: cannot write", index_path.display()))?;
     }
     index
         .flush()

@@ -79,17 +79,7 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
         stage
             .run(pair.reference(), None)?
             .into_iter()
-            .map(|d| {
-                (
-                    d.label,
-                    [
-                        d.rect.x as i64,
-                        d.rect.y as i64,
-                        d.rect.width as i64,
-                        d.rect.height as i64,
-                    ],
-                )
-            })
+            .map(|d| (d.label, [d.rect.x, d.rect.y, d.rect.width, d.rect.height].map(i64::from)))
             .collect()
     } else {
         boxes.into_iter().map(|b| ("box".to_string(), b)).collect()
@@ -108,19 +98,7 @@ pub fn run(a: StereoRangeArgs) -> Result<ExitCode> {
     // 3. Match and range each box.
     let mut m = Matcher::new();
     for (label, b) in labelled {
-        let line = match pair.range_box(&mut m, b) {
-            Ok((mm, Some(rg))) => serde_json::json!({
-                "label": label, "box": b, "disparity_px": mm.disparity, "ncc": mm.score,
-                "depth_m": {"eq16": rg.depth_eq16, "exact": rg.depth_exact, "bfd": rg.depth_bfd},
-                "forward_m": {"eq16": rg.forward_m[0], "exact": rg.forward_m[1], "bfd": rg.forward_m[2]},
-                "lateral_m": rg.lateral_m,
-            }),
-            Ok((mm, None)) => {
-                serde_json::json!({"label": label, "box": b, "no_range": format!("disparity {:.3} px", mm.disparity)})
-            }
-            Err(e) => serde_json::json!({"label": label, "box": b, "no_range": e.to_string()}),
-        };
-        println!("{line}");
+        println!("{}", pair.range_record(&mut m, &label, b));
     }
     Ok(ExitCode::SUCCESS)
 }

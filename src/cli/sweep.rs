@@ -11,7 +11,7 @@ use rccar::run_dir::{RunDir, RunState};
 use rccar::sim::plot;
 use rccar::sim::run::Summary;
 use rccar::sim::scene::Scene;
-use rccar::sim::sweep::{self, RunOutcome};
+use rccar::sim::sweep;
 use rccar::sim::track::Track;
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -62,20 +62,7 @@ pub fn run_sweep(
     }
     let csv_path = run.write("sweep.csv", sweep::csv_outcomes(&keys, &outcomes).as_bytes())?;
     if let Some(why) = stop.reason() {
-        let count = |f: fn(&RunOutcome) -> bool| outcomes.iter().filter(|o| f(o)).count();
-        let finished = count(|o| matches!(o, RunOutcome::Finished(_)));
-        let cut = count(|o| matches!(o, RunOutcome::Interrupted(_)));
-        let not_run: Vec<String> = points
-            .iter()
-            .zip(&outcomes)
-            .filter(|(_, o)| **o == RunOutcome::NotRun)
-            .map(|(p, _)| sweep::label(&keys, p))
-            .collect();
-        println!(
-            "sweep: interrupted; {finished} of {n} run(s) finished, {cut} cut short (rows ending `interrupted`), {} not run (no row): {}",
-            not_run.len(),
-            if not_run.is_empty() { "-".to_string() } else { not_run.join(", ") }
-        );
+        println!("{}", sweep::interrupted_line(&keys, &points, &outcomes));
         println!("  table: {}", csv_path.display());
         outdir::finish(&mut run, RunState::from_stop(Some(why)), None)?;
         return Ok(ExitCode::from(why.exit_code()));
@@ -86,11 +73,11 @@ pub fn run_sweep(
         plot::register_font(font);
         if axes.len() == 1 {
             let rows: Vec<(f64, Summary)> = runs.iter().map(|r| (r.values[0], r.summary.clone())).collect();
-            let p = outdir::save_png(&mut run, "sweep.png", &plot::sweep_plot(keys[0], &rows)?)?;
+            let p = run.write_png("sweep.png", &plot::sweep_plot(keys[0], &rows)?)?;
             println!("  plot:  {}", p.display());
         } else {
             let img = plot::grid_plot(keys[0], keys[1], &axes[0].values, &axes[1].values, &runs)?;
-            let p = outdir::save_png(&mut run, "sweep_grid.png", &img)?;
+            let p = run.write_png("sweep_grid.png", &img)?;
             println!("  heat map: {}", p.display());
         }
     }

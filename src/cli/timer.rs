@@ -1,8 +1,23 @@
 //! The wall clock and stage timer the binary hands to the library (which reads no clock
-//! itself).
+//! itself), and the session environment made of them ([`session_env`]).
 
-use rccar::timing::StageTimer;
+use rccar::drive::{Clock, NoClock, StopSignal};
+use rccar::session::SessionEnv;
+use rccar::timing::{NoTimer, StageTimer};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+/// A session's environment: the wall clock and stage timer (none with `no_timing`: zeros,
+/// reproducible telemetry), the run's `stop` signal, and the terminal for the library's lines
+/// ([`super::signals::sayer`]).
+pub fn session_env(no_timing: bool, stop: StopSignal) -> SessionEnv {
+    let (clock, timer): (Arc<dyn Clock + Send + Sync>, Box<dyn StageTimer + Send>) = if no_timing {
+        (Arc::new(NoClock), Box::new(NoTimer))
+    } else {
+        (Arc::new(WallClock::new()), Box::new(WallTimer::new()))
+    };
+    SessionEnv { clock, stop, timer, say: super::signals::sayer() }
+}
 
 /// Laps measured with `Instant`.
 pub struct WallTimer(Instant);

@@ -77,6 +77,7 @@ impl Config {
         self.sim.check(&mut c);
         self.detect.check(&mut c);
         self.ranging.check(&mut c);
+        self.classes.check(&mut c);
         self.check_box_bottoms(&mut c);
         self.behaviour.check(&mut c);
         self.gpio.check(&mut c);
@@ -97,16 +98,17 @@ impl Config {
         }
     }
 
-    /// `[ranging]` against `[camera]`: a box bottom at or above the lens is never seen below
-    /// the horizon, so Eq. 5 cannot range it.
+    /// `[classes.<name>]` against `[camera]`: a box bottom at or above the lens is never seen
+    /// below the horizon, so Eq. 5 cannot range it.
     fn check_box_bottoms(&self, c: &mut Checker) {
-        let r = &self.ranging;
-        if r.stop_sign_bottom_m >= self.camera.height_m || r.traffic_light_bottom_m >= self.camera.height_m {
-            c.fail(
-                "ranging.stop_sign_bottom_m",
-                format!("{} / {}", r.stop_sign_bottom_m, r.traffic_light_bottom_m),
-                "box bottoms below camera.height_m (a ray through them must go down)",
-            );
+        for (class, k) in self.classes.iter() {
+            if k.bottom_m >= self.camera.height_m {
+                c.fail(
+                    &format!("classes.{class}.bottom_m"),
+                    k.bottom_m.to_string(),
+                    "below camera.height_m (a ray through the box bottom must go down)",
+                );
+            }
         }
     }
 }

@@ -1,28 +1,29 @@
 //! Loading a configuration in layers: the base file, override files (e.g. `config/local.toml`)
-//! and `key=value` assignments from the command line, merged table by table; unknown keys are
+//! and `key=value` assignments from the command line, merged table by table over the defaults
+//! (so a section, e.g. one `[classes.<name>]`, needs only the keys it changes); unknown keys are
 //! refused with a hint, relative paths resolved against the file that names them, and the
 //! result deserialised and checked ([`Config::validate`]). Also where the configuration is
-//! found ([`find_config`]).
+//! found ([`find_config`], [`source_tree_config`]) and its personal override file
+//! ([`find_local`], [`local_beside`]).
 
 use super::{Config, ConfigError};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
-/// The keys whose values are file paths. A relative path written in a file is resolved
-/// against that file's folder; one given on the command line (`--set`) against the working
-/// directory; a default (a key set nowhere) against the base configuration's folder.
-/// Add a new path key here and it is resolved like the others.
-pub const PATH_KEYS: &[&str] = &[
-    "sim.track",
-    "detect.stop_sign",
-    "detect.traffic_light",
-    "detect.obstacle",
-    "stereo.calibration",
-];
+/// The keys whose values are file paths: `sim.track`, `stereo.calibration` and each class's
+/// model (`classes.<name>.model`, from the registry). A relative path written in a file is
+/// resolved against that file's folder; one given on the command line (`--set`) against the
+/// working directory; a default (a key set nowhere) against the base configuration's folder.
+/// Add a new path key here and to [`Config::resolve_paths`] and it is resolved like the others.
+pub fn path_keys() -> impl Iterator<Item = &'static str> {
+    ["sim.track", "stereo.calibration"]
+        .into_iter()
+        .chain(crate::classes::CLASSES.iter().map(|c| c.model_key))
+}
 
 impl Config {
     /// Loads `base`, then each override file, then `key=value` overrides; checks everything.
-    /// Relative path keys ([`PATH_KEYS`]) come back absolute, as [`LoadedConfig::load`].
+    /// Relative path keys ([`path_keys`]) come back absolute, as [`LoadedConfig::load`].
     pub fn load(base: &Path, override_files: &[PathBuf], overrides: &[String]) -> Result<Config, ConfigError> {
         LoadedConfig::load(base, override_files, overrides).map(|l| l.cfg)
     }
@@ -59,7 +60,9 @@ impl Config {
 
     fn from_layers(layers: &[Layer]) -> Result<Config, ConfigError> {
         let known = to_table(&Config::default());
-        let mut merged = toml::Table::new();
+        // Every layer merges over the defaults' tree (the one unknown keys are checked
+        // against), so a partial `[classes.<name>]` keeps that class's other defaults.
+        let mut merged = known.clone();
         for layer in layers {
             check_known(&layer.table, &known, "", &layer.origin)?;
             merge(&mut merged, &layer.table);
@@ -85,16 +88,14 @@ impl Config {
         Ok(cfg)
     }
 
-    /// Makes every relative path key ([`PATH_KEYS`]) absolute against `dir` (e.g. the folder of
+    /// Makes every relative path key ([`path_keys`]) absolute against `dir` (e.g. the folder of
     /// the file the defaults stand for). Empty values are left alone.
     pub fn resolve_paths(&mut self, dir: &Path) {
-        for p in [
-            &mut self.sim.track,
-            &mut self.detect.stop_sign,
-            &mut self.detect.traffic_light,
-            &mut self.detect.obstacle,
-            &mut self.stereo.calibration,
-        ] {
+        let models = self.classes.iter_mut().map(|c| &mut c.model);
+        for p in [&mut self.sim.track, &mut self.stereo.calibration]
+            .into_iter()
+            .chain(models)
+        {
             if !p.is_empty() && Path::new(p.as_str()).is_relative() {
                 *p = absolute(&dir.join(p.as_str())).display().to_string();
             }
@@ -106,7 +107,7 @@ impl Config {
 /// the base file and every file that was read.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LoadedConfig {
-    /// The merged, validated configuration; every [`PATH_KEYS`] value is an absolute path.
+    /// The merged, validated configuration; every [`path_keys`] value is an absolute path.
     pub cfg: Config,
     /// The folder of the base configuration file, absolute.
     pub dir: PathBuf,
@@ -196,6 +197,41 @@ pub fn find_config(start: &Path, env: Option<&std::ffi::OsStr>) -> Result<PathBu
         }
     }
     Err(ConfigError::NotFound { start })
+}
+
+/// `config/car.toml` of the source tree this crate was compiled from, if it is still there: a
+/// student who built rccar with cargo can run it from any folder. A binary copied to the car
+/// has no such tree (`None`).
+pub fn source_tree_config() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config").join("car.toml");
+    p.is_file().then_some(p)
+}
+
+/// The personal override file that goes with the configuration `base`: `local.toml` in its
+/// folder (git-ignored; it need not exist).
+pub fn local_beside(base: &Path) -> PathBuf {
+    base.parent().unwrap_or(Path::new("")).join("local.toml")
+}
+
+/// An override file named with `--local` that does not exist.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "--local {}: no such file (leave --local out to use local.toml beside the configuration when it exists)",
+    .0.display()
+)]
+pub struct MissingLocal(pub PathBuf);
+
+/// The override file layered on `base`: `named` (`--local`), which must exist, else
+/// [`local_beside`] `base` when it exists, else none.
+pub fn find_local(base: &Path, named: Option<&Path>) -> Result<Option<PathBuf>, MissingLocal> {
+    match named {
+        Some(p) if p.is_file() => Ok(Some(p.to_path_buf())),
+        Some(p) => Err(MissingLocal(p.to_path_buf())),
+        None => {
+            let p = local_beside(base);
+            Ok(p.is_file().then_some(p))
+        }
+    }
 }
 
 /// `p` made absolute against the working directory (no symlinks resolved; unchanged if the
@@ -372,17 +408,15 @@ impl Layer {
     }
 }
 
-/// Makes the relative string values of [`PATH_KEYS`] in one layer absolute against `dir`.
+/// Makes the relative string values of [`path_keys`] in one layer absolute against `dir`.
 fn resolve_table_paths(table: &mut toml::Table, dir: &Path) {
-    for key in PATH_KEYS {
-        let Some((section, name)) = key.split_once('.') else {
-            continue;
-        };
-        if let Some(toml::Value::String(s)) = table
-            .get_mut(section)
-            .and_then(toml::Value::as_table_mut)
-            .and_then(|t| t.get_mut(name))
-        {
+    for key in path_keys() {
+        let mut parts = key.split('.');
+        let mut cur = parts.next().and_then(|p| table.get_mut(p));
+        for p in parts {
+            cur = cur.and_then(toml::Value::as_table_mut).and_then(|t| t.get_mut(p));
+        }
+        if let Some(toml::Value::String(s)) = cur {
             if !s.is_empty() && Path::new(s.as_str()).is_relative() {
                 *s = absolute(&dir.join(s.as_str())).display().to_string();
             }
@@ -404,9 +438,7 @@ fn check_known(layer: &toml::Table, known: &toml::Table, prefix: &str, origin: &
         };
         match known.get(k) {
             None => {
-                let hint = closest(k, known.keys())
-                    .map(|c| format!(", did you mean `{c}`?"))
-                    .unwrap_or_default();
+                let hint = unknown_key_hint(k, &full, prefix, known);
                 return Err(ConfigError::UnknownKey {
                     origin: origin.into(),
                     key: full,
@@ -427,6 +459,29 @@ fn check_known(layer: &toml::Table, known: &toml::Table, prefix: &str, origin: &
         }
     }
     Ok(())
+}
+
+/// The hint after an unknown key `k` (`full` with its section): a close spelling among its
+/// siblings; for a key of the former flat layout (`detect.stop_sign`) the key it is now
+/// (`classes.stop_sign.model`); for an unknown class, the class an alias names or the known
+/// ones.
+fn unknown_key_hint(k: &str, full: &str, prefix: &str, known: &toml::Table) -> String {
+    if let Some(c) = closest(k, known.keys()) {
+        return format!(", did you mean `{c}`?");
+    }
+    if let Some(new) = super::classes::moved_key(full) {
+        return format!(", each class has its own section now: `{new}`");
+    }
+    if prefix == "classes" {
+        return match crate::classes::ObjectClass::from_label(k) {
+            Some(c) => format!(", did you mean `{c}`?"),
+            None => format!(
+                ", the classes are {} (a new one needs its entry in src/classes.rs)",
+                super::classes::class_names()
+            ),
+        };
+    }
+    String::new()
 }
 
 fn merge(into: &mut toml::Table, from: &toml::Table) {
@@ -520,5 +575,22 @@ mod tests {
         assert_eq!(cfg.lane.threshold_mode, ThresholdMode::Otsu);
         assert!(Config::default().with_override("steering.kq=1").is_err());
         assert!(Config::default().with_override("nonsense").is_err());
+    }
+
+    /// `--local` must exist; without it, local.toml beside the configuration counts only when
+    /// it is there.
+    #[test]
+    fn the_override_file_is_named_or_beside_the_configuration() {
+        let t = tempfile::tempdir().unwrap();
+        let base = t.path().join("car.toml");
+        assert_eq!(local_beside(&base), t.path().join("local.toml"));
+        assert_eq!(find_local(&base, None).unwrap(), None);
+        std::fs::write(t.path().join("local.toml"), "").unwrap();
+        assert_eq!(find_local(&base, None).unwrap(), Some(t.path().join("local.toml")));
+        let named = t.path().join("mine.toml");
+        let e = find_local(&base, Some(&named)).unwrap_err().to_string();
+        assert!(e.starts_with(&format!("--local {}: no such file", named.display())), "{e}");
+        std::fs::write(&named, "").unwrap();
+        assert_eq!(find_local(&base, Some(&named)).unwrap(), Some(named));
     }
 }

@@ -1,9 +1,10 @@
 //! The car's configuration: `config/car.toml`, the one file students edit.
 //!
 //! Loading goes in three steps (`layers.rs`):
-//! 1. the base file is parsed as TOML (a syntax error names its line);
+//! 1. the base file is parsed as TOML (a syntax error names its line) and merged over the
+//!    defaults, table by table;
 //! 2. an optional personal override file (git-ignored, e.g. `config/local.toml`) is merged on
-//!    top, table by table, and `key=value` overrides from the command line after it;
+//!    top, and `key=value` overrides from the command line after it;
 //! 3. the merged tree is checked for unknown keys (a typo such as `steering.kpp` is an error
 //!    naming it, never silently ignored), deserialised into [`Config`] and every value is
 //!    range-checked by [`Config::validate`] (`check.rs`); an error names the key, the value and
@@ -13,11 +14,14 @@
 //! conversion into the option type of the stage it configures (which lives in the stage: the
 //! stages never read the configuration). Every section has defaults, so tests and the
 //! simulator can start from `Config::default()` and a file only needs the keys it changes. The
-//! shipped `car.toml` lists them all, with units and advice.
+//! shipped `car.toml` lists them all, with units and advice. The object classes' sections
+//! (`[classes.<name>]`, `classes.rs`) are one table keyed by class name, each class's defaults
+//! from its entry in the registry (src/classes.rs).
 
 mod behaviour;
 mod camera;
 mod check;
+mod classes;
 mod dashboard;
 mod detect;
 mod gpio;
@@ -35,11 +39,12 @@ mod warp;
 
 pub use behaviour::BehaviourConfig;
 pub use camera::CameraConfig;
+pub use classes::{ClassConfig, ClassesConfig};
 pub use dashboard::DashboardConfig;
-pub use detect::{DetectClass, DetectConfig};
+pub use detect::DetectConfig;
 pub use gpio::GpioConfig;
 pub use lane::{LaneConfig, PeakMode, ThresholdMode};
-pub use layers::{find_config, LoadedConfig, PATH_KEYS};
+pub use layers::{find_config, find_local, local_beside, path_keys, source_tree_config, LoadedConfig, MissingLocal};
 pub use ranging::{RangingConfig, RangingMethod};
 pub use record::RecordConfig;
 pub use replay::ReplayConfig;
@@ -184,8 +189,11 @@ pub struct Config {
     pub sim: SimConfig,
     /// Object detection: which cascades the pipeline runs.
     pub detect: DetectConfig,
-    /// Monocular tilt ranging of detected boxes: calibration corrections, contact heights.
+    /// Monocular tilt ranging of detected boxes: calibration corrections, box noise, tracks.
     pub ranging: RangingConfig,
+    /// `[classes.<name>]`: each object class's model file, search region, box width and what
+    /// its box frames (one section per entry of src/classes.rs).
+    pub classes: ClassesConfig,
     /// The behaviour state machine: stop signs, lights, obstacles, lane lost.
     pub behaviour: BehaviourConfig,
     /// The Raspberry Pi's GPIO: start/stop button, status LED, HC-SR04 ultrasonic brake.

@@ -1,14 +1,15 @@
 //! `[ranging]`: the distance of each detected box: the camera's calibration corrections (pixels,
-//! a scale), what each class's box frames (heights and sizes, metres; margins), the box noise
-//! (pixels, relative), the object tracker's noise (m/s², relative), colour refinement and where
-//! the behaviours' distances come from (`method`).
+//! a scale), the box noise (pixels, relative), the object tracker's noise (m/s², relative),
+//! colour refinement and where the behaviours' distances come from (`method`). What each
+//! class's box frames (heights and sizes, metres; a margin) is in its `[classes.<name>]`
+//! section (`classes.rs`).
 
 use super::check::Checker;
-use super::CameraConfig;
+use super::Config;
 use crate::camera::PinholeCamera;
 use crate::classes::ObjectClass;
 use crate::ranging::track::TrackerOptions;
-use crate::ranging::{BoxRanging, ClassBox, TiltRanging};
+use crate::ranging::{BoxRanging, TiltRanging};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
@@ -49,24 +50,6 @@ pub struct RangingConfig {
     pub v0_offset_px: f64,
     /// Calibrated a_y divided by the nominal focal length from camera.hfov_deg.
     pub a_y_scale: f64,
-    /// Height above the floor of a stop sign box's bottom edge (the face's lower edge), metres.
-    pub stop_sign_bottom_m: f64,
-    /// Height of a traffic-light box's bottom edge (the housing's lower edge), metres.
-    pub traffic_light_bottom_m: f64,
-    /// Height of an obstacle box's bottom edge, metres (0: it stands on the floor).
-    pub obstacle_bottom_m: f64,
-    /// [width, height] of the face a stop-sign box frames, metres (0 = unknown: not used).
-    pub stop_sign_size_m: [f64; 2],
-    /// [width, height] of the face a traffic-light box frames (the housing), metres.
-    pub traffic_light_size_m: [f64; 2],
-    /// [width, height] of an obstacle's face, metres (0, 0: obstacles differ; contact row only).
-    pub obstacle_size_m: [f64; 2],
-    /// A stop-sign detector box's size over the face's outline (the training margin).
-    pub stop_sign_box_margin: f64,
-    /// A traffic-light detector box's size over the housing's outline.
-    pub traffic_light_box_margin: f64,
-    /// An obstacle detector box's size over the obstacle's outline.
-    pub obstacle_box_margin: f64,
     /// σ of a detector box's centre row, pixels.
     pub box_centre_sigma_px: f64,
     /// σ of a detector box's size, relative.
@@ -91,15 +74,6 @@ impl Default for RangingConfig {
         Self {
             v0_offset_px: 0.0,
             a_y_scale: 1.0,
-            stop_sign_bottom_m: 0.12,
-            traffic_light_bottom_m: 0.10,
-            obstacle_bottom_m: 0.0,
-            stop_sign_size_m: [0.10, 0.10],
-            traffic_light_size_m: [0.0, 0.12],
-            obstacle_size_m: [0.0, 0.0],
-            stop_sign_box_margin: 1.085,
-            traffic_light_box_margin: 1.21,
-            obstacle_box_margin: 1.36,
             box_centre_sigma_px: 1.0,
             box_size_sigma: 0.06,
             track_accel_sigma: 0.5,
@@ -113,50 +87,11 @@ impl Default for RangingConfig {
 }
 
 impl RangingConfig {
-    /// What a detector box of `class` frames (`ranging.<name>_size_m`, `_bottom_m`,
-    /// `_box_margin`; the one place that maps a class to its `[ranging]` fields).
-    pub fn class_box(&self, class: ObjectClass) -> ClassBox {
-        let (size, bottom_m, margin) = match class {
-            ObjectClass::StopSign => (
-                self.stop_sign_size_m,
-                self.stop_sign_bottom_m,
-                self.stop_sign_box_margin,
-            ),
-            ObjectClass::TrafficLight => (
-                self.traffic_light_size_m,
-                self.traffic_light_bottom_m,
-                self.traffic_light_box_margin,
-            ),
-            ObjectClass::Obstacle => (self.obstacle_size_m, self.obstacle_bottom_m, self.obstacle_box_margin),
-        };
-        ClassBox {
-            width_m: size[0],
-            height_m: size[1],
-            bottom_m,
-            margin,
-        }
-    }
-
-    /// Range checks of `[ranging]` (the box bottoms against the camera height are checked in
-    /// `check.rs`).
+    /// Range checks of `[ranging]`.
     pub(super) fn check(&self, c: &mut Checker) {
         let r = self;
         c.range("ranging.v0_offset_px", r.v0_offset_px, -200.0, 200.0);
         c.range("ranging.a_y_scale", r.a_y_scale, 0.5, 2.0);
-        c.range("ranging.stop_sign_bottom_m", r.stop_sign_bottom_m, 0.0, 3.0);
-        c.range("ranging.traffic_light_bottom_m", r.traffic_light_bottom_m, 0.0, 3.0);
-        c.range("ranging.obstacle_bottom_m", r.obstacle_bottom_m, 0.0, 3.0);
-        for (key, v) in [
-            ("ranging.stop_sign_size_m", r.stop_sign_size_m),
-            ("ranging.traffic_light_size_m", r.traffic_light_size_m),
-            ("ranging.obstacle_size_m", r.obstacle_size_m),
-        ] {
-            c.range(&format!("{key}[0]"), v[0], 0.0, 3.0);
-            c.range(&format!("{key}[1]"), v[1], 0.0, 3.0);
-        }
-        c.range("ranging.stop_sign_box_margin", r.stop_sign_box_margin, 0.5, 3.0);
-        c.range("ranging.traffic_light_box_margin", r.traffic_light_box_margin, 0.5, 3.0);
-        c.range("ranging.obstacle_box_margin", r.obstacle_box_margin, 0.5, 3.0);
         c.range("ranging.box_centre_sigma_px", r.box_centre_sigma_px, 0.01, 100.0);
         c.range("ranging.box_size_sigma", r.box_size_sigma, 0.001, 1.0);
         c.range("ranging.track_accel_sigma", r.track_accel_sigma, 0.0, 100.0);
@@ -166,21 +101,23 @@ impl RangingConfig {
     }
 }
 
-impl RangingConfig {
+impl Config {
     /// Box ranging with the camera of `[camera]` corrected by the calibration of `[ranging]`
-    /// (`v0_offset_px`, `a_y_scale`), what each class's box frames and the box noise.
-    pub fn box_ranging(&self, camera: &CameraConfig) -> BoxRanging {
-        let mut camera = PinholeCamera::from(camera);
-        camera.v0 += self.v0_offset_px;
-        camera.f_px *= self.a_y_scale;
+    /// (`v0_offset_px`, `a_y_scale`), what each class's box frames (`[classes.<name>]`) and
+    /// the box noise.
+    pub fn box_ranging(&self) -> BoxRanging {
+        let r = &self.ranging;
+        let mut camera = PinholeCamera::from(&self.camera);
+        camera.v0 += r.v0_offset_px;
+        camera.f_px *= r.a_y_scale;
         BoxRanging {
             tilt: TiltRanging::from_camera(&camera),
             camera,
-            classes: ObjectClass::ALL.map(|c| self.class_box(c)),
-            centre_sigma_px: self.box_centre_sigma_px,
-            size_sigma: self.box_size_sigma,
-            refine: self.refine_by_colour,
-            red_fraction: self.stop_sign_red_fraction,
+            classes: ObjectClass::ALL.map(|c| self.classes[c].class_box()),
+            centre_sigma_px: r.box_centre_sigma_px,
+            size_sigma: r.box_size_sigma,
+            refine: r.refine_by_colour,
+            red_fraction: r.stop_sign_red_fraction,
         }
     }
 }

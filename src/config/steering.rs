@@ -12,7 +12,7 @@ use crate::control::pure_pursuit::{PurePursuit, PurePursuitOptions};
 pub use crate::control::steering::SteeringMethod;
 use crate::control::steering::{Steering, SteeringError};
 use crate::control::Controller;
-use crate::lane::warp::Homography;
+use crate::lane::warp::{bird_to_floor, Homography};
 use serde::{Deserialize, Serialize};
 
 /// `[steering]`: the steering method and its parameters.
@@ -104,7 +104,7 @@ impl Config {
     /// lens to the rear axle (`vehicle.camera_x_m`).
     pub fn pure_pursuit_options(&self) -> Result<PurePursuitOptions, SteeringError> {
         let (w, h) = (self.warp.out_width, self.warp.out_height);
-        let lens = PinholeCamera::from(&self.camera).bird_to_floor(&self.warp.src, w, h).ok_or_else(|| {
+        let lens = bird_to_floor(&PinholeCamera::from(&self.camera), &self.warp.src, w, h).ok_or_else(|| {
             SteeringError::PurePursuit("a corner of warp.src does not see the floor with this [camera]".into())
         })?;
         let mut to_axle = nalgebra::Matrix3::identity();

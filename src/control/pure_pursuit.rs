@@ -5,7 +5,7 @@
 //! Car frame: x forward from the centre of the rear axle, y left, metres. Per frame:
 //! 1. **Band.** The bird's-eye rows that show the floor `lookahead_m ± lookahead_band_m`
 //!    ahead of the rear axle (the bird's-eye → floor homography comes from `[camera]`,
-//!    `[warp]` and `vehicle.camera_x_m`: [`crate::camera::PinholeCamera::bird_to_floor`]).
+//!    `[warp]` and `vehicle.camera_x_m`: [`crate::lane::warp::bird_to_floor`]).
 //! 2. **Lane centre in the band.** The column histogram of those rows of the binary bird's-eye
 //!    image, and the lines and lane centre of the lane pipeline (src/lane/lines.rs, with
 //!    `[lane]`'s lane width, peak rule and plausibility check), the left line searched left of

@@ -29,12 +29,12 @@ pub enum SaveError {
         why: String,
     },
     /// Reading or writing failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {err}")]
     Io {
         /// The file.
         path: String,
         /// The I/O error.
-        source: std::io::Error,
+        err: std::io::Error,
     },
 }
 
@@ -98,7 +98,7 @@ pub fn set_keys(text: &str, keys: &[(String, f64)], path: &str) -> Result<String
 /// then a rename, so a crash never leaves half a file.
 pub fn save(path: &Path, keys: &[(String, f64)]) -> Result<(), SaveError> {
     let p = path.display().to_string();
-    let io = |source| SaveError::Io { path: p.clone(), source };
+    let io = |err| SaveError::Io { path: p.clone(), err };
     let text = match std::fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),

@@ -1,5 +1,5 @@
 //! The dashboard of one run (issue 11): an observer that does nothing when the dashboard is
-//! off, or the loop's side of [`channel`](super::channel) with the HTTP server
+//! off, or the loop's side of [`channel`](super::observer::channel) with the HTTP server
 //! ([`super::server`], feature `dashboard`) serving it. The page arms, disarms and e-stops
 //! through the session's one arming state and gate; in the simulator it may also pause, step
 //! and place the car. The loop only publishes into the bounded slot: it never waits on the
@@ -14,8 +14,8 @@ use crate::telemetry::FrameRecord;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use super::observer::DashObserver;
 use super::shared::DashboardError;
-use super::DashObserver;
 
 /// The dashboard of one run: off (an observer that does nothing) or serving.
 pub struct Dash {
@@ -58,7 +58,7 @@ impl Dash {
             let listen = listen.unwrap_or_else(|| cfg.dashboard.listen.clone());
             let world = session.world().cloned();
             let world_given = world.is_some();
-            let ch = super::channel(cfg, world.clone(), Some(stop.clone()));
+            let ch = super::observer::channel(cfg, world.clone(), Some(stop.clone()));
             let srv = server::Server::start(server::Options {
                 listen,
                 cfg: cfg.clone(),
@@ -67,7 +67,7 @@ impl Dash {
                 live: ch.live,
                 tx: ch.tx,
                 arm: session.arming().clone(),
-                sent: Arc::new(super::Sent::new(session.sent(), clock)),
+                sent: Arc::new(super::shared::Sent::new(session.sent(), clock)),
                 world,
                 stop: stop.clone(),
             })?;

@@ -1,6 +1,8 @@
-//! Several cascades on one still image, as `rccar detect` runs them: the image in grey (as
+//! Several cascades on one still image, as `rccar detect` runs them: the flags' bounds
+//! ([`check_options`]), the image in grey (as
 //! OpenCV's `cvtColor`), every cascade's boxes (with the traffic-light reading inside each when
-//! asked), and a copy of the image with the boxes drawn, one colour per cascade.
+//! asked), the image's JSON line ([`image_record`]), and a copy of the image with the boxes
+//! drawn, one colour per cascade.
 
 use super::{gray_from_rgb, light_state, DetectError, DetectParams, Detection, Detector, LightReading, Rect};
 use image::{DynamicImage, GrayImage, Rgb, RgbImage};
@@ -26,6 +28,58 @@ pub struct FoundBox {
     pub light: Option<LightReading>,
 }
 
+/// Bounds of `--scale-factor`: at 1.01 a 4096-pixel image already has ~500 pyramid levels.
+pub const SCALE_FACTOR: (f64, f64) = (1.01, 4.0);
+/// Most `--cascade` files (each runs on every image).
+pub const MAX_CASCADES: usize = 16;
+/// Largest `--min-neighbors` (as `detect.min_neighbors`).
+pub const MAX_MIN_NEIGHBORS: u32 = 100;
+
+/// `rccar detect`'s options out of their bounds (the message names the flag and the bound).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OptionsError {
+    /// `--scale-factor` outside [`SCALE_FACTOR`].
+    #[error("--scale-factor {0}: must be {min}..={max} (the ratio between pyramid levels; nearer 1 means more levels: 1.0000001 would ask for millions)", min = SCALE_FACTOR.0, max = SCALE_FACTOR.1)]
+    ScaleFactor(f64),
+    /// More than [`MAX_CASCADES`] cascades.
+    #[error("{0} --cascade files: at most {MAX_CASCADES} (each runs on every image)")]
+    Cascades(usize),
+    /// `--min-neighbors` above [`MAX_MIN_NEIGHBORS`].
+    #[error("--min-neighbors {0}: must be 0..={MAX_MIN_NEIGHBORS}")]
+    MinNeighbors(u32),
+    /// A box size side above the largest image side.
+    #[error("{flag} {}x{}: each side must be 0..={max_side} pixels (the largest image side)", size.0, size.1)]
+    Size {
+        /// `--min-size` or `--max-size`.
+        flag: &'static str,
+        /// The size given.
+        size: (u32, u32),
+        /// The largest image side, pixels.
+        max_side: u32,
+    },
+}
+
+/// Checks `rccar detect`'s `params` and its number of `cascades` against their bounds
+/// (`max_side`: the largest image side, pixels).
+pub fn check_options(params: &DetectParams, cascades: usize, max_side: u32) -> Result<(), OptionsError> {
+    let (lo, hi) = SCALE_FACTOR;
+    if !(params.scale_factor >= lo && params.scale_factor <= hi) {
+        return Err(OptionsError::ScaleFactor(params.scale_factor));
+    }
+    if cascades > MAX_CASCADES {
+        return Err(OptionsError::Cascades(cascades));
+    }
+    if params.min_neighbors > MAX_MIN_NEIGHBORS {
+        return Err(OptionsError::MinNeighbors(params.min_neighbors));
+    }
+    for (flag, size) in [("--min-size", params.min_size), ("--max-size", params.max_size)] {
+        if size.0 > max_side || size.1 > max_side {
+            return Err(OptionsError::Size { flag, size, max_side });
+        }
+    }
+    Ok(())
+}
+
 /// The image in colour and in grey (a grey image is taken as it is; colour is converted as
 /// OpenCV's `cvtColor(RGB2GRAY)`).
 pub fn rgb_and_gray(img: &DynamicImage) -> (RgbImage, GrayImage) {
@@ -39,6 +93,28 @@ pub fn rgb_and_gray(img: &DynamicImage) -> (RgbImage, GrayImage) {
         }
     };
     (rgb, gray)
+}
+
+/// The JSON line of one image of `rccar detect`: its name, width and height, and every box
+/// with the name (`names[cascade]`) of the cascade that found it, its raw hits and, when read,
+/// the traffic light inside it.
+pub fn image_record(image: &str, (width, height): (u32, u32), found: &[FoundBox], names: &[String]) -> serde_json::Value {
+    let boxes: Vec<serde_json::Value> = found
+        .iter()
+        .map(|f| {
+            let d = &f.detection;
+            let mut b = serde_json::json!({
+                "cascade": names[f.cascade],
+                "x": d.rect.x, "y": d.rect.y, "width": d.rect.width, "height": d.rect.height,
+                "neighbors": d.neighbors,
+            });
+            if let Some(light) = f.light {
+                b["light"] = serde_json::json!(light);
+            }
+            b
+        })
+        .collect();
+    serde_json::json!({"image": image, "width": width, "height": height, "boxes": boxes})
 }
 
 /// Every detector's boxes in `gray`, in detector order (`light`: with the light reading of

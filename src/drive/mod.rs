@@ -72,10 +72,17 @@ pub enum Flow {
 pub enum LoopError {
     /// The command sink failed.
     #[error("command sink: {0}")]
-    Sink(#[from] SinkError),
+    Sink(SinkError),
     /// An observer (telemetry writer, recorder…) failed; the message names the file.
     #[error("{0}")]
     Observer(String),
+}
+
+// By hand, not `#[from]`: a `source` would print the sink's message a second time.
+impl From<SinkError> for LoopError {
+    fn from(e: SinkError) -> Self {
+        LoopError::Sink(e)
+    }
 }
 
 /// Everything about one processed frame, handed to the observer.

@@ -67,6 +67,25 @@ pub struct LaneImages {
     pub level: u8,
 }
 
+impl LaneImages {
+    /// The stage images by name, as `rccar stages` writes them (`<name>.bird.png` …): the grey
+    /// bird's-eye view, the edges and threshold ∪ edges.
+    pub fn stages(&self) -> [(&'static str, &GrayImage); 3] {
+        [("bird", &self.bird), ("edges", &self.edges), ("binary", &self.binary)]
+    }
+
+    /// The frame's record of `rccar stages` (one JSON line per image, for the OpenCV parity
+    /// script): the threshold level, the histogram band's rows, the histogram, the
+    /// bird's-eye → camera matrix (row-major, so another tool can warp identically) and the
+    /// lane measured; the caller adds the image's names.
+    pub fn stage_record(&self, bird_to_camera: &[f64; 9], lane: &LaneMeasurement) -> serde_json::Value {
+        serde_json::json!({
+            "level": self.level, "band_rows": self.band_rows, "hist": self.hist,
+            "bird_to_camera": bird_to_camera, "lane": lane,
+        })
+    }
+}
+
 /// Measures the lane in camera frames of one size: ROI → bird's-eye → threshold + Canny →
 /// histogram → lines → centre → error.
 #[derive(Debug, Clone)]
@@ -143,6 +162,13 @@ impl LaneDetector {
     /// The warp map (its homography relates camera and bird's-eye pixels).
     pub fn warp_map(&self) -> &WarpMap {
         &self.map
+    }
+
+    /// The bird's-eye → camera pixel matrix, row-major; zeros when the warp cannot be
+    /// inverted.
+    pub fn bird_to_camera(&self) -> [f64; 9] {
+        let m = self.map.homography().inverse().map(|h| h.0).unwrap_or_default();
+        std::array::from_fn(|k| m[(k / 3, k % 3)])
     }
 
     /// The options in use.

@@ -15,6 +15,7 @@
 //! Units: pixels everywhere. Pixel (i, j) has its centre at (i, j) (OpenCV's convention); the
 //! ROI corners map onto the centres of the bird's-eye image's corner pixels.
 
+use crate::camera::PinholeCamera;
 use image::{GrayImage, RgbImage};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
@@ -83,6 +84,21 @@ impl Homography {
     pub fn inverse(&self) -> Option<Self> {
         self.0.try_inverse().map(|m| Self(m / m[(2, 2)]))
     }
+}
+
+/// The map from bird's-eye pixels to the floor seen by camera `cam`: a bird's-eye image
+/// `out_w`×`out_h` made from the ROI `roi` (camera pixels, `[warp] src` order) shows the floor
+/// point `(x forward, y left)`, metres from the floor point below the lens, at pixel `(u, v)`
+/// where `H (u, v) = (x, y)`. Camera pixel → floor is a homography of the plane, and so is the
+/// warp, so one homography through the four corners is exact for any ROI. `None` when a
+/// corner does not see the floor (at or above the horizon) or the corners are degenerate.
+pub fn bird_to_floor(cam: &PinholeCamera, roi: &[[f64; 2]; 4], out_w: u32, out_h: u32) -> Option<Homography> {
+    let mut floor = [[0.0; 2]; 4];
+    for (f, c) in floor.iter_mut().zip(roi) {
+        let (x, y) = cam.ground_of_pixel(c[0], c[1])?;
+        *f = [x, y];
+    }
+    Homography::from_points(&rect_corners(out_w, out_h), &floor).ok()
 }
 
 /// The corners of a `width`×`height` image's corner pixel centres, in ROI order.

@@ -54,6 +54,9 @@ pub enum LinkError {
 /// before it is written, may flip bits in it.
 pub type WireFault = Box<dyn FnMut(&mut Vec<u8>) + Send>;
 
+/// How many times [`Link::arm`] asks before it gives up on an ARM that gets no answer.
+pub const ARM_ATTEMPTS: u32 = 3;
+
 /// Transport settings.
 pub struct LinkOptions {
     /// Baud rate (the firmware uses 115200).
@@ -316,9 +319,21 @@ impl Link {
     }
 
     /// Arms the firmware (it stays armed across reconnects and firmware resets: the link
-    /// re-arms after the new handshake). The ESC follows from the next DRIVE.
+    /// re-arms after the new handshake). The ESC follows from the next DRIVE. ARM is
+    /// idempotent, so one that gets no answer in time (a busy machine, a lost byte) is asked
+    /// again, [`ARM_ATTEMPTS`] times in all, before the error is returned.
     pub fn arm(&self) -> Result<(), LinkError> {
         self.shared.lock().want_armed = true;
+        let mut attempt = 1;
+        loop {
+            match self.arm_once() {
+                Err(LinkError::Timeout { .. }) if attempt < ARM_ATTEMPTS && self.is_connected() => attempt += 1,
+                r => return r,
+            }
+        }
+    }
+
+    fn arm_once(&self) -> Result<(), LinkError> {
         match self.expect_ok(Message::Arm, "ARM") {
             // the firmware has just reset and the link is handshaking again: the ARM is
             // repeated once the handshake is done

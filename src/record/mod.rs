@@ -130,9 +130,9 @@ fn read_line(r: &mut impl std::io::BufRead, buf: &mut Vec<u8>) -> std::io::Resul
 /// previous line's.
 pub fn recorded_times(dir: &Path) -> Result<RecordedTimes, RecordError> {
     let path = dir.join(TELEMETRY_FILE);
-    let file = File::open(&path).map_err(|source| RecordError::Read {
+    let file = File::open(&path).map_err(|err| RecordError::Read {
         path: path.clone(),
-        source,
+        err,
     })?;
     let mut r = std::io::BufReader::new(file);
     let bad = |line: usize, reason: String| RecordError::BadTelemetry {
@@ -148,9 +148,9 @@ pub fn recorded_times(dir: &Path) -> Result<RecordedTimes, RecordError> {
     let mut buf = Vec::with_capacity(4096);
     let mut line_no = 0;
     // 1. One line at a time, at most MAX_TELEMETRY_LINE bytes kept (a longer one counts as cut).
-    while let Some(too_long) = read_line(&mut r, &mut buf).map_err(|source| RecordError::Read {
+    while let Some(too_long) = read_line(&mut r, &mut buf).map_err(|err| RecordError::Read {
         path: path.clone(),
-        source,
+        err,
     })? {
         line_no += 1;
         if buf.iter().all(u8::is_ascii_whitespace) && !too_long {
@@ -239,20 +239,20 @@ impl Default for RecordOptions {
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
     /// The folder cannot be made.
-    #[error("{path}: cannot create the recording folder: {source}")]
+    #[error("{path}: cannot create the recording folder: {err}")]
     CreateDir {
         /// The folder.
         path: PathBuf,
         /// Underlying error.
-        source: std::io::Error,
+        err: std::io::Error,
     },
     /// The folder exists but a test write failed (read-only, full, no permission).
-    #[error("{path}: cannot record here: {source}")]
+    #[error("{path}: cannot record here: {err}")]
     NotWritable {
         /// The file that could not be written.
         path: PathBuf,
         /// Underlying error.
-        source: std::io::Error,
+        err: std::io::Error,
     },
     /// The folder is not empty (a recording on top of another would mix two runs).
     #[error(
@@ -265,12 +265,12 @@ pub enum RecordError {
         found: String,
     },
     /// A write during the run failed (counted; the run goes on).
-    #[error("{path}: write failed: {source}")]
+    #[error("{path}: write failed: {err}")]
     Write {
         /// The file.
         path: PathBuf,
         /// Underlying error.
-        source: std::io::Error,
+        err: std::io::Error,
     },
     /// A recording's telemetry contradicts itself (see [`recorded_times`]).
     #[error("{path}:{line}: {reason}; this recording's telemetry is damaged or holds two runs (record again, or replay a copy without the bad lines)")]
@@ -283,12 +283,12 @@ pub enum RecordError {
         reason: String,
     },
     /// A recording's telemetry cannot be read back.
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read: {err}")]
     Read {
         /// The file.
         path: PathBuf,
         /// Underlying error.
-        source: std::io::Error,
+        err: std::io::Error,
     },
     /// A frame could not be encoded (counted; the run goes on).
     #[error("{path}: cannot encode JPEG: {message}")]
@@ -369,14 +369,14 @@ impl Recorder {
     pub fn create(dir: &Path, opts: RecordOptions) -> Result<Self, RecordError> {
         // 1. The folder.
         let made_dir = !dir.exists();
-        std::fs::create_dir_all(dir).map_err(|source| RecordError::CreateDir {
+        std::fs::create_dir_all(dir).map_err(|err| RecordError::CreateDir {
             path: dir.into(),
-            source,
+            err,
         })?;
         // 2. Empty: not a second recording on top of a first, nor beside other files.
-        let entries = std::fs::read_dir(dir).map_err(|source| RecordError::CreateDir {
+        let entries = std::fs::read_dir(dir).map_err(|err| RecordError::CreateDir {
             path: dir.into(),
-            source,
+            err,
         })?;
         let mut names: Vec<String> = entries
             .flatten()
@@ -403,20 +403,20 @@ impl Recorder {
                 let _ = std::fs::remove_dir(dir);
             }
         };
-        probe_result.map_err(|source| {
+        probe_result.map_err(|err| {
             unmake();
             RecordError::NotWritable {
                 path: probe.clone(),
-                source,
+                err,
             }
         })?;
         // 4. The telemetry file.
         let telemetry_path = dir.join(TELEMETRY_FILE);
-        let telemetry = File::create(&telemetry_path).map_err(|source| {
+        let telemetry = File::create(&telemetry_path).map_err(|err| {
             unmake();
             RecordError::NotWritable {
                 path: telemetry_path.clone(),
-                source,
+                err,
             }
         })?;
         Ok(Self {
@@ -503,9 +503,9 @@ impl Recorder {
         // 4. Write (making the segment folder first; retried if it failed before).
         let seg = self.current.as_mut().expect("current segment");
         if !seg.created {
-            if let Err(source) = std::fs::create_dir_all(&seg.path) {
+            if let Err(err) = std::fs::create_dir_all(&seg.path) {
                 let path = seg.path.clone();
-                return Err(self.frame_failed(RecordError::Write { path, source }));
+                return Err(self.frame_failed(RecordError::Write { path, err }));
             }
             seg.created = true;
         }
@@ -527,14 +527,14 @@ impl Recorder {
                 self.stats.bytes_on_disk = self.used();
                 Ok(())
             }
-            Err(source) => {
+            Err(err) => {
                 // A partial file would replay as a damaged frame: remove it. A folder that
                 // vanished is made again for the next frame.
                 let _ = std::fs::remove_file(&path);
                 if !seg.path.is_dir() {
                     seg.created = false;
                 }
-                Err(self.frame_failed(RecordError::Write { path, source }))
+                Err(self.frame_failed(RecordError::Write { path, err }))
             }
         }
     }
@@ -574,11 +574,11 @@ impl Recorder {
                 self.stats.bytes_on_disk = self.used();
                 Ok(())
             }
-            Err(source) => {
+            Err(err) => {
                 self.stats.telemetry_failed += 1;
                 let e = RecordError::Write {
                     path: self.telemetry_path.clone(),
-                    source,
+                    err,
                 };
                 self.stats.last_error = Some(e.to_string());
                 Err(e)
@@ -593,9 +593,9 @@ impl Recorder {
         self.telemetry
             .flush()
             .and_then(|_| self.telemetry.sync_all())
-            .map_err(|source| RecordError::Write {
+            .map_err(|err| RecordError::Write {
                 path: self.telemetry_path.clone(),
-                source,
+                err,
             })?;
         Ok(std::mem::take(&mut self.stats))
     }
@@ -998,7 +998,7 @@ mod tests {
         std::os::unix::fs::symlink("/dev/full", dir.join(PROBE_FILE)).unwrap();
         let e = Recorder::create(&dir, RecordOptions::default()).unwrap_err();
         assert!(
-            matches!(&e, RecordError::NotWritable { source, .. } if source.raw_os_error() == Some(28)),
+            matches!(&e, RecordError::NotWritable { err, .. } if err.raw_os_error() == Some(28)),
             "{e:?}"
         );
         let msg = e.to_string();

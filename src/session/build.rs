@@ -243,7 +243,7 @@ fn setup_pipeline(cfg: &Config, spec: &SessionSpec, pipeline: &mut Pipeline, par
         ));
     }
     if spec.detector == DetectorSpec::FromConfig && !spec.truth_boxes {
-        let (stage, missing) = crate::pipeline::load_detector(&cfg.detect, Path::new("."))?;
+        let (stage, missing) = crate::pipeline::load_detector(cfg, Path::new("."))?;
         // A configured model that is not there is an error, not a silently weaker car.
         if let Some(m) = missing.first() {
             return Err(invalid(m.to_string()));

@@ -55,13 +55,13 @@ pub enum SessionError {
     Track(#[from] crate::sim::track::TrackError),
     /// The simulator's camera cannot see the road (warp).
     #[error("warp.src: {0}")]
-    Warp(#[from] crate::lane::warp::WarpError),
+    Warp(crate::lane::warp::WarpError),
     /// A folder of frames.
     #[error(transparent)]
     Source(#[from] crate::source::SourceError),
     /// A cascade file.
     #[error("detect: {0}")]
-    Cascade(#[from] crate::detect::cascade::CascadeError),
+    Cascade(crate::detect::cascade::CascadeError),
     /// The recording folder.
     #[error(transparent)]
     Record(#[from] crate::record::RecordError),
@@ -84,6 +84,19 @@ pub enum SessionError {
     #[cfg(feature = "gpio")]
     #[error(transparent)]
     Gpio(#[from] crate::gpio::pi::GpioError),
+}
+
+// By hand, not `#[from]`: a `source` would print the cause a second time after the message.
+impl From<crate::lane::warp::WarpError> for SessionError {
+    fn from(e: crate::lane::warp::WarpError) -> Self {
+        SessionError::Warp(e)
+    }
+}
+
+impl From<crate::detect::cascade::CascadeError> for SessionError {
+    fn from(e: crate::detect::cascade::CascadeError) -> Self {
+        SessionError::Cascade(e)
+    }
 }
 
 /// The session's own parts of the loop, each present or not.

@@ -7,7 +7,7 @@
 //! The font is the system's DejaVu Sans, handed over as bytes by the binary
 //! ([`register_font`]); the library reads no files. Units: metres, seconds.
 
-use crate::classes::ObjectClass;
+use crate::classes::SimShape;
 use super::run::{StepOutput, Summary};
 use super::scene::Scene;
 use super::step::StepMetrics;
@@ -22,6 +22,15 @@ pub struct PlotError(String);
 
 fn err<E: std::fmt::Display>(e: E) -> PlotError {
     PlotError(e.to_string())
+}
+
+/// Where the plot font is looked for (Debian's fonts-dejavu-core; never committed).
+pub const SYSTEM_FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
+
+/// The plot font read from [`SYSTEM_FONT`], kept for the life of the process (`None`: not
+/// installed).
+pub fn system_font() -> Option<&'static [u8]> {
+    std::fs::read(SYSTEM_FONT).ok().map(|b| &*Box::leak(b.into_boxed_slice()))
 }
 
 /// Registers the TTF font used for all text (call once, before plotting).
@@ -140,10 +149,11 @@ pub fn path_plot(s: &Series, scene: &Scene) -> Result<RgbImage, PlotError> {
             }
         }
         for o in track.enabled_objects() {
-            let col = match o.kind {
-                ObjectClass::StopSign => RED,
-                ObjectClass::TrafficLight => GREEN,
-                ObjectClass::Obstacle => BLUE,
+            // by how the class is drawn (the registry's shape), so a new class needs no entry here
+            let col = match o.kind.info().shape {
+                SimShape::Octagon => RED,
+                SimShape::LightHousing => GREEN,
+                SimShape::Box => BLUE,
             };
             c.draw_series(std::iter::once(Circle::new((o.pos[0], o.pos[1]), 5, col.filled())))
                 .map_err(err)?;

@@ -1,12 +1,16 @@
 //! What a simulator run keeps while the loop runs: the behaviour transitions as lines, the
 //! plots' series (time, cross-track error, steering, path), the camera frames as PNG (for
 //! `rccar replay`; the pair's other camera into a second folder), the stereo tally, and a
-//! sideways kick at a given time for step-response experiments.
+//! sideways kick at a given time for step-response experiments. After the run: the step
+//! response's lines and figures ([`RunReport::step_summary`]), the plots in the run folder
+//! ([`RunReport::write_plots`]) and where the frames went ([`RunReport::frames_line`]).
 
-use super::plot::Series;
+use super::plot::{self, PlotError, Series};
+use super::scene::Scene;
 use super::step::{step_metrics, StepError, StepMetrics, StepOptions, StepRequest};
 use super::world::{lock, SharedWorld};
 use crate::drive::{Flow, FrameContext, Level, LoopError, Observer, Say};
+use crate::run_dir::{RunDir, RunDirError};
 use std::path::PathBuf;
 
 /// Stereo frames and boxes of a run.
@@ -18,6 +22,38 @@ pub struct StereoTally {
     pub ranged: u64,
     /// Detector boxes without a stereo match.
     pub unmatched: u64,
+}
+
+impl StereoTally {
+    /// The end-of-run line of a stereo run.
+    pub fn line(&self) -> String {
+        format!(
+            "  stereo: {} pairs, detector boxes ranged by stereo {}, without a match {}",
+            self.pairs, self.ranged, self.unmatched
+        )
+    }
+}
+
+/// The plots a run wrote ([`RunReport::write_plots`]).
+#[derive(Debug, Clone)]
+pub struct RunPlots {
+    /// Cross-track error and steering against time (xte_steer.png).
+    pub time: PathBuf,
+    /// The path driven over the track (path.png).
+    pub path: PathBuf,
+    /// The step response (step.png), when one was measured.
+    pub step: Option<PathBuf>,
+}
+
+/// A plot that could not be drawn or written.
+#[derive(Debug, thiserror::Error)]
+pub enum WritePlotError {
+    /// Drawing failed.
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+    /// Writing into the run folder failed.
+    #[error(transparent)]
+    Write(#[from] RunDirError),
 }
 
 /// The run's report (see the module notes).
@@ -46,6 +82,56 @@ impl RunReport {
         // After a kick the first frame that sees it is the one after the kick's frame.
         let t0 = if st.kick { self.kicked_at.map(|t| t + 1e-6) } else { Some(0.0) };
         t0.map(|t0| step_metrics(&self.series.t, &self.series.xte, t0, &StepOptions::default()))
+    }
+
+    /// The step response `st` asked for, as the lines to print and the figures for
+    /// summary.json's `"step"`; no figures when none could be taken (the line says why).
+    pub fn step_summary(&self, st: &StepRequest) -> (Vec<String>, Option<StepMetrics>) {
+        match self.step_response(st) {
+            Some(Ok(m)) => (m.lines(), Some(m)),
+            Some(Err(e)) => (vec![format!("  step response: {e}")], None),
+            None => (vec![format!("  step response: the run ended before the kick at t = {} s", st.t)], None),
+        }
+    }
+
+    /// Draws the run's plots into `run` (the font registered with [`plot::register_font`]):
+    /// xte_steer.png (lane width `lane_width_m`), path.png over `scene`, and step.png with
+    /// the step response `step`.
+    pub fn write_plots(
+        &self,
+        run: &mut RunDir,
+        lane_width_m: f64,
+        scene: &Scene,
+        step: Option<&StepMetrics>,
+    ) -> Result<RunPlots, WritePlotError> {
+        let time = run.write_png("xte_steer.png", &plot::time_plot(&self.series, lane_width_m)?)?;
+        let path = run.write_png("path.png", &plot::path_plot(&self.series, scene)?)?;
+        let step = match step {
+            Some(m) => Some(run.write_png("step.png", &plot::step_plot(&self.series.t, &self.series.xte, m)?)?),
+            None => None,
+        };
+        Ok(RunPlots { time, path, step })
+    }
+
+    /// Where the recorded frames went and how to replay them (`None`: not recorded).
+    pub fn frames_line(&self, frames: u64) -> Option<String> {
+        match (&self.record, &self.record_right) {
+            (Some(dir), Some(right)) => Some(format!(
+                "  frames:    {}/ and {}/ ({} PNG each; replay with `rccar replay {} --right {} --set ranging.method=stereo`)",
+                dir.display(),
+                right.display(),
+                frames,
+                dir.display(),
+                right.display()
+            )),
+            (Some(dir), None) => Some(format!(
+                "  frames:    {}/ ({} PNG; replay with `rccar replay {}`)",
+                dir.display(),
+                frames,
+                dir.display()
+            )),
+            _ => None,
+        }
     }
 
     /// A report of `world`'s run; lines (transitions, the kick) go to `say`.

@@ -30,10 +30,17 @@ pub enum SimError {
     Pipeline(#[from] PipelineError),
     /// The ROI gives no bird's-eye view.
     #[error("warp.src: {0}")]
-    Warp(#[from] crate::lane::warp::WarpError),
+    Warp(crate::lane::warp::WarpError),
     /// The session cannot be built (anything else).
     #[error(transparent)]
     Session(Box<SessionError>),
+}
+
+// By hand, not `#[from]`: a `source` would print the cause a second time after the message.
+impl From<crate::lane::warp::WarpError> for SimError {
+    fn from(e: crate::lane::warp::WarpError) -> Self {
+        SimError::Warp(e)
+    }
 }
 
 impl From<SessionError> for SimError {

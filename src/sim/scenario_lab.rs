@@ -1,7 +1,8 @@
 //! A ranging calibration lab in the simulator: a flat marker on the floor of a straight road
 //! at several distances ahead of the car, its image row read off the rendered ground-truth box
 //! (snapped to the pixel grid, as a student reads it off a photo) and its distance "taped"
-//! with a chosen error. The pairs feed `rccar calibrate ranging` (docs/ranging.md).
+//! with a chosen error. The pairs feed `rccar calibrate ranging` (docs/ranging.md;
+//! [`lab_pairs`] checks its `--from-sim` options and sets the camera's true tilt).
 //!
 //! The simulated camera is the one `cfg` describes (its tilt is the "true" one); calibrating
 //! against another configuration's nominal tilt shows how well the fit recovers it.
@@ -11,7 +12,7 @@
 use super::rng::SplitMix64;
 use super::run::{SimError, Simulation};
 use super::track::Track;
-use crate::classes::ObjectClass;
+use crate::classes::SimShape;
 use crate::config::Config;
 use crate::ranging::Pair;
 
@@ -58,6 +59,57 @@ color = [240, 240, 240]
         MARKER[0], MARKER[1], MARKER[2]
     );
     Track::from_toml_str(&text, "ranging lab").expect("the built-in lab track is valid")
+}
+
+/// How `rccar calibrate ranging --from-sim N` sets up the lab.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LabOptions {
+    /// The simulated camera's true tilt minus the configured one, degrees (-30..=30).
+    pub tilt_error_deg: f64,
+    /// Standard deviation of the taped distances, metres (0..=0.5).
+    pub tape_sigma_m: f64,
+    /// Seed of the tape errors.
+    pub seed: u64,
+}
+
+/// Lab options or a pair count out of bounds (the message names the flag and the bound).
+#[derive(Debug, thiserror::Error)]
+pub enum LabError {
+    /// Fewer than 3 or more than `max` pairs.
+    #[error("--from-sim {n}: must be 3..={max} pairs")]
+    Count {
+        /// Pairs asked for.
+        n: usize,
+        /// The most allowed.
+        max: usize,
+    },
+    /// The tilt error is not within ±30 degrees.
+    #[error("--sim-tilt-error-deg {0}: must be -30..=30 degrees")]
+    TiltError(f64),
+    /// The tape sigma is not within 0..=0.5 m.
+    #[error("--sim-tape-sigma-m {0}: must be 0..=0.5 m")]
+    TapeSigma(f64),
+    /// The simulation could not run.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+}
+
+/// `n` pairs (3..=`max`) made in the lab with a camera tilted `o.tilt_error_deg` away from
+/// `cfg`'s, and that true tilt, degrees.
+pub fn lab_pairs(cfg: &Config, n: usize, max: usize, o: &LabOptions) -> Result<(Vec<Pair>, f64), LabError> {
+    if !(3..=max).contains(&n) {
+        return Err(LabError::Count { n, max });
+    }
+    if !(o.tilt_error_deg.is_finite() && o.tilt_error_deg.abs() <= 30.0) {
+        return Err(LabError::TiltError(o.tilt_error_deg));
+    }
+    if !(o.tape_sigma_m.is_finite() && (0.0..=0.5).contains(&o.tape_sigma_m)) {
+        return Err(LabError::TapeSigma(o.tape_sigma_m));
+    }
+    let mut real = cfg.clone();
+    real.camera.tilt_deg += o.tilt_error_deg;
+    let pairs = calibration_pairs(&real, n, o.tape_sigma_m, o.seed)?;
+    Ok((pairs, real.camera.tilt_deg))
 }
 
 /// `n` pairs (box-bottom row, taped distance to the marker's near edge, height 0) with the
@@ -148,7 +200,7 @@ yaw_deg = 180
 /// `None` if the track has no object.
 pub fn pose_before_object(cfg: &Config, track: &Track, d_m: f64) -> Option<super::vehicle::Pose> {
     let ob = track.enabled_objects().next()?;
-    let near = if ob.kind == ObjectClass::Obstacle {
+    let near = if ob.kind.info().shape == SimShape::Box {
         ob.size[0] / 2.0
     } else {
         0.0

@@ -9,7 +9,7 @@ use super::render::{CameraMount, ObjectBox, RenderOptions, Renderer};
 use super::scene::Scene;
 use super::vehicle::Pose;
 use crate::camera::PinholeCamera;
-use crate::classes::ObjectClass;
+use crate::classes::SimShape;
 use crate::config::Config;
 use image::RgbImage;
 use std::sync::Arc;
@@ -81,7 +81,8 @@ impl StereoRig {
                     .iter()
                     .map(|o| &o.0)
                     .find(|o| o.index == b.index)?;
-                let near = if ob.kind == ObjectClass::Obstacle {
+                // a box standing on the floor is ranged to its near face, a post to its pole
+                let near = if ob.kind.info().shape == SimShape::Box {
                     ob.size[0] / 2.0
                 } else {
                     0.0
@@ -103,7 +104,7 @@ impl StereoRig {
 /// wholly outside the image. [`Renderer::object_box`] boxes the whole object, pole and all;
 /// a detector boxes the face.
 pub fn sign_face_box(r: &Renderer, pose: &Pose, ob: &super::track::Object) -> Option<([f64; 4], bool)> {
-    if ob.kind != ObjectClass::StopSign {
+    if ob.kind.info().shape != SimShape::Octagon {
         return None;
     }
     let half = ob.size[0] / 2.0;

@@ -389,6 +389,26 @@ pub fn label(keys: &[&str], p: &[f64]) -> String {
         .join(" ")
 }
 
+/// After a stop request: how many of the runs at `points` finished, were cut short (their
+/// rows end `interrupted`) and never started (no row; named by their points), as one line.
+pub fn interrupted_line(keys: &[&str], points: &[Vec<f64>], outcomes: &[RunOutcome]) -> String {
+    let count = |f: fn(&RunOutcome) -> bool| outcomes.iter().filter(|o| f(o)).count();
+    let finished = count(|o| matches!(o, RunOutcome::Finished(_)));
+    let cut = count(|o| matches!(o, RunOutcome::Interrupted(_)));
+    let not_run: Vec<String> = points
+        .iter()
+        .zip(outcomes)
+        .filter(|(_, o)| **o == RunOutcome::NotRun)
+        .map(|(p, _)| label(keys, p))
+        .collect();
+    format!(
+        "sweep: interrupted; {finished} of {} run(s) finished, {cut} cut short (rows ending `interrupted`), {} not run (no row): {}",
+        points.len(),
+        not_run.len(),
+        if not_run.is_empty() { "-".to_string() } else { not_run.join(", ") }
+    )
+}
+
 /// The end reason as in sweep.csv (`time_up`, `interrupted`, …).
 pub fn end_name(s: &Summary) -> String {
     serde_json::to_value(s.end)

@@ -924,7 +924,7 @@ impl Track {
         if !(height > 0.0 && height <= 3.0) {
             return Err(bad(key("height_m"), height.to_string(), "must be > 0 and <= 3 m"));
         }
-        if o.kind == ObjectClass::TrafficLight && o.cycle_s.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+        if info.reads_light && o.cycle_s.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
             return Err(bad(
                 key("cycle_s"),
                 format!("{:?}", o.cycle_s),

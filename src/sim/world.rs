@@ -1,4 +1,4 @@
-//! The simulated world, split the way the car is: a **camera** ([`SimCamera`], a
+//! The simulated world, split the way the car is: a **camera** ([`super::camera::SimCamera`], a
 //! [`FrameSource`] rendering what the car's camera sees) and a **vehicle** ([`SimVehicle`], a
 //! [`CommandSink`] moving the car), over one shared [`World`]; the **score** ([`SimScore`], an
 //! [`Observer`]) watches the run. The loop between them is the car's own
@@ -21,7 +21,6 @@
 //!
 //! Units: metres, seconds, radians.
 
-pub use super::camera::SimCamera;
 use super::render::ObjectBox;
 use super::render::{CameraMount, RenderOptions, Renderer};
 use super::scene::Scene;

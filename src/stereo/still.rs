@@ -1,7 +1,8 @@
 //! One still stereo pair, as `rccar stereo LEFT RIGHT` ranges it: rectified with the maps of a
 //! calibration file (which must be for the images' size), or taken as an ideal rectified pair
 //! of the configured camera; then each box of the reference image is matched along the rows of
-//! the other image and ranged. The configuration converts into [`PairSetup`]
+//! the other image and ranged ([`StillPair::range_record`]: one JSON line per box). The
+//! configuration converts into [`PairSetup`]
 //! (`Config::still_pair_setup`), so this module reads no configuration.
 
 use super::geometry::{StereoGeometry, StereoRange};
@@ -84,5 +85,23 @@ impl StillPair {
         let v = b[1] as f64 + (b[3] as f64 - 1.0) / 2.0;
         let mm = m.match_box(self.reference(), other, b, &self.matching)?;
         Ok((mm, self.geometry.range(&mm, v, self.matching.reference_left)))
+    }
+
+    /// [`StillPair::range_box`] as `rccar stereo`'s JSON line of box `b` labelled `label`:
+    /// the disparity, the match score, the depth and forward distance by Eq. 16, exact angles
+    /// and b·f/d, and the lateral offset; or `no_range` saying why there is none.
+    pub fn range_record(&self, m: &mut Matcher, label: &str, b: [i64; 4]) -> serde_json::Value {
+        match self.range_box(m, b) {
+            Ok((mm, Some(rg))) => serde_json::json!({
+                "label": label, "box": b, "disparity_px": mm.disparity, "ncc": mm.score,
+                "depth_m": {"eq16": rg.depth_eq16, "exact": rg.depth_exact, "bfd": rg.depth_bfd},
+                "forward_m": {"eq16": rg.forward_m[0], "exact": rg.forward_m[1], "bfd": rg.forward_m[2]},
+                "lateral_m": rg.lateral_m,
+            }),
+            Ok((mm, None)) => {
+                serde_json::json!({"label": label, "box": b, "no_range": format!("disparity {:.3} px", mm.disparity)})
+            }
+            Err(e) => serde_json::json!({"label": label, "box": b, "no_range": e.to_string()}),
+        }
     }
 }

@@ -28,12 +28,12 @@ pub const MAX_POSITIVES: usize = 1_000_000;
 #[derive(Debug, thiserror::Error)]
 pub enum SampleError {
     /// The list file itself could not be read.
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read: {err}")]
     Io {
         /// File.
         path: PathBuf,
-        /// Cause.
-        source: std::io::Error,
+        /// Cause (in the message, not a `source`: printed once).
+        err: std::io::Error,
     },
     /// A bound was exceeded (the message names it).
     #[error("{0}")]
@@ -43,9 +43,9 @@ pub enum SampleError {
 /// Reads a text file of at most [`MAX_LIST_BYTES`]; the error names the file and the bound.
 pub fn read_list_text(path: &Path) -> Result<String, SampleError> {
     use std::io::Read;
-    let io = |source| SampleError::Io {
+    let io = |err| SampleError::Io {
         path: path.into(),
-        source,
+        err,
     };
     let mut text = String::new();
     std::fs::File::open(path)

@@ -33,12 +33,12 @@ use std::time::Instant;
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
     /// Reading or writing the output folder failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {err}")]
     Io {
         /// File.
         path: PathBuf,
-        /// Cause.
-        source: std::io::Error,
+        /// Cause (in the message, not a `source`: printed once).
+        err: std::io::Error,
     },
     /// A bad parameter or data set.
     #[error("{0}")]
@@ -53,7 +53,14 @@ pub enum TrainError {
     },
     /// The written cascade did not load (a bug).
     #[error("the trained cascade does not load: {0}")]
-    Cascade(#[from] rccar::detect::CascadeError),
+    Cascade(rccar::detect::CascadeError),
+}
+
+// By hand, not `#[from]`: a `source` would print the cascade's error a second time.
+impl From<rccar::detect::CascadeError> for TrainError {
+    fn from(e: rccar::detect::CascadeError) -> Self {
+        TrainError::Cascade(e)
+    }
 }
 
 /// Training options beyond the model's parameters.
@@ -222,9 +229,9 @@ impl Progress for NoProgress {
 
 fn write_atomic(path: &Path, text: &str) -> Result<(), TrainError> {
     let tmp = path.with_extension("tmp");
-    let io = |source| TrainError::Io {
+    let io = |err| TrainError::Io {
         path: path.into(),
-        source,
+        err,
     };
     std::fs::write(&tmp, text).map_err(io)?;
     std::fs::rename(&tmp, path).map_err(io)
@@ -367,9 +374,9 @@ pub fn train_with_holdout(
 
 /// Creates `out_dir`; the paths of its cascade.xml and stages.json.
 fn output_paths(out_dir: &Path) -> Result<(PathBuf, PathBuf), TrainError> {
-    std::fs::create_dir_all(out_dir).map_err(|source| TrainError::Io {
+    std::fs::create_dir_all(out_dir).map_err(|err| TrainError::Io {
         path: out_dir.into(),
-        source,
+        err,
     })?;
     Ok((out_dir.join("cascade.xml"), out_dir.join("stages.json")))
 }
@@ -674,9 +681,9 @@ fn resume_from(
     progress: &mut dyn Progress,
 ) -> Result<Option<TrainOutcome>, TrainError> {
     let p = &file.options.params.clone();
-    let text = std::fs::read_to_string(log_path).map_err(|source| TrainError::Io {
+    let text = std::fs::read_to_string(log_path).map_err(|err| TrainError::Io {
         path: log_path.into(),
-        source,
+        err,
     })?;
     let old: StageFile = serde_json::from_str(&text).map_err(|e| TrainError::Resume {
         path: log_path.into(),

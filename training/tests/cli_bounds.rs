@@ -194,6 +194,17 @@ fn train_refuses_a_huge_list_and_a_huge_image_by_name() {
     );
 }
 
+/// A file that cannot be read is named with the OS's reason once (it was printed twice: in the
+/// message and again as the error's source).
+#[test]
+fn a_missing_list_file_is_named_with_the_reason_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (code, err) = run(dir.path(), &["train", "--out", "m", "--pos", "missing.dat", "--bg", "missing.dat"], 60);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("missing.dat: cannot read: "), "{err}");
+    assert_eq!(err.matches("No such file or directory").count(), 1, "{err}");
+}
+
 /// A PNG that holds only its header (IHDR, an empty IDAT, IEND): enough for the header check,
 /// far too little to decode.
 fn png_header(path: &Path, w: u32, h: u32) {

@@ -21,7 +21,8 @@
 //! `/api/state` (`refused`) and noted in the telemetry once a second. The e-stop needs none of
 //! this: stopping is the safe direction; it is logged with its origin.
 
-use super::Shared;
+use super::log::{out, Log};
+use super::reply::error;
 use axum::body::Body;
 use axum::http::{header, HeaderMap, HeaderValue, Method, Response, StatusCode};
 use std::io::Read;
@@ -155,10 +156,10 @@ impl Access {
     /// The start-up lines: the plain URL, and off loopback the token on a line of its own.
     pub fn print_start_up(&self, bound: SocketAddr) {
         match &self.mode {
-            Mode::Loopback => println!("dashboard: http://{bound}/"),
+            Mode::Loopback => out(&format!("dashboard: http://{bound}/")),
             Mode::Token { token, .. } => {
-                println!("dashboard: http://{bound}/  (not loopback: enter the token below once on the page; it is never put in a URL)");
-                println!("dashboard token: {token}");
+                out(&format!("dashboard: http://{bound}/  (not loopback: enter the token below once on the page; it is never put in a URL)"));
+                out(&format!("dashboard token: {token}"));
             }
         }
     }
@@ -289,9 +290,19 @@ impl Access {
     }
 }
 
-/// Answers 403 with `why`, counts it and prints it (at most 20 lines a second).
-pub fn refuse(sh: &Shared, method: &Method, path: &str, h: &HeaderMap, peer: SocketAddr, why: &str) -> Response<Body> {
-    let a = &sh.access;
+/// Answers 403 with `why`, counts it in `a` and prints it through `log` (at most
+/// [`LINES_PER_S`] lines in the second `now_s` falls in, seconds on the dashboard's clock).
+#[allow(clippy::too_many_arguments)]
+pub fn refuse(
+    a: &Access,
+    log: &Log,
+    now_s: f64,
+    method: &Method,
+    path: &str,
+    h: &HeaderMap,
+    peer: SocketAddr,
+    why: &str,
+) -> Response<Body> {
     let n = a.refused.fetch_add(1, Ordering::SeqCst) + 1;
     let line = format!(
         "refused {method} {} from {peer} (Origin {}, Host {}): {why}",
@@ -300,16 +311,16 @@ pub fn refuse(sh: &Shared, method: &Method, path: &str, h: &HeaderMap, peer: Soc
         shown(h.get("host")),
     );
     *a.last.lock().unwrap_or_else(|e| e.into_inner()) = line.clone();
-    let second = sh.sent.now() as u64;
+    let second = now_s as u64;
     if a.line_window.swap(second, Ordering::SeqCst) != second {
         a.lines.store(0, Ordering::SeqCst);
     }
     if a.lines.fetch_add(1, Ordering::SeqCst) < LINES_PER_S {
-        sh.log.err(format!("dashboard: {line} [{n} refused so far]"));
+        log.err(format!("dashboard: {line} [{n} refused so far]"));
     } else {
         a.unprinted.fetch_add(1, Ordering::SeqCst);
     }
-    super::api::error(StatusCode::FORBIDDEN, why)
+    error(StatusCode::FORBIDDEN, why)
 }
 
 #[cfg(test)]

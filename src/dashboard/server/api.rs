@@ -2,17 +2,20 @@
 //! before anything else is looked at; every other request passes the checks of
 //! [`super::access`] before it reaches the axum router.
 
-use super::access::{self, refuse};
-use super::conn::{ConnCtl, HEAD_DEADLINE};
-use super::hub::{self, now_ms, Msg};
-use super::Shared;
+use super::access;
+use super::conn::{Caller, ConnCtl, HEAD_DEADLINE};
+use super::hub;
+use super::log::Msg;
+use super::reply::{error, reply};
+use super::state::Shared;
+use crate::dashboard::local_toml;
+use crate::dashboard::messages::{self, Control, PlaceRequest, PlotPoint, SetRequest};
+use crate::drive::Actor;
 use axum::body::{Body, Bytes};
 use axum::extract::State;
 use axum::http::{header, HeaderMap, HeaderValue, Method, Request, Response, StatusCode, Uri};
 use axum::routing::{get, post};
 use axum::{Extension, Router};
-use crate::dashboard::{self, Control, PlaceRequest, PlotPoint, SetRequest};
-use crate::drive::Actor;
 use serde_json::{json, Value};
 use std::convert::Infallible;
 use std::sync::atomic::Ordering;
@@ -22,29 +25,9 @@ use tower_service::Service;
 
 const PAGE: &str = include_str!("../page.html");
 
-/// Who sent the request (an extension of every request the router sees).
-#[derive(Clone)]
-pub struct Caller {
-    /// The connection.
-    pub ctl: Arc<ConnCtl>,
-    /// When its head was read (the body must follow within the head deadline).
-    pub at: Instant,
-    /// Logged in (always on loopback).
-    pub session: bool,
-}
-
-/// A JSON response.
-pub fn reply(code: StatusCode, v: &Value) -> Response<Body> {
-    let mut r = Response::new(Body::from(v.to_string()));
-    *r.status_mut() = code;
-    r.headers_mut()
-        .insert(header::CONTENT_TYPE, HeaderValue::from_static("application/json"));
-    r
-}
-
-/// `{"error": msg}` with `code`.
-pub fn error(code: StatusCode, msg: &str) -> Response<Body> {
-    reply(code, &json!({ "error": msg }))
+/// [`access::refuse`] with the server's log and clock.
+fn refuse(sh: &Shared, m: &Method, path: &str, h: &HeaderMap, peer: std::net::SocketAddr, why: &str) -> Response<Body> {
+    access::refuse(&sh.access, &sh.log, sh.sent.now(), m, path, h, peer, why)
 }
 
 /// Every route; the checks before them are in [`handle`].
@@ -177,11 +160,11 @@ async fn body(h: &HeaderMap, b: Body, c: &Caller) -> Result<Bytes, Response<Body
         Some(Some(n)) => n,
         Some(None) => return Err(error(StatusCode::BAD_REQUEST, "bad Content-Length")),
     };
-    if len > dashboard::MAX_BODY {
+    if len > messages::MAX_BODY {
         return Err(error(StatusCode::PAYLOAD_TOO_LARGE, "body larger than 4096 bytes"));
     }
     let left = HEAD_DEADLINE.saturating_sub(c.at.elapsed());
-    match tokio::time::timeout(left, axum::body::to_bytes(b, dashboard::MAX_BODY)).await {
+    match tokio::time::timeout(left, axum::body::to_bytes(b, messages::MAX_BODY)).await {
         Err(_) => Err(error(StatusCode::REQUEST_TIMEOUT, "body not complete within 3 s")),
         Ok(Err(_)) => Err(error(StatusCode::BAD_REQUEST, "body shorter than Content-Length")),
         Ok(Ok(b)) => Ok(b),
@@ -240,7 +223,7 @@ async fn release(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>)
 }
 
 async fn arm(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> Response<Body> {
-    sh.last_heartbeat_ms.store(now_ms(&sh), Ordering::SeqCst);
+    sh.last_heartbeat_ms.store(sh.now_ms(), Ordering::SeqCst);
     if let Err(why) = sh.arm.arm(Actor::Page) {
         return error(StatusCode::CONFLICT, &why.to_string());
     }
@@ -257,7 +240,7 @@ async fn disarm(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) 
 }
 
 async fn heartbeat(State(sh): State<Arc<Shared>>) -> Response<Body> {
-    sh.last_heartbeat_ms.store(now_ms(&sh), Ordering::SeqCst);
+    sh.last_heartbeat_ms.store(sh.now_ms(), Ordering::SeqCst);
     reply(StatusCode::OK, &json!({"armed": sh.arm.is_armed()}))
 }
 
@@ -266,12 +249,12 @@ async fn set(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h: 
         Ok(b) => b,
         Err(r) => return r,
     };
-    let req: SetRequest = match dashboard::parse_body(&bytes) {
+    let req: SetRequest = match messages::parse_body(&bytes) {
         Ok(q) => q,
         Err(e) => return error(StatusCode::BAD_REQUEST, &e.to_string()),
     };
     let mut cfg = sh.cfg.lock().unwrap_or_else(|e| e.into_inner());
-    let new = match dashboard::validate_set(&cfg, &req.key, req.value) {
+    let new = match messages::validate_set(&cfg, &req.key, req.value) {
         Ok(n) => n,
         Err(e) => return error(StatusCode::BAD_REQUEST, &e.to_string()),
     };
@@ -314,7 +297,7 @@ async fn save(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h:
         .map(|(k, v)| (k.clone(), *v))
         .collect();
     let (sh2, keys2) = (sh.clone(), keys.clone());
-    let r = tokio::task::spawn_blocking(move || dashboard::local_toml::save(&sh2.local, &keys2)).await;
+    let r = tokio::task::spawn_blocking(move || local_toml::save(&sh2.local, &keys2)).await;
     match r {
         Ok(Ok(())) => {
             let list = keys
@@ -355,7 +338,7 @@ async fn sim(
                 Ok(b) => b,
                 Err(r) => return r,
             };
-            let q: PlaceRequest = match dashboard::parse_body(&bytes) {
+            let q: PlaceRequest = match messages::parse_body(&bytes) {
                 Ok(q) => q,
                 Err(e) => return error(StatusCode::BAD_REQUEST, &e.to_string()),
             };
@@ -427,6 +410,8 @@ fn state_json(sh: &Shared, since: f64, session: bool) -> Value {
         "track_length": sh.track_length,
         "armed": sh.arm.is_armed(),
         "estop": sh.arm.is_estopped(),
+        // who last armed, disarmed or stopped the car (flag, button, page, heartbeat, link, …)
+        "arm_actor": sh.arm.last_actor().name(),
         "viewers": sh.viewers.load(Ordering::SeqCst),
         "stream_frames": sh.frames_sent.load(Ordering::SeqCst),
         "wall_s": s.now(),

@@ -1,5 +1,6 @@
-//! Connections: the accept loop, the bound on their number, the reserve kept for the e-stop,
-//! and the deadlines that close idle and slow clients.
+//! Connections: the bound on their number, the reserve kept for the e-stop, and the
+//! deadlines that close idle and slow clients ([`GuardedIo`]); the loop that accepts them is
+//! [`super::accept`]. Imports none of the server's other modules.
 //!
 //! - **Bound**: at most [`MAX_CONNECTIONS`] (1,024) connections, fewer when the open-file
 //!   limit is low (see [`Limits::for_nofile`]). At the bound a new connection closes the one
@@ -17,9 +18,6 @@
 //!   longest-waiting idle connection is closed and `accept` tried again 10 ms later; the new
 //!   client waits in the kernel's listen queue meanwhile (logged at most once a second).
 
-use super::{api, Shared};
-use hyper::server::conn::http1;
-use hyper_util::rt::TokioIo;
 use std::collections::HashMap;
 use std::future::Future;
 use std::io;
@@ -152,6 +150,10 @@ impl ConnCtl {
     pub fn streaming(&self) {
         self.set(STREAMING);
     }
+    /// Completes when the connection is closed to make room for another.
+    pub async fn evicted(&self) {
+        self.kill.notified().await
+    }
     fn set(&self, s: u8) {
         self.since_ms.store(self.now_ms(), Ordering::SeqCst);
         self.state.store(s, Ordering::SeqCst);
@@ -210,8 +212,14 @@ impl Conns {
     fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<u64, Arc<ConnCtl>>> {
         self.open.lock().unwrap_or_else(|e| e.into_inner())
     }
-    fn remove(&self, id: u64) {
-        self.lock().remove(&id);
+    /// Forgets connection `ctl` (it has ended).
+    pub fn remove(&self, ctl: &ConnCtl) {
+        self.lock().remove(&ctl.id);
+    }
+    /// Closes the connection that has waited longest for a request head, to make room (the
+    /// process is out of open files).
+    pub fn make_room(&self) {
+        self.evict_longest_waiting(&mut self.lock());
     }
     /// Closes the connection that has waited longest for a request head; false: none waits.
     fn evict_longest_waiting(&self, open: &mut HashMap<u64, Arc<ConnCtl>>) -> bool {
@@ -230,7 +238,7 @@ impl Conns {
         }
     }
     /// Registers a new connection: `None` when the bound and the reserve are both full.
-    fn admit(&self, peer: std::net::SocketAddr) -> Option<Arc<ConnCtl>> {
+    pub fn admit(&self, peer: std::net::SocketAddr) -> Option<Arc<ConnCtl>> {
         let mut open = self.lock();
         let mut reserve = false;
         if open.len() >= self.limits.max && !self.evict_longest_waiting(&mut open) {
@@ -258,6 +266,17 @@ impl Conns {
     }
 }
 
+/// Who sent a request (an extension of every request the router sees).
+#[derive(Clone)]
+pub struct Caller {
+    /// The connection.
+    pub ctl: Arc<ConnCtl>,
+    /// When its head was read (the body must follow within the head deadline).
+    pub at: Instant,
+    /// Logged in (always on loopback).
+    pub session: bool,
+}
+
 /// Connections the kernel queues before the accept loop takes them (capped by
 /// `net.core.somaxconn`, 4096 on current Linux). tokio's default of 128 overflowed when a
 /// burst of 1,000 connections met a busy machine: the kernel then dropped SYNs and clients
@@ -276,43 +295,9 @@ pub fn listen(addr: std::net::SocketAddr) -> io::Result<tokio::net::TcpListener>
     s.listen(BACKLOG)
 }
 
-/// Accepts until the server closes; every connection runs in a task of its own.
-pub async fn accept_loop(listener: tokio::net::TcpListener, router: axum::Router, sh: Arc<Shared>) {
-    let mut shut = sh.shutdown.subscribe();
-    let mut last_emfile_log: Option<Instant> = None;
-    loop {
-        let r = tokio::select! {
-            r = listener.accept() => r,
-            _ = shut.wait_for(|v| *v) => break,
-        };
-        let (sock, peer) = match r {
-            Ok(x) => x,
-            Err(e) if matches!(e.raw_os_error(), Some(libc::EMFILE | libc::ENFILE)) => {
-                // Out of descriptors despite the bound (other files): make room, try again.
-                sh.conns.evict_longest_waiting(&mut sh.conns.lock());
-                if last_emfile_log.is_none_or(|t| t.elapsed() >= Duration::from_secs(1)) {
-                    last_emfile_log = Some(Instant::now());
-                    sh.log.err(format!(
-                        "dashboard: out of open files ({e}) with {} connections: closed the longest-idle one",
-                        sh.conns.open()
-                    ));
-                }
-                tokio::time::sleep(Duration::from_millis(10)).await;
-                continue;
-            }
-            Err(_) => continue, // the client gave up before we took it (ECONNABORTED …)
-        };
-        let Some(ctl) = sh.conns.admit(peer) else {
-            let _ = sock.try_write(&canned("503 Service Unavailable", "too many connections"));
-            continue;
-        };
-        tokio::spawn(serve(sock, ctl, router.clone(), sh.clone()));
-    }
-}
-
 /// A whole response written straight to the socket (outside hyper: refusals before or
 /// after it serves the connection).
-fn canned(status: &str, msg: &str) -> Vec<u8> {
+pub fn canned(status: &str, msg: &str) -> Vec<u8> {
     let body = format!("{{\"error\":\"{msg}\"}}\n");
     format!(
         "HTTP/1.1 {status}\r\nContent-Type: application/json\r\nContent-Length: {}\r\nCache-Control: no-store\r\nConnection: close\r\n\r\n{body}",
@@ -321,35 +306,13 @@ fn canned(status: &str, msg: &str) -> Vec<u8> {
     .into_bytes()
 }
 
-/// Serves one connection until it closes, is evicted or the server closes.
-async fn serve(sock: TcpStream, ctl: Arc<ConnCtl>, router: axum::Router, sh: Arc<Shared>) {
-    let _ = sock.set_nodelay(true);
-    let io = TokioIo::new(GuardedIo::new(sock, ctl.clone(), sh.clone()));
-    let svc = {
-        let ctl = ctl.clone();
-        let sh = sh.clone();
-        hyper::service::service_fn(move |req| api::handle(req, ctl.clone(), router.clone(), sh.clone()))
-    };
-    let conn = http1::Builder::new()
-        .max_buf_size(MAX_HEAD)
-        .keep_alive(true)
-        .serve_connection(io, svc);
-    let mut shut = sh.shutdown.subscribe();
-    tokio::select! {
-        _ = conn => {}
-        _ = ctl.kill.notified() => {}
-        _ = shut.wait_for(|v| *v) => {}
-    }
-    sh.conns.remove(ctl.id);
-}
-
 /// The socket with the server's deadlines: a head not complete in time ends the connection
 /// (with a 408 when a request was begun or none was made yet); a write that makes no
 /// progress for [`WRITE_STALL`] ends it too.
-struct GuardedIo {
+pub struct GuardedIo {
     inner: TcpStream,
     ctl: Arc<ConnCtl>,
-    sh: Arc<Shared>,
+    conns: Arc<Conns>,
     head_timer: Pin<Box<Sleep>>,
     head_deadline: Option<Instant>,
     write_timer: Pin<Box<Sleep>>,
@@ -357,12 +320,13 @@ struct GuardedIo {
 }
 
 impl GuardedIo {
-    fn new(inner: TcpStream, ctl: Arc<ConnCtl>, sh: Arc<Shared>) -> Self {
+    /// `inner` with the deadlines of connection `ctl` of `conns`.
+    pub fn new(inner: TcpStream, ctl: Arc<ConnCtl>, conns: Arc<Conns>) -> Self {
         let far = tokio::time::Instant::now() + Duration::from_secs(3600);
         Self {
             inner,
             ctl,
-            sh,
+            conns,
             head_timer: Box::pin(tokio::time::sleep_until(far)),
             head_deadline: None,
             write_timer: Box::pin(tokio::time::sleep_until(far)),
@@ -371,7 +335,7 @@ impl GuardedIo {
     }
 
     fn timed_out(&self, what: &str) -> io::Error {
-        self.sh.conns.timed_out.fetch_add(1, Ordering::Relaxed);
+        self.conns.timed_out.fetch_add(1, Ordering::Relaxed);
         io::Error::new(io::ErrorKind::TimedOut, what.to_string())
     }
 

@@ -1,83 +1,25 @@
 //! The server's own threads and the stream: the hub (takes the loop's snapshots, keeps the
 //! plot history, renders and encodes the stream image once for every viewer), the heartbeat
-//! watchdog, the logger (so no request ever waits on stdout), and the MJPEG body.
+//! watchdog, and the MJPEG body. (The logger thread is [`super::log`].)
 
-use super::api::{error, Caller};
-use super::{Shared, HISTORY_S};
+use super::conn::Caller;
+use super::reply::error;
+use super::state::{Shared, HISTORY_S};
+use crate::dashboard::messages::{Control, Snapshot};
+use crate::drive::{Actor, Latest, StopSignal};
 use axum::body::{Body, Bytes};
 use axum::extract::State;
 use axum::http::{header, Response, StatusCode};
 use hyper::body::Frame;
 use image::{Rgb, RgbImage};
-use crate::dashboard::{Control, ControlSender, Snapshot};
-use crate::drive::{Actor, Latest, StopSignal};
 use std::convert::Infallible;
 use std::future::Future;
 use std::pin::Pin;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::task::{Context, Poll};
 use std::time::Duration;
 use tokio::sync::watch;
-
-/// A line for stdout or stderr, or a note for the telemetry.
-pub enum Msg {
-    /// stdout.
-    Out(String),
-    /// stderr.
-    Err(String),
-    /// An event in the telemetry record of the next frame.
-    Note(String),
-}
-
-/// The handlers' way to print: a bounded queue to the logger thread (never waits; a full
-/// queue drops the line and counts it).
-pub struct Log {
-    tx: SyncSender<Msg>,
-    /// Lines dropped because the queue was full (stdout blocked).
-    pub dropped: AtomicU64,
-}
-
-impl Log {
-    /// The queue and its receiving end (for [`start_logger`]).
-    pub fn new() -> (Log, Receiver<Msg>) {
-        let (tx, rx) = sync_channel(256);
-        (
-            Log {
-                tx,
-                dropped: AtomicU64::new(0),
-            },
-            rx,
-        )
-    }
-    /// Queues `m`.
-    pub fn send(&self, m: Msg) {
-        if self.tx.try_send(m).is_err() {
-            self.dropped.fetch_add(1, Ordering::Relaxed);
-        }
-    }
-    /// A line on stderr.
-    pub fn err(&self, s: String) {
-        self.send(Msg::Err(s));
-    }
-}
-
-/// Prints the queued lines and hands the notes to the loop; ends with the server.
-pub fn start_logger(rx: Receiver<Msg>, tx: ControlSender) -> std::io::Result<()> {
-    std::thread::Builder::new().name("dash-log".into()).spawn(move || {
-        for m in rx {
-            match m {
-                Msg::Out(s) => println!("{s}"),
-                Msg::Err(s) => eprintln!("{s}"),
-                Msg::Note(s) => {
-                    tx.send(Control::Note(s));
-                }
-            }
-        }
-    })?;
-    Ok(())
-}
 
 /// The web's threads yield to the control loop: nice 10 for this thread (Linux; elsewhere a
 /// no-op). The hub's annotation and JPEG encoding then take CPU only when the loop does not.
@@ -88,11 +30,6 @@ fn lower_priority() {
         let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
         libc::setpriority(libc::PRIO_PROCESS, tid, 10);
     }
-}
-
-/// Milliseconds on the dashboard's clock.
-pub fn now_ms(sh: &Shared) -> u64 {
-    (sh.sent.now() * 1e3) as u64
 }
 
 /// Disarms when the page that armed the car stops sending heartbeats; once a second tells
@@ -109,7 +46,7 @@ pub fn watchdog(sh: Arc<Shared>, stop: StopSignal) {
         if sh.heartbeat_ms == 0 || !sh.armed_by_page.load(Ordering::SeqCst) || !sh.arm.is_armed() {
             continue;
         }
-        let age = now_ms(&sh).saturating_sub(sh.last_heartbeat_ms.load(Ordering::SeqCst));
+        let age = sh.now_ms().saturating_sub(sh.last_heartbeat_ms.load(Ordering::SeqCst));
         if age > sh.heartbeat_ms {
             sh.arm.disarm(Actor::Heartbeat);
             sh.armed_by_page.store(false, Ordering::SeqCst);
@@ -118,7 +55,7 @@ pub fn watchdog(sh: Arc<Shared>, stop: StopSignal) {
                 sh.heartbeat_ms,
                 sh.sent.now()
             );
-            println!("dashboard: {msg}");
+            super::log::out(&format!("dashboard: {msg}"));
             sh.tx.send(Control::Note(msg));
         }
     }

@@ -24,24 +24,32 @@
 //! The e-stop handler touches only atomics (no lock the loop, the hub or another request
 //! holds) and its log line goes through a queue, so it works while everything else is stuck.
 
+//!
+//! The modules import one another one way only, from the bottom up: [`reply`], [`log`] and
+//! [`conn`] (the connection table) import none of the others; [`access`] uses `reply` and
+//! `log`; [`state`] (what everything shares) holds an `access`, a `log` and a `conn`; then
+//! [`hub`], [`api`], [`accept`], and this file, which starts them.
+
+mod accept;
 mod access;
 mod api;
 mod conn;
 mod hub;
+mod log;
+mod reply;
+mod state;
 
 use super::shared::{DashboardError, Sent};
 use crate::config::Config;
-use crate::dashboard::{ControlSender, Live, PlotPoint, Snapshot};
+use crate::dashboard::messages::{ControlSender, Live, Snapshot};
 use crate::drive::{Arming, Latest, StopSignal};
 use crate::sim::world::{lock, SharedWorld};
-use std::collections::{BTreeMap, VecDeque};
+use state::{Shared, View};
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize};
 use std::sync::{Arc, Mutex};
-
-/// Plot history kept for the page, seconds of frame time.
-const HISTORY_S: f64 = 30.0;
 
 /// What the server needs from the run.
 pub struct Options {
@@ -65,47 +73,6 @@ pub struct Options {
     pub world: Option<SharedWorld>,
     /// The run's stop signal (the server's threads end with it).
     pub stop: StopSignal,
-}
-
-/// The newest state for `GET /api/state`.
-#[derive(Default)]
-struct View {
-    snap: Option<Arc<Snapshot>>,
-    history: VecDeque<PlotPoint>,
-}
-
-/// Everything the handlers, the hub and the watchdog share.
-struct Shared {
-    cfg: Mutex<Config>,
-    changed: Mutex<BTreeMap<String, f64>>,
-    local: PathBuf,
-    tx: ControlSender,
-    arm: Arc<Arming>,
-    sent: Arc<Sent>,
-    track_length: Option<f64>,
-    access: access::Access,
-    view: Mutex<View>,
-    /// The newest JPEG of the stream (newest only: a viewer that was busy skips the rest).
-    jpeg: tokio::sync::watch::Sender<Arc<Vec<u8>>>,
-    heartbeat_ms: u64,
-    last_heartbeat_ms: AtomicU64,
-    armed_by_page: AtomicBool,
-    viewers: AtomicUsize,
-    max_viewers: usize,
-    frames_sent: AtomicU64,
-    closed: AtomicBool,
-    /// `true` once the server is closing: every connection and stream ends.
-    shutdown: tokio::sync::watch::Sender<bool>,
-    live: Arc<Live>,
-    log: hub::Log,
-    conns: conn::Conns,
-}
-
-impl Shared {
-    fn close(&self) {
-        self.closed.store(true, Ordering::SeqCst);
-        self.shutdown.send_replace(true);
-    }
 }
 
 /// The running server; its threads end when the run's stop signal is set or it is dropped.
@@ -147,7 +114,7 @@ impl Server {
             .map_err(|source| DashboardError::Bind { addr, source })?;
         let bound = listener.local_addr()?;
         let access = access::Access::new(bound, &o.cfg.dashboard.token);
-        let (log, log_rx) = hub::Log::new();
+        let (log, log_rx) = log::Log::new();
         let track_length = o.world.as_ref().map(|w| lock(w).scene().track.length);
         let shared = Arc::new(Shared {
             heartbeat_ms: o.cfg.dashboard.heartbeat_ms,
@@ -170,16 +137,16 @@ impl Server {
             shutdown: tokio::sync::watch::Sender::new(false),
             live: o.live,
             log,
-            conns: conn::Conns::new(limits),
+            conns: Arc::new(conn::Conns::new(limits)),
         });
         shared.access.print_start_up(bound);
         if let Some(n) = nofile.filter(|_| limits.reduced) {
-            println!(
+            log::out(&format!(
                 "dashboard: open-file limit {n}: at most {} connections (+{} for the e-stop)",
                 limits.max, limits.reserve
-            );
+            ));
         }
-        hub::start_logger(log_rx, o.tx)?;
+        log::start_logger(log_rx, o.tx)?;
         {
             let sh = shared.clone();
             let slot = o.slot.clone();
@@ -198,7 +165,7 @@ impl Server {
             let sh = shared.clone();
             let router = api::router(shared.clone());
             std::thread::Builder::new().name("dash-accept".into()).spawn(move || {
-                rt.block_on(conn::accept_loop(listener, router, sh));
+                rt.block_on(accept::accept_loop(listener, router, sh));
                 // Connections still open end with the runtime (no waiting for slow clients).
                 rt.shutdown_timeout(std::time::Duration::from_millis(200));
             })?

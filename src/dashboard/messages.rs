@@ -1,0 +1,306 @@
+//! What the control loop and the web server say to each other (no sockets, no clock): the
+//! snapshot the loop publishes ([`Snapshot`], [`PlotPoint`], [`Live`]), the messages the page
+//! sends the loop ([`Control`] through [`ControlSender`]), and their checks: the settable keys
+//! ([`settable`]), bodies ([`parse_body`]) and values ([`validate_set`], with the
+//! configuration's own ranges). Both sides import this; it imports neither.
+
+use crate::config::Config;
+use crate::control::behaviour::Transition;
+use crate::control::params::{self, ParamInfo};
+use crate::control::steering::unused_by;
+use crate::control::Command;
+use crate::lane::warp::Homography;
+use crate::lane::{LaneImages, LaneMeasurement};
+use crate::pipeline::RangedObject;
+use crate::telemetry::FrameRecord;
+use image::RgbImage;
+use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError};
+
+/// The keys the page may change while the car runs (the rest needs a restart): the
+/// parameter table of the run's steering method, then the throttle's
+/// ([`crate::control::params::of_method`]), with their units, ranges, sliders and docs.
+pub fn settable(cfg: &Config) -> Vec<ParamInfo> {
+    params::of_method(cfg.steering.method)
+}
+
+/// Largest control message body the server reads, bytes.
+pub const MAX_BODY: usize = 4096;
+
+/// Messages queued for the loop at most; more are refused (HTTP 503), never queued.
+pub const INBOX_CAPACITY: usize = 64;
+
+/// A refused control message: the HTTP server answers 400 with this text.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ControlError {
+    /// The body is not the JSON the endpoint takes.
+    #[error("malformed request: {0}")]
+    Malformed(String),
+    /// A key the dashboard may not change.
+    #[error("unknown key `{key}` (settable: {settable})")]
+    UnknownKey {
+        /// The key as given (at most 64 characters).
+        key: String,
+        /// The settable keys, comma-separated.
+        settable: String,
+    },
+    /// A parameter of another steering method than the run's.
+    #[error("{0}; the steering method cannot change while the car runs")]
+    OtherMethod(String),
+    /// NaN or infinite.
+    #[error("{key} = {value} is not a finite number")]
+    NotFinite {
+        /// The key.
+        key: String,
+        /// The value as given.
+        value: String,
+    },
+    /// Outside the configuration's range: the config's own message (key, value, range).
+    #[error("{0}")]
+    OutOfRange(String),
+}
+
+/// `POST /api/set` body: one key and its new value.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SetRequest {
+    /// Dotted config key, one of [`settable`].
+    pub key: String,
+    /// The new value.
+    pub value: f64,
+}
+
+/// `POST /api/sim/place` body: where along the track, metres.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaceRequest {
+    /// Arc length along the track's centre line, metres (0 ..= track length).
+    pub s: f64,
+}
+
+/// Parses a JSON body into `T`, refusing oversized bodies and unknown fields.
+pub fn parse_body<T: for<'de> Deserialize<'de>>(body: &[u8]) -> Result<T, ControlError> {
+    if body.len() > MAX_BODY {
+        return Err(ControlError::Malformed(format!(
+            "body of {} bytes (at most {MAX_BODY})",
+            body.len()
+        )));
+    }
+    serde_json::from_slice(body).map_err(|e| ControlError::Malformed(e.to_string()))
+}
+
+/// Checks `key = value` against the configuration's ranges; returns the configuration with
+/// the value set (the caller keeps it as the dashboard's view of the settings).
+pub fn validate_set(cfg: &Config, key: &str, value: f64) -> Result<Config, ControlError> {
+    let keys = settable(cfg);
+    if !keys.iter().any(|p| p.key == key) {
+        if let Some(why) = unused_by(cfg.steering.method, key) {
+            return Err(ControlError::OtherMethod(why));
+        }
+        return Err(ControlError::UnknownKey {
+            key: key.chars().take(64).collect(),
+            settable: keys.iter().map(|p| p.key).collect::<Vec<_>>().join(", "),
+        });
+    }
+    if !value.is_finite() {
+        return Err(ControlError::NotFinite {
+            key: key.into(),
+            value: value.to_string(),
+        });
+    }
+    cfg.with_override(&format!("{key}={value:?}"))
+        .map_err(|e| ControlError::OutOfRange(e.to_string().replace("config + override: ", "")))
+}
+
+/// The value of a settable key in `cfg`.
+pub fn get_value(cfg: &Config, key: &str) -> Option<f64> {
+    settable(cfg)
+        .iter()
+        .any(|p| p.key == key)
+        .then(|| cfg.number(key))
+        .flatten()
+}
+
+/// A message from the page to the loop (already validated by the server).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Control {
+    /// Set a [`settable`] key. `note` says who asked and when (wall clock), for telemetry.
+    Set {
+        /// Dotted key.
+        key: String,
+        /// New value.
+        value: f64,
+        /// Who and when, e.g. `dashboard 127.0.0.1 at wall 12.345 s`.
+        note: String,
+    },
+    /// Simulator: stop taking frames until `Resume` or `Step`.
+    Pause,
+    /// Simulator: run again.
+    Resume,
+    /// Simulator, paused: process exactly one frame.
+    Step,
+    /// Simulator: the car back to the start, at rest.
+    Reset,
+    /// Simulator: the car to `s` metres along the track, at rest.
+    PlaceAt(f64),
+    /// Something that happened elsewhere (arm, disarm, e-stop), for the telemetry.
+    Note(String),
+}
+
+/// The server's end of the inbox: never blocks.
+#[derive(Debug, Clone)]
+pub struct ControlSender(SyncSender<Control>);
+
+impl ControlSender {
+    /// The server's end of the inbox whose loop's end is `rx` ([`super::observer::channel`]).
+    pub(super) fn new(tx: SyncSender<Control>) -> ControlSender {
+        ControlSender(tx)
+    }
+
+    /// Queues `c` for the loop's next `before_frame`; `false` when the inbox is full (the loop
+    /// is paused or stuck) or the loop has ended.
+    pub fn send(&self, c: Control) -> bool {
+        !matches!(
+            self.0.try_send(c),
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_))
+        )
+    }
+}
+
+/// One plot sample per frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PlotPoint {
+    /// Frame time, seconds.
+    pub t: f64,
+    /// Normalised lane error, −1..1 (`None`: lane lost).
+    pub error: Option<f64>,
+    /// Steering command, −1..1.
+    pub steer: f64,
+    /// Throttle command of the pipeline, −1..1 (before arming).
+    pub throttle: f64,
+    /// Dead-reckoned speed, m/s.
+    pub speed: Option<f64>,
+}
+
+/// What the loop publishes for the page, at most `stream_fps` times per second of frame time.
+#[derive(Debug, Clone)]
+pub struct Snapshot {
+    /// The frame's telemetry record (behaviour, transition, objects, timing).
+    pub record: FrameRecord,
+    /// The camera frame.
+    pub image: RgbImage,
+    /// The lane detector's intermediate images (bird's-eye view, binary, histogram).
+    pub lane_images: LaneImages,
+    /// The lane measurement.
+    pub lane: LaneMeasurement,
+    /// The pipeline's command.
+    pub command: Command,
+    /// Camera → bird's-eye homography (for annotation).
+    pub homography: Homography,
+    /// The ROI trapezoid in the camera image, pixels.
+    pub roi: [[f64; 2]; 4],
+    /// Plot samples since the previous snapshot (every frame).
+    pub points: Vec<PlotPoint>,
+    /// The settable values in force, in [`settable`] order.
+    pub values: Vec<(String, f64)>,
+    /// The last behaviour transition, with the frame time it happened at.
+    pub last_transition: Option<(f64, Transition)>,
+    /// Ranged objects of the frame.
+    pub objects: Vec<RangedObject>,
+    /// The simulator is paused.
+    pub paused: bool,
+    /// Snapshots replaced before the server took them (slow server threads).
+    pub dropped: u64,
+}
+
+/// What the loop updates on every frame (a few atomics, cheaper than a snapshot): the page's
+/// frame counter and pause state are exact even between snapshots.
+#[derive(Debug, Default)]
+pub struct Live {
+    /// The last processed frame's number.
+    pub frame: AtomicU64,
+    /// Its time, seconds (f64 bits).
+    pub time_bits: AtomicU64,
+    /// The loop is waiting in pause.
+    pub paused: AtomicBool,
+    /// Frames processed since the start.
+    pub frames: AtomicU64,
+}
+
+impl Live {
+    /// The last frame's time, seconds.
+    pub fn time_s(&self) -> f64 {
+        f64::from_bits(self.time_bits.load(Ordering::SeqCst))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_are_checked_with_the_config_ranges() {
+        let cfg = Config::default();
+        let ok = validate_set(&cfg, "steering.kp", 0.8).unwrap();
+        assert_eq!(ok.steering.kp, 0.8);
+        let e = validate_set(&cfg, "steering.kp", 25.0).unwrap_err().to_string();
+        assert!(e.contains("steering.kp") && e.contains("0 ..= 20"), "{e}");
+        let e = validate_set(&cfg, "throttle.min", 0.9).unwrap_err().to_string();
+        assert!(e.contains("throttle.min"), "{e}");
+        assert!(matches!(
+            validate_set(&cfg, "steering.kp", f64::NAN),
+            Err(ControlError::NotFinite { .. })
+        ));
+        assert!(matches!(
+            validate_set(&cfg, "steering.kp", f64::INFINITY),
+            Err(ControlError::NotFinite { .. })
+        ));
+        assert!(matches!(
+            validate_set(&cfg, "camera.fps", 10.0),
+            Err(ControlError::UnknownKey { .. })
+        ));
+    }
+
+    /// The settable keys are the run's steering method's table and the throttle's: another
+    /// method's key is refused with its owner named.
+    #[test]
+    fn settable_keys_follow_the_steering_method() {
+        let keys = |c: &Config| settable(c).iter().map(|p| p.key).collect::<Vec<_>>();
+        let pid = Config::default();
+        assert!(keys(&pid).contains(&"steering.kd") && !keys(&pid).contains(&"steering.lookahead_m"));
+        assert!(keys(&pid).contains(&"throttle.base"));
+        let pp = pid.with_override("steering.method=pure_pursuit").unwrap();
+        assert!(keys(&pp).contains(&"steering.lookahead_m") && !keys(&pp).contains(&"steering.kp"));
+        assert_eq!(
+            validate_set(&pp, "steering.lookahead_m", 1.0)
+                .unwrap()
+                .steering
+                .lookahead_m,
+            1.0
+        );
+        let e = validate_set(&pp, "steering.kp", 1.0).unwrap_err().to_string();
+        assert!(
+            e.contains("steering.method = pid") && e.contains("cannot change while the car runs"),
+            "{e}"
+        );
+        let e = validate_set(&pp, "camera.fps", 1.0).unwrap_err().to_string();
+        assert!(
+            e.contains("settable: steering.lookahead_m, steering.lookahead_band_m"),
+            "{e}"
+        );
+        assert_eq!(get_value(&pp, "steering.lookahead_m"), Some(0.9));
+        assert_eq!(get_value(&pp, "steering.kp"), None);
+    }
+
+    #[test]
+    fn bodies_refuse_unknown_fields_nan_and_size() {
+        assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp","value":0.5}"#).is_ok());
+        assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp","value":0.5,"x":1}"#).is_err());
+        assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp","value":NaN}"#).is_err());
+        assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp","value":1e999}"#).is_err());
+        assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp""#).is_err());
+        let big = vec![b' '; MAX_BODY + 1];
+        assert!(parse_body::<SetRequest>(&big).is_err());
+    }
+}
