@@ -21,6 +21,16 @@
 use image::DynamicImage;
 use std::path::Path;
 
+/// Bounds on the images a file or a flag can make rccar decode, checked from the header before
+/// anything is allocated (frame folders, `detect`, `stages`, calibration photos, `stereo`, the
+/// trainer's samples).
+pub mod limits {
+    /// Largest image a frame source, `stages` or `detect` decodes, pixels (width × height).
+    pub const MAX_IMAGE_PIXELS: u64 = 40_000_000;
+    /// Largest image side, pixels.
+    pub const MAX_IMAGE_SIDE: u32 = 16_384;
+}
+
 /// Why an image file could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum ImageIoError {

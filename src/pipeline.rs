@@ -34,6 +34,7 @@ use crate::lane::warp::WarpError;
 use crate::lane::{LaneDetector, LaneMeasurement};
 use crate::ranging::track::{Measurement, Tracker};
 use crate::ranging::{BoxRanging, ObjectClass};
+use crate::source::GivenBox;
 use crate::timing::{StageTimer, StageTimes};
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
@@ -91,17 +92,6 @@ pub struct FrameOutput {
     pub mode: Mode,
     /// What the behaviour machine was given.
     pub observations: Observations,
-}
-
-/// A box handed to the pipeline instead of the detector's (the simulator's ground truth).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct GivenBox {
-    /// What it is.
-    pub class: ObjectClass,
-    /// [left, top, right, bottom], pixel-centre coordinates.
-    pub bbox: [f64; 4],
-    /// A traffic light's colour.
-    pub light: Option<LightColor>,
 }
 
 /// One object of a frame, ranged (a telemetry field).

@@ -8,13 +8,14 @@
 //! 1. structure check of the bytes ([`image_damage`]): a JPEG must reach its end-of-image
 //!    marker (a JPEG cut short otherwise decodes with its missing part filled grey, with no
 //!    error), a PNG must have every chunk complete with a matching CRC and an IEND;
-//! 2. the size from the header, against [`crate::config::limits`], before any pixel is
+//! 2. the size from the header, against [`crate::imageio::limits`], before any pixel is
 //!    allocated;
 //! 3. the decode itself ([`decode_image`], one function so another decoder can replace it).
 //!
 //! File names are kept lossless ([`escape_name`]) and output names unique ([`output_name`]).
 
-use crate::pipeline::GivenBox;
+use crate::classes::ObjectClass;
+use crate::control::behaviour::LightColor;
 use image::RgbImage;
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
@@ -42,6 +43,17 @@ pub struct Frame {
     /// The second camera's view of the same moment (a stereo pair, `ranging.method =
     /// "stereo"`; src/drive/stereo.rs); `None` for a single camera.
     pub other: Option<OtherView>,
+}
+
+/// A box handed to the pipeline instead of the detector's (the simulator's ground truth).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GivenBox {
+    /// What it is.
+    pub class: ObjectClass,
+    /// [left, top, right, bottom], pixel-centre coordinates.
+    pub bbox: [f64; 4],
+    /// A traffic light's colour.
+    pub light: Option<LightColor>,
 }
 
 /// The other camera's image of a stereo frame (the reference camera's is [`Frame::image`]).
@@ -453,9 +465,9 @@ pub fn read_image(path: &Path) -> Result<image::DynamicImage, String> {
 }
 
 /// Decodes image bytes after checking the size in the header against
-/// [`crate::config::limits`]; the one place that calls the decoder.
+/// [`crate::imageio::limits`]; the one place that calls the decoder.
 pub fn decode_image(bytes: &[u8]) -> Result<image::DynamicImage, String> {
-    use crate::config::limits::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
+    use crate::imageio::limits::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
     let reader = || {
         image::ImageReader::new(std::io::Cursor::new(bytes))
             .with_guessed_format()

@@ -5,7 +5,7 @@
 //! `rccar calibrate camera|stereo` calls these and prints what they return.
 
 use super::corners::{find_chessboard, orient_like, BoardSize, CornerOptions};
-use crate::config::limits::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
+use crate::imageio::limits::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -33,7 +33,7 @@ pub enum PhotoError {
         #[source]
         err: image::ImageError,
     },
-    /// The header's size is outside [`crate::config::limits`].
+    /// The header's size is outside [`crate::imageio::limits`].
     #[error("{}: {w}×{h} pixels is outside the image limit (1..={MAX_IMAGE_SIDE} per side, at most {} megapixels)", path.display(), MAX_IMAGE_PIXELS / 1_000_000)]
     Limit {
         /// The photo.

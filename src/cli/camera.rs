@@ -1,6 +1,6 @@
 //! `rccar camera check`: what cameras the machine has, then one opened as `drive` would, with
 //! its real size, fps and latency over a few seconds, and one frame saved (the library's
-//! `rccar::pipecam::check`).
+//! `rccar::session::camera_check`).
 
 use super::common::ConfigArgs;
 use super::signals::{say, say_err};
@@ -43,12 +43,12 @@ pub fn run(c: CameraCmd) -> Result<ExitCode> {
     if !(0.5..=600.0).contains(&a.seconds) {
         bail!("--seconds {}: give 0.5 ..= 600 seconds", a.seconds);
     }
-    for line in rccar::pipecam::check::found() {
+    for line in rccar::session::camera_check::found() {
         say(&format!("found: {line}"));
     }
     let camera = match &a.camera {
         Some(s) => CameraSpec::parse(s).map_err(anyhow::Error::msg)?,
-        None => rccar::pipecam::check::default_camera(),
+        None => rccar::session::camera_check::default_camera(),
     };
     say(&format!(
         "checking {} for {} s ({}×{} at {} fps configured)...",
@@ -66,7 +66,7 @@ pub fn run(c: CameraCmd) -> Result<ExitCode> {
         timer: Box::new(super::timer::WallTimer::new()),
         say: Arc::new(|_, line: &str| say_err(line)),
     };
-    let (report, frame) = rccar::pipecam::check::run(&cfg, camera, a.seconds, env)?;
+    let (report, frame) = rccar::session::camera_check::run(&cfg, camera, a.seconds, env)?;
     for line in report.lines((cfg.camera.width, cfg.camera.height, cfg.camera.fps)) {
         say(&line);
     }

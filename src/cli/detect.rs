@@ -67,7 +67,7 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
         max_size: args.max_size,
         parallel: args.parallel,
     };
-    annotate::check_options(&params, args.cascades.len(), rccar::config::limits::MAX_IMAGE_SIDE)?;
+    annotate::check_options(&params, args.cascades.len(), rccar::imageio::limits::MAX_IMAGE_SIDE)?;
     let names: Vec<String> = args.cascades.iter().map(|p| escape_name(p.as_os_str())).collect();
     let mut detectors = Vec::new();
     for path in &args.cascades {

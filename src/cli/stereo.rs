@@ -40,7 +40,7 @@ fn parse_box(s: &str) -> Result<[i64; 4]> {
     let [x, y, w, h] = v[..] else {
         bail!("--box {s}: needs exactly four integers X,Y,W,H");
     };
-    let side = rccar::config::limits::MAX_IMAGE_SIDE as i64;
+    let side = rccar::imageio::limits::MAX_IMAGE_SIDE as i64;
     if !((0..=side).contains(&x) && (0..=side).contains(&y) && (1..=side).contains(&w) && (1..=side).contains(&h)) {
         bail!("--box {s}: X and Y must be 0..={side}, W and H 1..={side} pixels (the largest image side)");
     }

@@ -39,15 +39,15 @@ impl Checker {
         }
     }
 
-    /// Every tunable parameter of `section` (`crate::control::params::all`, keys
+    /// Every tunable parameter of `section` (`crate::control::catalog::all`, keys
     /// `section.name`) against its table range, its value read from the serialised section.
     pub(super) fn params<T: serde::Serialize>(&mut self, section: &str, values: &T) {
-        let table = super::layers::to_table(values);
-        for p in crate::control::params::all() {
+        let table = super::value::to_table(values);
+        for p in crate::control::catalog::all() {
             let Some(name) = p.key.strip_prefix(section).and_then(|k| k.strip_prefix('.')) else {
                 continue;
             };
-            match super::layers::number_at(&table, name) {
+            match super::value::number_at(&table, name) {
                 Some(v) => self.range(p.key, v, p.range[0], p.range[1]),
                 None => self.fail(p.key, "missing".into(), "a number (the key of a tunable parameter)"),
             }

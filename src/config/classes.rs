@@ -187,7 +187,7 @@ pub(super) fn moved_key(key: &str) -> Option<String> {
     if !matches!(section, "detect" | "ranging") {
         return None;
     }
-    let fields = super::layers::to_table(&ClassConfig::default_for(ObjectClass::ALL[0]));
+    let fields = super::value::to_table(&ClassConfig::default_for(ObjectClass::ALL[0]));
     CLASSES.iter().find_map(|c| {
         let tail = rest.strip_prefix(c.name)?;
         let field = if tail.is_empty() {
@@ -242,7 +242,7 @@ mod tests {
         assert_eq!(model(ObjectClass::Obstacle), dir.join("cascades/obstacle.xml"));
         assert_eq!(l.cfg.classes[ObjectClass::TrafficLight].box_m, [0.065, 0.10]);
         // Every path key names a string of the defaults (each class's model among them).
-        let defaults = crate::config::layers::to_table(&Config::default());
+        let defaults = crate::config::value::to_table(&Config::default());
         let keys: Vec<&str> = path_keys().collect();
         assert!(keys.contains(&"classes.obstacle.model"), "{keys:?}");
         for k in keys {

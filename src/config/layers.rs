@@ -6,8 +6,8 @@
 //! found ([`find_config`], [`source_tree_config`]) and its personal override file
 //! ([`find_local`], [`local_beside`]).
 
+use super::value::{lookup, number_at, to_table};
 use super::{Config, ConfigError};
-use serde::Serialize;
 use std::path::{Path, PathBuf};
 
 /// The keys whose values are file paths: `sim.track`, `stereo.calibration` and each class's
@@ -249,38 +249,6 @@ fn count_values(t: &toml::Table) -> usize {
         .sum()
 }
 
-/// The value at a serde path such as `steering.kp` or `warp.src[1][0]`.
-fn lookup<'a>(t: &'a toml::Table, path: &str) -> Option<&'a toml::Value> {
-    let mut cur: Option<&toml::Value> = None;
-    for part in path.split('.') {
-        let (name, idx) = match part.find('[') {
-            Some(i) => (&part[..i], &part[i..]),
-            None => (part, ""),
-        };
-        cur = match cur {
-            None => t.get(name),
-            Some(toml::Value::Table(s)) => s.get(name),
-            _ => None,
-        };
-        for i in idx.split(['[', ']']).filter(|s| !s.is_empty()) {
-            cur = match (cur, i.parse::<usize>()) {
-                (Some(toml::Value::Array(a)), Ok(i)) => a.get(i),
-                _ => None,
-            };
-        }
-    }
-    cur
-}
-
-/// The number at a dotted key of a serialised section or configuration.
-pub(super) fn number_at(t: &toml::Table, key: &str) -> Option<f64> {
-    match lookup(t, key)? {
-        toml::Value::Float(f) => Some(*f),
-        toml::Value::Integer(i) => Some(*i as f64),
-        _ => None,
-    }
-}
-
 fn show_value(v: &toml::Value) -> String {
     let s = v.to_string();
     if s.chars().count() > 60 {
@@ -422,10 +390,6 @@ fn resolve_table_paths(table: &mut toml::Table, dir: &Path) {
             }
         }
     }
-}
-
-pub(super) fn to_table<T: Serialize>(v: &T) -> toml::Table {
-    toml::Table::try_from(v).expect("config types always serialise")
 }
 
 /// Every key of `layer` must exist in `known` (the default config's tree).

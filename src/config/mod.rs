@@ -34,6 +34,7 @@ mod sim;
 mod steering;
 mod stereo;
 mod throttle;
+mod value;
 mod vehicle;
 mod warp;
 
@@ -138,13 +139,6 @@ pub enum ConfigError {
 pub const HOW_TO_POINT: &str =
     "run rccar inside the project folder, or name a file with --config FILE or RCCAR_CONFIG=FILE";
 
-/// Bounds on sizes that files and flags control, checked before anything is allocated.
-pub mod limits {
-    /// Largest image a frame source, `stages` or `detect` decodes, pixels (width × height).
-    pub const MAX_IMAGE_PIXELS: u64 = 40_000_000;
-    /// Largest image side, pixels.
-    pub const MAX_IMAGE_SIDE: u32 = 16_384;
-}
 
 /// One value outside its allowed range or inconsistent with another.
 #[derive(Debug, Clone, PartialEq)]

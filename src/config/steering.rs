@@ -147,7 +147,7 @@ impl Config {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::params::all;
+    use crate::control::catalog::all;
 
     /// Every table key is a number of `[steering]`/`[throttle]`, and what the configuration
     /// sets is what the running part reads back (key, field and conversion agree).

@@ -4,11 +4,12 @@
 //! on the lane error, [`pure_pursuit`] towards a look-ahead point on the lane. [`throttle`]
 //! picks the speed, [`Controller`] combines a steering method and the throttle policy. Every
 //! part takes the time step as an argument and never reads the clock, and publishes its
-//! tunable parameters once ([`params`]). [`behaviour`] is the state machine for stop signs,
+//! tunable parameters once ([`params`]; gathered in [`catalog`]). [`behaviour`] is the state machine for stop signs,
 //! lights, obstacles and a lost lane on top of them; control never talks to the serial link:
 //! a sink delivers commands.
 
 pub mod behaviour;
+pub mod catalog;
 pub mod params;
 pub mod pid;
 pub mod pure_pursuit;
@@ -90,7 +91,7 @@ impl Controller {
 
     /// The parameters that tune this controller: the steering method's, then the throttle's.
     pub fn params(&self) -> Vec<ParamInfo> {
-        params::of_method(self.steering.method())
+        catalog::of_method(self.steering.method())
     }
 
     /// The value in force of a parameter of [`Controller::params`].

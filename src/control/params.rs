@@ -86,70 +86,7 @@ pub fn infos<T>(table: &[Param<T>]) -> Vec<ParamInfo> {
     table.iter().map(|p| p.info).collect()
 }
 
-/// Every tunable parameter of every steering method and of the throttle, each key once (a
-/// limit that two methods share, such as `steering.max_steer`, appears once): what the
-/// configuration checks.
-pub fn all() -> Vec<ParamInfo> {
-    let mut out: Vec<ParamInfo> = Vec::new();
-    let tables = super::steering::SteeringMethod::ALL
-        .iter()
-        .flat_map(|m| m.params())
-        .chain(infos(super::throttle::Throttle::PARAMS));
-    for p in tables {
-        if !out.iter().any(|q| q.key == p.key) {
-            out.push(p);
-        }
-    }
-    out
-}
-
-/// The parameters of a run that steers with `method`: the method's table, then the
-/// throttle's (what [`super::Controller::params`] returns; what the dashboard may change).
-pub fn of_method(method: super::steering::SteeringMethod) -> Vec<ParamInfo> {
-    let mut p = method.params();
-    p.extend(infos(super::throttle::Throttle::PARAMS));
-    p
-}
-
-/// The row of `key` among [`all`].
-pub fn find(key: &str) -> Option<ParamInfo> {
-    all().into_iter().find(|p| p.key == key)
-}
-
 /// `"lo ..= hi"` of a range, as the configuration's errors print it.
 pub fn show_range(r: [f64; 2]) -> String {
     format!("{} ..= {}", r[0], r[1])
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn every_row_is_consistent() {
-        for p in all() {
-            let [lo, hi] = p.range;
-            let [slo, shi, step] = p.slider;
-            assert!(lo < hi && lo.is_finite() && hi.is_finite(), "{}: range {lo}..{hi}", p.key);
-            assert!(lo <= slo && slo < shi && shi <= hi, "{}: slider {slo}..{shi} outside {lo}..{hi}", p.key);
-            assert!(step > 0.0 && step <= (shi - slo) / 4.0, "{}: step {step}", p.key);
-            assert!(!p.doc.is_empty() && !p.doc.contains('\n'), "{}: doc", p.key);
-            assert!(p.key.starts_with("steering.") || p.key.starts_with("throttle."), "{}", p.key);
-        }
-    }
-
-    /// A limit two methods share has one description (else the check would depend on which
-    /// table came first).
-    #[test]
-    fn shared_keys_agree_between_tables() {
-        let rows: Vec<ParamInfo> = super::super::steering::SteeringMethod::ALL
-            .iter()
-            .flat_map(|m| m.params())
-            .collect();
-        for a in &rows {
-            for b in rows.iter().filter(|b| b.key == a.key) {
-                assert_eq!(a, b, "{} described twice, differently", a.key);
-            }
-        }
-    }
 }

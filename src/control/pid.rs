@@ -12,7 +12,7 @@
 //! Time is passed in (`dt`, seconds): the controller never reads a clock.
 
 use super::params::{Param, ParamInfo, Params};
-use super::steering::{Steering, SteeringInput, SteeringMethod};
+use super::steering::{Steering, SteeringInput, SteeringMethod, MAX_STEER, SLEW_RATE};
 
 /// PID gains and limits (units: steer per unit of normalised error, seconds); `[steering]` of
 /// car.toml converts into them.
@@ -136,24 +136,6 @@ impl Steering for Pid {
         Box::new(self.clone())
     }
 }
-
-/// `steering.max_steer`: the output clamp every shipped method applies (steer units).
-pub const MAX_STEER: ParamInfo = ParamInfo {
-    key: "steering.max_steer",
-    unit: "steer",
-    range: [0.0, 1.0],
-    slider: [0.0, 1.0, 0.01],
-    doc: "steering output clamp; 1 = full servo travel",
-};
-
-/// `steering.slew_rate`: the rate limit every shipped method applies (steer units per second).
-pub const SLEW_RATE: ParamInfo = ParamInfo {
-    key: "steering.slew_rate",
-    unit: "1/s",
-    range: [0.1, 1000.0],
-    slider: [0.5, 30.0, 0.5],
-    doc: "largest change of the steering command per second; protects the servo, too low is late into curves",
-};
 
 impl Params for Pid {
     const PARAMS: &'static [Param<Pid>] = &[

@@ -31,8 +31,7 @@
 //! leaves the view first, so far look-aheads measure one line and estimate the other.
 
 use super::params::{Param, ParamInfo, Params};
-use super::pid::{MAX_STEER, SLEW_RATE};
-use super::steering::{Steering, SteeringError, SteeringInput, SteeringMethod};
+use super::steering::{Steering, SteeringError, SteeringInput, SteeringMethod, MAX_STEER, SLEW_RATE};
 use crate::lane::lines::{column_histogram_rows, measure_in, LineOptions};
 use crate::lane::warp::Homography;
 

@@ -10,9 +10,11 @@
 //!
 //! Methods: [`super::pid::Pid`] (`pid`, the default: PID on the normalised lane error) and
 //! [`super::pure_pursuit::PurePursuit`] (`pure_pursuit`: a look-ahead point on the lane,
-//! Coulter 1992). Adding one: docs/control.md, "Adding a steering method".
+//! Coulter 1992). This file stands below them (they implement its trait and share its limits
+//! [`MAX_STEER`] and [`SLEW_RATE`]); the table of which method has which parameters stands
+//! above them, in [`super::catalog`]. Adding one: docs/control.md, "Adding a steering method".
 
-use super::params::{infos, ParamInfo, Params, Tunable};
+use super::params::{ParamInfo, Tunable};
 use crate::lane::{LaneDetector, LaneMeasurement};
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
@@ -72,42 +74,25 @@ impl SteeringMethod {
             SteeringMethod::PurePursuit => "pure_pursuit",
         }
     }
-
-    /// The method's parameter table.
-    pub fn params(self) -> Vec<ParamInfo> {
-        match self {
-            SteeringMethod::Pid => infos(super::pid::Pid::PARAMS),
-            SteeringMethod::PurePursuit => infos(super::pure_pursuit::PurePursuit::PARAMS),
-        }
-    }
-
-    /// Whether `key` is one of this method's parameters.
-    pub fn uses(self, key: &str) -> bool {
-        self.params().iter().any(|p| p.key == key)
-    }
 }
 
-/// Why `key` does nothing in a run that steers with `method`: `Some(reason)` when it is a
-/// parameter of other steering methods only, `None` otherwise (one of `method`'s, the
-/// throttle's, or not a steering parameter at all).
-pub fn unused_by(method: SteeringMethod, key: &str) -> Option<String> {
-    if method.uses(key) {
-        return None;
-    }
-    let owners: Vec<&str> = SteeringMethod::ALL
-        .iter()
-        .filter(|m| m.uses(key))
-        .map(|m| m.name())
-        .collect();
-    (!owners.is_empty()).then(|| {
-        format!(
-            "`{key}` is a parameter of steering.method = {}, and this run steers with {} (add --set steering.method={})",
-            owners.join(" or "),
-            method.name(),
-            owners[0]
-        )
-    })
-}
+/// `steering.max_steer`: the output clamp every shipped method applies (steer units).
+pub const MAX_STEER: ParamInfo = ParamInfo {
+    key: "steering.max_steer",
+    unit: "steer",
+    range: [0.0, 1.0],
+    slider: [0.0, 1.0, 0.01],
+    doc: "steering output clamp; 1 = full servo travel",
+};
+
+/// `steering.slew_rate`: the rate limit every shipped method applies (steer units per second).
+pub const SLEW_RATE: ParamInfo = ParamInfo {
+    key: "steering.slew_rate",
+    unit: "1/s",
+    range: [0.1, 1000.0],
+    slider: [0.5, 30.0, 0.5],
+    doc: "largest change of the steering command per second; protects the servo, too low is late into curves",
+};
 
 /// Why a steering method cannot be built from a configuration.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -131,20 +116,4 @@ pub enum SteeringError {
         /// Farthest.
         far_m: f64,
     },
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_key_of_another_method_is_named_with_its_owner() {
-        assert_eq!(unused_by(SteeringMethod::Pid, "steering.kp"), None);
-        assert_eq!(unused_by(SteeringMethod::Pid, "throttle.base"), None);
-        assert_eq!(unused_by(SteeringMethod::PurePursuit, "steering.max_steer"), None);
-        let why = unused_by(SteeringMethod::Pid, "steering.lookahead_m").unwrap();
-        assert!(why.contains("pure_pursuit") && why.contains("steers with pid"), "{why}");
-        let why = unused_by(SteeringMethod::PurePursuit, "steering.kd").unwrap();
-        assert!(why.contains("steering.method = pid"), "{why}");
-    }
 }

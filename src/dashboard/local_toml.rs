@@ -1,7 +1,7 @@
 //! Writes the dashboard's changed keys into `config/local.toml` in place: only those keys are
 //! added or replaced; every other line, comment and table of the student's file is kept
 //! (toml_edit keeps the document's formatting). Only keys of the parameter tables
-//! ([`crate::control::params::all`]) are written; a key new to the file gets its unit and
+//! ([`crate::control::catalog::all`]) are written; a key new to the file gets its unit and
 //! allowed range as a comment on its line.
 
 use std::path::Path;
@@ -46,7 +46,7 @@ pub fn set_keys(text: &str, keys: &[(String, f64)], path: &str) -> Result<String
         message: e.to_string().trim().replace('\n', " "),
     })?;
     for (key, v) in keys {
-        let (Some((section, name)), Some(info)) = (key.split_once('.'), crate::control::params::find(key)) else {
+        let (Some((section, name)), Some(info)) = (key.split_once('.'), crate::control::catalog::find(key)) else {
             return Err(SaveError::Key {
                 path: path.into(),
                 key: key.clone(),

@@ -6,8 +6,8 @@
 
 use crate::config::Config;
 use crate::control::behaviour::Transition;
-use crate::control::params::{self, ParamInfo};
-use crate::control::steering::unused_by;
+use crate::control::catalog::{self, unused_by};
+use crate::control::params::ParamInfo;
 use crate::control::Command;
 use crate::lane::warp::Homography;
 use crate::lane::{LaneImages, LaneMeasurement};
@@ -20,9 +20,9 @@ use std::sync::mpsc::{SyncSender, TrySendError};
 
 /// The keys the page may change while the car runs (the rest needs a restart): the
 /// parameter table of the run's steering method, then the throttle's
-/// ([`crate::control::params::of_method`]), with their units, ranges, sliders and docs.
+/// ([`crate::control::catalog::of_method`]), with their units, ranges, sliders and docs.
 pub fn settable(cfg: &Config) -> Vec<ParamInfo> {
-    params::of_method(cfg.steering.method)
+    catalog::of_method(cfg.steering.method)
 }
 
 /// Largest control message body the server reads, bytes.

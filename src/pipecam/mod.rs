@@ -19,9 +19,8 @@
 //!   program exiting ends the source as a fault (the car stops; rccar does not restart it).
 //! - Lock-step ([`open_lockstep`]): `rccar replay 'pipe:…'` takes every frame, in order, at
 //!   the configured fps (frame *i* at *i*/fps seconds), as a folder of frames is replayed.
-//! - [`check`]: `rccar camera check`.
+//! - `rccar camera check` builds a session on these sources: [`crate::session::camera_check`].
 
-pub mod check;
 pub mod child;
 pub mod export;
 pub mod format;

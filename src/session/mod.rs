@@ -16,8 +16,11 @@
 //! Every way out of [`Session::run`] — the end of the source, a stop request, an error, a
 //! panic unwinding through it — ends with neutral sent through the gate (once), before the
 //! caller flushes any file.
+//!
+//! [`camera_check`] is `rccar camera check`: a session with a camera and no sink, measured.
 
 mod build;
+pub mod camera_check;
 pub mod observers;
 pub mod replay;
 pub mod spec;

@@ -52,7 +52,7 @@ pub enum SweepError {
         /// The key.
         key: String,
         /// Which method it belongs to and how to steer with it
-        /// ([`crate::control::steering::unused_by`]).
+        /// ([`crate::control::catalog::unused_by`]).
         why: String,
     },
     /// A value of the grid the configuration refuses (its message, with its causes).
@@ -161,7 +161,7 @@ pub fn grid(axes: &[Axis]) -> Vec<Vec<f64>> {
 /// ([`crate::control::params`]), else from its name's suffix (`_m`, `_s`, `_deg`, …). Empty
 /// when unitless or unknown.
 pub fn key_unit(key: &str) -> &'static str {
-    if let Some(p) = crate::control::params::find(key) {
+    if let Some(p) = crate::control::catalog::find(key) {
         return p.unit;
     }
     let last = key.rsplit('.').next().unwrap_or(key);
@@ -349,7 +349,7 @@ pub fn run_all(
 pub fn configs(cfg: &Config, keys: &[&str], points: &[Vec<f64>]) -> Result<Vec<Config>, SweepError> {
     // A parameter of another steering method would change nothing: every row the same.
     for k in keys {
-        if let Some(why) = crate::control::steering::unused_by(cfg.steering.method, k) {
+        if let Some(why) = crate::control::catalog::unused_by(cfg.steering.method, k) {
             return Err(SweepError::OtherMethod {
                 key: k.to_string(),
                 why,

@@ -111,7 +111,7 @@ fn check_window(flag: &str, (w, h): (u32, u32)) -> anyhow::Result<()> {
 
 /// Refuses a size (N or WxH) with a side above the largest image side.
 fn check_size(flag: &str, (w, h): (u32, u32)) -> anyhow::Result<()> {
-    let side = rccar::config::limits::MAX_IMAGE_SIDE;
+    let side = rccar::imageio::limits::MAX_IMAGE_SIDE;
     if w > side || h > side {
         bail!("{flag} {w}x{h}: each side must be 0..={side} px");
     }

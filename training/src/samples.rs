@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 /// Largest list file (info.dat, bg.txt, a boxes CSV) read, bytes.
 pub const MAX_LIST_BYTES: u64 = 64 << 20;
 /// Largest image read, pixels (width × height), as rccar's own limit.
-pub const MAX_IMAGE_PIXELS: u64 = rccar::config::limits::MAX_IMAGE_PIXELS;
+pub const MAX_IMAGE_PIXELS: u64 = rccar::imageio::limits::MAX_IMAGE_PIXELS;
 /// Most grey pixels held at once by one command (backgrounds, evaluation frames): 2 GB.
 pub const MAX_TOTAL_PIXELS: u64 = 2_000_000_000;
 /// Most positive windows loaded for training.

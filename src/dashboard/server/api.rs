@@ -386,7 +386,7 @@ async fn state(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, u
 
 /// The rows of the parameter table of a run steering with `method`, for the page's sliders.
 fn param_rows(method: crate::control::steering::SteeringMethod) -> Vec<Value> {
-    crate::control::params::of_method(method)
+    crate::control::catalog::of_method(method)
         .iter()
         .map(|p| json!({"key": p.key, "unit": p.unit, "range": p.range, "slider": p.slider, "doc": p.doc}))
         .collect()

@@ -6,7 +6,7 @@
 
 use crate::config::Config;
 use crate::drive::{Clock, Flow, FrameContext, LoopError, Observer, StopReason, StopSignal};
-use crate::session::{
+use super::{
     ArmAt, CameraSpec, DetectorSpec, Session, SessionEnv, SessionError, SessionSpec, SinkSpec, SourceSpec, Timing,
 };
 use crate::source::FrameError;
@@ -47,12 +47,12 @@ pub fn found() -> Vec<String> {
         };
         out.push(format!("V4L2: /dev/{dev}: {name}{hint}"));
     }
-    match super::rpicam::find_program() {
+    match crate::pipecam::rpicam::find_program() {
         None => out.push(
             "camera module: no rpicam-vid or libcamera-vid on PATH (Raspberry Pi OS: sudo apt install rpicam-apps-lite)"
                 .into(),
         ),
-        Some(p) => match super::rpicam::list_cameras(&p) {
+        Some(p) => match crate::pipecam::rpicam::list_cameras(&p) {
             Ok((list, _)) if list.is_empty() => out.push(format!(
                 "camera module: {} lists no camera (cable, or camera_auto_detect in config.txt)",
                 p.display()
@@ -80,7 +80,7 @@ pub fn found() -> Vec<String> {
 /// The camera to check when none is named: the camera module when its program is there,
 /// else the first V4L2 device.
 pub fn default_camera() -> CameraSpec {
-    if super::rpicam::find_program().is_some() {
+    if crate::pipecam::rpicam::find_program().is_some() {
         CameraSpec::Picam { index: 0, mjpeg: false }
     } else {
         CameraSpec::V4l(0)
