@@ -168,9 +168,18 @@ pub fn canny(src: &GrayImage, opts: &CannyOptions, s: &mut CannyScratch, edges: 
         }
     }
     replicate_border(s);
+    // 2. Sobel dx, dy and the L1 magnitude.
+    sobel(s);
+    // 3. Non-maximum suppression and classification; strong pixels go on the stack.
+    suppress_and_classify(s, opts.low as i32, opts.high as i32);
+    // 4. Hysteresis: grow edges from strong pixels through candidates.
+    hysteresis(s, edges);
+}
 
-    // 2. Sobel dx, dy and the L1 magnitude (zero border around `mag`), over shifted row
-    //    slices so that it vectorises.
+/// Canny step 2: Sobel dx, dy and the L1 magnitude (zero border around `mag`) of the padded
+/// buffer, over shifted row slices so that it vectorises.
+fn sobel(s: &mut CannyScratch) {
+    let (w, h, pw) = (s.w, s.h, s.w + 2);
     for y in 0..h {
         let up = &s.padded[y * pw..y * pw + pw];
         let mid = &s.padded[(y + 1) * pw..(y + 1) * pw + pw];
@@ -197,9 +206,13 @@ pub fn canny(src: &GrayImage, opts: &CannyOptions, s: &mut CannyScratch, edges: 
             *m_o = gx.unsigned_abs() + gy.unsigned_abs();
         }
     }
+}
 
-    // 3. Non-maximum suppression and classification; strong pixels go on the stack.
-    let (low, high) = (opts.low as i32, opts.high as i32);
+/// Canny step 3: non-maximum suppression along the gradient direction (OpenCV's fixed-point
+/// tan 22.5° / 67.5° sectors) and classification against `low` and `high`: `map` gets 1 (not
+/// an edge), 0 (a candidate) or 2 (strong, also pushed on the stack).
+fn suppress_and_classify(s: &mut CannyScratch, low: i32, high: i32) {
+    let (w, h, pw) = (s.w, s.h, s.w + 2);
     s.stack.clear();
     for y in 0..h {
         let row = (y + 1) * pw;
@@ -245,8 +258,12 @@ pub fn canny(src: &GrayImage, opts: &CannyOptions, s: &mut CannyScratch, edges: 
             };
         }
     }
+}
 
-    // 4. Hysteresis: grow edges from strong pixels through candidates.
+/// Canny step 4: hysteresis, growing edges from the strong pixels through the candidates
+/// (8-connected), then 255 (edge) or 0 into `edges`.
+fn hysteresis(s: &mut CannyScratch, edges: &mut GrayImage) {
+    let (w, h, pw) = (s.w, s.h, s.w + 2);
     while let Some(i) = s.stack.pop() {
         let i = i as isize;
         let p = pw as isize;

@@ -141,6 +141,18 @@ pub struct ObjectBox {
     pub clipped: bool,
 }
 
+/// Where one frame is seen from, shared by the steps of [`Renderer::render_rows`].
+struct View {
+    /// The camera's optical centre, world metres.
+    o: [f64; 3],
+    /// sin and cos of the car's heading.
+    yaw: (f64, f64),
+    /// The lens's floor point (the camera above it), world metres.
+    lens: [f64; 2],
+    /// Global gain: exposure and the slow lighting change.
+    gain: f32,
+}
+
 /// Renders a scene through one camera.
 #[derive(Debug, Clone)]
 pub struct Renderer {
@@ -269,109 +281,131 @@ impl Renderer {
     /// lane pipeline reading its ROI, decides exactly as on full frames.
     pub fn render_rows(&mut self, pose: &Pose, t_s: f64, frame: u64, img: &mut RgbImage, rows: Range<usize>) {
         let cam = self.mount.camera;
-        let (w, h) = (cam.width as usize, cam.height as usize);
+        let h = cam.height as usize;
         let rows = rows.start.min(h)..rows.end.min(h);
         if img.dimensions() != (cam.width, cam.height) {
             *img = RgbImage::new(cam.width, cam.height);
         }
-        let scene = &*self.scene;
-        let o = self.mount.origin(pose);
-        let (sy, cy) = pose.yaw.sin_cos();
-        let lens = pose.to_world([self.mount.x_m, 0.0]);
         // 1. Global gain: exposure and the slow lighting change.
         let gain = (self.opts.exposure
             * (1.0
                 + self.opts.light_variation * (std::f64::consts::TAU * t_s / self.opts.light_period_s.max(1e-3)).sin()))
             as f32;
-        let buf: &mut [u8] = img.as_mut();
-        // 2. Floor, walls, ceiling, row by row: the floor point and its footprint move by a
-        //    fixed step per column.
-        let rot = |x: f64, y: f64| -> [f64; 2] { [cy * x - sy * y, sy * x + cy * y] };
+        let view = View {
+            o: self.mount.origin(pose),
+            yaw: pose.yaw.sin_cos(),
+            lens: pose.to_world([self.mount.x_m, 0.0]),
+            gain,
+        };
+        // 2. Floor, walls, ceiling, row by row.
         for v in rows.clone() {
-            let row = self.rows[v];
-            let vig = &self.vig[v * w..(v + 1) * w];
-            let out = &mut buf[3 * v * w..3 * (v + 1) * w];
-            let g0 = rot(row.g0[0], row.g0[1]);
-            let dg = rot(row.dg[0], row.dg[1]);
-            let ju = dg;
-            let jv0 = rot(row.jv0[0], row.jv0[1]);
-            let djv = rot(row.djv[0], row.djv[1]);
-            // The lighting every LIGHT_STEP columns, and the texture about once per texel
-            // (where it is not faded out), interpolated between.
-            let tstep = (Footprint::TEXEL_M / row.dg[0].hypot(row.dg[1]))
-                .floor()
-                .clamp(1.0, 16.0) as usize;
-            let textured = row.floor && row.fade > 0.01;
-            let at = |u: usize| [lens[0] + g0[0] + u as f64 * dg[0], lens[1] + g0[1] + u as f64 * dg[1]];
-            // The row is a straight segment and the floor a rectangle: both ends on it means
-            // every pixel is.
-            let all_floor = row.floor && scene.on_floor(at(0)) && scene.on_floor(at(w - 1));
-            if row.floor {
-                // Samples, then per-pixel values by linear interpolation (simple loops the
-                // compiler vectorises; no division per pixel).
-                lerp_fill(&mut self.light, w, LIGHT_STEP, |u| scene.illumination(at(u)));
-                if textured {
-                    lerp_fill(&mut self.tex, w, tstep, |u| scene.texture_at(at(u)) * row.fade);
-                }
-            }
-            // Columns before `probe_from` are known to be clear of every line (see
-            // `Scene::floor_color`): the distance to a line shrinks by at most one step per
-            // column.
-            let step_len = row.dg[0].hypot(row.dg[1]) as f32;
-            let mut probe_from = 0usize;
-            let mut u = 0usize;
-            while u < w {
-                if all_floor && u < probe_from {
-                    // A run of pixels known to be clear of every line: bare floor only (the
-                    // same arithmetic as `floor_color` without a probe), no positions needed.
-                    let end = probe_from.min(w);
-                    let (light, tex) = (&self.light[u..end], &self.tex[..]);
-                    for (j, ((px, &vg), &l)) in out[3 * u..3 * end]
-                        .chunks_exact_mut(3)
-                        .zip(&vig[u..end])
-                        .zip(light)
-                        .enumerate()
-                    {
-                        let t = if textured { tex[u + j] } else { 0.0 };
-                        let c = scene.plain_floor(l, t);
-                        let k = gain * vg;
-                        px[0] = (c[0] * k) as u8;
-                        px[1] = (c[1] * k) as u8;
-                        px[2] = (c[2] * k) as u8;
-                    }
-                    u = end;
-                    continue;
-                }
-                let (px, vg) = (&mut out[3 * u..3 * u + 3], vig[u]);
-                let uf = u as f64;
-                let p = [lens[0] + g0[0] + uf * dg[0], lens[1] + g0[1] + uf * dg[1]];
-                let c = if all_floor || (row.floor && scene.on_floor(p)) {
-                    let fp = Footprint {
-                        ju,
-                        jv: [jv0[0] + uf * djv[0], jv0[1] + uf * djv[1]],
-                        size: row.size,
-                        fade: row.fade,
-                    };
-                    let light = self.light[u];
-                    let tex = if textured { self.tex[u] } else { 0.0 };
-                    let probe = u >= probe_from;
-                    let (c, clear) = scene.floor_color(p, &fp, light, tex, probe);
-                    if probe && clear > row.size {
-                        probe_from = u + 1 + ((clear - row.size) / step_len.max(1e-9)).min(w as f32) as usize;
-                    }
-                    c
-                } else {
-                    scene.wall_color(o, self.world_ray((sy, cy), uf, v as f64))
-                };
-                let k = gain * vg;
-                // `as u8` saturates (and maps NaN to 0): no clamp needed.
-                px[0] = (c[0] * k) as u8;
-                px[1] = (c[1] * k) as u8;
-                px[2] = (c[2] * k) as u8;
-                u += 1;
-            }
+            self.render_row(&view, v, img);
         }
         // 3. Objects, far ones first.
+        self.render_objects(pose, t_s, &view, &rows, img);
+        // 4. Blur and noise.
+        self.blur_and_noise(frame, &rows, img);
+    }
+
+    /// Step 2 of [`Renderer::render_rows`] for image row `v`: floor, walls or ceiling. The
+    /// floor point and its footprint move by a fixed step per column.
+    fn render_row(&mut self, view: &View, v: usize, img: &mut RgbImage) {
+        let w = self.mount.camera.width as usize;
+        let scene = &*self.scene;
+        let (o, (sy, cy), lens, gain) = (view.o, view.yaw, view.lens, view.gain);
+        let buf: &mut [u8] = img.as_mut();
+        let rot = |x: f64, y: f64| -> [f64; 2] { [cy * x - sy * y, sy * x + cy * y] };
+        let row = self.rows[v];
+        let vig = &self.vig[v * w..(v + 1) * w];
+        let out = &mut buf[3 * v * w..3 * (v + 1) * w];
+        let g0 = rot(row.g0[0], row.g0[1]);
+        let dg = rot(row.dg[0], row.dg[1]);
+        let ju = dg;
+        let jv0 = rot(row.jv0[0], row.jv0[1]);
+        let djv = rot(row.djv[0], row.djv[1]);
+        // The lighting every LIGHT_STEP columns, and the texture about once per texel
+        // (where it is not faded out), interpolated between.
+        let tstep = (Footprint::TEXEL_M / row.dg[0].hypot(row.dg[1]))
+            .floor()
+            .clamp(1.0, 16.0) as usize;
+        let textured = row.floor && row.fade > 0.01;
+        let at = |u: usize| [lens[0] + g0[0] + u as f64 * dg[0], lens[1] + g0[1] + u as f64 * dg[1]];
+        // The row is a straight segment and the floor a rectangle: both ends on it means
+        // every pixel is.
+        let all_floor = row.floor && scene.on_floor(at(0)) && scene.on_floor(at(w - 1));
+        if row.floor {
+            // Samples, then per-pixel values by linear interpolation (simple loops the
+            // compiler vectorises; no division per pixel).
+            lerp_fill(&mut self.light, w, LIGHT_STEP, |u| scene.illumination(at(u)));
+            if textured {
+                lerp_fill(&mut self.tex, w, tstep, |u| scene.texture_at(at(u)) * row.fade);
+            }
+        }
+        // Columns before `probe_from` are known to be clear of every line (see
+        // `Scene::floor_color`): the distance to a line shrinks by at most one step per
+        // column.
+        let step_len = row.dg[0].hypot(row.dg[1]) as f32;
+        let mut probe_from = 0usize;
+        let mut u = 0usize;
+        while u < w {
+            if all_floor && u < probe_from {
+                // A run of pixels known to be clear of every line: bare floor only (the
+                // same arithmetic as `floor_color` without a probe), no positions needed.
+                let end = probe_from.min(w);
+                let (light, tex) = (&self.light[u..end], &self.tex[..]);
+                for (j, ((px, &vg), &l)) in out[3 * u..3 * end]
+                    .chunks_exact_mut(3)
+                    .zip(&vig[u..end])
+                    .zip(light)
+                    .enumerate()
+                {
+                    let t = if textured { tex[u + j] } else { 0.0 };
+                    let c = scene.plain_floor(l, t);
+                    let k = gain * vg;
+                    px[0] = (c[0] * k) as u8;
+                    px[1] = (c[1] * k) as u8;
+                    px[2] = (c[2] * k) as u8;
+                }
+                u = end;
+                continue;
+            }
+            let (px, vg) = (&mut out[3 * u..3 * u + 3], vig[u]);
+            let uf = u as f64;
+            let p = [lens[0] + g0[0] + uf * dg[0], lens[1] + g0[1] + uf * dg[1]];
+            let c = if all_floor || (row.floor && scene.on_floor(p)) {
+                let fp = Footprint {
+                    ju,
+                    jv: [jv0[0] + uf * djv[0], jv0[1] + uf * djv[1]],
+                    size: row.size,
+                    fade: row.fade,
+                };
+                let light = self.light[u];
+                let tex = if textured { self.tex[u] } else { 0.0 };
+                let probe = u >= probe_from;
+                let (c, clear) = scene.floor_color(p, &fp, light, tex, probe);
+                if probe && clear > row.size {
+                    probe_from = u + 1 + ((clear - row.size) / step_len.max(1e-9)).min(w as f32) as usize;
+                }
+                c
+            } else {
+                scene.wall_color(o, self.world_ray((sy, cy), uf, v as f64))
+            };
+            let k = gain * vg;
+            // `as u8` saturates (and maps NaN to 0): no clamp needed.
+            px[0] = (c[0] * k) as u8;
+            px[1] = (c[1] * k) as u8;
+            px[2] = (c[2] * k) as u8;
+            u += 1;
+        }
+    }
+
+    /// Step 3 of [`Renderer::render_rows`]: the track's objects over the rows `rows`, far ones
+    /// first, each pixel from four rays (±¼ pixel) blended over what step 2 drew.
+    fn render_objects(&mut self, pose: &Pose, t_s: f64, view: &View, rows: &Range<usize>, img: &mut RgbImage) {
+        let w = self.mount.camera.width as usize;
+        let scene = &*self.scene;
+        let (o, (sy, cy), gain) = (view.o, view.yaw, view.gain);
+        let buf: &mut [u8] = img.as_mut();
         let mut order: Vec<(f64, &Object)> = scene
             .track
             .enabled_objects()
@@ -461,7 +495,12 @@ impl Renderer {
                 }
             }
         }
-        // 4. Blur and noise.
+    }
+
+    /// Step 4 of [`Renderer::render_rows`]: the lens blur, then the frame's sensor noise over
+    /// the rows `rows`.
+    fn blur_and_noise(&mut self, frame: u64, rows: &Range<usize>, img: &mut RgbImage) {
+        let w = self.mount.camera.width as usize;
         if self.opts.blur_px > 0.0 {
             gaussian_blur(img, self.opts.blur_px);
         }

@@ -322,42 +322,72 @@ impl Matcher {
         want_rows: bool,
     ) -> Result<StereoMatch, NoRange> {
         self.rows.clear();
-        let Some(first) = reference.first() else {
-            return Err(NoRange::Flat);
-        };
-        let (w, h) = first.dimensions();
-        for img in reference.iter().chain(other.iter()) {
-            if img.dimensions() != (w, h) {
-                return Err(NoRange::SizeMismatch {
-                    left_w: w,
-                    left_h: h,
-                    right_w: img.width(),
-                    right_h: img.height(),
-                });
-            }
-        }
-        let planes = reference.len().min(other.len());
-        let [bx, by, bw, bh] = bbox;
-        // Written so that no sum can overflow (a box from the command line may hold i64::MAX).
-        if bw < 3 || bh < 3 || bx < 0 || by < 0 || bw > w as i64 - bx || bh > h as i64 - by {
-            return Err(NoRange::BadBox(bbox));
-        }
-        let (bx, by, bw, bh) = (bx as usize, by as usize, bw as usize, bh as usize);
-        let iw = w as usize;
-        // Row by row (obstacles), a large box is sampled: at most MAX_ROWS evenly spaced rows
-        // and MAX_COLS evenly spaced columns (the window slides by whole pixels all the same,
-        // so the disparity resolution is unchanged; the face fit is a median over rows).
-        let (rs, cs) = if want_rows {
-            (bh.div_ceil(MAX_ROWS).max(1), bw.div_ceil(MAX_COLS).max(1))
-        } else {
-            (1, 1)
-        };
-        let (bhs, bws) = (bh.div_ceil(rs), bw.div_ceil(cs));
-        let n = (bws * bhs) as f64;
+        let g = Sampling::of(reference, other, bbox, want_rows)?;
         // The template, each plane less its own mean.
+        let tnorm = self.template(reference, &g);
+        if tnorm < 1e-6 * g.n * g.planes as f64 {
+            return Err(NoRange::Flat);
+        }
+        // 1. Column sums of each plane of the other image over the box's rows.
+        self.column_sums(other, &g);
+        // Candidate window starts: x_other = bx ∓ d.
+        let (dmin, dmax) = (
+            opts.min_disparity as i64,
+            opts.max_disparity.max(opts.min_disparity) as i64,
+        );
+        let nd = (dmax - dmin + 1) as usize;
+        let (bx, bw, iw) = (g.bx, g.bw, g.iw);
+        let x0_of = |d: i64| -> Option<usize> {
+            let x0 = if opts.reference_left {
+                bx as i64 - d
+            } else {
+                bx as i64 + d
+            };
+            (x0 >= 0 && x0 as usize + bw <= iw).then_some(x0 as usize)
+        };
+        // 2. The normalised cross-correlation of every candidate window.
+        let best = self.score_windows(other, &g, tnorm, (dmin, dmax, nd), &x0_of, want_rows);
+        let Some((i, score)) = best else {
+            return Err(NoRange::NoSearchRoom);
+        };
+        // 2b. The nearest of the near-best local maxima.
+        let (i, score) = nearest_near_best(&self.scores, i, score, opts);
+        // 2c. Threshold.
+        if score < opts.min_score {
+            return Err(NoRange::BelowThreshold {
+                score,
+                min: opts.min_score,
+            });
+        }
+        // 3. Parabolic sub-pixel peak.
+        let disparity = (dmin + i as i64) as f64 + parabola(&self.scores, i);
+        if disparity <= 0.0 {
+            return Err(NoRange::NonPositiveDisparity(disparity));
+        }
+        let x_ref = bx as f64 + (bw as f64 - 1.0) / 2.0;
+        let x_other = if opts.reference_left {
+            x_ref - disparity
+        } else {
+            x_ref + disparity
+        };
+        if want_rows {
+            self.match_rows(reference, other, (g.by, bw, g.bhs, g.bws), (g.rs, g.cs), (dmin, nd), opts, &x0_of);
+        }
+        Ok(StereoMatch {
+            disparity,
+            score,
+            x_ref,
+            x_other,
+        })
+    }
+
+    /// The template: the reference planes over the (sampled) box, each less its own mean,
+    /// into `self.tmpl`; returns the sum of its squares.
+    fn template(&mut self, reference: &[&GrayImage], g: &Sampling) -> f64 {
+        let (iw, bx, by, bw, bh, rs, cs) = (g.iw, g.bx, g.by, g.bw, g.bh, g.rs, g.cs);
         self.tmpl.clear();
         let mut tnorm = 0f64;
-        for r in reference.iter().take(planes).map(|p| p.as_raw()) {
+        for r in reference.iter().take(g.planes).map(|p| p.as_raw()) {
             let start = self.tmpl.len();
             let mut tsum = 0f64;
             for y in (by..by + bh).step_by(rs) {
@@ -366,16 +396,19 @@ impl Matcher {
                     self.tmpl.push(v as f32);
                 }
             }
-            let tmean = (tsum / n) as f32;
+            let tmean = (tsum / g.n) as f32;
             for v in self.tmpl[start..].iter_mut() {
                 *v -= tmean;
                 tnorm += (*v as f64) * (*v as f64);
             }
         }
-        if tnorm < 1e-6 * n * planes as f64 {
-            return Err(NoRange::Flat);
-        }
-        // 1. Column sums of each plane of the other image over the box's rows.
+        tnorm
+    }
+
+    /// Column sums and sums of squares of each plane of the other image over the box's
+    /// (sampled) rows, every column of the image (`self.colsum`, `self.colsq`).
+    fn column_sums(&mut self, other: &[&GrayImage], g: &Sampling) {
+        let (iw, by, bh, rs, planes) = (g.iw, g.by, g.bh, g.rs, g.planes);
         self.colsum.clear();
         self.colsum.resize(iw * planes, 0.0);
         self.colsq.clear();
@@ -394,20 +427,23 @@ impl Matcher {
                 }
             }
         }
-        // Candidate window starts: x_other = bx ∓ d.
-        let (dmin, dmax) = (
-            opts.min_disparity as i64,
-            opts.max_disparity.max(opts.min_disparity) as i64,
-        );
-        let nd = (dmax - dmin + 1) as usize;
-        let x0_of = |d: i64| -> Option<usize> {
-            let x0 = if opts.reference_left {
-                bx as i64 - d
-            } else {
-                bx as i64 + d
-            };
-            (x0 >= 0 && x0 as usize + bw <= iw).then_some(x0 as usize)
-        };
+    }
+
+    /// The normalised cross-correlation of the template with the window at every disparity
+    /// `dmin..=dmax` (NaN where the window leaves the image) into `self.scores`, and each
+    /// sampled row's cross term into `self.row_cross` when `want_rows`; the best index and
+    /// score.
+    fn score_windows(
+        &mut self,
+        other: &[&GrayImage],
+        g: &Sampling,
+        tnorm: f64,
+        (dmin, dmax, nd): (i64, i64, usize),
+        x0_of: &dyn Fn(i64) -> Option<usize>,
+        want_rows: bool,
+    ) -> Option<(usize, f64)> {
+        let (iw, by, bw, bh, rs, cs, bhs, bws, n, planes) =
+            (g.iw, g.by, g.bw, g.bh, g.rs, g.cs, g.bhs, g.bws, g.n, g.planes);
         self.scores.clear();
         if want_rows {
             self.row_cross.clear();
@@ -453,51 +489,7 @@ impl Matcher {
             }
             self.scores.push(score);
         }
-        let Some((mut i, mut score)) = best else {
-            return Err(NoRange::NoSearchRoom);
-        };
-        // 2b. The nearest of the near-best local maxima.
-        let floor = score * opts.near_peak_ratio.min(1.0);
-        for k in (i + 1)..self.scores.len() {
-            let v = self.scores[k];
-            let left = self.scores[k - 1];
-            let right = self.scores.get(k + 1).copied().unwrap_or(f64::NEG_INFINITY);
-            if v >= floor
-                && v >= opts.min_score
-                && v >= left
-                && right.partial_cmp(&v) != Some(std::cmp::Ordering::Greater)
-            {
-                i = k;
-                score = v;
-            }
-        }
-        // 2. Threshold.
-        if score < opts.min_score {
-            return Err(NoRange::BelowThreshold {
-                score,
-                min: opts.min_score,
-            });
-        }
-        // 3. Parabolic sub-pixel peak.
-        let disparity = (dmin + i as i64) as f64 + parabola(&self.scores, i);
-        if disparity <= 0.0 {
-            return Err(NoRange::NonPositiveDisparity(disparity));
-        }
-        let x_ref = bx as f64 + (bw as f64 - 1.0) / 2.0;
-        let x_other = if opts.reference_left {
-            x_ref - disparity
-        } else {
-            x_ref + disparity
-        };
-        if want_rows {
-            self.match_rows(reference, other, (by, bw, bhs, bws), (rs, cs), (dmin, nd), opts, &x0_of);
-        }
-        Ok(StereoMatch {
-            disparity,
-            score,
-            x_ref,
-            x_other,
-        })
+        best
     }
 
     /// Each row of the box on its own: the template row less its own means, the window's
@@ -610,6 +602,97 @@ pub fn match_box(
     opts: &MatchOptions,
 ) -> Result<StereoMatch, NoRange> {
     Matcher::new().match_box(reference, other, bbox, opts)
+}
+
+/// Where the box is and how it is sampled, for [`Matcher::match_core`]'s steps.
+struct Sampling {
+    /// Image width (every plane's).
+    iw: usize,
+    /// Planes matched (the fewer of the two sides').
+    planes: usize,
+    /// The box: left, top, width, height, pixels.
+    bx: usize,
+    by: usize,
+    bw: usize,
+    bh: usize,
+    /// Row and column steps (1 unless a large box is sampled row by row).
+    rs: usize,
+    cs: usize,
+    /// Sampled rows and columns.
+    bhs: usize,
+    bws: usize,
+    /// Samples per plane, `bws · bhs`.
+    n: f64,
+}
+
+impl Sampling {
+    /// The box checked against the images (all of one size, at least 3×3 pixels, inside),
+    /// and its sampling: row by row (obstacles), a large box is sampled at most MAX_ROWS
+    /// evenly spaced rows and MAX_COLS evenly spaced columns (the window slides by whole
+    /// pixels all the same, so the disparity resolution is unchanged; the face fit is a
+    /// median over rows).
+    fn of(reference: &[&GrayImage], other: &[&GrayImage], bbox: [i64; 4], want_rows: bool) -> Result<Self, NoRange> {
+        let Some(first) = reference.first() else {
+            return Err(NoRange::Flat);
+        };
+        let (w, h) = first.dimensions();
+        for img in reference.iter().chain(other.iter()) {
+            if img.dimensions() != (w, h) {
+                return Err(NoRange::SizeMismatch {
+                    left_w: w,
+                    left_h: h,
+                    right_w: img.width(),
+                    right_h: img.height(),
+                });
+            }
+        }
+        let [bx, by, bw, bh] = bbox;
+        // Written so that no sum can overflow (a box from the command line may hold i64::MAX).
+        if bw < 3 || bh < 3 || bx < 0 || by < 0 || bw > w as i64 - bx || bh > h as i64 - by {
+            return Err(NoRange::BadBox(bbox));
+        }
+        let (bx, by, bw, bh) = (bx as usize, by as usize, bw as usize, bh as usize);
+        let (rs, cs) = if want_rows {
+            (bh.div_ceil(MAX_ROWS).max(1), bw.div_ceil(MAX_COLS).max(1))
+        } else {
+            (1, 1)
+        };
+        let (bhs, bws) = (bh.div_ceil(rs), bw.div_ceil(cs));
+        Ok(Sampling {
+            iw: w as usize,
+            planes: reference.len().min(other.len()),
+            bx,
+            by,
+            bw,
+            bh,
+            rs,
+            cs,
+            bhs,
+            bws,
+            n: (bws * bhs) as f64,
+        })
+    }
+}
+
+/// Of the local maxima of `scores` at or right of the best `i` (score `score`), the last one
+/// within `near_peak_ratio` of the best and above `min_score`: the nearest object when two
+/// surfaces match almost equally well.
+fn nearest_near_best(scores: &[f64], mut i: usize, mut score: f64, opts: &MatchOptions) -> (usize, f64) {
+    let floor = score * opts.near_peak_ratio.min(1.0);
+    for k in (i + 1)..scores.len() {
+        let v = scores[k];
+        let left = scores[k - 1];
+        let right = scores.get(k + 1).copied().unwrap_or(f64::NEG_INFINITY);
+        if v >= floor
+            && v >= opts.min_score
+            && v >= left
+            && right.partial_cmp(&v) != Some(std::cmp::Ordering::Greater)
+        {
+            i = k;
+            score = v;
+        }
+    }
+    (i, score)
 }
 
 #[cfg(test)]
