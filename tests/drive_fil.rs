@@ -59,21 +59,11 @@ fn drive(sim: &Sim, log: &Path, out: &Path, extra: &[&str]) -> Child {
         .stdout(std::fs::File::create(out.with_extension("stdout")).unwrap())
         .stderr(std::fs::File::create(out.with_extension("stderr")).unwrap());
     std::fs::create_dir_all(out).unwrap();
-    // As the car's service runs it (docs/rccar.service, Nice=-5), where allowed; otherwise at
-    // the test's own priority. Set before exec, so every thread of `drive` inherits it.
-    // SAFETY: setpriority is async-signal-safe; nothing else runs between fork and exec.
-    unsafe {
-        use std::os::unix::process::CommandExt;
-        c.pre_exec(|| {
-            libc::setpriority(libc::PRIO_PROCESS, 0, SERVICE_NICE);
-            Ok(())
-        });
-    }
+    // As the car's service runs it (docs/rccar.service, Nice=-5), where allowed.
+    sim::as_the_car(&mut c);
     c.spawn().expect("start rccar drive")
 }
 
-/// The car service's priority (docs/rccar.service `Nice=`).
-const SERVICE_NICE: i32 = -5;
 
 /// Waits for `drive` (its output went to `out.stdout` / `out.stderr`).
 fn wait(child: &mut Child, out: &Path, limit: Duration) -> (Option<i32>, String, String) {

@@ -583,7 +583,7 @@ fn dropping_the_link_disarms_at_once_not_by_failsafe() {
 #[test]
 fn ctrl_c_on_rccar_link_disarms() {
     let sim = Sim::start("ctrlc");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_rccar"))
+    let mut child = super::sim::as_the_car(&mut std::process::Command::new(env!("CARGO_BIN_EXE_rccar")))
         .args(["link", "--port", &sim.tty, "--sweep"])
         .stdout(std::process::Stdio::null())
         .spawn()
