@@ -5,6 +5,7 @@
 //! ever added; optional ones are left out when empty.
 
 use crate::control::behaviour::{Mode, Transition};
+use crate::control::pilot::{DriveMode, Pilot};
 use crate::control::Command;
 use crate::lane::{LaneMeasurement, LaneStatus};
 use crate::pipeline::{FrameOutput, Pipeline, RangedObject};
@@ -86,6 +87,22 @@ pub struct FrameRecord {
     /// car disarmed, e-stopped, braking, or a fault): plots show this, not the wish.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sent: Option<Command>,
+    /// Who drives: `manual`, `assisted` or `autopilot` (src/drive/manual.rs). Written once a
+    /// human input is attached to the run (the dashboard); absent: the autopilot, and nobody
+    /// could have taken over.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drive_mode: Option<DriveMode>,
+    /// Who produced the command before the gate: `autopilot`, `human`, or `shared` (assisted:
+    /// the pipeline's steering, the human's throttle). Written with `drive_mode`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pilot: Option<Pilot>,
+    /// The human's input as used (after `manual.max_throttle`; neutral once released or older
+    /// than `manual.input_timeout_ms`), in `manual` and `assisted`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub human: Option<Command>,
+    /// How old the human's input was when the command went out, ms (real clocks only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_age_ms: Option<f64>,
     /// The car's status on a car run (waiting, disarmed, driving, fault…).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub car: Option<crate::health::CarStatus>,
@@ -151,6 +168,10 @@ impl FrameRecord {
             ultrasonic_m: None,
             events: Vec::new(),
             sent: None,
+            drive_mode: None,
+            pilot: None,
+            human: None,
+            input_age_ms: None,
             car: None,
             stereo: None,
         }

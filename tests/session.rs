@@ -132,3 +132,62 @@ fn a_folder_replays_in_process_like_the_golden_file() {
     }
     println!("{} frames in-process, the same commands as the golden file", g.len());
 }
+
+/// Frames of a lock-step simulated `drive` (the world may end the run, as under `drive
+/// --camera sim`) with the car held by `hold` from frame `at`; how the world ended, if it did.
+fn held_sim(overrides: &[&str], at: u64, hold: impl Fn(&rccar::drive::Arming)) -> (Option<rccar::sim::run::EndReason>, u64) {
+    use rccar::session::{ArmAt, SceneSpec};
+    use rccar::drive::Step;
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let mut o: Vec<String> = vec!["detect.enabled=false".into()];
+    o.extend(overrides.iter().map(|s| s.to_string()));
+    let cfg = Config::load(&root.join("config/car.toml"), &[], &o).unwrap();
+    let mut spec = SessionSpec::new(
+        SourceSpec::Sim {
+            scene: SceneSpec::Track(PathBuf::from(&cfg.sim.track)),
+            timing: Timing::LockStep,
+            stall: None,
+            start_offset_m: None,
+        },
+        SinkSpec::DryRun,
+    );
+    spec.arm = ArmAt::Operator;
+    let mut s = Session::build(&cfg, spec, env()).unwrap();
+    let arming = s.arming().clone();
+    // 10 s of frame time: the stall ending takes 5 s of standing after the first second.
+    for k in 0..300u64 {
+        if k == at {
+            hold(&arming);
+        }
+        if let Step::End(_) = s.step(&mut NoObserver).unwrap() {
+            return (s.world().and_then(|w| rccar::sim::world::lock(w).ended()), k);
+        }
+    }
+    (s.world().and_then(|w| rccar::sim::world::lock(w).ended()), 300)
+}
+
+/// Issue 26: `drive --camera sim --dry-run --dashboard` ended by itself after 6 s ("ended:
+/// Stalled") while the car waited to be armed or sat e-stopped. Standing still on purpose —
+/// disarmed, e-stopped, or a human holding the throttle at 0 — is not a stall; a pipeline
+/// that stops the car by itself still is.
+#[test]
+fn a_car_held_on_purpose_is_not_stalled_but_a_pipeline_that_stops_is() {
+    use rccar::drive::{Actor, DriveMode};
+    use rccar::sim::run::EndReason;
+    let disarmed = held_sim(&[], 0, |_| {});
+    assert_eq!(disarmed, (None, 300), "waiting to be armed for 10 s");
+    let estopped = held_sim(&[], 0, |a| {
+        a.arm(Actor::Page).unwrap();
+        a.estop(Actor::Page);
+    });
+    assert_eq!(estopped, (None, 300), "e-stopped for 10 s");
+    let by_hand = held_sim(&[], 0, |a| {
+        a.arm(Actor::Page).unwrap();
+        a.controls().set_mode(DriveMode::Manual, Actor::Page, 0.0);
+    });
+    assert_eq!(by_hand, (None, 300), "armed in manual mode, nobody at the stick");
+    // Armed, autopilot, and the pipeline's throttle is 0: the stall ending still works.
+    let (end, k) = held_sim(&["throttle.base=0", "throttle.min=0"], 0, |a| a.arm(Actor::Page).unwrap());
+    assert_eq!(end, Some(EndReason::Stalled), "ended at frame {k}");
+    assert!((170..200).contains(&k), "stalled after 1 + 5 s of standing, at frame {k}");
+}

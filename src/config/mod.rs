@@ -27,6 +27,7 @@ mod detect;
 mod gpio;
 mod lane;
 mod layers;
+mod manual;
 mod ranging;
 mod record;
 mod replay;
@@ -46,6 +47,7 @@ pub use detect::DetectConfig;
 pub use gpio::GpioConfig;
 pub use lane::{LaneConfig, PeakMode, ThresholdMode};
 pub use layers::{find_config, find_local, local_beside, path_keys, source_tree_config, LoadedConfig, MissingLocal};
+pub use manual::ManualConfig;
 pub use ranging::{RangingConfig, RangingMethod};
 pub use record::RecordConfig;
 pub use replay::ReplayConfig;
@@ -196,6 +198,8 @@ pub struct Config {
     pub record: RecordConfig,
     /// `[dashboard]`: the live page of `sim|drive --dashboard`.
     pub dashboard: DashboardConfig,
+    /// `[manual]`: driving by hand (the input's deadline, the human's throttle ceiling).
+    pub manual: ManualConfig,
     /// Stereo ranging with a second camera (src/stereo/, docs/stereo.md).
     pub stereo: StereoConfig,
 }

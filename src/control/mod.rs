@@ -12,6 +12,7 @@ pub mod behaviour;
 pub mod catalog;
 pub mod params;
 pub mod pid;
+pub mod pilot;
 pub mod pure_pursuit;
 pub mod steering;
 pub mod throttle;

@@ -79,6 +79,24 @@ pub struct PlaceRequest {
     pub s: f64,
 }
 
+/// `POST /api/drive` body: the human's steering and throttle, each in −1..1 (issue 26).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriveRequest {
+    /// −1 (full left) ..= 1 (full right).
+    pub steer: f64,
+    /// −1 (full reverse) ..= 1 (full forward), scaled by `manual.max_throttle`.
+    pub throttle: f64,
+}
+
+/// `POST /api/mode` body: `manual`, `assisted` or `autopilot`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModeRequest {
+    /// The mode's name.
+    pub mode: String,
+}
+
 /// Parses a JSON body into `T`, refusing oversized bodies and unknown fields.
 pub fn parse_body<T: for<'de> Deserialize<'de>>(body: &[u8]) -> Result<T, ControlError> {
     if body.len() > MAX_BODY {

@@ -34,8 +34,8 @@ pub mod server;
 pub mod shared;
 
 pub use messages::{
-    get_value, parse_body, settable, validate_set, Control, ControlError, ControlSender, Live, PlaceRequest, PlotPoint,
-    SetRequest, Snapshot, INBOX_CAPACITY, MAX_BODY,
+    get_value, parse_body, settable, validate_set, Control, ControlError, ControlSender, DriveRequest, Live, ModeRequest,
+    PlaceRequest, PlotPoint, SetRequest, Snapshot, INBOX_CAPACITY, MAX_BODY,
 };
 pub use observer::{apply_value, channel, Channel, DashObserver};
 pub use run::Dash;

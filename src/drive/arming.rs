@@ -25,6 +25,7 @@
 //! returns what it actually sent.
 
 use crate::health::{Health, Part, PartState};
+use super::manual::Controls;
 use super::{Clock, StopReason, StopSignal};
 use crate::control::Command;
 use crate::sink::{Actuators, CommandSink, Connection, SinkError};
@@ -58,7 +59,7 @@ pub enum Actor {
 }
 
 impl Actor {
-    fn from_u8(v: u8) -> Self {
+    pub(crate) fn from_u8(v: u8) -> Self {
         match v {
             1 => Actor::Flag,
             2 => Actor::Button,
@@ -111,6 +112,8 @@ pub struct Arming {
     /// The last actor of a change.
     actor: AtomicU8,
     health: Arc<Health>,
+    /// The driving mode and the human's input, beside the arming (`super::manual`).
+    controls: Controls,
 }
 
 impl Arming {
@@ -123,6 +126,7 @@ impl Arming {
             version: AtomicU64::new(0),
             actor: AtomicU8::new(Actor::Program as u8),
             health,
+            controls: Controls::new(),
         })
     }
 
@@ -212,6 +216,12 @@ impl Arming {
     pub fn health(&self) -> &Arc<Health> {
         &self.health
     }
+
+    /// Who drives (the mode) and the human's newest input: the loop chooses the command by
+    /// them before the gate, so everything above still holds for a human.
+    pub fn controls(&self) -> &Controls {
+        &self.controls
+    }
 }
 
 /// A float in an atomic (its bits); NaN = not set.
@@ -219,6 +229,10 @@ impl Arming {
 pub struct AtomicF64(AtomicU64);
 
 impl AtomicF64 {
+    /// Holding `v`.
+    pub fn new(v: f64) -> Self {
+        Self(AtomicU64::new(v.to_bits()))
+    }
     /// Not set (NaN).
     pub fn nan() -> Self {
         Self(AtomicU64::new(f64::NAN.to_bits()))

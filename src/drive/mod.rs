@@ -16,7 +16,8 @@
 //!    source (no frame for the stall time) gets neutral sent at once and the loop waits on;
 //! 4. `dt` = this frame's time − the previous frame's (the loop owns dt: frames the source
 //!    dropped or could not read still count as time passed);
-//! 5. `Pipeline::step` → command → `sink.send`;
+//! 5. `Pipeline::step` → command → chosen by the driving mode ([`manual`]: the pipeline's, the
+//!    human's, or the pipeline's steering with the human's throttle) → `sink.send` (the gate);
 //! 6. the one telemetry record of the frame, with the capture→command latency and the loop
 //!    period measured on the [`Clock`] the caller passes in (the library reads no clock);
 //! 7. the observer sees the frame, the record and the pipeline; it may end the run.
@@ -26,6 +27,7 @@
 //! the caller gets control back, so files are flushed *after* the motor is safe.
 
 pub mod arming;
+pub mod manual;
 
 pub mod slot;
 pub mod stereo;
@@ -33,6 +35,7 @@ pub mod stop;
 
 pub use crate::sink::{Actuators, Connection};
 pub use arming::{Actor, Arming, Gate, GateOptions, Refused, Sent};
+pub use manual::{Controls, DriveMode, Pilot};
 pub use crate::health::{CarStatus, Fault, Health, HealthSnapshot, Part, PartState};
 pub use slot::Latest;
 pub use stop::{StopReason, StopSignal};
@@ -301,6 +304,9 @@ pub struct Parts<'a> {
     pub timer: &'a mut dyn StageTimer,
     /// Telemetry, scoring, recording, dashboard (several as `[&mut dyn Observer; N]`).
     pub observer: &'a mut dyn Observer,
+    /// The driving mode and the human's input (the arming state's); `None`: the pipeline
+    /// always drives.
+    pub controls: Option<&'a Controls>,
 }
 
 /// The loop's state between frames: the previous frame's time (for dt), counters, and the
@@ -315,6 +321,8 @@ pub struct Driver {
     stats: LoopStats,
     ended: Option<LoopEnd>,
     resync: bool,
+    /// The mode changes already turned into events.
+    mode_seen: u64,
 }
 
 impl Driver {
@@ -328,6 +336,7 @@ impl Driver {
             stats: LoopStats::default(),
             ended: None,
             resync: false,
+            mode_seen: 0,
         }
     }
 
@@ -346,6 +355,7 @@ impl Driver {
     pub fn step(&mut self, parts: &mut Parts<'_>) -> Result<Step, LoopError> {
         let (source, pipeline, sink) = (&mut *parts.source, &mut *parts.pipeline, &mut *parts.sink);
         let (stop, clock, timer, observer) = (parts.stop, parts.clock, &mut *parts.timer, &mut *parts.observer);
+        let controls = parts.controls;
         if let Some(e) = self.ended {
             return Ok(Step::End(e));
         }
@@ -391,7 +401,10 @@ impl Driver {
             (Some(o), None) => pipeline.step_stereo(&frame.image, &o.image, dt, timer),
             _ => pipeline.step_with(&frame.image, dt, timer, frame.given.as_deref()),
         };
-        let sent_cmd = sink.send(out.command, frame.time_s)?;
+        // The driving mode picks the command before the gate: disarmed, e-stop, brake and
+        // interlocks hold a human back exactly as they hold the pipeline.
+        let choice = controls.map(|c| c.choose(out.command, clock.now_s()));
+        let sent_cmd = sink.send(choice.map_or(out.command, |ch| ch.command), frame.time_s)?;
         // Dead reckoning integrates what the motors were told, not what the pipeline wanted.
         pipeline.note_sent(sent_cmd);
         let sent = clock.now_s();
@@ -421,6 +434,9 @@ impl Driver {
         if sent_cmd != out.command {
             record.sent = Some(sent_cmd);
         }
+        if let (Some(c), Some(ch)) = (controls, choice) {
+            self.note_mode(c, ch, clock.is_real(), &mut record);
+        }
         sink.drain_events(&mut record.events);
         observer.decorate(&mut record);
         // 7. Observers.
@@ -434,6 +450,30 @@ impl Driver {
             self.ended = Some(LoopEnd::ObserverStopped);
         }
         Ok(Step::Frame(Box::new((out, record))))
+    }
+
+    /// The mode and who drove into the record (once a human input is attached to the run),
+    /// and a mode change as an event naming who and when.
+    fn note_mode(&mut self, c: &Controls, ch: manual::Choice, real_clock: bool, record: &mut FrameRecord) {
+        let v = c.mode_version();
+        if v != self.mode_seen {
+            self.mode_seen = v;
+            let (before, by, at) = c.last_change();
+            record.events.push(format!(
+                "mode {} (was {}) by {} at wall {at:.3} s",
+                ch.mode.name(),
+                before.name(),
+                by.name()
+            ));
+        }
+        if c.reported() {
+            record.drive_mode = Some(ch.mode);
+            record.pilot = Some(ch.pilot);
+            record.human = ch.human;
+            if real_clock {
+                record.input_age_ms = ch.input_age_ms;
+            }
+        }
     }
 
     /// Frames the source numbered but never gave are dropped (not those missing after a
@@ -468,9 +508,9 @@ impl Driver {
     /// Runs until the source ends, a stop is requested or an observer ends the run. The sink
     /// gets neutral on every way out (see the module notes).
     pub fn run(&mut self, parts: Parts<'_>) -> Result<LoopEnd, LoopError> {
-        let Parts { source, pipeline, sink, stop, clock, timer, observer } = parts;
+        let Parts { source, pipeline, sink, stop, clock, timer, observer, controls } = parts;
         let mut guard = NeutralOnDrop::new(sink);
-        let mut parts = Parts { source, pipeline, sink: &mut guard, stop, clock, timer, observer };
+        let mut parts = Parts { source, pipeline, sink: &mut guard, stop, clock, timer, observer, controls };
         let why = loop {
             match self.step(&mut parts)? {
                 Step::End(why) => break why,
@@ -558,6 +598,7 @@ mod tests {
                 clock: &NoClock,
                 timer: &mut NoTimer,
                 observer: &mut NoObserver,
+                controls: None,
             })
             .unwrap();
         assert_eq!(end, LoopEnd::SourceEnded);
@@ -602,6 +643,7 @@ mod tests {
                 clock: &NoClock,
                 timer: &mut NoTimer,
                 observer: &mut obs,
+                controls: None,
             })
             .unwrap();
         assert_eq!(end, LoopEnd::Stopped(StopReason::Interrupt));
@@ -641,8 +683,117 @@ mod tests {
             clock: &NoClock,
             timer: &mut NoTimer,
             observer: &mut Fails,
+            controls: None,
         });
         assert!(r.is_err());
         assert_eq!(log.borrow().last(), Some(&Command::NEUTRAL));
+    }
+
+    /// Issue 26, through the loop and the gate: a recorded sequence of human inputs, mode
+    /// changes, arming and the e-stop, one entry per frame.
+    #[test]
+    fn human_inputs_pass_the_same_gate_and_go_stale() {
+        use crate::drive::arming::AtomicF64;
+        use crate::sink::Actuators;
+        struct At(Arc<AtomicF64>);
+        impl Clock for At {
+            fn now_s(&self) -> f64 {
+                self.0.get()
+            }
+        }
+        #[derive(Default)]
+        struct Motors(Vec<Command>);
+        impl CommandSink for Motors {
+            fn send(&mut self, c: Command, _: f64) -> Result<Command, SinkError> {
+                self.0.push(c);
+                Ok(c)
+            }
+        }
+        impl Actuators for Motors {}
+        use std::sync::Arc;
+        let mut p = pipeline();
+        let (w, h) = p.frame_size();
+        let mut src = Scripted {
+            items: (0..20).map(|i| Some(Ok(i))).collect(),
+            i: 0,
+            size: (w, h),
+        };
+        let now = Arc::new(AtomicF64::new(0.0));
+        let arming = Arming::new(crate::health::Health::new());
+        let c = arming.controls();
+        c.configure(0.25, 0.5);
+        let stop = StopSignal::new();
+        let mut gate = Gate::new(
+            Motors::default(),
+            GateOptions { arming: arming.clone(), stop: stop.clone(), clock: Arc::new(At(now.clone())), give_up_s: 3.0 },
+        );
+        let clock = At(now.clone());
+        let mut d = Driver::new(30.0);
+        let mut records = Vec::new();
+        for k in 0..20u64 {
+            let t = k as f64 / 30.0;
+            now.set(t);
+            // What happened before frame k (the recorded sequence).
+            match k {
+                0 => {
+                    c.set_mode(DriveMode::Manual, Actor::Page, t);
+                    c.set_input(0.5, 1.0, t).unwrap();
+                }
+                1 => c.set_input(0.5, 1.0, t).unwrap(),
+                2 => {
+                    arming.arm(Actor::Page).unwrap();
+                    c.set_input(0.5, 1.0, t).unwrap();
+                }
+                4 => {
+                    arming.estop(Actor::Page);
+                    c.set_input(1.0, 1.0, t).unwrap();
+                }
+                5 => c.set_input(1.0, 1.0, t).unwrap(),
+                6 => {
+                    arming.release(Actor::Page);
+                    arming.arm(Actor::Page).unwrap();
+                    c.set_input(-0.25, 0.5, t).unwrap();
+                }
+                15 => {
+                    c.set_mode(DriveMode::Assisted, Actor::Pad, t);
+                    c.set_input(0.9, 0.75, t).unwrap();
+                }
+                _ => {}
+            }
+            let step = d
+                .step(&mut Parts {
+                    source: &mut src,
+                    pipeline: &mut p,
+                    sink: &mut gate,
+                    stop: &stop,
+                    clock: &clock,
+                    timer: &mut NoTimer,
+                    observer: &mut NoObserver,
+                    controls: Some(c),
+                })
+                .unwrap();
+            let Step::Frame(b) = step else { panic!("frame {k}: {step:?}") };
+            records.push(b.1);
+        }
+        let sent = &gate.inner_mut().0;
+        let cmd = |steer: f64, throttle: f64| Command { steer, throttle };
+        assert_eq!(&sent[..2], &[Command::NEUTRAL; 2], "disarmed: never moves whatever the input");
+        assert_eq!(&sent[2..4], &[cmd(0.5, 0.5); 2], "armed: the human's steer, throttle under the ceiling");
+        assert_eq!(&sent[4..6], &[Command::NEUTRAL; 2], "e-stopped: never moves whatever the input");
+        // The input of frame 6 (t = 0.2 s) holds for 250 ms: frames up to t = 0.45 s.
+        for (k, s) in sent.iter().enumerate().take(15).skip(6) {
+            let want = if (k as f64 / 30.0) - 0.2 <= 0.25 { cmd(-0.25, 0.25) } else { Command::NEUTRAL };
+            assert_eq!(*s, want, "frame {k}");
+        }
+        assert_eq!(sent[14], Command::NEUTRAL, "stale on the first frame past the deadline");
+        // Assisted: the pipeline's steering, the human's throttle.
+        assert_eq!(sent[15], cmd(records[15].steer, 0.375));
+        assert_eq!(records[15].pilot, Some(Pilot::Shared));
+        assert_eq!(records[0].drive_mode, Some(DriveMode::Manual));
+        assert_eq!(records[3].pilot, Some(Pilot::Human));
+        assert_eq!(records[3].human, Some(cmd(0.5, 0.5)));
+        assert!(records[0].events.iter().any(|e| e == "mode manual (was autopilot) by page at wall 0.000 s"), "{:?}", records[0].events);
+        assert!(records[15].events.iter().any(|e| e.starts_with("mode assisted (was manual) by pad")), "{:?}", records[15].events);
+        assert!(records[1].events.is_empty(), "a change is noted once: {:?}", records[1].events);
     }
 }

@@ -39,6 +39,10 @@ pub(super) fn build(cfg: &Config, spec: SessionSpec, env: SessionEnv) -> Result<
     let health = Health::new();
     health.set(Part::Camera, PartState::Waiting, "no frame yet");
     let arming = Arming::new(health.clone());
+    // Driving by hand: how long an input holds, the human's throttle ceiling.
+    arming
+        .controls()
+        .configure(cfg.manual.input_timeout_ms as f64 / 1e3, cfg.manual.max_throttle);
     let mut parts = Parts {
         notes: Vec::new(),
         world: None,
@@ -91,7 +95,7 @@ pub(super) fn build(cfg: &Config, spec: SessionSpec, env: SessionEnv) -> Result<
         score: parts
             .world
             .clone()
-            .map(|w| SimScore::new(w).ending_the_run(!spec.operator_ends_run)),
+            .map(|w| SimScore::new(w).ending_the_run(!spec.operator_ends_run).held_by(arming.clone())),
         car: wall.then(|| CarState(arming.clone())),
         telemetry,
         recorder,

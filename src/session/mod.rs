@@ -343,6 +343,7 @@ impl Session {
             clock: self.env.clock.as_ref(),
             timer: self.env.timer.as_mut(),
             observer: &mut chain,
+            controls: Some(self.arming.controls()),
         });
         if let Some(rec) = self.own.recorder.as_mut() {
             if let Some(w) = rec.take_warning() {

@@ -32,7 +32,7 @@ use crate::classes::SimShape;
 use crate::config::Config;
 use crate::control::behaviour::LightColor;
 use crate::control::Command;
-use crate::drive::{Flow, FrameContext, LoopError, Observer};
+use crate::drive::{Arming, Flow, FrameContext, LoopError, Observer};
 use crate::pipeline::FrameOutput;
 use crate::source::GivenBox;
 use crate::sink::{CommandSink, SinkError};
@@ -52,7 +52,7 @@ pub enum EndReason {
     /// More than a lane width off the lane centre.
     LeftTheRoad,
     /// Stood still for 5 s (not counting waits the behaviour chose: stop sign, red light,
-    /// obstacle).
+    /// obstacle; nor the operator's: disarmed, e-stopped, braked, a human at the throttle).
     Stalled,
     /// Stopped from outside (Ctrl-C, SIGTERM, a test) before any other ending.
     Interrupted,
@@ -359,10 +359,17 @@ impl World {
     /// Scores one processed frame (at the pose it was rendered from) and checks the endings.
     /// `time_s` is the frame's time; `dt` its period.
     pub fn score(&mut self, out: &FrameOutput, dt: f64, time_s: f64) {
+        self.score_held(out, dt, time_s, false)
+    }
+
+    /// [`World::score`] for a frame on which the car was held still on purpose (`held`:
+    /// disarmed, e-stopped, braking, or a human holding the throttle): standing then is not
+    /// a stall.
+    pub fn score_held(&mut self, out: &FrameOutput, dt: f64, time_s: f64, held: bool) {
         let Some(truth) = self.last_truth.clone() else {
             return;
         };
-        self.score_frame(&truth, out, dt, time_s);
+        self.score_frame(&truth, out, dt, time_s, held);
         self.sc.frames += 1;
         if self.sc.end.is_none() && self.sc.frames as f64 / self.fps >= self.cfg.sim.max_seconds {
             self.sc.end = Some(EndReason::TimeUp);
@@ -417,7 +424,7 @@ impl World {
         Some(GivenBox { class, bbox, light })
     }
 
-    fn score_frame(&mut self, truth: &FrameTruth, out: &FrameOutput, dt: f64, t: f64) {
+    fn score_frame(&mut self, truth: &FrameTruth, out: &FrameOutput, dt: f64, t: f64, held: bool) {
         let track = &self.scene.track;
         let e = truth.offset_m;
         // Wheels: rebuild them for the rendered pose.
@@ -496,8 +503,9 @@ impl World {
         if e.abs() > 2.0 * half {
             self.sc.end.get_or_insert(EndReason::LeftTheRoad);
         }
-        // Standing at a stop sign, a red light or an obstacle is the behaviour's choice.
-        if self.vehicle.speed.abs() < 0.005 && t > 1.0 && !out.mode.is_waiting() {
+        // Standing at a stop sign, a red light or an obstacle is the behaviour's choice;
+        // standing disarmed, e-stopped, braked or held by a human is the operator's.
+        if self.vehicle.speed.abs() < 0.005 && t > 1.0 && !out.mode.is_waiting() && !held {
             self.sc.still_s += dt;
             if self.sc.still_s >= 5.0 {
                 self.sc.end.get_or_insert(EndReason::Stalled);
@@ -540,12 +548,32 @@ impl crate::sink::Actuators for SimVehicle {}
 pub struct SimScore {
     world: SharedWorld,
     ends_run: bool,
+    /// The run's arming: a car held on purpose (disarmed, e-stopped, braked, a human at the
+    /// throttle) is not stalled.
+    arming: Option<Arc<Arming>>,
 }
 
 impl SimScore {
     /// Scores `world`.
     pub fn new(world: SharedWorld) -> SimScore {
-        SimScore { world, ends_run: true }
+        SimScore {
+            world,
+            ends_run: true,
+            arming: None,
+        }
+    }
+
+    /// Reads `arming` each frame: standing still while it holds the car is not a stall.
+    pub fn held_by(mut self, arming: Arc<Arming>) -> Self {
+        self.arming = Some(arming);
+        self
+    }
+
+    /// Whether the car is held still on purpose now.
+    fn held(&self) -> bool {
+        self.arming.as_ref().is_some_and(|a| {
+            !a.is_armed() || a.is_braking() || a.controls().mode() != crate::drive::DriveMode::Autopilot
+        })
     }
 
     /// `false`: score but never end the loop (the caller checks [`World::ended`]).
@@ -557,9 +585,10 @@ impl SimScore {
 
 impl Observer for SimScore {
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        let held = self.held();
         let mut w = lock(&self.world);
         let dt = 1.0 / w.fps;
-        w.score(ctx.output, dt, ctx.frame.time_s);
+        w.score_held(ctx.output, dt, ctx.frame.time_s, held);
         Ok(if self.ends_run && w.ended().is_some() {
             Flow::Stop
         } else {

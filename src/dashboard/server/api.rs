@@ -9,8 +9,8 @@ use super::log::Msg;
 use super::reply::{error, reply};
 use super::state::Shared;
 use crate::dashboard::local_toml;
-use crate::dashboard::messages::{self, Control, PlaceRequest, PlotPoint, SetRequest};
-use crate::drive::Actor;
+use crate::dashboard::messages::{self, Control, DriveRequest, ModeRequest, PlaceRequest, PlotPoint, SetRequest};
+use crate::drive::{Actor, DriveMode};
 use axum::body::{Body, Bytes};
 use axum::extract::State;
 use axum::http::{header, HeaderMap, HeaderValue, Method, Request, Response, StatusCode, Uri};
@@ -44,6 +44,8 @@ pub fn router(sh: Arc<Shared>) -> Router {
         .route("/api/heartbeat", post(heartbeat))
         .route("/api/set", post(set))
         .route("/api/save", post(save))
+        .route("/api/drive", post(drive))
+        .route("/api/mode", post(mode))
         .route("/api/sim/pause", post(sim))
         .route("/api/sim/resume", post(sim))
         .route("/api/sim/step", post(sim))
@@ -244,6 +246,54 @@ async fn heartbeat(State(sh): State<Arc<Shared>>) -> Response<Body> {
     reply(StatusCode::OK, &json!({"armed": sh.arm.is_armed()}))
 }
 
+/// `POST /api/drive`: the human's newest steering and throttle (−1..1 each). Only atomics:
+/// the loop takes the newest at its next frame, by the mode, before the gate; an input older
+/// than `manual.input_timeout_ms` counts as released.
+async fn drive(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h: HeaderMap, b: Body) -> Response<Body> {
+    let bytes = match body(&h, b, &c).await {
+        Ok(b) => b,
+        Err(r) => return r,
+    };
+    let q: DriveRequest = match messages::parse_body(&bytes) {
+        Ok(q) => q,
+        Err(e) => return error(StatusCode::BAD_REQUEST, &e.to_string()),
+    };
+    let controls = sh.arm.controls();
+    if let Err(e) = controls.set_input(q.steer, q.throttle, sh.sent.now()) {
+        return error(StatusCode::BAD_REQUEST, &e.to_string());
+    }
+    reply(
+        StatusCode::OK,
+        &json!({"mode": controls.mode().name(), "armed": sh.arm.is_armed()}),
+    )
+}
+
+/// `POST /api/mode`: `manual`, `assisted` or `autopilot`, from the next frame on (the loop
+/// notes the change in the telemetry with who and when).
+async fn mode(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h: HeaderMap, b: Body) -> Response<Body> {
+    let bytes = match body(&h, b, &c).await {
+        Ok(b) => b,
+        Err(r) => return r,
+    };
+    let q: ModeRequest = match messages::parse_body(&bytes) {
+        Ok(q) => q,
+        Err(e) => return error(StatusCode::BAD_REQUEST, &e.to_string()),
+    };
+    let Some(m) = DriveMode::parse(&q.mode) else {
+        let msg = format!(
+            "mode `{}` is not one of {}",
+            q.mode.chars().take(32).collect::<String>(),
+            DriveMode::ALL.map(DriveMode::name).join(", ")
+        );
+        return error(StatusCode::BAD_REQUEST, &msg);
+    };
+    let before = sh.arm.controls().set_mode(m, Actor::Page, sh.sent.now());
+    if before != m {
+        sh.log.send(Msg::Out(format!("dashboard: mode {} (was {}) from {}", m.name(), before.name(), c.ctl.peer)));
+    }
+    reply(StatusCode::OK, &json!({"mode": m.name()}))
+}
+
 async fn set(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h: HeaderMap, b: Body) -> Response<Body> {
     let bytes = match body(&h, b, &c).await {
         Ok(b) => b,
@@ -392,6 +442,18 @@ fn param_rows(method: crate::control::steering::SteeringMethod) -> Vec<Value> {
         .collect()
 }
 
+/// Driving by hand: the human's input as the loop would take it now, the deadline and the
+/// ceiling.
+fn manual_json(sh: &Shared) -> Value {
+    let c = sh.arm.controls();
+    let input = c.input(sh.sent.now());
+    json!({
+        "input": input.map(|(steer, throttle, age_ms)| json!({"steer": steer, "throttle": throttle, "age_ms": age_ms})),
+        "input_timeout_ms": c.deadline_s() * 1e3,
+        "max_throttle": c.ceiling(),
+    })
+}
+
 fn state_json(sh: &Shared, since: f64, session: bool) -> Value {
     let (snap, points) = {
         let v = sh.view.lock().unwrap_or_else(|e| e.into_inner());
@@ -438,6 +500,8 @@ fn state_json(sh: &Shared, since: f64, session: bool) -> Value {
         "changed": *sh.changed.lock().unwrap_or_else(|e| e.into_inner()),
         "steering_method": method.name(),
         "params": params,
+        "mode": sh.arm.controls().mode().name(),
+        "manual": manual_json(sh),
     });
     if let Some(sn) = snap {
         let r = &sn.record;

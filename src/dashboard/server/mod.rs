@@ -8,7 +8,7 @@
 //!   whose socket takes nothing for 2 s is dropped; at most `dashboard.max_viewers` viewers.
 //! - `GET /api/state?since=T` the newest state and the plot samples after frame time `T`.
 //! - `POST /api/estop`: stops the car, from anyone who can reach the server (the safe way).
-//! - `POST /api/{release,arm,disarm,heartbeat,set,save}`, and in the simulator
+//! - `POST /api/{release,arm,disarm,heartbeat,set,save,drive,mode}`, and in the simulator
 //!   `POST /api/sim/{pause,resume,step,reset,place}`: need the same-origin proof of
 //!   [`access`] (Host, Origin, `Content-Type: application/json`, the page's secret and, off
 //!   loopback, the login cookie); refusals answer 403 and are logged.
@@ -114,6 +114,8 @@ impl Server {
             .map_err(|source| DashboardError::Bind { addr, source })?;
         let bound = listener.local_addr()?;
         let access = access::Access::new(bound, &o.cfg.dashboard.token);
+        // A human may drive from now on: every record says the mode and who drove.
+        o.arm.controls().attach();
         let (log, log_rx) = log::Log::new();
         let track_length = o.world.as_ref().map(|w| lock(w).scene().track.length);
         let shared = Arc::new(Shared {
