@@ -279,6 +279,8 @@ const CONTROL: &[&str] = &[
     "/api/sim/step",
     "/api/sim/reset",
     "/api/sim/place",
+    "/api/drive",
+    "/api/mode",
 ];
 
 #[test]
@@ -514,6 +516,46 @@ fn nan_and_infinity_are_refused() {
     assert_eq!(state(s).unwrap()["values"]["steering.kp"], 1.0);
 }
 
+/// Issue 26: the human's input is steer and throttle in -1..1, and the mode one of three
+/// names; anything else is 400 and changes nothing.
+#[test]
+fn manual_inputs_out_of_range_nan_or_unknown_are_refused_400() {
+    let s = remote();
+    let last = || state(s).unwrap()["manual"]["last_input_wall_s"].clone();
+    let before = last();
+    for body in [
+        r#"{"steer":0,"throttle":1.5}"#,
+        r#"{"steer":-1.01,"throttle":0}"#,
+        r#"{"steer":NaN,"throttle":0}"#,
+        r#"{"steer":0,"throttle":1e999}"#,
+        r#"{"steer":0,"throttle":-Infinity}"#,
+        r#"{"steer":0,"throttle":null}"#,
+        r#"{"steer":0}"#,
+        r#"{"steer":0,"throttle":0.5,"boost":1}"#,
+        r#"[0, 0.5]"#,
+    ] {
+        let (c, b) = req(s, "POST", "/api/drive", body);
+        assert_eq!(c, 400, "{body}: {b}");
+    }
+    let (c, b) = req(s, "POST", "/api/drive", r#"{"steer":0,"throttle":1.5}"#);
+    assert!(b.contains("throttle = 1.5 is out of range (allowed: -1 ..= 1)"), "{c} {b}");
+    assert_eq!(last(), before, "a refused input was taken");
+    for body in [r#"{"mode":"turbo"}"#, r#"{"mode":"Manual"}"#, r#"{"mode":1}"#, r#"{}"#] {
+        let (c, b) = req(s, "POST", "/api/mode", body);
+        assert_eq!(c, 400, "{body}: {b}");
+    }
+    assert_eq!(state(s).unwrap()["mode"], "autopilot");
+    // In range, with the proof: taken (and the mode back to the autopilot afterwards).
+    let (c, b) = req(s, "POST", "/api/drive", r#"{"steer":-1,"throttle":1}"#);
+    assert_eq!(c, 200, "{b}");
+    assert_ne!(last(), before);
+    let (c, b) = req(s, "POST", "/api/mode", r#"{"mode":"assisted"}"#);
+    assert_eq!(c, 200, "{b}");
+    assert_eq!(state(s).unwrap()["mode"], "assisted");
+    let (c, b) = req(s, "POST", "/api/mode", r#"{"mode":"autopilot"}"#);
+    assert_eq!(c, 200, "{b}");
+}
+
 #[test]
 fn path_traversal_finds_nothing() {
     let s = remote();
@@ -688,6 +730,8 @@ fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() 
         ("/api/save", ""),
         ("/api/sim/place", r#"{"s":10}"#),
         ("/api/sim/pause", ""),
+        ("/api/mode", r#"{"mode":"manual"}"#),
+        ("/api/drive", r#"{"steer":0.5,"throttle":1}"#),
     ];
     let mut n = 0;
     for (what, h) in &attempts {
@@ -721,6 +765,10 @@ fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() 
     assert_eq!(after.2, serde_json::json!({}), "changed keys");
     assert_eq!(before.3, after.3, "local.toml was written");
     assert!(!state(s).unwrap()["paused"].as_bool().unwrap_or(false), "paused");
+    // No human input taken, the mode unchanged (issue 26).
+    let st = state(s).unwrap();
+    assert_eq!(st["mode"], "autopilot", "mode changed");
+    assert!(st["manual"]["last_input_wall_s"].is_null(), "a manual input was taken: {}", st["manual"]);
     // Every refusal counted (state, for the page), logged on stderr with origin and path.
     let st = state(s).unwrap();
     assert!(
@@ -735,6 +783,8 @@ fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() 
         &format!("Origin {other}"),
         "Host rebind.evil.example",
         "refused OPTIONS /api/arm",
+        "refused POST /api/drive from 127.0.0.1",
+        "refused POST /api/mode from 127.0.0.1",
     ] {
         assert!(log.contains(needle), "stderr lacks `{needle}`:\n{log}");
     }

@@ -273,6 +273,11 @@ pub struct Sent {
     pub neutral_clock_s: AtomicF64,
     /// … and its frame time.
     pub neutral_frame_s: AtomicF64,
+    /// When the throttle sent last became 0 (the first zero after a non-zero throttle),
+    /// clock seconds: a released joystick or key is measured here. NaN: never moved.
+    pub stopped_clock_s: AtomicF64,
+    /// … and its frame time.
+    pub stopped_frame_s: AtomicF64,
 }
 
 impl Sent {
@@ -290,6 +295,11 @@ impl Sent {
     }
 
     fn record(&self, cmd: Command, clock_s: f64, frame_s: f64) {
+        let before = self.throttle.get();
+        if cmd.throttle == 0.0 && before != 0.0 && !before.is_nan() {
+            self.stopped_clock_s.set(clock_s);
+            self.stopped_frame_s.set(frame_s);
+        }
         self.throttle.set(cmd.throttle);
         self.steer.set(cmd.steer);
         self.clock_s.set(clock_s);

@@ -187,6 +187,11 @@ impl Controls {
         Ok(())
     }
 
+    /// When the newest input arrived, seconds on the run's clock (NaN: never), stale or not.
+    pub fn input_at_s(&self) -> f64 {
+        self.input_at_s.get()
+    }
+
     /// The human's input at `now_s`: `(steer, throttle after the ceiling, age ms)`, or
     /// `None` when released (never given, or older than the deadline).
     pub fn input(&self, now_s: f64) -> Option<(f64, f64, f64)> {

@@ -708,6 +708,10 @@ mod tests {
                 self.0.push(c);
                 Ok(c)
             }
+            // Only the frames' commands are logged (not the neutral of a disarm).
+            fn stop(&mut self) -> Result<(), SinkError> {
+                Ok(())
+            }
         }
         impl Actuators for Motors {}
         use std::sync::Arc;

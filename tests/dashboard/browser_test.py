@@ -124,10 +124,17 @@ class WebDriver:
         self.cmd("POST", "/actions", {"actions": [{"type": "key", "id": "kbd", "actions": [
             {"type": "keyDown", "value": key}, {"type": "keyUp", "value": key}]}]})
 
+    def actions(self, *sources):
+        """One W3C action chain; input state (a key or a finger held) lasts across calls."""
+        self.cmd("POST", "/actions", {"actions": list(sources)})
+
     def screenshot(self, path):
         png = base64.b64decode(self.cmd("GET", "/screenshot"))
         with open(path, "wb") as f:
             f.write(png)
+
+    def set_window(self, w, h):
+        self.cmd("POST", "/window/rect", {"width": w, "height": h})
 
     def quit(self):
         try:
@@ -160,6 +167,8 @@ def main():
     ap.add_argument("--rccar", default=os.path.join(ROOT, "target/release/rccar"))
     ap.add_argument("--screenshot", help="also save the page here (docs/img/dashboard.png)")
     ap.add_argument("--keep", action="store_true", help="keep the temp folder")
+    ap.add_argument("--only", choices=["all", "manual"], default="all",
+                    help="manual: only driving by hand (sim and drive), for a busy machine")
     a = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="rccar-dash-")
     cfgdir = os.path.join(tmp, "config")
@@ -193,6 +202,15 @@ def main():
         wd.go(base + "/")
         shown = wait(lambda: wd.js("return document.getElementById('s-steering.kp') !== null"), 20, 0.1)
         check("page loads and builds the sliders", bool(shown))
+        if a.only == "manual":
+            manual_suite(wd, base, out, "sim", tmp)
+            wd.set_window(390, 844)
+            phone(wd, "sim", tmp)
+            wd.set_window(1400, 1000)
+            check("the sim is still running", sim.poll() is None)
+            sim.terminate()
+            drive_suite(a, wd, cfgdir, tmp, procs)
+            return
         cross_origin(wd, base, local, os.path.join(tmp, "sim.log"), tmp, "sim")
 
         # 1. Frames arrive in the <img> (the only viewer).
@@ -432,16 +450,156 @@ def drive_suite(a, wd, cfgdir, tmp, procs):
     wd.go(base + "/")
     shown = wait(lambda: wd.js("return document.getElementById('s-steering.kp') !== null"), 20, 0.1)
     check("[drive] page loads and builds the sliders", bool(shown))
-    cross_origin(wd, base, local, log, tmp, "drive")
+    t_up = time.time()
+    if a.only != "manual":
+        cross_origin(wd, base, local, log, tmp, "drive")
+    # Issue 26: waiting disarmed is not a stall (the run ended "Stalled" after 6 s).
+    time.sleep(max(0.0, 8.0 - (time.time() - t_up)))
+    ended = drive.poll()
+    check("[drive] waiting disarmed for 8 s: still running (not \"Stalled\")", ended is None,
+          "ended by itself: " + open(log).read()[-300:] if ended is not None else "")
+    manual_suite(wd, base, os.path.join(tmp, "drive-out"), "drive", tmp, joystick=False)
     wd.click(wd.find("#arm"))
     armed = wait(lambda: (_state(base) or {}).get("armed"), 5)
     wd.click(wd.find("#estop"))
     stopped = wait(lambda: (lambda s: s and s["estop"] and not s["armed"])(_state(base)), 5)
     check("[drive] the page arms, then its EMERGENCY STOP stops", bool(armed) and bool(stopped),
           f"armed {bool(armed)}, e-stop {bool(stopped)}")
+    time.sleep(7.0)
     ended = drive.poll()
-    check("[drive] still running after the checks", ended is None,
+    check("[drive] e-stopped for 7 s and still running after the checks", ended is None,
           "ended by itself: " + open(log).read()[-300:] if ended is not None else "")
+
+
+ELEMENT = "element-6066-11e4-a52e-4f735466cecf"
+
+
+def _last_truth(out):
+    """The newest telemetry record that has the simulator's truth."""
+    try:
+        recs = telemetry(os.path.join(out, "telemetry.jsonl"))
+    except (OSError, ValueError):
+        return None
+    for r in reversed(recs):
+        if r.get("truth"):
+            return r
+    return None
+
+
+def _release_timing(wd, base, label, how, t_page):
+    """After a release at page time `t_page` (epoch s): when the neutral input reached the
+    server, when the throttle sent became 0, both on the server's clock."""
+    def stopped_after_release(s):
+        if not s or s["sent"]["throttle"] != 0.0 or s["sent"]["stopped_wall_s"] is None:
+            return None
+        to_epoch = s["epoch_ms"] / 1e3 - s["wall_s"]
+        return s if s["sent"]["stopped_wall_s"] + to_epoch >= t_page - 0.2 else None
+    st = wait(lambda: stopped_after_release(_state(base)), 5)
+    if not st:
+        check(f"[{label}] {how}: released -> neutral within one frame", False, "throttle never went to 0")
+        return
+    to_epoch = st["epoch_ms"] / 1e3 - st["wall_s"]
+    arrived = st["manual"]["last_input_wall_s"]
+    stopped = st["sent"]["stopped_wall_s"]
+    period = st.get("period_ms") or 33.3
+    release_to_zero = (stopped + to_epoch - t_page) * 1e3
+    arrival_to_zero = (stopped - arrived) * 1e3
+    # One frame: the first command after the neutral input arrived is neutral (the loop
+    # takes the newest input at its next frame; a frame is period_ms apart).
+    check(f"[{label}] {how}: released -> neutral within one frame",
+          -1.0 <= arrival_to_zero <= period * 1.5 + 5.0 and release_to_zero < 100.0,
+          f"neutral input reached the server -> throttle 0 sent: {arrival_to_zero:.1f} ms (frame period {period:.1f} ms); "
+          f"release in the page -> throttle 0 sent: {release_to_zero:.1f} ms")
+
+
+def manual_suite(wd, base, out, label, tmp, joystick=True):
+    """Issue 26: the keyboard and the joystick drive the simulated car in manual mode;
+    releasing gives neutral within one frame; disarmed the car never moves."""
+    wd.js("window.__rel=null;const h=e=>{window.__rel=performance.timeOrigin+e.timeStamp;};"
+          "document.addEventListener('keyup',h,true);"
+          "document.getElementById('joy').addEventListener('pointerup',h,true);")
+    wd.click(wd.find("#release"))
+    wd.click(wd.find("#disarm"))
+    wd.click(wd.find('#modes button[data-mode="manual"]'))
+    on = wait(lambda: (lambda s: s and s["mode"] == "manual")(_state(base)), 5)
+    rec = wait(lambda: _find_event(os.path.join(out, "telemetry.jsonl"), "mode manual (was autopilot) by page"), 5)
+    check(f"[{label}] the mode switch: manual on the next frame, noted with who and when",
+          bool(on) and rec is not None and rec.get("drive_mode") == "manual",
+          f"frame {rec['frame']}: {rec['events']}" if rec else "no event")
+    # Disarmed: holding the up arrow sends input, the car never moves.
+    wd.js("document.activeElement.blur()")
+    r0 = _last_truth(out)
+    wd.actions({"type": "key", "id": "kbd", "actions": [{"type": "keyDown", "value": "\ue013"}]})  # ArrowUp
+    time.sleep(1.5)
+    st = _state(base)
+    r1 = _last_truth(out)
+    wd.actions({"type": "key", "id": "kbd", "actions": [{"type": "keyUp", "value": "\ue013"}]})
+    held = st["manual"]["input"]
+    moved = abs(r1["truth"]["s_m"] - r0["truth"]["s_m"]) if r0 and r1 else None
+    check(f"[{label}] disarmed: holding a key never moves the car",
+          held is not None and held["throttle"] > 0 and st["sent"]["throttle"] == 0.0 and moved is not None and moved < 1e-6,
+          f"input {held}, sent throttle {st['sent']['throttle']}, moved {moved} m")
+    # Armed: the keyboard drives.
+    wd.click(wd.find("#arm"))
+    wait(lambda: (_state(base) or {}).get("armed"), 5)
+    wd.js("document.activeElement.blur()")
+    r0 = _last_truth(out)
+    wd.actions({"type": "key", "id": "kbd", "actions": [{"type": "keyDown", "value": "\ue013"}]})
+    time.sleep(1.5)
+    st = _state(base)
+    r1 = _last_truth(out)
+    wd.actions({"type": "key", "id": "kbd", "actions": [{"type": "keyUp", "value": "\ue013"}]})
+    t_rel = wd.js("return window.__rel") / 1e3
+    moved = r1["truth"]["s_m"] - r0["truth"]["s_m"] if r0 and r1 else None
+    check(f"[{label}] keyboard (arrow up, 1.5 s): the car drives at the ceiling",
+          abs(st["sent"]["throttle"] - st["manual"]["max_throttle"]) < 1e-6 and moved is not None and moved > 0.05,
+          f"sent throttle {st['sent']['throttle']} (ceiling {st['manual']['max_throttle']}), moved {moved:.2f} m, "
+          f"true speed {r1['truth']['speed_mps']:.2f} m/s" if moved is not None else "no truth")
+    _release_timing(wd, base, label, "key up", t_rel)
+    if joystick:
+        for ptype in ("touch", "mouse"):
+            joy = wd.find("#joy")
+            wd.js("document.getElementById('joy').scrollIntoView({block: 'center'})")
+            time.sleep(1.0)
+            r0 = _last_truth(out)
+            wd.actions({"type": "pointer", "id": "p-" + ptype, "parameters": {"pointerType": ptype}, "actions": [
+                {"type": "pointerMove", "duration": 0, "origin": {ELEMENT: joy}, "x": 0, "y": 0},
+                {"type": "pointerDown", "button": 0},
+                {"type": "pointerMove", "duration": 100, "origin": {ELEMENT: joy}, "x": 30, "y": -90}]})
+            time.sleep(1.5)
+            st = _state(base)
+            r1 = _last_truth(out)
+            wd.actions({"type": "pointer", "id": "p-" + ptype, "parameters": {"pointerType": ptype},
+                        "actions": [{"type": "pointerUp", "button": 0}]})
+            t_rel = wd.js("return window.__rel") / 1e3
+            h = st["manual"]["input"]
+            moved = r1["truth"]["s_m"] - r0["truth"]["s_m"] if r0 and r1 else None
+            check(f"[{label}] joystick ({ptype}, dragged up and right): the car drives and steers",
+                  h is not None and h["throttle"] > 0.2 and h["steer"] > 0.1 and st["sent"]["throttle"] > 0.2
+                  and moved is not None and moved > 0.05,
+                  f"input {h}, sent {st['sent']['steer']:.2f}/{st['sent']['throttle']:.2f}, moved {moved:.2f} m"
+                  if moved is not None else f"input {h}")
+            _release_timing(wd, base, label, f"joystick ({ptype}) let go", t_rel)
+    # Released: nothing more is sent, the car stays stopped.
+    time.sleep(0.6)
+    st = _state(base)
+    check(f"[{label}] released: the car stays stopped, no input held", st["sent"]["throttle"] == 0.0 and st["manual"]["input"] is None,
+          f"sent throttle {st['sent']['throttle']}, input {st['manual']['input']}")
+    wd.click(wd.find("#disarm"))
+    wd.click(wd.find('#modes button[data-mode="autopilot"]'))
+    wait(lambda: (lambda s: s and s["mode"] == "autopilot")(_state(base)), 5)
+    wd.screenshot(os.path.join(tmp, f"dashboard_manual_{label}.png"))
+
+
+def phone(wd, label, tmp):
+    """On a 390x844 phone every drive control fits: no horizontal scrolling."""
+    time.sleep(0.5)
+    v = wd.js("const d=document.documentElement;const r=id=>{const e=document.getElementById(id);const b=e.getBoundingClientRect();return [b.left,b.right];};"
+              "return {vw: d.clientWidth, sw: d.scrollWidth, joy: r('joy'), modes: r('modes'), estop: r('estop'), arm: r('arm')};")
+    fits = all(0 <= v[k][0] and v[k][1] <= v["vw"] + 0.5 for k in ("joy", "modes", "estop", "arm"))
+    check(f"[{label}] 390x844: the drive controls fit without horizontal scrolling",
+          fits and v["sw"] <= v["vw"], json.dumps(v))
+    wd.screenshot(os.path.join(tmp, f"dashboard_phone_{label}.png"))
 
 
 def link_config(dst):

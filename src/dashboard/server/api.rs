@@ -449,6 +449,8 @@ fn manual_json(sh: &Shared) -> Value {
     let input = c.input(sh.sent.now());
     json!({
         "input": input.map(|(steer, throttle, age_ms)| json!({"steer": steer, "throttle": throttle, "age_ms": age_ms})),
+        // the newest input's arrival on the run's clock, stale or not (`wall_s` is now)
+        "last_input_wall_s": opt(c.input_at_s()),
         "input_timeout_ms": c.deadline_s() * 1e3,
         "max_throttle": c.ceiling(),
     })
@@ -478,7 +480,8 @@ fn state_json(sh: &Shared, since: f64, session: bool) -> Value {
         "stream_frames": sh.frames_sent.load(Ordering::SeqCst),
         "wall_s": s.now(),
         "epoch_ms": std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64() * 1e3),
-        "sent": {"throttle": opt(s.throttle.get()), "steer": opt(s.steer.get()), "wall_s": opt(s.clock_s.get()), "sim_s": opt(s.frame_s.get())},
+        "sent": {"throttle": opt(s.throttle.get()), "steer": opt(s.steer.get()), "wall_s": opt(s.clock_s.get()), "sim_s": opt(s.frame_s.get()),
+                 "stopped_wall_s": opt(s.stopped_clock_s.get()), "stopped_sim_s": opt(s.stopped_frame_s.get())},
         "estop_timing": {
             "pressed_wall_s": opt(s.estop_clock_s.get()), "pressed_sim_s": opt(s.estop_frame_s.get()),
             "neutral_wall_s": opt(s.neutral_clock_s.get()), "neutral_sim_s": opt(s.neutral_frame_s.get()),
