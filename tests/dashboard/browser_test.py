@@ -19,8 +19,16 @@ package), and checks what a student would see and do:
    secret: the car stays disarmed, kp and local.toml are unchanged, and the server logged
    every refusal with the attacking origin on stderr and counts them in /api/state.
 
-The cross-origin part (6), the page loading and an e-stop click are also run against
-`rccar drive --camera sim --dry-run --dashboard` (the car's own loop).
+7. (issue 26) driving by hand: the mode switch, a held arrow key, the joystick dragged by a
+   finger and by the mouse (WebDriver pointer actions) and a scripted Gamepad API pad drive
+   the armed car (its true position moves); disarmed it never moves; each release gives
+   neutral on the next frame (timed); at 390x844 the controls fit without horizontal
+   scrolling.
+
+The cross-origin part (6), the page loading, driving by hand (7) and an e-stop click are also
+run against `rccar drive --camera sim --dry-run --dashboard` (the car's own loop), which must
+wait disarmed and e-stopped without ending ("Stalled" after 6 s before issue 26).
+`--only manual` runs only (7) on both, for a busy machine.
 
 Screenshots go to the output folder (not committed); `--screenshot PATH` also writes one
 there (docs/img/dashboard.png). Prints "N passed, N failed"; exit 1 on any failure.
@@ -337,6 +345,11 @@ def main():
             wd.click(wd.find("#arm"))
             time.sleep(3)
             wd.screenshot(a.screenshot)
+        # 6. Driving by hand (issue 26), and the phone size.
+        manual_suite(wd, base, out, "sim", tmp)
+        wd.set_window(390, 844)
+        phone(wd, "sim", tmp)
+        wd.set_window(1400, 1000)
         print(f"screenshots in {tmp}")
         check("the sim is still running", sim.poll() is None)
         sim.terminate()
