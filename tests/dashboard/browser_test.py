@@ -529,6 +529,14 @@ def _release_timing(wd, base, label, how, t_page, allow_ms=100.0):
 
 
 def manual_suite(wd, base, out, label, tmp, joystick=True):
+    """`_manual_suite`, a crash (a run that ended, a state that never came) counted as a failure."""
+    try:
+        _manual_suite(wd, base, out, label, tmp, joystick)
+    except Exception as e:  # noqa: BLE001 - reported as a failed check, the suite goes on
+        check(f"[{label}] driving by hand ran to its end", False, repr(e))
+
+
+def _manual_suite(wd, base, out, label, tmp, joystick=True):
     """Issue 26: the keyboard and the joystick drive the simulated car in manual mode;
     releasing gives neutral within one frame; disarmed the car never moves."""
     wd.js("window.__rel=null;const h=e=>{window.__rel=performance.timeOrigin+e.timeStamp;};"
@@ -593,6 +601,9 @@ def manual_suite(wd, base, out, label, tmp, joystick=True):
             r1 = _last_truth(out)
             chain.join(30)
             t_rel = wd.js("return window.__rel") / 1e3
+            if not st:
+                check(f"[{label}] joystick ({ptype}): the car drives and steers", False, "no state (the run ended?)")
+                return
             h = st["manual"]["input"]
             moved = r1["truth"]["s_m"] - r0["truth"]["s_m"] if r0 and r1 else None
             check(f"[{label}] joystick ({ptype}, dragged up and right): the car drives and steers",
@@ -615,6 +626,9 @@ def manual_suite(wd, base, out, label, tmp, joystick=True):
     st = wait(lambda: _state(base), 5)
     r1 = _last_truth(out)
     t_rel = wd.js("window.__pad.buttons[4]={pressed:false,value:0};return performance.timeOrigin+performance.now();") / 1e3
+    if not st:
+        check(f"[{label}] gamepad: the car drives and steers", False, "no state (the run ended?)")
+        return
     h = st["manual"]["input"]
     moved = r1["truth"]["s_m"] - r0["truth"]["s_m"] if r0 and r1 else None
     check(f"[{label}] gamepad (LB held, right stick up, left stick right): the car drives and steers",
