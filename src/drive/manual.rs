@@ -200,7 +200,8 @@ impl Controls {
         let age = now_s - at;
         // NaN (never given) fails the comparison; a time from the future is not trusted
         // beyond the deadline either.
-        if !(age.abs() <= self.deadline_s.get()) {
+        let fresh = age.abs() <= self.deadline_s.get();
+        if !fresh {
             return None;
         }
         Some((steer, throttle * self.ceiling.get(), age.max(0.0) * 1e3))
