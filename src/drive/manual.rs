@@ -81,7 +81,10 @@ fn pack(steer: f64, throttle: f64) -> u64 {
 }
 
 fn unpack(w: u64) -> (f64, f64) {
-    (f64::from(f32::from_bits((w >> 32) as u32)), f64::from(f32::from_bits(w as u32)))
+    (
+        f64::from(f32::from_bits((w >> 32) as u32)),
+        f64::from(f32::from_bits(w as u32)),
+    )
 }
 
 /// Why a human input was refused.
@@ -307,7 +310,11 @@ mod tests {
         for (s, t) in [(f64::NAN, 0.0), (0.0, f64::INFINITY), (1.01, 0.0), (0.0, -1.5)] {
             assert!(c.set_input(s, t, 0.0).is_err(), "{s} {t}");
         }
-        assert_eq!(c.choose(AUTO, 0.0).command, Command::NEUTRAL, "a refused input changes nothing");
+        assert_eq!(
+            c.choose(AUTO, 0.0).command,
+            Command::NEUTRAL,
+            "a refused input changes nothing"
+        );
         c.configure(0.25, 0.3);
         c.set_input(0.0, 1.0, 5.0).unwrap();
         assert_eq!(c.choose(AUTO, 5.0).command.throttle, 0.3, "the ceiling");
