@@ -15,7 +15,9 @@
 //! | `manual` | the human's | the human's |
 //!
 //! The human's input is the newest `(steer, throttle)` in −1..1 with the time it arrived on
-//! the run's clock. Older than the deadline (`manual.input_timeout_ms`) it counts as released:
+//! the human's clock: the wall clock, never the run's (a human acts in wall time, and a run's
+//! clock may read nothing at all, as under `--no-timing`: an input timed on it would never go
+//! stale). Older than the deadline (`manual.input_timeout_ms`) it counts as released:
 //! neutral (steer 0, throttle 0). A page that goes away, a browser that freezes, a Wi-Fi that
 //! drops all end the same way: the car stops within the deadline. The human's throttle is
 //! scaled by the ceiling (`manual.max_throttle`): full stick gives at most that.
@@ -27,7 +29,10 @@
 use super::arming::{Actor, AtomicF64};
 pub use crate::control::pilot::{DriveMode, Pilot};
 use crate::control::Command;
+use crate::timing::Clock;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::Instant;
 
 /// The command the loop hands to the gate, and who made it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,7 +46,8 @@ pub struct Choice {
     /// The human's input as used (after the ceiling; neutral when released or stale), when
     /// the mode takes anything from the human.
     pub human: Option<Command>,
-    /// How old the human's input was, ms on the run's clock (`None`: released or stale).
+    /// How old the human's input was, ms on the human's (wall) clock (`None`: released or
+    /// stale).
     pub input_age_ms: Option<f64>,
 }
 
@@ -49,8 +55,17 @@ pub struct Choice {
 const DEFAULT_DEADLINE_S: f64 = 0.25;
 const DEFAULT_CEILING: f64 = 0.5;
 
-/// The driving mode and the human's newest input (see the module notes). Lock-free.
+/// The human's clock: monotonic wall time since the controls were made.
 #[derive(Debug)]
+struct Wall(Instant);
+
+impl Clock for Wall {
+    fn now_s(&self) -> f64 {
+        self.0.elapsed().as_secs_f64()
+    }
+}
+
+/// The driving mode and the human's newest input (see the module notes). Lock-free.
 pub struct Controls {
     mode: AtomicU8,
     mode_actor: AtomicU8,
@@ -62,12 +77,26 @@ pub struct Controls {
     mode_before: AtomicU8,
     /// Steer and throttle of the newest input as two f32 in one word (never torn).
     input: AtomicU64,
-    /// When the newest input arrived, seconds on the run's clock (NaN: never).
+    /// When the newest input arrived, seconds on the human's clock (NaN: never).
     input_at_s: AtomicF64,
+    /// The human's clock: the wall clock unless a test gave another ([`Controls::use_clock`]).
+    wall: Wall,
+    clock: OnceLock<Arc<dyn Clock + Send + Sync>>,
     deadline_s: AtomicF64,
     ceiling: AtomicF64,
     /// A human input is attached to this run (a dashboard, a pad): records say the mode.
     attached: AtomicBool,
+}
+
+impl std::fmt::Debug for Controls {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Controls")
+            .field("mode", &self.mode())
+            .field("input_at_s", &self.input_at_s.get())
+            .field("deadline_s", &self.deadline_s.get())
+            .field("ceiling", &self.ceiling.get())
+            .finish_non_exhaustive()
+    }
 }
 
 impl Default for Controls {
@@ -108,6 +137,8 @@ impl Controls {
             mode_before: AtomicU8::new(DriveMode::Autopilot as u8),
             input: AtomicU64::new(pack(0.0, 0.0)),
             input_at_s: AtomicF64::nan(),
+            wall: Wall(Instant::now()),
+            clock: OnceLock::new(),
             deadline_s: AtomicF64::new(DEFAULT_DEADLINE_S),
             ceiling: AtomicF64::new(DEFAULT_CEILING),
             attached: AtomicBool::new(false),
@@ -119,6 +150,20 @@ impl Controls {
     pub fn configure(&self, deadline_s: f64, ceiling: f64) {
         self.deadline_s.set(deadline_s);
         self.ceiling.set(ceiling.clamp(0.0, 1.0));
+    }
+
+    /// Times inputs on `clock` instead of the wall clock (a test replaying a recorded input
+    /// sequence on its own clock). Only before the first use; `false` if too late.
+    pub fn use_clock(&self, clock: Arc<dyn Clock + Send + Sync>) -> bool {
+        self.clock.set(clock).is_ok()
+    }
+
+    /// Seconds on the human's clock (see the module notes).
+    pub fn now_s(&self) -> f64 {
+        match self.clock.get() {
+            Some(c) => c.now_s(),
+            None => self.wall.now_s(),
+        }
     }
 
     /// The input deadline, seconds.
@@ -173,9 +218,14 @@ impl Controls {
         )
     }
 
-    /// The human's newest input, arrived at `at_s` on the run's clock. Both in −1..1 (NaN
-    /// and infinities refused).
-    pub fn set_input(&self, steer: f64, throttle: f64, at_s: f64) -> Result<(), BadInput> {
+    /// The human's newest input, arriving now on the human's clock. Both in −1..1 (NaN and
+    /// infinities refused).
+    pub fn set_input(&self, steer: f64, throttle: f64) -> Result<(), BadInput> {
+        self.set_input_at(steer, throttle, self.now_s())
+    }
+
+    /// The human's newest input, arrived at `at_s` on the human's clock.
+    pub fn set_input_at(&self, steer: f64, throttle: f64, at_s: f64) -> Result<(), BadInput> {
         for (what, v) in [("steer", steer), ("throttle", throttle)] {
             if !(-1.0..=1.0).contains(&v) {
                 return Err(BadInput {
@@ -190,7 +240,7 @@ impl Controls {
         Ok(())
     }
 
-    /// When the newest input arrived, seconds on the run's clock (NaN: never), stale or not.
+    /// When the newest input arrived, seconds on the human's clock (NaN: never), stale or not.
     pub fn input_at_s(&self) -> f64 {
         self.input_at_s.get()
     }
@@ -210,9 +260,14 @@ impl Controls {
         Some((steer, throttle * self.ceiling.get(), age.max(0.0) * 1e3))
     }
 
-    /// The command by mode (see the table in the module notes) at `now_s` on the run's
-    /// clock, from the pipeline's `auto`. The gate comes after this.
-    pub fn choose(&self, auto: Command, now_s: f64) -> Choice {
+    /// The command by mode (see the table in the module notes) now, from the pipeline's
+    /// `auto`. The gate comes after this.
+    pub fn choose(&self, auto: Command) -> Choice {
+        self.choose_at(auto, self.now_s())
+    }
+
+    /// [`Controls::choose`] at `now_s` on the human's clock.
+    pub fn choose_at(&self, auto: Command, now_s: f64) -> Choice {
         let mode = self.mode();
         if mode == DriveMode::Autopilot {
             return Choice {
@@ -257,8 +312,8 @@ mod tests {
     #[test]
     fn autopilot_takes_the_pipeline_whatever_the_input() {
         let c = Controls::new();
-        c.set_input(1.0, 1.0, 0.0).unwrap();
-        let ch = c.choose(AUTO, 0.01);
+        c.set_input_at(1.0, 1.0, 0.0).unwrap();
+        let ch = c.choose_at(AUTO, 0.01);
         assert_eq!((ch.command, ch.pilot, ch.human), (AUTO, Pilot::Autopilot, None));
     }
 
@@ -276,10 +331,10 @@ mod tests {
                 if ti > t {
                     break;
                 }
-                c.set_input(s, th, ti).unwrap();
+                c.set_input_at(s, th, ti).unwrap();
                 ins.next();
             }
-            got.push((t, c.choose(AUTO, t).command));
+            got.push((t, c.choose_at(AUTO, t).command));
         }
         let cmd = |steer: f64, throttle: f64| Command { steer, throttle };
         let f32s = |v: f64| f64::from(v as f32);
@@ -291,13 +346,13 @@ mod tests {
         assert_eq!(got[4].1, Command::NEUTRAL, "stale input → neutral on the next step");
         assert_eq!(got[5].1, Command::NEUTRAL);
         // Assisted: the pipeline's steering, the human's throttle.
-        c.set_input(0.9, 0.6, 2.0).unwrap();
+        c.set_input_at(0.9, 0.6, 2.0).unwrap();
         c.set_mode(DriveMode::Assisted, Actor::Pad, 2.0);
-        let ch = c.choose(AUTO, 2.01);
+        let ch = c.choose_at(AUTO, 2.01);
         assert_eq!(ch.command, cmd(AUTO.steer, f64::from(0.6f32) * 0.5));
         assert_eq!(ch.pilot, Pilot::Shared);
         // … and neutral throttle (the pipeline still steers) once the input is stale.
-        assert_eq!(c.choose(AUTO, 2.5).command, cmd(AUTO.steer, 0.0));
+        assert_eq!(c.choose_at(AUTO, 2.5).command, cmd(AUTO.steer, 0.0));
         assert_eq!(c.last_change(), (DriveMode::Manual, Actor::Pad, 2.0));
         assert_eq!(c.mode_version(), 2);
     }
@@ -306,19 +361,19 @@ mod tests {
     fn no_input_ever_is_neutral_and_bad_inputs_are_refused() {
         let c = Controls::new();
         c.set_mode(DriveMode::Manual, Actor::Page, 0.0);
-        assert_eq!(c.choose(AUTO, 0.0).command, Command::NEUTRAL);
+        assert_eq!(c.choose_at(AUTO, 0.0).command, Command::NEUTRAL);
         for (s, t) in [(f64::NAN, 0.0), (0.0, f64::INFINITY), (1.01, 0.0), (0.0, -1.5)] {
-            assert!(c.set_input(s, t, 0.0).is_err(), "{s} {t}");
+            assert!(c.set_input_at(s, t, 0.0).is_err(), "{s} {t}");
         }
         assert_eq!(
-            c.choose(AUTO, 0.0).command,
+            c.choose_at(AUTO, 0.0).command,
             Command::NEUTRAL,
             "a refused input changes nothing"
         );
         c.configure(0.25, 0.3);
-        c.set_input(0.0, 1.0, 5.0).unwrap();
-        assert_eq!(c.choose(AUTO, 5.0).command.throttle, 0.3, "the ceiling");
+        c.set_input_at(0.0, 1.0, 5.0).unwrap();
+        assert_eq!(c.choose_at(AUTO, 5.0).command.throttle, 0.3, "the ceiling");
         // An input stamped in the future (another clock) is not held beyond the deadline.
-        assert_eq!(c.choose(AUTO, 4.0).command, Command::NEUTRAL);
+        assert_eq!(c.choose_at(AUTO, 4.0).command, Command::NEUTRAL);
     }
 }

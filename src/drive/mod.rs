@@ -323,6 +323,8 @@ pub struct Driver {
     resync: bool,
     /// The mode changes already turned into events.
     mode_seen: u64,
+    /// The mode version the steering method was last reset at.
+    mode_reset: u64,
 }
 
 impl Driver {
@@ -337,6 +339,7 @@ impl Driver {
             ended: None,
             resync: false,
             mode_seen: 0,
+            mode_reset: 0,
         }
     }
 
@@ -394,7 +397,15 @@ impl Driver {
         // 4. dt from the frames' own times: skipped and dropped frames still count as time.
         let dt = self.last_time_s.map_or(1.0 / self.fps, |t| frame.time_s - t);
         self.last_time_s = Some(frame.time_s);
-        // 5. Pipeline → command → sink.
+        // 5. Pipeline → command → sink. A mode change starts the steering method afresh: a PID
+        // that kept integrating the lane error while a human steered would kick on handover.
+        if let Some(c) = controls {
+            let v = c.mode_version();
+            if v != self.mode_reset {
+                self.mode_reset = v;
+                pipeline.controller_mut().steering_mut().reset();
+            }
+        }
         // A stereo pair (src/drive/stereo.rs) is ranged by stereo; given boxes win.
         let counts_before = pipeline.stereo().map(|s| s.counts);
         let out = match (&frame.other, &frame.given) {
@@ -403,7 +414,7 @@ impl Driver {
         };
         // The driving mode picks the command before the gate: disarmed, e-stop, brake and
         // interlocks hold a human back exactly as they hold the pipeline.
-        let choice = controls.map(|c| c.choose(out.command, clock.now_s()));
+        let choice = controls.map(|c| c.choose(out.command));
         let sent_cmd = sink.send(choice.map_or(out.command, |ch| ch.command), frame.time_s)?;
         // Dead reckoning integrates what the motors were told, not what the pipeline wanted.
         pipeline.note_sent(sent_cmd);
@@ -726,6 +737,8 @@ mod tests {
         let arming = Arming::new(crate::health::Health::new());
         let c = arming.controls();
         c.configure(0.25, 0.5);
+        // The human's clock is the test's, so the recorded sequence is exact.
+        assert!(c.use_clock(Arc::new(At(now.clone()))));
         let stop = StopSignal::new();
         let mut gate = Gate::new(
             Motors::default(),
@@ -741,26 +754,26 @@ mod tests {
             match k {
                 0 => {
                     c.set_mode(DriveMode::Manual, Actor::Page, t);
-                    c.set_input(0.5, 1.0, t).unwrap();
+                    c.set_input(0.5, 1.0).unwrap();
                 }
-                1 => c.set_input(0.5, 1.0, t).unwrap(),
+                1 => c.set_input(0.5, 1.0).unwrap(),
                 2 => {
                     arming.arm(Actor::Page).unwrap();
-                    c.set_input(0.5, 1.0, t).unwrap();
+                    c.set_input(0.5, 1.0).unwrap();
                 }
                 4 => {
                     arming.estop(Actor::Page);
-                    c.set_input(1.0, 1.0, t).unwrap();
+                    c.set_input(1.0, 1.0).unwrap();
                 }
-                5 => c.set_input(1.0, 1.0, t).unwrap(),
+                5 => c.set_input(1.0, 1.0).unwrap(),
                 6 => {
                     arming.release(Actor::Page);
                     arming.arm(Actor::Page).unwrap();
-                    c.set_input(-0.25, 0.5, t).unwrap();
+                    c.set_input(-0.25, 0.5).unwrap();
                 }
                 15 => {
                     c.set_mode(DriveMode::Assisted, Actor::Pad, t);
-                    c.set_input(0.9, 0.75, t).unwrap();
+                    c.set_input(0.9, 0.75).unwrap();
                 }
                 _ => {}
             }
@@ -799,5 +812,125 @@ mod tests {
         assert!(records[0].events.iter().any(|e| e == "mode manual (was autopilot) by page at wall 0.000 s"), "{:?}", records[0].events);
         assert!(records[15].events.iter().any(|e| e.starts_with("mode assisted (was manual) by pad")), "{:?}", records[15].events);
         assert!(records[1].events.is_empty(), "a change is noted once: {:?}", records[1].events);
+    }
+
+    /// Issue 26's safety hole: under `--no-timing` the run's clock reads nothing (always 0),
+    /// so an input timed on it never went stale and a page that went away left the car
+    /// driving. Inputs are timed on the wall clock: stale after the deadline whatever the
+    /// run's clock says.
+    #[test]
+    fn an_input_goes_stale_on_the_wall_clock_when_the_run_clock_reads_nothing() {
+        let mut p = pipeline();
+        let (w, h) = p.frame_size();
+        let mut src = Scripted {
+            items: (0..3).map(|i| Some(Ok(i))).collect(),
+            i: 0,
+            size: (w, h),
+        };
+        let arming = Arming::new(crate::health::Health::new());
+        arming.arm(crate::drive::Actor::Page).unwrap();
+        let c = arming.controls();
+        c.configure(0.1, 1.0);
+        c.set_mode(DriveMode::Manual, crate::drive::Actor::Page, 0.0);
+        let mut sink = RecordingSink::default();
+        let stop = StopSignal::new();
+        let mut d = Driver::new(30.0);
+        let step = |d: &mut Driver, src: &mut Scripted, p: &mut Pipeline, sink: &mut RecordingSink| {
+            let s = d
+                .step(&mut Parts {
+                    source: src,
+                    pipeline: p,
+                    sink,
+                    stop: &stop,
+                    clock: &NoClock,
+                    timer: &mut NoTimer,
+                    observer: &mut NoObserver,
+                    controls: Some(c),
+                })
+                .unwrap();
+            assert!(matches!(s, Step::Frame(_)), "{s:?}");
+        };
+        c.set_input(0.5, 0.8).unwrap();
+        step(&mut d, &mut src, &mut p, &mut sink);
+        assert_eq!(sink.log.last().unwrap().1, Command { steer: f64::from(0.5f32), throttle: f64::from(0.8f32) });
+        // 250 ms of wall time with no new input, the run's clock still at 0.
+        std::thread::sleep(std::time::Duration::from_millis(250));
+        step(&mut d, &mut src, &mut p, &mut sink);
+        assert_eq!(sink.log.last().unwrap().1, Command::NEUTRAL, "stale input is neutral");
+    }
+
+    /// A mode change starts the steering method afresh (a PID must not carry the integral it
+    /// gathered while a human steered into the handover).
+    #[test]
+    fn a_mode_change_resets_the_steering_method() {
+        use crate::control::params::{ParamInfo, Tunable};
+        use crate::control::steering::{Steering, SteeringInput, SteeringMethod};
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        #[derive(Debug, Clone)]
+        struct Counting(Arc<AtomicUsize>);
+        impl Tunable for Counting {
+            fn params(&self) -> Vec<ParamInfo> {
+                Vec::new()
+            }
+            fn get_param(&self, _: &str) -> Option<f64> {
+                None
+            }
+            fn set_param(&mut self, _: &str, _: f64) -> bool {
+                false
+            }
+        }
+        impl Steering for Counting {
+            fn method(&self) -> SteeringMethod {
+                SteeringMethod::Pid
+            }
+            fn steer(&mut self, _: &SteeringInput<'_>, _: f64) -> f64 {
+                0.0
+            }
+            fn reset(&mut self) {
+                self.0.fetch_add(1, Ordering::SeqCst);
+            }
+            fn clone_box(&self) -> Box<dyn Steering> {
+                Box::new(self.clone())
+            }
+        }
+        use std::sync::Arc;
+        // Resets over 8 frames, with a mode change before the frames in `changes`.
+        let resets = |changes: &[(u64, DriveMode)]| {
+            let mut p = pipeline();
+            let n = Arc::new(AtomicUsize::new(0));
+            let throttle = (&Config::default().throttle).into();
+            *p.controller_mut() = crate::control::Controller::new(Box::new(Counting(n.clone())), throttle);
+            let (w, h) = p.frame_size();
+            let mut src = Scripted {
+                items: (0..8).map(|i| Some(Ok(i))).collect(),
+                i: 0,
+                size: (w, h),
+            };
+            let arming = Arming::new(crate::health::Health::new());
+            let c = arming.controls();
+            let mut sink = RecordingSink::default();
+            let stop = StopSignal::new();
+            let mut d = Driver::new(30.0);
+            for k in 0..8u64 {
+                if let Some((_, m)) = changes.iter().find(|(at, _)| *at == k) {
+                    c.set_mode(*m, crate::drive::Actor::Page, 0.0);
+                }
+                d.step(&mut Parts {
+                    source: &mut src,
+                    pipeline: &mut p,
+                    sink: &mut sink,
+                    stop: &stop,
+                    clock: &NoClock,
+                    timer: &mut NoTimer,
+                    observer: &mut NoObserver,
+                    controls: Some(c),
+                })
+                .unwrap();
+            }
+            n.load(Ordering::SeqCst)
+        };
+        let base = resets(&[]);
+        let with = resets(&[(2, DriveMode::Manual), (5, DriveMode::Autopilot)]);
+        assert_eq!(with, base + 2, "one reset per mode change (base {base})");
     }
 }

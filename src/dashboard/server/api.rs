@@ -259,7 +259,7 @@ async fn drive(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h
         Err(e) => return error(StatusCode::BAD_REQUEST, &e.to_string()),
     };
     let controls = sh.arm.controls();
-    if let Err(e) = controls.set_input(q.steer, q.throttle, sh.sent.now()) {
+    if let Err(e) = controls.set_input(q.steer, q.throttle) {
         return error(StatusCode::BAD_REQUEST, &e.to_string());
     }
     reply(
