@@ -28,6 +28,21 @@ pub fn annotate(
     lane: &LaneMeasurement,
     cmd: &Command,
 ) -> RgbImage {
+    annotate_with(frame, roi, homography, images, lane, cmd, true)
+}
+
+/// [`annotate`], with the bird's-eye inset in the top-right corner or without it (the
+/// dashboard draws the bird's-eye view beside the frame: an inset there would only cover
+/// the scene, where a stop sign stands).
+pub fn annotate_with(
+    frame: &RgbImage,
+    roi: &[[f64; 2]; 4],
+    homography: &Homography,
+    images: &LaneImages,
+    lane: &LaneMeasurement,
+    cmd: &Command,
+    inset: bool,
+) -> RgbImage {
     let mut out = frame.clone();
     // ROI trapezoid.
     for k in 0..4 {
@@ -35,7 +50,7 @@ pub fn annotate(
         line(&mut out, a[0], a[1], b[0], b[1], YELLOW);
     }
     // Lines and centres, from the bird's-eye band back into the camera view.
-    let (bw, bh) = images.binary.dimensions();
+    let bh = images.binary.height();
     let inv = homography.inverse();
     let top = (bh - images.band_rows) as f64;
     let bottom = bh as f64 - 1.0;
@@ -57,35 +72,9 @@ pub fn annotate(
     }
     vertical(&mut out, lane.frame_center, 0.0, BLUE);
 
-    // Inset: bird's-eye binary image at 1/3 size with the histogram over it.
-    let scale = 3u32;
-    let (iw, ih) = (bw / scale, bh / scale);
-    let (ox, oy) = (out.width().saturating_sub(iw + 2), 2u32);
-    for y in 0..ih {
-        for x in 0..iw {
-            let v = images.binary.get_pixel(x * scale, y * scale).0[0];
-            let g = if v > 0 { 230 } else { 30 };
-            put(&mut out, (ox + x) as i64, (oy + y) as i64, Rgb([g, g, g]));
-        }
+    if inset {
+        draw_inset(&mut out, images, lane);
     }
-    let max = images.hist.iter().copied().max().unwrap_or(0).max(1) as f64;
-    for x in 0..iw {
-        let c = images.hist[(x * scale) as usize] as f64 / max;
-        let hgt = (c * ih as f64 * 0.5) as u32;
-        for y in 0..hgt {
-            put(&mut out, (ox + x) as i64, (oy + ih - 1 - y) as i64, YELLOW);
-        }
-    }
-    let mark = |out: &mut RgbImage, col: Option<f64>, colour| {
-        if let Some(c) = col {
-            let x = ox as f64 + c / scale as f64;
-            line(out, x, oy as f64, x, (oy + ih - 1) as f64, colour);
-        }
-    };
-    mark(&mut out, lane.p_left, RED);
-    mark(&mut out, lane.p_right, RED);
-    mark(&mut out, lane.lane_center, GREEN);
-    mark(&mut out, Some(lane.frame_center), BLUE);
 
     // Text.
     let status = match lane.status {
@@ -106,6 +95,39 @@ pub fn annotate(
         if lane.status == LaneStatus::Both { GREEN } else { ORANGE },
     );
     out
+}
+
+/// The bird's-eye binary image at 1/3 size with its histogram, top right.
+fn draw_inset(out: &mut RgbImage, images: &LaneImages, lane: &LaneMeasurement) {
+    let (bw, bh) = images.binary.dimensions();
+    let scale = 3u32;
+    let (iw, ih) = (bw / scale, bh / scale);
+    let (ox, oy) = (out.width().saturating_sub(iw + 2), 2u32);
+    for y in 0..ih {
+        for x in 0..iw {
+            let v = images.binary.get_pixel(x * scale, y * scale).0[0];
+            let g = if v > 0 { 230 } else { 30 };
+            put(out, (ox + x) as i64, (oy + y) as i64, Rgb([g, g, g]));
+        }
+    }
+    let max = images.hist.iter().copied().max().unwrap_or(0).max(1) as f64;
+    for x in 0..iw {
+        let c = images.hist[(x * scale) as usize] as f64 / max;
+        let hgt = (c * ih as f64 * 0.5) as u32;
+        for y in 0..hgt {
+            put(out, (ox + x) as i64, (oy + ih - 1 - y) as i64, YELLOW);
+        }
+    }
+    let mark = |out: &mut RgbImage, col: Option<f64>, colour| {
+        if let Some(c) = col {
+            let x = ox as f64 + c / scale as f64;
+            line(out, x, oy as f64, x, (oy + ih - 1) as f64, colour);
+        }
+    };
+    mark(out, lane.p_left, RED);
+    mark(out, lane.p_right, RED);
+    mark(out, lane.lane_center, GREEN);
+    mark(out, Some(lane.frame_center), BLUE);
 }
 
 fn put(img: &mut RgbImage, x: i64, y: i64, c: Rgb<u8>) {

@@ -186,19 +186,44 @@ impl ControlSender {
     }
 }
 
-/// One plot sample per frame.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+/// One plot sample per frame: what the pipeline wanted **and** what the gate really sent, the
+/// gate's state (disarmed, e-stop, brake, paused: shaded on the page), and in the simulator the
+/// true speed and cross-track error. A plot of the wish alone showed a parked car "driving" at
+/// 0.5 m/s and an e-stopped one still at throttle 0.62 (issue 26).
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PlotPoint {
     /// Frame time, seconds.
     pub t: f64,
-    /// Normalised lane error, −1..1 (`None`: lane lost).
-    pub error: Option<f64>,
-    /// Steering command, −1..1.
+    /// Lane error L_c − L_F, bird's-eye pixels (`None`: lane lost) — the one unit of the page
+    /// and the overlay.
+    pub error_px: Option<f64>,
+    /// Steering the pipeline wanted, −1..1.
     pub steer: f64,
-    /// Throttle command of the pipeline, −1..1 (before arming).
+    /// Throttle the pipeline wanted, −1..1.
     pub throttle: f64,
-    /// Dead-reckoned speed, m/s.
+    /// Steering the gate sent to the car, −1..1.
+    pub sent_steer: f64,
+    /// Throttle the gate sent to the car, −1..1 (0 while disarmed or e-stopped).
+    pub sent_throttle: f64,
+    /// Speed, m/s: the simulator's true speed, else dead-reckoned from what was sent.
     pub speed: Option<f64>,
+    /// `true` when `speed` is the simulator's truth.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub speed_true: bool,
+    /// The simulator's true cross-track error, metres (positive: car left of the lane centre).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cte_m: Option<f64>,
+    /// The gate: `armed`, `disarmed`, `estop` or `brake`.
+    pub gate: &'static str,
+    /// The simulator was paused at this frame.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub paused: bool,
+    /// Who drove (`manual`, `assisted`, `autopilot`), once a human input is attached.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mode: Option<&'static str>,
+    /// The frame's events (a gain change, a move, a mode switch, arming): a marker each.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub events: Vec<String>,
 }
 
 /// What the loop publishes for the page, at most `stream_fps` times per second of frame time.

@@ -7,7 +7,7 @@
 use super::messages::{Control, ControlSender, Live, PlotPoint, Snapshot, INBOX_CAPACITY};
 use crate::config::Config;
 use crate::control::behaviour::Transition;
-use crate::drive::{Flow, FrameContext, Latest, LoopError, Observer, StopSignal};
+use crate::drive::{Arming, Flow, FrameContext, Latest, LoopError, Observer, StopSignal};
 use crate::pipeline::Pipeline;
 use crate::sim::world::{lock, SharedWorld};
 use crate::telemetry::FrameRecord;
@@ -15,6 +15,12 @@ use std::sync::atomic::Ordering;
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
+
+/// A plot value to 4 decimals: a page draws no finer, and the pushed samples are a third as
+/// long (a 0 stays exactly 0).
+fn r4(v: f64) -> f64 {
+    (v * 1e4).round() / 1e4
+}
 
 /// Applies a settable key to the running pipeline (acts on the next frame).
 pub fn apply_value(p: &mut Pipeline, key: &str, value: f64) -> bool {
@@ -29,6 +35,8 @@ pub struct DashObserver {
     live: Arc<Live>,
     world: Option<SharedWorld>,
     stop: Option<StopSignal>,
+    /// The car's arming state: each plot sample says what the gate let through.
+    arming: Option<Arc<Arming>>,
     pending: Arc<Mutex<Vec<String>>>,
     every_s: f64,
     last_pub: Option<f64>,
@@ -53,7 +61,7 @@ pub struct Channel {
 }
 
 /// The slot the loop publishes into, the inbox sender for the server, and the observer.
-pub fn channel(cfg: &Config, world: Option<SharedWorld>, stop: Option<StopSignal>) -> Channel {
+pub fn channel(cfg: &Config, world: Option<SharedWorld>, stop: Option<StopSignal>, arming: Option<Arc<Arming>>) -> Channel {
     let (tx, rx) = std::sync::mpsc::sync_channel(INBOX_CAPACITY);
     let out = Arc::new(Latest::new());
     let live = Arc::new(Live::default());
@@ -63,6 +71,7 @@ pub fn channel(cfg: &Config, world: Option<SharedWorld>, stop: Option<StopSignal
         live: live.clone(),
         world,
         stop,
+        arming,
         pending: Arc::new(Mutex::new(Vec::new())),
         every_s: 1.0 / cfg.dashboard.stream_fps.clamp(1.0, 60.0),
         last_pub: None,
@@ -183,12 +192,29 @@ impl Observer for DashObserver {
         self.live.time_bits.store(r.time_s.to_bits(), Ordering::SeqCst);
         self.live.frame.store(r.frame, Ordering::SeqCst);
         self.live.frames.fetch_add(1, Ordering::SeqCst);
+        let sent = r.sent.unwrap_or(crate::control::Command { steer: r.steer, throttle: r.throttle });
+        let truth = |k: &str| r.truth.as_ref().and_then(|t| t.get(k)).and_then(serde_json::Value::as_f64);
+        let true_speed = truth("speed_mps");
+        let gate = match &self.arming {
+            Some(a) if a.is_estopped() => "estop",
+            Some(a) if !a.is_armed() => "disarmed",
+            Some(a) if a.is_braking() => "brake",
+            _ => "armed",
+        };
         self.points.push(PlotPoint {
-            t: r.time_s,
-            error: r.error,
-            steer: r.steer,
-            throttle: r.throttle,
-            speed: r.speed_est_mps,
+            t: r4(r.time_s),
+            error_px: r.error_px.map(r4),
+            steer: r4(r.steer),
+            throttle: r4(r.throttle),
+            sent_steer: r4(sent.steer),
+            sent_throttle: r4(sent.throttle),
+            speed: true_speed.or(r.speed_est_mps).map(r4),
+            speed_true: true_speed.is_some(),
+            cte_m: truth("offset_m").map(r4),
+            gate,
+            paused: self.paused || self.stepping,
+            mode: r.drive_mode.map(|m| m.name()),
+            events: r.events.clone(),
         });
         if let Some(tr) = &r.transition {
             if self.last_transition.as_ref().map(|(_, t)| t) != Some(tr) {

@@ -58,7 +58,7 @@ impl Dash {
             let listen = listen.unwrap_or_else(|| cfg.dashboard.listen.clone());
             let world = session.world().cloned();
             let world_given = world.is_some();
-            let ch = super::observer::channel(cfg, world.clone(), Some(stop.clone()));
+            let ch = super::observer::channel(cfg, world.clone(), Some(stop.clone()), Some(session.arming().clone()));
             let srv = server::Server::start(server::Options {
                 listen,
                 cfg: cfg.clone(),

@@ -174,10 +174,11 @@ def telemetry(path):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--rccar", default=os.path.join(ROOT, "target/release/rccar"))
-    ap.add_argument("--screenshot", help="also save the page here (docs/img/dashboard.png)")
+    ap.add_argument("--screenshot", help="also save the page here (docs/img/dashboard.png; the phone size beside it as dashboard_phone.png)")
     ap.add_argument("--keep", action="store_true", help="keep the temp folder")
-    ap.add_argument("--only", choices=["all", "manual"], default="all",
-                    help="manual: only driving by hand (sim and drive), for a busy machine")
+    ap.add_argument("--only", choices=["all", "manual", "page"], default="all",
+                    help="manual: only driving by hand (sim and drive); page: only the plots, the e-stop's "
+                         "display time, the traffic and the phone size (sim); for a busy machine")
     a = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="rccar-dash-")
     cfgdir = os.path.join(tmp, "config")
@@ -211,6 +212,19 @@ def main():
         wd.go(base + "/")
         shown = wait(lambda: wd.js("return document.getElementById('s-steering.kp') !== null"), 20, 0.1)
         check("page loads and builds the sliders", bool(shown))
+        honest_plots_disarmed(wd, "sim")
+        traffic(base, "sim")
+        if a.only == "page":
+            set_armed(wd, base, True)
+            wait(lambda: (lambda s: s and (s["sent"]["throttle"] or 0) > 0.05)(_state(base)), 10)
+            time.sleep(0.5)
+            wd.click(wd.find("#estop"))
+            honest_plots_after_estop(wd, "sim")
+            estop_shown(wd, base, "sim")
+            wd.set_window(390, 844)
+            phone(wd, "sim", tmp)
+            wd.set_window(1400, 1000)
+            return
         if a.only == "manual":
             manual_suite(wd, base, out, "sim", tmp)
             wd.set_window(390, 844)
@@ -262,7 +276,7 @@ def main():
         # 3. Arm, then EMERGENCY STOP by click and by the space bar.
         for how in ("click", "space bar"):
             wd.click(wd.find("#release"))
-            wd.click(wd.find("#arm"))
+            set_armed(wd, base, True)
             moving = wait(lambda: (lambda s: s["armed"] and (s["sent"]["throttle"] or 0) > 0.05)(_state(base)), 10)
             check(f"armed: the car gets throttle ({how})", bool(moving),
                   f"throttle sent {_state(base)['sent']['throttle']}")
@@ -300,6 +314,8 @@ def main():
                   f"frame {rec['frame']}" if rec else "")
             time.sleep(0.3)
             check(f"the car stays stopped ({how})", _state(base)["sent"]["throttle"] == 0.0)
+            honest_plots_after_estop(wd, f"sim, {how}")
+        estop_shown(wd, base, "sim")
         wd.screenshot(os.path.join(tmp, "dashboard_2_estop.png"))
 
         # 4. Pause, step, resume.
@@ -342,13 +358,16 @@ def main():
         wd.screenshot(os.path.join(tmp, "dashboard_3_saved.png"))
         if a.screenshot:
             wd.click(wd.find("#release"))
-            wd.click(wd.find("#arm"))
+            set_armed(wd, base, True)
             time.sleep(3)
             wd.screenshot(a.screenshot)
         # 6. Driving by hand (issue 26), and the phone size.
         manual_suite(wd, base, out, "sim", tmp)
         wd.set_window(390, 844)
         phone(wd, "sim", tmp)
+        if a.screenshot:
+            shutil.copy2(os.path.join(tmp, "dashboard_phone_sim.png"),
+                         os.path.join(os.path.dirname(a.screenshot), "dashboard_phone.png"))
         wd.set_window(1400, 1000)
         print(f"screenshots in {tmp}")
         check("the sim is still running", sim.poll() is None)
@@ -475,12 +494,13 @@ def drive_suite(a, wd, cfgdir, tmp, procs):
     # Shorter holds: `drive` ends the run when the car leaves the simulated road (the start
     # straight is about 2 m from where the car stands).
     manual_suite(wd, base, os.path.join(tmp, "drive-out"), "drive", tmp, hold=0.8)
-    wd.click(wd.find("#arm"))
+    set_armed(wd, base, True)
     armed = wait(lambda: (_state(base) or {}).get("armed"), 5)
     wd.click(wd.find("#estop"))
     stopped = wait(lambda: (lambda s: s and s["estop"] and not s["armed"])(_state(base)), 5)
     check("[drive] the page arms, then its EMERGENCY STOP stops", bool(armed) and bool(stopped),
           f"armed {bool(armed)}, e-stop {bool(stopped)}")
+    estop_shown(wd, base, "drive")
     time.sleep(7.0)
     ended = drive.poll()
     check("[drive] e-stopped for 7 s and still running after the checks", ended is None,
@@ -545,7 +565,7 @@ def _manual_suite(wd, base, out, label, tmp, joystick=True, hold=1.5):
           "document.addEventListener('keyup',h,true);"
           "document.getElementById('joy').addEventListener('pointerup',h,true);")
     wd.click(wd.find("#release"))
-    wd.click(wd.find("#disarm"))
+    set_armed(wd, base, False)
     wd.click(wd.find('#modes button[data-mode="manual"]'))
     on = wait(lambda: (lambda s: s and s["mode"] == "manual")(_state(base)), 5)
     rec = wait(lambda: _find_event(os.path.join(out, "telemetry.jsonl"), "mode manual (was autopilot) by page"), 5)
@@ -566,7 +586,7 @@ def _manual_suite(wd, base, out, label, tmp, joystick=True, hold=1.5):
           held is not None and held["throttle"] > 0 and st["sent"]["throttle"] == 0.0 and moved is not None and moved < 1e-6,
           f"input {held}, sent throttle {st['sent']['throttle']}, moved {moved} m")
     # Armed: the keyboard drives.
-    wd.click(wd.find("#arm"))
+    set_armed(wd, base, True)
     wait(lambda: (_state(base) or {}).get("armed"), 5)
     wd.js("document.activeElement.blur()")
     r0 = _last_truth(out)
@@ -645,18 +665,120 @@ def _manual_suite(wd, base, out, label, tmp, joystick=True, hold=1.5):
     st = wait(lambda: _state(base), 5)
     check(f"[{label}] released: the car stays stopped, no input held", st["sent"]["throttle"] == 0.0 and st["manual"]["input"] is None,
           f"sent throttle {st['sent']['throttle']}, input {st['manual']['input']}")
-    wd.click(wd.find("#disarm"))
+    set_armed(wd, base, False)
     wd.click(wd.find('#modes button[data-mode="autopilot"]'))
     wait(lambda: (lambda s: s and s["mode"] == "autopilot")(_state(base)), 5)
     wd.screenshot(os.path.join(tmp, f"dashboard_manual_{label}.png"))
+
+
+def set_armed(wd, base, want):
+    """Arm or disarm with the page's one Arm/Disarm toggle: click it only when the car's state
+    differs (the toggle shows what a click does), then wait for the server to agree."""
+    st = wait(lambda: _state(base), 5) or {}
+    if bool(st.get("armed")) == want:
+        return True
+    # The page must know the state the server has before its toggle means the right thing.
+    wait(lambda: wd.js("return window.lastState && window.lastState.armed === arguments[0] && !window.lastState.estop", not want), 5)
+    wd.click(wd.find("#armtoggle"))
+    return wait(lambda: (lambda s: s is not None and bool(s.get("armed")) == want)(_state(base)), 5)
+
+
+def plotted(wd):
+    """The series the page drew last (window.plotted: t, sent_* and wanted values, speed, gate)."""
+    return wd.js("return window.plotted || null")
+
+
+def honest_plots_disarmed(wd, label):
+    """Disarmed from the start: the plotted speed (the simulator's truth) is 0 on every sample,
+    while the pipeline still wants its throttle (the plot shows both)."""
+    p = wait(lambda: (lambda q: q if q and len(q["t"]) > 30 else None)(plotted(wd)), 10)
+    if not p:
+        check(f"[{label}] plots: series drawn", False, "no window.plotted")
+        return
+    idx = [i for i, g in enumerate(p["gate"]) if g == "disarmed"]
+    speeds = [p["speed"][i] for i in idx]
+    wanted = [p["throttle"][i] for i in idx]
+    sent = [p["sent_throttle"][i] for i in idx]
+    check(f"[{label}] plots: disarmed, the plotted speed is 0 and the plotted sent throttle 0 (wanted {max(wanted):.2f})",
+          len(idx) > 30 and all(v == 0.0 for v in speeds) and all(v == 0.0 for v in sent),
+          f"{len(idx)} disarmed samples, speed max {max(speeds) if speeds else None}, sent max {max(sent) if sent else None}")
+
+
+def honest_plots_after_estop(wd, label):
+    """After an e-stop the plotted sent throttle is 0 from the first e-stopped sample on (within
+    one frame), while the wanted throttle is still drawn beside it."""
+    time.sleep(0.6)
+    p = plotted(wd)
+    gate = p["gate"] if p else []
+    # the last e-stop span
+    starts = [i for i, g in enumerate(gate) if g == "estop" and (i == 0 or gate[i - 1] != "estop")]
+    if not starts:
+        check(f"[{label}] plots: the e-stop is shaded", False, "no e-stopped sample drawn")
+        return
+    first = starts[-1]
+    before = p["sent_throttle"][first - 1] if first > 0 else None
+    after = p["sent_throttle"][first:]
+    wanted = p["throttle"][first:]
+    check(f"[{label}] plots: after the e-stop the plotted sent throttle is 0 within one frame",
+          before is not None and before > 0.05 and all(v == 0.0 for v in after[1:]) and len(after) > 5,
+          f"sent before {before}, first e-stopped samples {after[:4]}, wanted {wanted[:2]}")
+
+
+def estop_shown(wd, base, label, n=20):
+    """The e-stop on the page: from the click's event to the page showing E-STOP (a mutation
+    observer's clock), n times; the median and the worst."""
+    ms = []
+    for _ in range(n):
+        wd.click(wd.find("#release"))
+        wait(lambda: wd.js("return document.getElementById('armed').textContent !== 'E-STOP'"), 5, 0.01)
+        wd.js("window.__c=null;window.__s=null;"
+              "document.getElementById('estop').addEventListener('click',e=>{if(window.__c===null)window.__c=e.timeStamp;},{capture:true,once:true});"
+              "const a=document.getElementById('armed');const o=new MutationObserver(()=>{if(a.textContent==='E-STOP'&&window.__s===null){window.__s=performance.now();o.disconnect();}});"
+              "o.observe(a,{childList:true,characterData:true,subtree:true});")
+        wd.click(wd.find("#estop"))
+        got = wait(lambda: wd.js("return window.__s !== null && window.__c !== null ? window.__s - window.__c : null"), 5, 0.01)
+        if got is not None:
+            ms.append(got)
+    ms.sort()
+    med = ms[len(ms) // 2] if ms else None
+    print(f"  e-stop shown on the page after the click [{label}]: median {med:.1f} ms, min {ms[0]:.1f}, max {ms[-1]:.1f} ms (n={len(ms)})" if ms else "  no e-stop times")
+    check(f"[{label}] the e-stop shows on the page within 50 ms of the click (median of {n})",
+          len(ms) == n and med < 50.0, f"median {med} ms, all {[round(v, 1) for v in ms]}")
+    return med
+
+
+def traffic(base, label, seconds=6.0):
+    """The page's own state traffic per viewer: pushed events (this page, the only subscriber)
+    against polling /api/state ten times a second with `since`, as the page did before."""
+    s0 = _state(base)
+    t0 = time.time()
+    polled = 0
+    since = s0["t"] if s0 and s0.get("t") is not None else -1e9
+    while time.time() - t0 < seconds:
+        req = urllib.request.Request(base + f"/api/state?since={since}")
+        with urllib.request.urlopen(req, timeout=5) as r:
+            body = r.read()
+        polled += len(body) + 150  # + the response head, about
+        st = json.loads(body)
+        if st.get("points"):
+            since = st["points"][-1]["t"]
+        time.sleep(0.1)
+    s1 = _state(base)
+    dt = time.time() - t0
+    subs = max(1, s1.get("subscribers", 1))
+    pushed = (s1["event_bytes"] - s0["event_bytes"]) / subs / dt
+    poll_rate = polled / dt
+    print(f"  page state traffic per viewer [{label}]: pushed {pushed / 1024:.1f} KiB/s, polling at 10 Hz {poll_rate / 1024:.1f} KiB/s")
+    check(f"[{label}] pushed state costs a viewer less than polling did", 0 < pushed < poll_rate,
+          f"pushed {pushed:.0f} B/s, polled {poll_rate:.0f} B/s")
 
 
 def phone(wd, label, tmp):
     """On a 390x844 phone every drive control fits: no horizontal scrolling."""
     time.sleep(0.5)
     v = wd.js("const d=document.documentElement;const r=id=>{const e=document.getElementById(id);const b=e.getBoundingClientRect();return [b.left,b.right];};"
-              "return {vw: d.clientWidth, sw: d.scrollWidth, joy: r('joy'), modes: r('modes'), estop: r('estop'), arm: r('arm')};")
-    fits = all(0 <= v[k][0] and v[k][1] <= v["vw"] + 0.5 for k in ("joy", "modes", "estop", "arm"))
+              "return {vw: d.clientWidth, sw: d.scrollWidth, joy: r('joy'), modes: r('modes'), estop: r('estop'), arm: r('armtoggle'), release: r('release')};")
+    fits = all(0 <= v[k][0] and v[k][1] <= v["vw"] + 0.5 for k in ("joy", "modes", "estop", "arm", "release"))
     check(f"[{label}] 390x844: the drive controls fit without horizontal scrolling",
           fits and v["sw"] <= v["vw"], json.dumps(v))
     wd.screenshot(os.path.join(tmp, f"dashboard_phone_{label}.png"))

@@ -8,8 +8,10 @@ use super::hub;
 use super::log::Msg;
 use super::reply::{error, reply};
 use super::state::Shared;
+use super::status::state_json;
+use super::push;
 use crate::dashboard::local_toml;
-use crate::dashboard::messages::{self, Control, DriveRequest, ModeRequest, PlaceRequest, PlotPoint, SetRequest};
+use crate::dashboard::messages::{self, Control, DriveRequest, ModeRequest, PlaceRequest, SetRequest};
 use crate::drive::{Actor, DriveMode};
 use axum::body::{Body, Bytes};
 use axum::extract::State;
@@ -37,6 +39,7 @@ pub fn router(sh: Arc<Shared>) -> Router {
         .route("/index.html", get(page))
         .route("/login", post(login))
         .route("/api/state", get(state))
+        .route("/api/events", get(push::events))
         .route("/stream.mjpg", get(hub::stream))
         .route("/api/release", post(release))
         .route("/api/arm", post(arm))
@@ -131,6 +134,7 @@ fn estop(sh: &Shared, ctl: &ConnCtl, h: &HeaderMap) -> Response<Body> {
     sh.sent.mark_estop();
     sh.arm.estop(Actor::Page);
     sh.armed_by_page.store(false, Ordering::SeqCst);
+    sh.poke();
     let who = format!(
         "{} (Origin {}, Host {})",
         ctl.peer,
@@ -220,6 +224,7 @@ fn note(sh: &Shared, c: &Caller, what: &str) -> String {
 
 async fn release(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> Response<Body> {
     sh.arm.release(Actor::Page);
+    sh.poke();
     sh.tx.send(Control::Note(note(&sh, &c, "e-stop released")));
     reply(StatusCode::OK, &json!({"estop": false}))
 }
@@ -230,6 +235,7 @@ async fn arm(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> 
         return error(StatusCode::CONFLICT, &why.to_string());
     }
     sh.armed_by_page.store(true, Ordering::SeqCst);
+    sh.poke();
     sh.tx.send(Control::Note(note(&sh, &c, "armed")));
     reply(StatusCode::OK, &json!({"armed": true}))
 }
@@ -237,6 +243,7 @@ async fn arm(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> 
 async fn disarm(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> Response<Body> {
     sh.arm.disarm(Actor::Page);
     sh.armed_by_page.store(false, Ordering::SeqCst);
+    sh.poke();
     sh.tx.send(Control::Note(note(&sh, &c, "disarmed")));
     reply(StatusCode::OK, &json!({"armed": false}))
 }
@@ -288,6 +295,7 @@ async fn mode(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h:
         return error(StatusCode::BAD_REQUEST, &msg);
     };
     let before = sh.arm.controls().set_mode(m, Actor::Page, sh.sent.now());
+    sh.poke();
     if before != m {
         sh.log.send(Msg::Out(format!("dashboard: mode {} (was {}) from {}", m.name(), before.name(), c.ctl.peer)));
     }
@@ -412,14 +420,6 @@ async fn sim(
     }
 }
 
-fn opt(v: f64) -> Value {
-    if v.is_finite() {
-        json!(v)
-    } else {
-        Value::Null
-    }
-}
-
 /// `GET /api/state?since=T`.
 async fn state(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, uri: Uri) -> Response<Body> {
     let since = uri.query().unwrap_or("").split('&').find_map(|kv| {
@@ -431,103 +431,6 @@ async fn state(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, u
         Some(Ok(t)) if t.is_finite() => t,
         Some(_) => return error(StatusCode::BAD_REQUEST, "since: expected a finite number of seconds"),
     };
-    reply(StatusCode::OK, &state_json(&sh, since, c.session))
+    reply(StatusCode::OK, &state_json(&sh, since, c.session, true))
 }
 
-/// The rows of the parameter table of a run steering with `method`, for the page's sliders.
-fn param_rows(method: crate::control::steering::SteeringMethod) -> Vec<Value> {
-    crate::control::catalog::of_method(method)
-        .iter()
-        .map(|p| json!({"key": p.key, "unit": p.unit, "range": p.range, "slider": p.slider, "doc": p.doc}))
-        .collect()
-}
-
-/// Driving by hand: the human's input as the loop would take it now, the deadline and the
-/// ceiling.
-fn manual_json(sh: &Shared) -> Value {
-    let c = sh.arm.controls();
-    let input = c.input(sh.sent.now());
-    json!({
-        "input": input.map(|(steer, throttle, age_ms)| json!({"steer": steer, "throttle": throttle, "age_ms": age_ms})),
-        // the newest input's arrival on the run's clock, stale or not (`wall_s` is now)
-        "last_input_wall_s": opt(c.input_at_s()),
-        "input_timeout_ms": c.deadline_s() * 1e3,
-        "max_throttle": c.ceiling(),
-    })
-}
-
-fn state_json(sh: &Shared, since: f64, session: bool) -> Value {
-    let (snap, points) = {
-        let v = sh.view.lock().unwrap_or_else(|e| e.into_inner());
-        let pts: Vec<PlotPoint> = v.history.iter().filter(|p| p.t > since).copied().collect();
-        (v.snap.clone(), pts)
-    };
-    // The settable parameters, from the steering method's and the throttle's tables.
-    let method = sh.cfg.lock().unwrap_or_else(|e| e.into_inner()).steering.method;
-    let params: Vec<Value> = param_rows(method);
-    let s = &sh.sent;
-    let lim = sh.conns.limits();
-    let a = &sh.access;
-    let mut o = json!({
-        "read_only": !session,
-        "sim": sh.track_length.is_some(),
-        "track_length": sh.track_length,
-        "armed": sh.arm.is_armed(),
-        "estop": sh.arm.is_estopped(),
-        // who last armed, disarmed or stopped the car (flag, button, page, heartbeat, link, …)
-        "arm_actor": sh.arm.last_actor().name(),
-        "viewers": sh.viewers.load(Ordering::SeqCst),
-        "stream_frames": sh.frames_sent.load(Ordering::SeqCst),
-        "wall_s": s.now(),
-        "epoch_ms": std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64() * 1e3),
-        "sent": {"throttle": opt(s.throttle.get()), "steer": opt(s.steer.get()), "wall_s": opt(s.clock_s.get()), "sim_s": opt(s.frame_s.get()),
-                 "stopped_wall_s": opt(s.stopped_clock_s.get()), "stopped_sim_s": opt(s.stopped_frame_s.get())},
-        "estop_timing": {
-            "pressed_wall_s": opt(s.estop_clock_s.get()), "pressed_sim_s": opt(s.estop_frame_s.get()),
-            "neutral_wall_s": opt(s.neutral_clock_s.get()), "neutral_sim_s": opt(s.neutral_frame_s.get()),
-        },
-        "connections": {
-            "open": sh.conns.open(), "max": lim.max, "reserve": lim.reserve,
-            "peak": sh.conns.peak.load(Ordering::Relaxed),
-            "evicted": sh.conns.evicted.load(Ordering::Relaxed),
-            "reserve_used": sh.conns.reserve_used.load(Ordering::Relaxed),
-            "refused": sh.conns.refused.load(Ordering::Relaxed),
-            "timed_out": sh.conns.timed_out.load(Ordering::Relaxed),
-        },
-        "refused": {
-            "count": a.refused.load(Ordering::SeqCst),
-            "last": a.last.lock().unwrap_or_else(|e| e.into_inner()).clone(),
-        },
-        "log_lines_dropped": sh.log.dropped.load(Ordering::Relaxed),
-        "points": points,
-        "changed": *sh.changed.lock().unwrap_or_else(|e| e.into_inner()),
-        "steering_method": method.name(),
-        "params": params,
-        "mode": sh.arm.controls().mode().name(),
-        "manual": manual_json(sh),
-    });
-    if let Some(sn) = snap {
-        let r = &sn.record;
-        // Exact between snapshots: the loop's own counters.
-        o["frame"] = json!(sh.live.frame.load(Ordering::SeqCst));
-        o["t"] = json!(sh.live.time_s());
-        o["snapshot_frame"] = json!(r.frame);
-        o["error"] = json!(r.error);
-        o["steer"] = json!(r.steer);
-        o["throttle"] = json!(r.throttle);
-        o["speed"] = json!(r.speed_est_mps);
-        o["status"] = json!(r.status);
-        o["behaviour"] = json!(r.behaviour);
-        o["latency_ms"] = json!(r.latency_ms);
-        o["period_ms"] = json!(r.period_ms);
-        o["paused"] = json!(sh.live.paused.load(Ordering::SeqCst));
-        o["dropped_snapshots"] = json!(sn.dropped);
-        o["objects"] = json!(sn.objects);
-        o["transition"] = match &sn.last_transition {
-            Some((t, tr)) => json!({"t": t, "from": tr.from, "to": tr.to, "reason": tr.reason}),
-            None => Value::Null,
-        };
-        o["values"] = Value::Object(sn.values.iter().map(|(k, v)| (k.clone(), json!(v))).collect());
-    }
-    o
-}

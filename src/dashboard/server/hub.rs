@@ -100,13 +100,14 @@ pub fn hub(slot: Arc<Latest<Arc<Snapshot>>>, sh: Arc<Shared>) {
                     v.history.clear();
                 }
             }
-            v.history.extend(snap.points.iter().copied());
+            v.history.extend(snap.points.iter().cloned());
             let newest = v.history.back().map_or(0.0, |p| p.t);
             while v.history.front().is_some_and(|p| p.t < newest - HISTORY_S) {
                 v.history.pop_front();
             }
             v.snap = Some(snap.clone());
         }
+        sh.poke();
         if sh.viewers.load(Ordering::SeqCst) == 0 {
             continue; // nobody watches: no JPEG work
         }
@@ -124,7 +125,9 @@ pub fn hub(slot: Arc<Latest<Arc<Snapshot>>>, sh: Arc<Shared>) {
 /// The annotated camera frame and, to its right, the bird's-eye view (grey, the binary image
 /// in red, the column histogram in yellow, the lines found in green) at the same height.
 fn render(s: &Snapshot) -> RgbImage {
-    let ann = crate::annotate::annotate(&s.image, &s.roi, &s.homography, &s.lane_images, &s.lane, &s.command);
+    // No inset: the bird's-eye view is drawn beside the frame, the scene stays visible.
+    let mut ann = crate::annotate::annotate_with(&s.image, &s.roi, &s.homography, &s.lane_images, &s.lane, &s.command, false);
+    draw_objects(&mut ann, &s.objects);
     let li = &s.lane_images;
     let (bw, bh) = li.bird.dimensions();
     let h = ann.height();
@@ -168,6 +171,28 @@ fn render(s: &Snapshot) -> RgbImage {
         }
     }
     out
+}
+
+/// Each detected object's box in magenta with its class and range ("STOP 0.84M"; a light
+/// with its colour), the label above the box or inside it at the top edge.
+fn draw_objects(img: &mut RgbImage, objects: &[crate::pipeline::RangedObject]) {
+    use crate::annotate::{line, text};
+    let c = Rgb([255, 0, 255]);
+    for o in objects {
+        let [l, t, r, b] = o.bbox;
+        for (x0, y0, x1, y1) in [(l, t, r, t), (r, t, r, b), (r, b, l, b), (l, b, l, t)] {
+            line(img, x0, y0, x1, y1, c);
+        }
+        let mut label = o.class.name().replace('_', " ").to_uppercase();
+        if let Some(light) = o.light {
+            label = format!("{label} {light:?}").to_uppercase();
+        }
+        if let Some(d) = o.distance_m {
+            label = format!("{label} {d:.2}M");
+        }
+        let y = if t >= 10.0 { t - 9.0 } else { t + 2.0 };
+        text(img, l.max(0.0) as i64, y as i64, &label, c);
+    }
 }
 
 /// `GET /stream.mjpg`: MJPEG to one viewer, the newest JPEG whenever it is ready for one.

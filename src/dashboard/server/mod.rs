@@ -36,8 +36,10 @@ mod api;
 mod conn;
 mod hub;
 mod log;
+mod push;
 mod reply;
 mod state;
+mod status;
 
 use super::shared::{DashboardError, Sent};
 use crate::config::Config;
@@ -134,6 +136,10 @@ impl Server {
             last_heartbeat_ms: AtomicU64::new(0),
             armed_by_page: AtomicBool::new(false),
             viewers: AtomicUsize::new(0),
+            subscribers: AtomicUsize::new(0),
+            tick: tokio::sync::watch::Sender::new(0),
+            events_sent: AtomicU64::new(0),
+            event_bytes: AtomicU64::new(0),
             frames_sent: AtomicU64::new(0),
             closed: AtomicBool::new(false),
             shutdown: tokio::sync::watch::Sender::new(false),

@@ -56,6 +56,14 @@ pub struct Shared {
     pub armed_by_page: AtomicBool,
     /// Streams being sent.
     pub viewers: AtomicUsize,
+    /// Pages subscribed to the pushed state (`GET /api/events`).
+    pub subscribers: AtomicUsize,
+    /// Bumped when there is something new to push (a snapshot, a control's change).
+    pub tick: tokio::sync::watch::Sender<u64>,
+    /// Pushed events and their bytes, all subscribers (the page's traffic).
+    pub events_sent: AtomicU64,
+    /// See `events_sent`.
+    pub event_bytes: AtomicU64,
     /// Most streams at once.
     pub max_viewers: usize,
     /// Stream frames sent to all viewers.
@@ -77,6 +85,11 @@ impl Shared {
     pub fn close(&self) {
         self.closed.store(true, Ordering::SeqCst);
         self.shutdown.send_replace(true);
+    }
+
+    /// Something changed: every subscribed page gets an event now.
+    pub fn poke(&self) {
+        self.tick.send_modify(|v| *v = v.wrapping_add(1));
     }
 
     /// Milliseconds on the dashboard's clock.
