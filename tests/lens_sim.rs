@@ -65,5 +65,8 @@ fn a_wide_angle_lens_is_driven_cleanly_with_its_model_in_the_bird_eye_map() {
         err_with <= 0.6 * err_without,
         "lane centre error with the lens model {err_with:.3} px, without {err_without:.3} px"
     );
-    assert!(err_with <= 1.29 + 0.5, "lane centre error with the lens model {err_with:.3} px");
+    assert!(
+        err_with <= 1.29 + 0.5,
+        "lane centre error with the lens model {err_with:.3} px"
+    );
 }

@@ -147,7 +147,6 @@ impl LensWarp {
     }
 }
 
-
 /// The spans (sorted, disjoint) widened by the blur's reach (`3·blur_px`) and merged where
 /// they meet; with blur, one range from the first to the last (the blur runs over the whole
 /// image on each render call).
