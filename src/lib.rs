@@ -32,6 +32,7 @@ pub mod gpio;
 pub mod health;
 pub mod imageio;
 pub mod lane;
+pub mod lens;
 pub mod link;
 pub mod pipeline;
 #[cfg(unix)]

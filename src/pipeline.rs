@@ -46,6 +46,10 @@ pub enum PipelineError {
     /// The ROI does not define a bird's-eye view.
     #[error("warp.src: {0}")]
     Warp(WarpError),
+    /// The camera's lens (`camera.distortion`, `camera.calibration`) cannot be folded into
+    /// the bird's-eye map.
+    #[error(transparent)]
+    Lens(crate::config::LensError),
     /// A cascade file exists but cannot be read or parsed.
     #[error("detect: {0}")]
     Cascade(CascadeError),
@@ -62,6 +66,15 @@ pub enum PipelineError {
 impl From<crate::calib::file::FileError> for PipelineError {
     fn from(e: crate::calib::file::FileError) -> Self {
         PipelineError::StereoCalibration(e)
+    }
+}
+
+impl From<crate::config::LaneSetupError> for PipelineError {
+    fn from(e: crate::config::LaneSetupError) -> Self {
+        match e {
+            crate::config::LaneSetupError::Warp(w) => PipelineError::Warp(w),
+            crate::config::LaneSetupError::Lens(l) => PipelineError::Lens(l),
+        }
     }
 }
 

@@ -370,6 +370,50 @@ impl CalibrationFile {
         }
     }
 
+    /// Reads a single camera's results file (`rccar calibrate camera`) as the lens of
+    /// `width`×`height` frames (its pinhole and distortion): the pinhole scaled from the calibrated image size (the frames
+    /// are resized to `width`×`height`, so the shape must be the same; pixel centres at
+    /// integers, so c' = (c + ½)·s − ½) and its distortion (dimensionless, unchanged).
+    pub fn load_camera(path: &Path, width: u32, height: u32) -> Result<(crate::lens::Pinhole, Distortion), FileError> {
+        let p = path.display().to_string();
+        match Self::load(path)? {
+            CalibrationFile::Camera { camera, .. } => {
+                let [cw, ch] = camera.image_size;
+                // Same shape: cw/ch = w/h, to a pixel of rounding either way.
+                let (sx, sy) = (width as f64 / cw.max(1) as f64, height as f64 / ch.max(1) as f64);
+                if cw == 0 || ch == 0 || (sx - sy).abs() * (cw.max(ch) as f64) > 1.0 {
+                    return Err(FileError::Size {
+                        path: p,
+                        cw,
+                        ch,
+                        w: width,
+                        h: height,
+                    });
+                }
+                let k = camera.intrinsics;
+                let pin = crate::lens::Pinhole {
+                    fx: k.fx * sx,
+                    fy: k.fy * sy,
+                    cx: (k.cx + 0.5) * sx - 0.5,
+                    cy: (k.cy + 0.5) * sy - 0.5,
+                };
+                let nums = [pin.fx, pin.fy, pin.cx, pin.cy];
+                if !nums.iter().chain(&camera.distortion.0).all(|v| v.is_finite()) || pin.fx <= 0.0 || pin.fy <= 0.0 {
+                    return Err(FileError::Parse {
+                        path: p,
+                        msg: "the focal lengths must be > 0 and every number finite".into(),
+                    });
+                }
+                Ok((pin, camera.distortion))
+            }
+            CalibrationFile::Stereo { .. } => Err(FileError::Kind {
+                path: p,
+                got: "stereo",
+                want: "single-camera",
+            }),
+        }
+    }
+
     /// JSON text of the file.
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).expect("calibration results serialise")

@@ -79,38 +79,10 @@ impl Intrinsics {
     }
 }
 
-/// Lens distortion in OpenCV's order (k1, k2, p1, p2, k3); dimensionless.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct Distortion(pub [f64; 5]);
-
-impl Distortion {
-    /// Applies the distortion to a normalised point (x', y') → (x'', y'').
-    pub fn distort(&self, x: f64, y: f64) -> (f64, f64) {
-        let [k1, k2, p1, p2, k3] = self.0;
-        let r2 = x * x + y * y;
-        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-        (
-            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
-        )
-    }
-
-    /// Inverts [`Distortion::distort`] by fixed-point iteration (as `cv2.undistortPoints`,
-    /// with more iterations).
-    pub fn undistort(&self, xd: f64, yd: f64) -> (f64, f64) {
-        let [k1, k2, p1, p2, k3] = self.0;
-        let (mut x, mut y) = (xd, yd);
-        for _ in 0..50 {
-            let r2 = x * x + y * y;
-            let icdist = 1.0 / (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3)));
-            let dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-            let dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-            x = (xd - dx) * icdist;
-            y = (yd - dy) * icdist;
-        }
-        (x, y)
-    }
-}
+/// Lens distortion in OpenCV's order (k1, k2, p1, p2, k3): the model lives below the
+/// calibration, in [`crate::lens`], so the lane warp and the simulator use it without
+/// importing the calibration.
+pub use crate::lens::Distortion;
 
 /// A board's pose in a camera: X_cam = R(rvec)·X_board + t. `rvec` is a Rodrigues vector
 /// (radians), `t` in the board's length unit.

@@ -2,7 +2,8 @@
 //! camera or of the stereo pair (src/calib/, Zhang's method with OpenCV's lens model,
 //! Bouguet's rectification). Prints the reprojection error of every image, names the images
 //! where the board was not found, and writes the results file (JSON) that `[stereo]
-//! calibration` points at.
+//! calibration` (a pair) or `[camera] calibration` (one camera's lens, for the bird's-eye
+//! map) points at.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -107,6 +108,7 @@ pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
         println!("{n}: reprojection RMS {e:.4} px");
     }
     println!("{}", cam.summary_line("camera"));
+    let hint = lane_hint(&cam, &a.out);
     let file = CalibrationFile::Camera {
         board: a.board.board,
         square_m: a.board.square,
@@ -114,7 +116,20 @@ pub fn run_camera(a: CameraArgs) -> Result<ExitCode> {
     };
     std::fs::write(&a.out, file.to_json()).with_context(|| format!("{}: cannot write", a.out.display()))?;
     println!("wrote {}", a.out.display());
+    println!("{hint}");
     Ok(ExitCode::SUCCESS)
+}
+
+/// How the lane pipeline uses a camera's results file: the `[camera]` keys to set (the file
+/// folds the lens into the bird's-eye map; `hfov_deg` from fx keeps `rccar config roi` and the
+/// ranging on the same pinhole).
+fn lane_hint(cam: &CameraCalibration, out: &std::path::Path) -> String {
+    let w = cam.image_size[0] as f64;
+    let hfov = 2.0 * (w / (2.0 * cam.intrinsics.fx)).atan().to_degrees();
+    format!(
+        "lane keeping through this lens: in car.toml [camera] set calibration = \"{}\" and hfov_deg = {hfov:.1} (from fx), then recompute [warp] src with `rccar config roi` (docs/lane.md, \"Wide-angle lenses\")",
+        out.display()
+    )
 }
 
 /// Runs `rccar calibrate stereo`.

@@ -86,6 +86,12 @@ fn check(args: &ConfigArgs) -> Result<ExitCode> {
                     return Ok(ExitCode::from(1));
                 }
             }
+            // So must the camera's lens (`camera.calibration`'s file, a model that does not
+            // fold back inside the ROI).
+            if let Err(e) = l.cfg.camera_lens() {
+                eprintln!("config error:\n{e}");
+                return Ok(ExitCode::from(1));
+            }
             print!("{}", l.cfg.to_toml());
             let files: Vec<String> = l.files.iter().map(|p| p.display().to_string()).collect();
             if l.values_in_files == 0 {

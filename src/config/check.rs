@@ -70,11 +70,13 @@ impl Config {
         let mut c = Checker::default();
         self.camera.check(&mut c);
         self.warp.check(&mut c);
+        self.check_lens(&mut c);
         self.lane.check(&mut c, self.warp.out_width);
         self.steering.check(&mut c);
         self.throttle.check(&mut c);
         self.vehicle.check(&mut c);
         self.sim.check(&mut c);
+        self.check_sim_lens(&mut c);
         self.detect.check(&mut c);
         self.ranging.check(&mut c);
         self.classes.check(&mut c);

@@ -106,9 +106,23 @@ impl From<&LaneConfig> for LaneOptions {
     }
 }
 
+/// Why the lane detector of a configuration cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum LaneSetupError {
+    /// The ROI does not define a bird's-eye view.
+    #[error(transparent)]
+    Warp(WarpError),
+    /// The camera's lens (`camera.distortion`, `camera.calibration`) cannot be used.
+    #[error(transparent)]
+    Lens(super::camera::LensError),
+}
+
 impl Config {
-    /// The lane detector of `[camera]` (frame size), `[warp]` and `[lane]`.
-    pub fn lane_detector(&self) -> Result<LaneDetector, WarpError> {
-        LaneDetector::new(self.camera.width, self.camera.height, &(&self.warp).into(), (&self.lane).into())
+    /// The lane detector of `[camera]` (frame size and lens: `camera.distortion` or the file
+    /// `camera.calibration` names, read here), `[warp]` and `[lane]`.
+    pub fn lane_detector(&self) -> Result<LaneDetector, LaneSetupError> {
+        let mut warp: crate::lane::WarpOptions = (&self.warp).into();
+        warp.lens = self.camera_lens().map_err(LaneSetupError::Lens)?;
+        LaneDetector::new(self.camera.width, self.camera.height, &warp, (&self.lane).into()).map_err(LaneSetupError::Warp)
     }
 }

@@ -40,12 +40,12 @@ mod vehicle;
 mod warp;
 
 pub use behaviour::BehaviourConfig;
-pub use camera::CameraConfig;
+pub use camera::{CameraConfig, LensError};
 pub use classes::{ClassConfig, ClassesConfig};
 pub use dashboard::DashboardConfig;
 pub use detect::DetectConfig;
 pub use gpio::GpioConfig;
-pub use lane::{LaneConfig, PeakMode, ThresholdMode};
+pub use lane::{LaneConfig, LaneSetupError, PeakMode, ThresholdMode};
 pub use layers::{find_config, find_local, local_beside, path_keys, source_tree_config, LoadedConfig, MissingLocal};
 pub use manual::ManualConfig;
 pub use ranging::{RangingConfig, RangingMethod};

@@ -31,10 +31,14 @@ pub struct SimConfig {
     /// Period of the brightness change, seconds.
     pub light_period_s: f64,
     /// How a stereo pair's second camera is turned from ideal: yaw, pitch, roll, degrees
-    /// (`ranging.method = "stereo"`; src/sim/stereo.rs `LensWarp`).
+    /// (`ranging.method = "stereo"`; src/sim/lens.rs `LensWarp`).
     pub stereo_error_deg: [f64; 3],
     /// Radial distortion k₁ of the stereo pair's second camera (0 = none).
     pub stereo_error_k1: f64,
+    /// The car's own camera seen through a lens with this distortion, OpenCV's order [k1, k2,
+    /// p1, p2, k3] on `[camera]`'s pinhole (src/sim/lens.rs `LensWarp`); all zero = an ideal
+    /// lens. The truth stays the ideal camera's.
+    pub lens_distortion: [f64; 5],
 }
 
 impl Default for SimConfig {
@@ -52,6 +56,7 @@ impl Default for SimConfig {
             light_period_s: 10.0,
             stereo_error_deg: [0.0; 3],
             stereo_error_k1: 0.0,
+            lens_distortion: [0.0; 5],
         }
     }
 }
@@ -76,5 +81,39 @@ impl SimConfig {
             c.range(&format!("sim.stereo_error_deg[{i}]"), *v, -5.0, 5.0);
         }
         c.range("sim.stereo_error_k1", m.stereo_error_k1, -0.5, 0.5);
+        for (i, (v, bound)) in m.lens_distortion.iter().zip([1.0, 1.0, 0.1, 0.1, 1.0]).enumerate() {
+            c.range(&format!("sim.lens_distortion[{i}]"), *v, -bound, bound);
+            // (the same bounds gate the fold check in `check_sim_lens`)
+        }
+    }
+}
+
+impl super::Config {
+    /// `sim.lens_distortion` against `[camera]`: the simulated lens must bend every pixel of
+    /// the image from one ray (the model may not fold back before the image's corners).
+    pub(super) fn check_sim_lens(&self, c: &mut Checker) {
+        let d = crate::lens::Distortion(self.sim.lens_distortion);
+        let in_range = d.0.iter().zip([1.0, 1.0, 0.1, 0.1, 1.0]).all(|(v, b)| v.abs() <= b);
+        if d.is_zero() || !in_range {
+            return;
+        }
+        let cam = crate::camera::PinholeCamera::from(&self.camera);
+        let corner = (cam.u0.hypot(cam.v0) / cam.f_px).max(1e-6);
+        // Walk out along the radius until the bent radius reaches the corner's.
+        let mut r: f64 = 0.0;
+        let radial = |r: f64| r * (1.0 + r * r * (d.0[0] + r * r * (d.0[1] + r * r * d.0[4])));
+        while radial(r) < corner {
+            if d.radial_slope(r * r) <= 0.0 || r > 10.0 * corner {
+                c.fail(
+                    "sim.lens_distortion",
+                    format!("{:?}", self.sim.lens_distortion),
+                    &format!(
+                        "a lens that bends every pixel from one ray: this model folds back (1 + 3k1 r² + 5k2 r⁴ + 7k3 r⁶ ≤ 0) at r = {r:.3} before the image corners (r_d = {corner:.3}); make k1 less negative or k2 larger"
+                    ),
+                );
+                return;
+            }
+            r += corner / 256.0;
+        }
     }
 }

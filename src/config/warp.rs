@@ -72,13 +72,15 @@ impl WarpConfig {
 }
 
 impl From<&WarpConfig> for WarpOptions {
-    /// The lane stage's bird's-eye view of `[warp]`.
+    /// The lane stage's bird's-eye view of `[warp]`, for an ideal lens
+    /// (`Config::lane_detector` adds `[camera]`'s).
     fn from(w: &WarpConfig) -> Self {
         Self {
             src: w.src,
             out_width: w.out_width,
             out_height: w.out_height,
             exact: w.exact,
+            lens: None,
         }
     }
 }

@@ -34,6 +34,9 @@ pub struct WarpOptions {
     /// Warp each colour channel, then convert to grey (OpenCV's exact order) instead of grey
     /// first.
     pub exact: bool,
+    /// The camera's lens (pinhole and distortion) folded into the warp's table
+    /// ([`WarpMap::with_lens`]); `None` (or zero distortion) for an ideal pinhole camera.
+    pub lens: Option<crate::lens::Lens>,
 }
 
 /// Options of the lane measurement in the bird's-eye image (`[lane]` of car.toml converts
@@ -103,7 +106,7 @@ impl LaneDetector {
     /// (`Config::lane_detector` builds the one of car.toml).
     pub fn new(frame_w: u32, frame_h: u32, warp: &WarpOptions, opts: LaneOptions) -> Result<Self, WarpError> {
         let (out_w, out_h) = (warp.out_width, warp.out_height);
-        let map = WarpMap::new(frame_w, frame_h, &warp.src, out_w, out_h)?;
+        let map = WarpMap::with_lens(frame_w, frame_h, &warp.src, out_w, out_h, warp.lens.as_ref())?;
         let band_rows = lines::band_rows(out_h, opts.lines.band);
         Ok(Self {
             map,

@@ -12,10 +12,23 @@
 //!    (`Y = (9798 R + 19235 G + 3735 B + 2^14) >> 15`, OpenCV's integer BT.601), so the
 //!    colour bird's-eye image is never stored.
 //!
+//! 4. A wide-angle lens bends straight tape into curves. [`WarpMap::with_lens`] folds the lens
+//!    model that `rccar calibrate camera` measures into the same table: OpenCV's
+//!    radial–tangential model ([`crate::lens`]), on normalised ideal coordinates
+//!    x = (u − cx)/fx, y = (v − cy)/fy (ideal pinhole), r² = x² + y²,
+//!    x_d = x(1 + k1 r² + k2 r⁴ + k3 r⁶) + 2 p1 x y + p2 (r² + 2x²),
+//!    y_d = y(1 + k1 r² + k2 r⁴ + k3 r⁶) + p1 (r² + 2y²) + 2 p2 x y,
+//!    u_d = fx x_d + cx, v_d = fy y_d + cy (real pinhole). The homography gives each bird's-eye pixel its
+//!    ideal (undistorted) camera pixel, the model where that ray lands in the real frame, and
+//!    the table samples there: undistortion costs nothing per frame, and the ROI and the
+//!    homography stay in the ideal image (the one `rccar config roi` computes). With all
+//!    coefficients zero the table is the one without a lens, bit for bit.
+//!
 //! Units: pixels everywhere. Pixel (i, j) has its centre at (i, j) (OpenCV's convention); the
 //! ROI corners map onto the centres of the bird's-eye image's corner pixels.
 
 use crate::camera::PinholeCamera;
+use crate::lens::Lens;
 use image::{GrayImage, RgbImage};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
@@ -195,6 +208,23 @@ impl WarpMap {
     /// Builds the map for `src_w`×`src_h` camera frames and the ROI `roi` (top-left,
     /// top-right, bottom-right, bottom-left) onto an `out_w`×`out_h` bird's-eye image.
     pub fn new(src_w: u32, src_h: u32, roi: &[[f64; 2]; 4], out_w: u32, out_h: u32) -> Result<Self, WarpError> {
+        Self::with_lens(src_w, src_h, roi, out_w, out_h, None)
+    }
+
+    /// [`WarpMap::new`] for a camera whose lens bends the image: `roi` is then in the ideal
+    /// (undistorted) image of `lens`'s pinhole, and each bird's-eye pixel samples the real
+    /// frame where its ray lands (`lens.distort_pixel` of the homography's ideal pixel).
+    /// Undistortion and warp are one table, so a frame costs what it did without a lens. A
+    /// lens without distortion (or `None`) gives exactly the map of [`WarpMap::new`].
+    pub fn with_lens(
+        src_w: u32,
+        src_h: u32,
+        roi: &[[f64; 2]; 4],
+        out_w: u32,
+        out_h: u32,
+        lens: Option<&Lens>,
+    ) -> Result<Self, WarpError> {
+        let lens = lens.filter(|l| !l.distortion.is_zero());
         let homography = Homography::from_quad_to_rect(roi, out_w, out_h)?;
         let inv = homography.inverse().ok_or(WarpError::Singular)?.0;
         let tab = bilinear_table();
@@ -213,8 +243,17 @@ impl WarpMap {
                 let xf = x as f64;
                 let w = w0 + m6 * xf;
                 let w = if w != 0.0 { INTER_TAB as f64 / w } else { 0.0 };
-                let fx = ((x0 + m0 * xf) * w).clamp(i32::MIN as f64, i32::MAX as f64);
-                let fy = ((y0 + m3 * xf) * w).clamp(i32::MIN as f64, i32::MAX as f64);
+                let (mut fx, mut fy) = ((x0 + m0 * xf) * w, (y0 + m3 * xf) * w);
+                if let Some(l) = lens {
+                    // The ideal pixel's ray lands here in the real, distorted frame.
+                    let (u, v) = l.distort_pixel(fx / INTER_TAB as f64, fy / INTER_TAB as f64);
+                    (fx, fy) = (u * INTER_TAB as f64, v * INTER_TAB as f64);
+                    if !(fx.is_finite() && fy.is_finite()) {
+                        (fx, fy) = (-4.0 * INTER_TAB as f64, -4.0 * INTER_TAB as f64);
+                    }
+                }
+                let fx = fx.clamp(i32::MIN as f64, i32::MAX as f64);
+                let fy = fy.clamp(i32::MIN as f64, i32::MAX as f64);
                 let (ix, iy) = (fx.round_ties_even() as i32, fy.round_ties_even() as i32);
                 let (sx, sy) = ((ix >> INTER_BITS) as i64, (iy >> INTER_BITS) as i64);
                 let a = ((iy & (INTER_TAB - 1)) * INTER_TAB + (ix & (INTER_TAB - 1))) as usize;
@@ -270,7 +309,8 @@ impl WarpMap {
         })
     }
 
-    /// The homography from the camera frame to the bird's-eye image.
+    /// The homography from the camera frame to the bird's-eye image (the ideal, undistorted
+    /// frame when the map was built [`WarpMap::with_lens`]).
     pub fn homography(&self) -> &Homography {
         &self.homography
     }
@@ -502,6 +542,127 @@ mod tests {
             .max()
             .unwrap();
         assert!(max <= 2, "max difference {max}");
+    }
+
+    /// The frame a wide-angle lens (`k`) shows of two straight tapes on the floor, 2 cm wide,
+    /// 0.18 m either side of the car's axis, and the camera's lens.
+    fn bent_tapes(k: [f64; 5]) -> (RgbImage, Lens) {
+        let cam = PinholeCamera::new(320, 240, 62.2, 0.20, 20.0);
+        let pin = crate::lens::Pinhole {
+            fx: cam.f_px,
+            fy: cam.f_px,
+            cx: cam.u0,
+            cy: cam.v0,
+        };
+        let lens = Lens::on(pin, crate::lens::Distortion(k));
+        // 4×4 samples a pixel: each real pixel's ray (undistorted) hits the floor somewhere.
+        let img = RgbImage::from_fn(320, 240, |u, v| {
+            let mut hits = 0u32;
+            for (i, j) in (0..16).map(|n| (n % 4, n / 4)) {
+                let (su, sv) = (u as f64 - 0.375 + 0.25 * i as f64, v as f64 - 0.375 + 0.25 * j as f64);
+                let (iu, iv) = lens.undistort_pixel(su, sv);
+                if let Some((_, y)) = cam.ground_of_pixel(iu, iv) {
+                    hits += u32::from((y.abs() - 0.18).abs() < 0.01);
+                }
+            }
+            let g = (30 + hits * 225 / 16) as u8;
+            image::Rgb([g, g, g])
+        });
+        (img, lens)
+    }
+
+    /// The tape's centre column on each row of each half of a bird's-eye image.
+    fn tape_centres(bird: &GrayImage) -> Vec<Vec<(f64, f64)>> {
+        let (w, h) = bird.dimensions();
+        [0..w / 2, w / 2..w]
+            .into_iter()
+            .map(|half| {
+                let pts: Vec<(f64, f64)> = (0..h)
+                    .filter_map(|y| {
+                        let (mut sw, mut sx) = (0.0, 0.0);
+                        for x in half.clone() {
+                            let v = bird.get_pixel(x, y).0[0] as f64 - 30.0;
+                            if v > 20.0 {
+                                sw += v;
+                                sx += v * x as f64;
+                            }
+                        }
+                        (sw > 0.0).then(|| (y as f64, sx / sw))
+                    })
+                    .collect();
+                assert!(pts.len() as u32 > h * 9 / 10, "the tape is missing on rows: {} of {h}", pts.len());
+                pts
+            })
+            .collect()
+    }
+
+    /// The worst distance (px) of the tape's centre from the straight line fitted to it.
+    fn fit_residual(tapes: &[Vec<(f64, f64)>]) -> f64 {
+        let mut worst = 0.0f64;
+        for pts in tapes {
+            let n = pts.len() as f64;
+            let (my, mx) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
+            let b = pts.iter().map(|p| (p.0 - my) * (p.1 - mx)).sum::<f64>() / pts.iter().map(|p| (p.0 - my).powi(2)).sum::<f64>();
+            for p in pts {
+                worst = worst.max((p.1 - (mx + b * (p.0 - my))).abs());
+            }
+        }
+        worst
+    }
+
+    /// The worst distance (px) of the tape's centre from where an ideal lens puts it.
+    fn off_truth(tapes: &[Vec<(f64, f64)>], truth: &[Vec<(f64, f64)>]) -> f64 {
+        let mut worst = 0.0f64;
+        for (a, b) in tapes.iter().zip(truth) {
+            for p in a {
+                if let Some(q) = b.iter().find(|q| q.0 == p.0) {
+                    worst = worst.max((p.1 - q.1).abs());
+                }
+            }
+        }
+        worst
+    }
+
+    /// Issue 26: straight tape seen through a wide-angle lens stays straight, and where it
+    /// is, in the bird's-eye view when the lens is folded into the map, and bends and moves
+    /// without it.
+    #[test]
+    fn a_straight_tape_stays_straight_through_a_wide_angle_lens_only_with_the_lens_model() {
+        let k = [-0.5, 0.2, 0.0, 0.0, 0.0];
+        let (frame, lens) = bent_tapes(k);
+        let mut bird = GrayImage::new(320, 240);
+        // An ideal lens's frame through the ideal map: where the tapes belong.
+        let without = WarpMap::new(320, 240, &ROI, 320, 240).unwrap();
+        without.warp_rgb_to_gray(&bent_tapes([0.0; 5]).0, &mut bird);
+        let truth = tape_centres(&bird);
+        let with = WarpMap::with_lens(320, 240, &ROI, 320, 240, Some(&lens)).unwrap();
+        with.warp_rgb_to_gray(&frame, &mut bird);
+        let good = tape_centres(&bird);
+        without.warp_rgb_to_gray(&frame, &mut bird);
+        let bent = tape_centres(&bird);
+        let (gr, go, br, bo) = (
+            fit_residual(&good),
+            off_truth(&good, &truth),
+            fit_residual(&bent),
+            off_truth(&bent, &truth),
+        );
+        eprintln!(
+            "tape centre, worst px from a fitted straight line / from the true column: with the lens model {gr:.3} / {go:.3}, without {br:.3} / {bo:.3}, ideal lens {:.3} / 0",
+            fit_residual(&truth)
+        );
+        assert!(gr < 0.5 && go < 0.5, "with the lens model: {gr} px from straight, {go} px off");
+        assert!(br > 1.0 && bo > 5.0, "without it: {br} px from straight, {bo} px off");
+    }
+
+    /// With zero distortion the table is the one without a lens, bit for bit.
+    #[test]
+    fn a_lens_without_distortion_leaves_the_map_unchanged() {
+        let (_, mut lens) = bent_tapes([0.0; 5]);
+        lens.distortion = crate::lens::Distortion::default();
+        let a = WarpMap::new(320, 240, &ROI, 320, 240).unwrap();
+        let b = WarpMap::with_lens(320, 240, &ROI, 320, 240, Some(&lens)).unwrap();
+        assert_eq!((&a.offset, &a.weight, a.src_rows.clone()), (&b.offset, &b.weight, b.src_rows.clone()));
+        assert_eq!(a.edges.len(), b.edges.len());
     }
 
     proptest! {

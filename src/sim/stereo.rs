@@ -11,6 +11,7 @@ use super::vehicle::Pose;
 use crate::camera::PinholeCamera;
 use crate::classes::SimShape;
 use crate::config::Config;
+pub use super::lens::LensWarp;
 use image::RgbImage;
 use std::sync::Arc;
 
@@ -165,97 +166,10 @@ pub struct OtherCamera {
     lens: Option<(LensWarp, RgbImage)>,
 }
 
-/// How a simulated camera differs from the ideal one it is rendered as: turned by yaw, pitch
-/// and roll (`sim.stereo_error_deg`) about its own centre and with a radial lens distortion
-/// k₁ (`sim.stereo_error_k1`, OpenCV's model: x_d = x·(1 + k₁r²)). A camera turned about its
-/// centre sees the same rays, so its image is exactly the ideal image resampled: for each of
-/// its pixels, undistort → turn the ray back (Rᵀ) → project into the ideal camera → bilinear
-/// sample (black outside the ideal view). The map is built once. Units: pixels, radians.
-#[derive(Debug, Clone)]
-pub struct LensWarp {
-    maps: crate::calib::stereo::RectifyMaps,
-    fixed: crate::calib::stereo::FixedMaps,
-}
-
-impl LensWarp {
-    /// The warp of `cfg`'s other camera, `None` when it is ideal (all errors zero).
-    pub fn from_config(cfg: &Config) -> Option<LensWarp> {
-        let [yaw, pitch, roll] = cfg.sim.stereo_error_deg;
-        let k1 = cfg.sim.stereo_error_k1;
-        if [yaw, pitch, roll, k1].iter().all(|&v| v == 0.0) {
-            return None;
-        }
-        Some(Self::new(&PinholeCamera::from(&cfg.camera), [yaw, pitch, roll], k1))
-    }
-
-    /// The warp of `cam` turned by `[yaw, pitch, roll]` degrees (about the camera's y, x and
-    /// z axes: x right, y down, z forward; R = R_z(roll)·R_y(yaw)·R_x(pitch), X_real = R·X_ideal)
-    /// with radial distortion `k1`.
-    pub fn new(cam: &PinholeCamera, deg: [f64; 3], k1: f64) -> LensWarp {
-        use crate::calib::intrinsics::{Distortion, Intrinsics};
-        let [yaw, pitch, roll] = deg.map(f64::to_radians);
-        let (rx, ry, rz) = (
-            nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::x_axis(), pitch),
-            nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::y_axis(), yaw),
-            nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::z_axis(), roll),
-        );
-        let r = (rz * ry * rx).into_inner();
-        // RectifyMaps: output pixel → ray (f, c) → Rᵀ → distortion → K. Here the output is
-        // the real camera and the source the ideal one: a real pixel's ray is undistort(pixel),
-        // so the "rectified" side is the real camera's distorted plane and the source has no
-        // distortion; built directly below.
-        let k = Intrinsics {
-            fx: cam.f_px,
-            fy: cam.f_px,
-            cx: cam.u0,
-            cy: cam.v0,
-        };
-        let d = Distortion([k1, 0.0, 0.0, 0.0, 0.0]);
-        let (w, h) = (cam.width, cam.height);
-        let n = (w * h) as usize;
-        let (mut map_x, mut map_y) = (Vec::with_capacity(n), Vec::with_capacity(n));
-        let rt = r.transpose();
-        for v in 0..h {
-            for u in 0..w {
-                let (x, y) = d.undistort((u as f64 - k.cx) / k.fx, (v as f64 - k.cy) / k.fy);
-                let q = rt * nalgebra::Vector3::new(x, y, 1.0);
-                let (sx, sy) = if q[2] > 1e-9 {
-                    (k.fx * q[0] / q[2] + k.cx, k.fy * q[1] / q[2] + k.cy)
-                } else {
-                    (-10.0, -10.0)
-                };
-                map_x.push(sx as f32);
-                map_y.push(sy as f32);
-            }
-        }
-        let maps = crate::calib::stereo::RectifyMaps {
-            width: w,
-            height: h,
-            map_x,
-            map_y,
-        };
-        LensWarp {
-            fixed: crate::calib::stereo::FixedMaps::new(&maps, w, h),
-            maps,
-        }
-    }
-
-    /// The real camera's colour image from the ideal one.
-    pub fn apply_rgb(&self, ideal: &RgbImage, out: &mut RgbImage) {
-        if !self.fixed.remap_rgb(ideal, out) {
-            self.maps.remap_rgb(ideal, out);
-        }
-    }
-
-    /// The real camera's grey image from the ideal one (e.g. a rendered checkerboard).
-    pub fn apply_gray(&self, ideal: &image::GrayImage, out: &mut image::GrayImage) {
-        self.maps.remap_gray(ideal, out);
-    }
-}
-
 /// Renders the rows `spans` (sorted, disjoint) of `r`'s view from `pose` into `img`, each
 /// widened by the blur's reach (`3·blur_px`; with blur, one range from the first span to the
-/// last), as `World::render_spans` does for the reference camera.
+/// last), as `World::render_spans` does for the reference camera; through the camera's error
+/// ([`LensWarp`]) when it has one (the ideal rows those rows read are rendered, then bent).
 pub fn render_spans(
     r: &mut OtherCamera,
     pose: &Pose,
@@ -265,37 +179,5 @@ pub fn render_spans(
     spans: &[std::ops::Range<usize>],
     blur_px: f64,
 ) {
-    let reach = if blur_px > 0.0 {
-        (3.0 * blur_px).ceil() as usize + 1
-    } else {
-        0
-    };
-    let mut merged: Vec<std::ops::Range<usize>> = Vec::with_capacity(spans.len());
-    for s in spans.iter().filter(|s| !s.is_empty()) {
-        let s = s.start.saturating_sub(reach)..s.end + reach;
-        match merged.last_mut() {
-            Some(m) if s.start <= m.end => m.end = m.end.max(s.end),
-            _ => merged.push(s),
-        }
-    }
-    if reach > 0 && merged.len() > 1 {
-        let all = merged[0].start..merged[merged.len() - 1].end;
-        merged = vec![all];
-    }
-    match &mut r.lens {
-        // A turned camera's rows come from other rows of the ideal view: all of it.
-        Some((lens, ideal)) => {
-            let h = img.height() as usize;
-            if ideal.dimensions() != img.dimensions() {
-                *ideal = RgbImage::new(img.width(), img.height());
-            }
-            r.renderer.render_rows(pose, t_s, frame, ideal, 0..h);
-            lens.apply_rgb(ideal, img);
-        }
-        None => {
-            for m in merged {
-                r.renderer.render_rows(pose, t_s, frame, img, m);
-            }
-        }
-    }
+    super::lens::render_through(&mut r.renderer, r.lens.as_mut(), pose, t_s, frame, img, spans, blur_px);
 }

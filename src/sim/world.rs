@@ -121,7 +121,22 @@ impl Summary {
 /// The camera rows the pipeline's bird's-eye warp reads (its ROI, bilinear taps, and the
 /// blur's reach).
 pub fn roi_rows(cfg: &Config) -> Range<usize> {
-    let ys = cfg.warp.src.iter().map(|p| p[1]);
+    // Through a lens the map reads the bent ROI: its outline, sampled along each edge.
+    let lens = cfg.camera_lens().ok().flatten();
+    let src = &cfg.warp.src;
+    let ys: Vec<f64> = match &lens {
+        None => src.iter().map(|p| p[1]).collect(),
+        Some(l) => (0..4)
+            .flat_map(|k| {
+                let (a, b) = (src[k], src[(k + 1) % 4]);
+                (0..=32).map(move |i| {
+                    let t = i as f64 / 32.0;
+                    l.distort_pixel(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])).1
+                })
+            })
+            .collect(),
+    };
+    let ys = ys.iter().copied();
     let lo = ys.clone().fold(f64::INFINITY, f64::min);
     let hi = ys.fold(f64::NEG_INFINITY, f64::max);
     let blur = (3.0 * cfg.sim.blur_px).ceil() + 2.0;
@@ -158,6 +173,8 @@ pub struct World {
     cfg: Config,
     scene: Arc<Scene>,
     renderer: Renderer,
+    /// The camera's lens (`sim.lens_distortion`) and the ideal image it bends, if any.
+    lens: Option<(super::lens::LensWarp, RgbImage)>,
     truth: TruthModel,
     vehicle: Vehicle,
     /// Simulated time of the vehicle, seconds.
@@ -198,6 +215,7 @@ impl World {
             cfg: cfg.clone(),
             scene,
             renderer,
+            lens: super::lens::LensWarp::main_camera(cfg).map(|l| (l, RgbImage::new(0, 0))),
             truth,
             vehicle,
             t_s: 0.0,
@@ -289,30 +307,12 @@ impl World {
 
     /// Like [`World::render`] with several row ranges (sorted, disjoint), each widened by the
     /// blur's reach (`3·sim.blur_px`, so every row in `spans` comes out as in a full frame;
-    /// with blur, one range from the first span to the last).
+    /// with blur, one range from the first span to the last); through the lens of
+    /// `sim.lens_distortion` when it has one ([`super::lens::render_through`]).
     pub fn render_spans(&mut self, frame: u64, t_s: f64, img: &mut RgbImage, spans: &[Range<usize>]) -> FrameTruth {
         let pose = self.vehicle.pose;
-        let reach = if self.cfg.sim.blur_px > 0.0 {
-            (3.0 * self.cfg.sim.blur_px).ceil() as usize + 1
-        } else {
-            0
-        };
-        let mut merged: Vec<Range<usize>> = Vec::with_capacity(spans.len());
-        for r in spans.iter().filter(|r| !r.is_empty()) {
-            let r = r.start.saturating_sub(reach)..r.end + reach;
-            match merged.last_mut() {
-                Some(m) if r.start <= m.end => m.end = m.end.max(r.end),
-                _ => merged.push(r),
-            }
-        }
-        if reach > 0 && merged.len() > 1 {
-            // The blur runs over the whole image on each call: one call for every span.
-            let all = merged[0].start..merged[merged.len() - 1].end;
-            merged = vec![all];
-        }
-        for m in merged {
-            self.renderer.render_rows(&pose, t_s, frame, img, m);
-        }
+        let blur = self.cfg.sim.blur_px;
+        super::lens::render_through(&mut self.renderer, self.lens.as_mut(), &pose, t_s, frame, img, spans, blur);
         let v = &self.vehicle;
         let wb = self.cfg.vehicle.wheelbase_m;
         let mut truth = self.truth.frame(&self.scene, &pose, v.speed, v.wheel_angle, wb);
