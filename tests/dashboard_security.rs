@@ -731,6 +731,7 @@ fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() 
         ("/api/sim/pause", ""),
         ("/api/mode", r#"{"mode":"manual"}"#),
         ("/api/drive", r#"{"steer":0.5,"throttle":1}"#),
+        ("/api/record", r#"{"on":true}"#),
     ];
     let mut n = 0;
     for (what, h) in &attempts {
@@ -784,6 +785,7 @@ fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() 
         "refused OPTIONS /api/arm",
         "refused POST /api/drive from 127.0.0.1",
         "refused POST /api/mode from 127.0.0.1",
+        "refused POST /api/record from 127.0.0.1",
     ] {
         assert!(log.contains(needle), "stderr lacks `{needle}`:\n{log}");
     }
@@ -792,6 +794,11 @@ fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() 
     let good = [json, with_secret, ("Origin", own.as_str())];
     let (c, _, b) = send(s, "POST", "/api/set", &good, r#"{"key":"steering.kd","value":0.07}"#);
     assert_eq!(c, 200, "{b}");
+    // A run without --record cannot record: 409 with the reason, even with every proof.
+    let (c, _, b) = send(s, "POST", "/api/record", &good, r#"{"on":true}"#);
+    assert_eq!(c, 409, "{b}");
+    assert!(b.contains("--record DIR"), "{b}");
+    assert_eq!(state(s).unwrap()["record"]["available"], false);
 }
 
 #[test]

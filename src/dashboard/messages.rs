@@ -97,6 +97,14 @@ pub struct ModeRequest {
     pub mode: String,
 }
 
+/// `POST /api/record` body: record (`true`) or pause (`false`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordRequest {
+    /// Record frames from the next one on.
+    pub on: bool,
+}
+
 /// Parses a JSON body into `T`, refusing oversized bodies and unknown fields.
 pub fn parse_body<T: for<'de> Deserialize<'de>>(body: &[u8]) -> Result<T, ControlError> {
     if body.len() > MAX_BODY {

@@ -34,7 +34,7 @@ pub mod server;
 pub mod shared;
 
 pub use messages::{
-    get_value, parse_body, settable, validate_set, Control, ControlError, ControlSender, DriveRequest, Live, ModeRequest,
+    get_value, parse_body, settable, validate_set, Control, ControlError, ControlSender, DriveRequest, Live, ModeRequest, RecordRequest,
     PlaceRequest, PlotPoint, SetRequest, Snapshot, INBOX_CAPACITY, MAX_BODY,
 };
 pub use observer::{apply_value, channel, Channel, DashObserver};

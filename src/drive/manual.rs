@@ -86,6 +86,8 @@ pub struct Controls {
     ceiling: AtomicF64,
     /// A human input is attached to this run (a dashboard, a pad): records say the mode.
     attached: AtomicBool,
+    /// The record switch.
+    record: RecordSwitch,
 }
 
 impl std::fmt::Debug for Controls {
@@ -126,6 +128,109 @@ pub struct BadInput {
     pub value: String,
 }
 
+/// The record switch (issue 26): whether the run's recorder keeps frames, switched from the
+/// page or the pad, and what the recorder reports back. Only a run started with `--record DIR`
+/// has a recorder ([`RecordSwitch::available`]); it starts recording (as before the switch
+/// existed), and switching it off keeps the folder and pauses the frames — one run, one folder,
+/// never a second recording mixed into it.
+#[derive(Debug)]
+pub struct RecordSwitch {
+    available: AtomicBool,
+    on: AtomicBool,
+    version: AtomicU64,
+    actor: AtomicU8,
+    at_s: AtomicF64,
+    frames: AtomicU64,
+    bytes_left: AtomicU64,
+}
+
+impl Default for RecordSwitch {
+    fn default() -> Self {
+        Self {
+            available: AtomicBool::new(false),
+            on: AtomicBool::new(false),
+            version: AtomicU64::new(0),
+            actor: AtomicU8::new(Actor::Program as u8),
+            at_s: AtomicF64::nan(),
+            frames: AtomicU64::new(0),
+            bytes_left: AtomicU64::new(u64::MAX),
+        }
+    }
+}
+
+/// Why the record switch did not move.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("this run has no recorder: start it with --record DIR to record")]
+pub struct NoRecorder;
+
+impl RecordSwitch {
+    /// The run has a recorder, recording from the start (`--record DIR`).
+    pub fn make_available(&self) {
+        self.available.store(true, Ordering::SeqCst);
+        self.on.store(true, Ordering::SeqCst);
+    }
+
+    /// Whether the run has a recorder.
+    pub fn available(&self) -> bool {
+        self.available.load(Ordering::SeqCst)
+    }
+
+    /// Whether frames are being recorded now.
+    pub fn is_on(&self) -> bool {
+        self.available() && self.on.load(Ordering::SeqCst)
+    }
+
+    /// Records (`on`) or pauses, `by` whom at `at_s` on the run's clock. Returns the state before.
+    pub fn set(&self, on: bool, by: Actor, at_s: f64) -> Result<bool, NoRecorder> {
+        if !self.available() {
+            return Err(NoRecorder);
+        }
+        let before = self.on.swap(on, Ordering::SeqCst);
+        if before != on {
+            self.actor.store(by as u8, Ordering::SeqCst);
+            self.at_s.set(at_s);
+            self.version.fetch_add(1, Ordering::SeqCst);
+        }
+        Ok(before)
+    }
+
+    /// Flips the switch (a pad's button). Returns the state after.
+    pub fn toggle(&self, by: Actor, at_s: f64) -> Result<bool, NoRecorder> {
+        let on = !self.is_on();
+        self.set(on, by, at_s).map(|_| on)
+    }
+
+    /// Changes so far.
+    pub fn version(&self) -> u64 {
+        self.version.load(Ordering::SeqCst)
+    }
+
+    /// The last change: (on, who, when on the run's clock).
+    pub fn last_change(&self) -> (bool, Actor, f64) {
+        (
+            self.on.load(Ordering::SeqCst),
+            Actor::from_u8(self.actor.load(Ordering::SeqCst)),
+            self.at_s.get(),
+        )
+    }
+
+    /// The recorder's report: frames kept on disk and bytes left of the budget.
+    pub fn report(&self, frames: u64, bytes_left: u64) {
+        self.frames.store(frames, Ordering::SeqCst);
+        self.bytes_left.store(bytes_left, Ordering::SeqCst);
+    }
+
+    /// Frames kept on disk.
+    pub fn frames(&self) -> u64 {
+        self.frames.load(Ordering::SeqCst)
+    }
+
+    /// Bytes left of the disk budget (`u64::MAX` before the first report).
+    pub fn bytes_left(&self) -> u64 {
+        self.bytes_left.load(Ordering::SeqCst)
+    }
+}
+
 impl Controls {
     /// Autopilot, no input yet, the default deadline (250 ms) and ceiling (0.5).
     pub fn new() -> Self {
@@ -142,6 +247,7 @@ impl Controls {
             deadline_s: AtomicF64::new(DEFAULT_DEADLINE_S),
             ceiling: AtomicF64::new(DEFAULT_CEILING),
             attached: AtomicBool::new(false),
+            record: RecordSwitch::default(),
         }
     }
 
@@ -164,6 +270,11 @@ impl Controls {
             Some(c) => c.now_s(),
             None => self.wall.now_s(),
         }
+    }
+
+    /// The record switch.
+    pub fn record(&self) -> &RecordSwitch {
+        &self.record
     }
 
     /// The input deadline, seconds.

@@ -35,7 +35,7 @@ pub mod stop;
 
 pub use crate::sink::{Actuators, Connection};
 pub use arming::{Actor, Arming, Gate, GateOptions, Refused, Sent};
-pub use manual::{Controls, DriveMode, Pilot};
+pub use manual::{Controls, DriveMode, NoRecorder, Pilot, RecordSwitch};
 pub use crate::health::{CarStatus, Fault, Health, HealthSnapshot, Part, PartState};
 pub use slot::Latest;
 pub use stop::{StopReason, StopSignal};
@@ -325,6 +325,8 @@ pub struct Driver {
     mode_seen: u64,
     /// The mode version the steering method was last reset at.
     mode_reset: u64,
+    /// Record-switch changes already noted as events.
+    record_seen: u64,
 }
 
 impl Driver {
@@ -340,6 +342,7 @@ impl Driver {
             resync: false,
             mode_seen: 0,
             mode_reset: 0,
+            record_seen: 0,
         }
     }
 
@@ -474,6 +477,16 @@ impl Driver {
                 "mode {} (was {}) by {} at wall {at:.3} s",
                 ch.mode.name(),
                 before.name(),
+                by.name()
+            ));
+        }
+        let rs = c.record();
+        if rs.version() != self.record_seen {
+            self.record_seen = rs.version();
+            let (on, by, at) = rs.last_change();
+            record.events.push(format!(
+                "recording {} by {} at wall {at:.3} s",
+                if on { "on" } else { "paused" },
                 by.name()
             ));
         }

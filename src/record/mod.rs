@@ -450,6 +450,11 @@ impl Recorder {
         &self.stats
     }
 
+    /// Bytes left of the disk budget (`record.max_mb`), counted as [`RecordStats::bytes_on_disk`].
+    pub fn bytes_left(&self) -> u64 {
+        self.opts.max_bytes.saturating_sub(self.used())
+    }
+
     /// Writes frame `index` (the loop's frame number; it names the file) as JPEG into the
     /// current segment. An error is also counted in the stats; the caller reports it and
     /// goes on (never end the run for it). A frame skipped for the budget is `Ok` and counted

@@ -4,7 +4,8 @@
 //! end of the run: the car must not stop because a USB stick is full.
 
 use super::{RecordError, RecordStats, Recorder};
-use crate::drive::{Flow, FrameContext, LoopError, Observer};
+use crate::drive::{Arming, Flow, FrameContext, LoopError, Observer};
+use std::sync::Arc;
 
 /// Keeps each frame and its telemetry line (see the module notes).
 pub struct RecordObserver {
@@ -15,6 +16,8 @@ pub struct RecordObserver {
     /// The first write error, kept for the caller to report once.
     failed: Option<String>,
     warned: bool,
+    /// The record switch (page, pad): frames are kept only while it is on.
+    switch: Option<Arc<Arming>>,
 }
 
 /// What a finished recording wrote.
@@ -34,7 +37,16 @@ impl RecordObserver {
             right,
             failed: None,
             warned: false,
+            switch: None,
         }
+    }
+
+    /// Keeps frames only while `arming`'s record switch is on (the page's and the pad's
+    /// toggle); the switch is made available and on, and told what was recorded.
+    pub fn switched_by(mut self, arming: Arc<Arming>) -> Self {
+        arming.controls().record().make_available();
+        self.switch = Some(arming);
+        self
     }
 
     /// The first write error, once (for a warning line); later calls return `None`.
@@ -59,6 +71,9 @@ impl RecordObserver {
 
 impl Observer for RecordObserver {
     fn on_frame(&mut self, ctx: &FrameContext<'_>) -> Result<Flow, LoopError> {
+        if self.switch.as_ref().is_some_and(|a| !a.controls().record().is_on()) {
+            return Ok(Flow::Continue); // paused from the page or the pad
+        }
         let line = ctx.record.to_json_line();
         let a = self.rec.write_frame(ctx.frame.index, &ctx.frame.image);
         let b = self.rec.write_telemetry_line(&line);
@@ -68,6 +83,12 @@ impl Observer for RecordObserver {
         };
         if let Err(e) = a.and(b).and(c) {
             self.failed.get_or_insert_with(|| e.to_string());
+        }
+        if let Some(a) = &self.switch {
+            let st = self.rec.stats();
+            a.controls()
+                .record()
+                .report(st.frames_written.saturating_sub(st.frames_deleted), self.rec.bytes_left());
         }
         Ok(Flow::Continue)
     }

@@ -82,7 +82,7 @@ pub(super) fn build(cfg: &Config, spec: SessionSpec, env: SessionEnv) -> Result<
     );
     // 4. GPIO, recording, and last the telemetry file.
     let gpio = open_gpio(cfg, &arming)?;
-    let recorder = open_recorder(cfg, &spec)?;
+    let recorder = open_recorder(cfg, &spec)?.map(|r| r.switched_by(arming.clone()));
     let telemetry = open_telemetry(&spec)?;
     // 5. Arming on the flag (an operator arms otherwise).
     if spec.arm == ArmAt::Flag {

@@ -471,7 +471,7 @@ def drive_suite(a, wd, cfgdir, tmp, procs):
     drive = subprocess.Popen(
         [a.rccar, "drive", "--camera", "sim", "--dry-run", "--dashboard", "--listen", f"127.0.0.1:{port}",
          "--config", os.path.join(cfgdir, "car.toml"), "--local", local, "--seconds", "120",
-         "-o", os.path.join(tmp, "drive-out")],
+         "--record", os.path.join(tmp, "drive-rec"), "-o", os.path.join(tmp, "drive-out")],
         cwd=ROOT, stdout=open(log, "w"), stderr=subprocess.STDOUT)
     procs.append(drive)
     base = f"http://127.0.0.1:{port}"
@@ -486,6 +486,7 @@ def drive_suite(a, wd, cfgdir, tmp, procs):
     t_up = time.time()
     if a.only != "manual":
         cross_origin(wd, base, local, log, tmp, "drive")
+    record_toggle(wd, base, os.path.join(tmp, "drive-rec"), os.path.join(tmp, "drive-out"))
     # Issue 26: waiting disarmed is not a stall (the run ended "Stalled" after 6 s).
     time.sleep(max(0.0, 8.0 - (time.time() - t_up)))
     ended = drive.poll()
@@ -669,6 +670,38 @@ def _manual_suite(wd, base, out, label, tmp, joystick=True, hold=1.5):
     wd.click(wd.find('#modes button[data-mode="autopilot"]'))
     wait(lambda: (lambda s: s and s["mode"] == "autopilot")(_state(base)), 5)
     wd.screenshot(os.path.join(tmp, f"dashboard_manual_{label}.png"))
+
+
+def _frames_on_disk(d):
+    return sum(len([f for f in fs if f.endswith(".jpg")]) for _, _, fs in os.walk(d))
+
+
+def record_toggle(wd, base, rec_dir, out):
+    """The page's record toggle on a `--record` run: it starts recording; paused, no frame is
+    added to the folder; on again, frames are added; both switches are telemetry events naming
+    the page; the page shows the frame count and the budget left."""
+    st = wait(lambda: (lambda s: s if s and s["record"]["frames"] > 5 else None)(_state(base)), 10)
+    check("[drive] --record: the page's recorder is available and recording", bool(st) and st["record"]["available"] and st["record"]["on"],
+          json.dumps(st["record"]) if st else "no state")
+    wd.click(wd.find("#rec"))
+    paused = wait(lambda: (lambda s: s if s and not s["record"]["on"] else None)(_state(base)), 5)
+    time.sleep(0.3)
+    n0 = _frames_on_disk(rec_dir)
+    time.sleep(1.0)
+    n1 = _frames_on_disk(rec_dir)
+    shown = wd.js("return document.getElementById('recinfo').textContent")
+    check("[drive] paused from the page: no frame is added to the recording", bool(paused) and n1 == n0 and n0 > 5,
+          f"frames on disk {n0} -> {n1}; page: {shown}")
+    wd.click(wd.find("#rec"))
+    wait(lambda: (lambda s: s if s and s["record"]["on"] else None)(_state(base)), 5)
+    time.sleep(1.0)
+    n2 = _frames_on_disk(rec_dir)
+    shown = wd.js("return document.getElementById('recinfo').textContent")
+    ev_off = wait(lambda: _find_event(os.path.join(out, "telemetry.jsonl"), "recording paused by page"), 5)
+    ev_on = wait(lambda: _find_event(os.path.join(out, "telemetry.jsonl"), "recording on by page"), 5)
+    check("[drive] recording again: frames are added, the page shows the count and the budget left, both switches in the telemetry",
+          n2 > n1 and "frames kept" in shown and "MB of the budget left" in shown and bool(ev_off) and bool(ev_on),
+          f"frames on disk {n1} -> {n2}; page: {shown}; events {bool(ev_off)} {bool(ev_on)}")
 
 
 def set_armed(wd, base, want):

@@ -11,7 +11,7 @@ use super::state::Shared;
 use super::status::state_json;
 use super::push;
 use crate::dashboard::local_toml;
-use crate::dashboard::messages::{self, Control, DriveRequest, ModeRequest, PlaceRequest, SetRequest};
+use crate::dashboard::messages::{self, Control, DriveRequest, ModeRequest, PlaceRequest, RecordRequest, SetRequest};
 use crate::drive::{Actor, DriveMode};
 use axum::body::{Body, Bytes};
 use axum::extract::State;
@@ -49,6 +49,7 @@ pub fn router(sh: Arc<Shared>) -> Router {
         .route("/api/save", post(save))
         .route("/api/drive", post(drive))
         .route("/api/mode", post(mode))
+        .route("/api/record", post(record))
         .route("/api/sim/pause", post(sim))
         .route("/api/sim/resume", post(sim))
         .route("/api/sim/step", post(sim))
@@ -300,6 +301,34 @@ async fn mode(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h:
         sh.log.send(Msg::Out(format!("dashboard: mode {} (was {}) from {}", m.name(), before.name(), c.ctl.peer)));
     }
     reply(StatusCode::OK, &json!({"mode": m.name()}))
+}
+
+/// `POST /api/record`: `{"on": true}` records frames from the next one on, `false` pauses (a
+/// run started with `--record DIR` only: 409 otherwise). Noted in the telemetry with who and when.
+async fn record(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h: HeaderMap, b: Body) -> Response<Body> {
+    let bytes = match body(&h, b, &c).await {
+        Ok(b) => b,
+        Err(r) => return r,
+    };
+    let q: RecordRequest = match messages::parse_body(&bytes) {
+        Ok(q) => q,
+        Err(e) => return error(StatusCode::BAD_REQUEST, &e.to_string()),
+    };
+    let sw = sh.arm.controls().record();
+    match sw.set(q.on, Actor::Page, sh.sent.now()) {
+        Err(e) => error(StatusCode::CONFLICT, &e.to_string()),
+        Ok(before) => {
+            if before != q.on {
+                sh.log.send(Msg::Out(format!(
+                    "dashboard: recording {} from {}",
+                    if q.on { "on" } else { "paused" },
+                    c.ctl.peer
+                )));
+            }
+            sh.poke();
+            reply(StatusCode::OK, &json!({"recording": q.on}))
+        }
+    }
 }
 
 async fn set(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h: HeaderMap, b: Body) -> Response<Body> {

@@ -24,6 +24,18 @@ fn param_rows(method: crate::control::steering::SteeringMethod) -> Vec<Value> {
         .collect()
 }
 
+/// The record switch: whether the run can record, whether it does, frames kept, budget left.
+fn record_json(sh: &Shared) -> Value {
+    let r = sh.arm.controls().record();
+    let left = r.bytes_left();
+    json!({
+        "available": r.available(),
+        "on": r.is_on(),
+        "frames": r.frames(),
+        "mb_left": if left == u64::MAX { Value::Null } else { json!((left as f64 / 1e6 * 10.0).round() / 10.0) },
+    })
+}
+
 /// Driving by hand: the human's input as the loop would take it now, the deadline and the
 /// ceiling.
 fn manual_json(sh: &Shared) -> Value {
@@ -91,6 +103,7 @@ pub fn state_json(sh: &Shared, since: f64, session: bool, full: bool) -> Value {
         "steering_method": method.name(),
         "mode": sh.arm.controls().mode().name(),
         "manual": manual_json(sh),
+        "record": record_json(sh),
     });
     if full {
         o["params"] = json!(param_rows(method));
