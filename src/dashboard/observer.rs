@@ -131,6 +131,17 @@ impl DashObserver {
                 }
                 false
             }
+            Control::Lane { cfg, note } => {
+                match p.set_lane_config(&cfg) {
+                    Ok(()) => {
+                        self.roi = cfg.warp.src;
+                        self.event(note);
+                    }
+                    // Checked by the server with the same configuration checks: not expected.
+                    Err(e) => self.event(format!("set-up refused by the pipeline: {e} ({note})")),
+                }
+                false
+            }
             Control::Note(n) => {
                 self.event(n);
                 false
