@@ -81,16 +81,24 @@ fn at_size(img: &RgbImage, cfg: &Config) -> RgbImage {
     }
 }
 
+/// Why no frame or preview: the status and the message (small, unlike a response).
+type Refused = (StatusCode, String);
+
+/// The JSON error response of `r`.
+fn refused(r: Refused) -> Response<Body> {
+    error(r.0, &r.1)
+}
+
 /// Freezes a frame: the given file's (`--setup-frame`) or the newest camera frame.
-fn freeze(sh: &Shared, file: bool) -> Result<Arc<Frozen>, Response<Body>> {
+fn freeze(sh: &Shared, file: bool) -> Result<Arc<Frozen>, Refused> {
     let cfg = sh.cfg.lock().unwrap_or_else(|e| e.into_inner()).clone();
     let (image, what) = if file {
         match &sh.setup_given {
             Some((img, name)) => (at_size(img, &cfg), format!("the file {name}")),
             None => {
-                return Err(error(
+                return Err((
                     StatusCode::NOT_FOUND,
-                    "no set-up frame was given at start (--setup-frame FILE)",
+                    "no set-up frame was given at start (--setup-frame FILE)".into(),
                 ))
             }
         }
@@ -102,9 +110,9 @@ fn freeze(sh: &Shared, file: bool) -> Result<Arc<Frozen>, Response<Body>> {
                 format!("camera frame {} at {:.2} s", s.record.frame, s.record.time_s),
             ),
             None => {
-                return Err(error(
+                return Err((
                     StatusCode::SERVICE_UNAVAILABLE,
-                    "no camera frame yet: try again in a moment",
+                    "no camera frame yet: try again in a moment".into(),
                 ))
             }
         }
@@ -116,7 +124,7 @@ fn freeze(sh: &Shared, file: bool) -> Result<Arc<Frozen>, Response<Body>> {
 }
 
 /// The frozen frame; the first time, the given file's or else the newest camera frame.
-fn frozen(sh: &Shared) -> Result<Arc<Frozen>, Response<Body>> {
+fn frozen(sh: &Shared) -> Result<Arc<Frozen>, Refused> {
     if let Some(f) = sh.frozen.lock().unwrap_or_else(|e| e.into_inner()).clone() {
         return Ok(f);
     }
@@ -127,7 +135,7 @@ fn frozen(sh: &Shared) -> Result<Arc<Frozen>, Response<Body>> {
 pub async fn frame(State(sh): State<Arc<Shared>>) -> Response<Body> {
     let f = match tokio::task::spawn_blocking(move || frozen(&sh)).await {
         Ok(Ok(f)) => f,
-        Ok(Err(r)) => return r,
+        Ok(Err(r)) => return refused(r),
         Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
     };
     let mut r = Response::new(Body::from(f.png.clone()));
@@ -178,7 +186,7 @@ pub async fn freeze_now(
     let sh2 = sh.clone();
     match tokio::task::spawn_blocking(move || freeze(&sh2, file)).await {
         Ok(Ok(f)) => reply(StatusCode::OK, &json!({"frozen": f.what})),
-        Ok(Err(r)) => r,
+        Ok(Err(r)) => refused(r),
         Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
     }
 }
@@ -254,12 +262,12 @@ pub async fn preview(
     let sh2 = sh.clone();
     let r = tokio::task::spawn_blocking(move || {
         let f = frozen(&sh2)?;
-        preview_images(&new, &f.image).map_err(|e| error(StatusCode::BAD_REQUEST, &e))
+        preview_images(&new, &f.image).map_err(|e| (StatusCode::BAD_REQUEST, e))
     })
     .await;
     match r {
         Ok(Ok(v)) => reply(StatusCode::OK, &v),
-        Ok(Err(r)) => r,
+        Ok(Err(r)) => refused(r),
         Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
     }
 }
