@@ -416,6 +416,22 @@ impl Pipeline {
         }
     }
 
+    /// A new region of interest and lane threshold from the next frame on (the dashboard's
+    /// set-up page, between frames): the lane detector of `cfg`'s `[camera]`, `[warp]` and
+    /// `[lane]`, and, when the steering method reads the warp (pure pursuit's bird's-eye →
+    /// floor map), the steering method of `cfg` too (its state starts afresh). On an error
+    /// nothing changes. A camera that renders only the rows the pipeline reads
+    /// ([`Pipeline::row_plan`]) must be told again; the dashboard's runs render whole frames.
+    pub fn set_lane_config(&mut self, cfg: &Config) -> Result<(), PipelineError> {
+        let lane = cfg.lane_detector()?;
+        if self.control.steering().method() == crate::control::steering::SteeringMethod::PurePursuit {
+            let steering = cfg.steering_method()?;
+            self.control.set_steering(steering);
+        }
+        self.lane = lane;
+        Ok(())
+    }
+
     /// Installs (or removes) stereo ranging; [`Pipeline::new`] installs an ideal pair of
     /// `[camera]` when `ranging.method = "stereo"` (replace it to use a calibration's geometry).
     pub fn set_stereo(&mut self, stereo: Option<crate::stereo::ranging::StereoRanging>) {

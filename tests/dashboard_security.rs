@@ -281,6 +281,9 @@ const CONTROL: &[&str] = &[
     "/api/sim/place",
     "/api/drive",
     "/api/mode",
+    "/api/setup/freeze",
+    "/api/setup/preview",
+    "/api/setup/apply",
 ];
 
 #[test]
@@ -310,6 +313,9 @@ fn remote_without_login_every_control_and_the_stream_are_refused_403() {
     }
     let (c, _, _) = send(s, "GET", "/stream.mjpg", &[], "");
     assert_eq!(c, 403, "stream");
+    // The set-up page's frozen camera frame is the camera's picture too (issue 26).
+    let (c, _, _) = send(s, "GET", "/api/setup/frame", &[], "");
+    assert_eq!(c, 403, "setup frame");
     // Read-only view: the page (with the login form and the e-stop) and the state.
     let (c, _, b) = send(s, "GET", "/", &[], "");
     assert!(c == 200 && b.contains("EMERGENCY STOP") && b.contains("name=\"rccar-login\" content=\"1\""));
@@ -732,6 +738,9 @@ fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() 
         ("/api/mode", r#"{"mode":"manual"}"#),
         ("/api/drive", r#"{"steer":0.5,"throttle":1}"#),
         ("/api/record", r#"{"on":true}"#),
+        ("/api/setup/apply", SETUP_BODY),
+        ("/api/setup/preview", SETUP_BODY),
+        ("/api/setup/freeze", r#"{"source":"camera"}"#),
     ];
     let mut n = 0;
     for (what, h) in &attempts {
@@ -769,6 +778,11 @@ fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() 
     let st = state(s).unwrap();
     assert_eq!(st["mode"], "autopilot", "mode changed");
     assert!(st["manual"]["last_input_wall_s"].is_null(), "a manual input was taken: {}", st["manual"]);
+    // The ROI and threshold unchanged, no frame frozen by a refused request (issue 26).
+    let setup = setup_state(s);
+    assert_eq!(setup["src"], serde_json::json!(DEFAULT_SRC), "warp.src changed");
+    assert_eq!(setup["threshold"], 170, "lane.threshold changed");
+    assert!(setup["frozen"].is_null(), "a frame was frozen: {}", setup["frozen"]);
     // Every refusal counted (state, for the page), logged on stderr with origin and path.
     let st = state(s).unwrap();
     assert!(
@@ -786,6 +800,8 @@ fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() 
         "refused POST /api/drive from 127.0.0.1",
         "refused POST /api/mode from 127.0.0.1",
         "refused POST /api/record from 127.0.0.1",
+        "refused POST /api/setup/apply from 127.0.0.1",
+        "refused POST /api/setup/preview from 127.0.0.1",
     ] {
         assert!(log.contains(needle), "stderr lacks `{needle}`:\n{log}");
     }
@@ -799,6 +815,120 @@ fn cross_origin_wrong_host_text_plain_and_missing_secret_posts_change_nothing() 
     assert_eq!(c, 409, "{b}");
     assert!(b.contains("--record DIR"), "{b}");
     assert_eq!(state(s).unwrap()["record"]["available"], false);
+}
+
+/// config/car.toml's `[warp] src`.
+const DEFAULT_SRC: [[f64; 2]; 4] = [[93.72, 78.96], [225.28, 78.96], [308.75, 150.02], [10.25, 150.02]];
+/// A set-up body with a lower threshold (an attacker's, in the cross-origin test).
+const SETUP_BODY: &str = r#"{"src":[[93.72,78.96],[225.28,78.96],[308.75,150.02],[10.25,150.02]],"threshold":120}"#;
+
+fn setup_state(s: &Server) -> serde_json::Value {
+    let (c, _, b) = send(s, "GET", "/api/setup/state", &[], "");
+    assert_eq!(c, 200, "{b}");
+    serde_json::from_str(&b).unwrap()
+}
+
+/// Set-up by clicking (issue 26): bad corners are refused 400 naming the corner and what is
+/// wrong; good ones give the pipeline's preview images, and "apply" sets warp.src and the
+/// threshold for the loop and marks them for "save". On the token server (127.0.0.2): with the
+/// token header, as a script would.
+#[test]
+fn setup_refuses_bad_corners_with_a_clear_400_and_applies_good_ones() {
+    let s = remote();
+    let bad = [
+        (
+            r#"{"src":[[93,79],[225,79],[320,150],[10,150]]}"#,
+            "warp.src[2] (bottom-right) = [320, 150] lies outside the 320x240 frame",
+        ),
+        (
+            r#"{"src":[[93,-1],[225,79],[308,150],[10,150]]}"#,
+            "warp.src[0] (top-left)",
+        ),
+        (r#"{"src":[[10,10],[100,10],[200,10],[10,150]]}"#, "are collinear"),
+        (r#"{"src":[[93,79],[225,79],[10,150],[308,150]]}"#, "convex"),
+        (r#"{"src":[[10,150],[308,150],[225,79],[93,79]]}"#, "upside down"),
+        (r#"{"src":[[93,79],[225,79],[308,150]]}"#, "malformed request"),
+        (
+            r#"{"src":[[93,79],[225,79],[308,150],[10,150]],"threshold":256}"#,
+            "lane.threshold = 256",
+        ),
+        (
+            r#"{"src":[[93,79],[225,79],[308,150],[10,150]],"threshold_mode":"auto"}"#,
+            "not one of fixed, otsu",
+        ),
+        (
+            r#"{"src":[[93,79],[225,79],[308,150],[10,150]],"extra":1}"#,
+            "unknown field",
+        ),
+    ];
+    for path in ["/api/setup/preview", "/api/setup/apply"] {
+        for (body, want) in bad {
+            let (c, b) = req(s, "POST", path, body);
+            assert_eq!(c, 400, "{path} {body}: {b}");
+            assert!(b.contains(want), "{path} {body}: `{b}` lacks `{want}`");
+        }
+    }
+    assert_eq!(
+        setup_state(s)["src"],
+        serde_json::json!(DEFAULT_SRC),
+        "a refused request changed warp.src"
+    );
+    // The frame: a PNG at the pipeline's size (the token stands for the login).
+    let t = s.token.clone().unwrap();
+    let (c, head, png) = send(s, "GET", "/api/setup/frame", &[("X-Token", &t)], "");
+    assert_eq!(c, 200, "{head}");
+    assert!(head.to_ascii_lowercase().contains("content-type: image/png"), "{head}");
+    assert!(png.len() > 1000, "{} bytes", png.len());
+    // A good preview: two PNG data URLs and the lane measured; nothing changes.
+    let good = r#"{"src":[[93.72,78.96],[225.28,78.96],[308.75,150.02],[10.25,150.02]],"threshold":150,"threshold_mode":"fixed"}"#;
+    let (c, b) = req(s, "POST", "/api/setup/preview", good);
+    assert_eq!(c, 200, "{b}");
+    let v: serde_json::Value = serde_json::from_str(&b).unwrap();
+    assert!(
+        v["bird"].as_str().unwrap().starts_with("data:image/png;base64,iVBOR"),
+        "{}",
+        &b[..200.min(b.len())]
+    );
+    assert!(v["binary"].as_str().unwrap().starts_with("data:image/png;base64,iVBOR"));
+    assert_eq!(v["level"], 150);
+    assert_eq!(setup_state(s)["threshold"], 170, "a preview changed the threshold");
+    // Apply: in force for the server at once, for the loop from its next frame (telemetry).
+    let moved = r#"{"src":[[90.5,80],[228,80],[310,152.25],[8,152.25]],"threshold":150,"threshold_mode":"fixed"}"#;
+    let f0 = frame(s);
+    let (c, b) = req(s, "POST", "/api/setup/apply", moved);
+    assert_eq!(c, 200, "{b}");
+    let st = setup_state(s);
+    assert_eq!(
+        st["src"],
+        serde_json::json!([[90.5, 80.0], [228.0, 80.0], [310.0, 152.25], [8.0, 152.25]])
+    );
+    assert_eq!(st["threshold"], 150);
+    assert_eq!(st["changed"]["warp.src"], st["src"]);
+    assert_eq!(st["changed"]["lane.threshold"], 150);
+    let tel = s.dir.join("out/telemetry.jsonl");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let event = loop {
+        let text = std::fs::read_to_string(&tel).unwrap_or_default();
+        let hit = text
+            .lines()
+            .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+            .find(|r| {
+                r["events"].as_array().is_some_and(|e| {
+                    e.iter()
+                        .any(|e| e.as_str().unwrap_or("").contains("set-up: warp.src=[[90.5, 80.0]"))
+                })
+            });
+        if let Some(r) = hit {
+            break r;
+        }
+        assert!(Instant::now() < deadline, "no set-up event in the telemetry");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert!(event["frame"].as_u64().unwrap() > f0, "{event}");
+    // Back to car.toml's, so that other tests see the ROI they expect.
+    let restore = r#"{"src":[[93.72,78.96],[225.28,78.96],[308.75,150.02],[10.25,150.02]],"threshold":170}"#;
+    let (c, b) = req(s, "POST", "/api/setup/apply", restore);
+    assert_eq!(c, 200, "{b}");
 }
 
 #[test]

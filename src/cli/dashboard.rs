@@ -21,6 +21,11 @@ pub struct DashArgs {
     /// address than 127.0.0.1 / ::1 requires the token printed at start-up.
     #[arg(long, value_name = "ADDR")]
     pub listen: Option<String>,
+    /// The dashboard's set-up page (/setup) shows this image (PNG or JPEG, resized to [camera]
+    /// width x height) instead of a frozen camera frame, e.g. a frame saved by `rccar camera
+    /// check` or the shipped tests/data/lane_sample/frame_000.png
+    #[arg(long, value_name = "FILE", requires = "dashboard")]
+    pub setup_frame: Option<PathBuf>,
 }
 
 impl DashArgs {
@@ -36,6 +41,23 @@ impl DashArgs {
         if !self.dashboard {
             return Ok(Dash::off());
         }
-        Ok(Dash::serve(self.listen.clone(), cfg, local, session, stop, clock)?)
+        let frame = match &self.setup_frame {
+            None => None,
+            Some(p) => {
+                let img = rccar::imageio::open(p)
+                    .map_err(|e| anyhow::anyhow!("--setup-frame {}: {e}", p.display()))?
+                    .to_rgb8();
+                Some((img, p.display().to_string()))
+            }
+        };
+        Ok(Dash::serve(
+            self.listen.clone(),
+            cfg,
+            local,
+            session,
+            stop,
+            clock,
+            frame,
+        )?)
     }
 }

@@ -85,6 +85,11 @@ impl Controller {
         self.steering.as_mut()
     }
 
+    /// Replaces the steering method (the set-up page's new ROI changes pure pursuit's map).
+    pub fn set_steering(&mut self, steering: Box<dyn steering::Steering>) {
+        self.steering = steering;
+    }
+
     /// The throttle policy.
     pub fn throttle(&self) -> &throttle::Throttle {
         &self.throttle

@@ -103,6 +103,89 @@ pub struct ModeRequest {
 pub struct RecordRequest {
     /// Record frames from the next one on.
     pub on: bool,
+/// The ROI corners' names, in `warp.src` order (config/car.toml's).
+pub const CORNERS: [&str; 4] = ["top-left", "top-right", "bottom-right", "bottom-left"];
+
+/// `POST /api/setup/preview` and `/api/setup/apply` body (issue 26, set-up by clicking): the
+/// ROI's four corners in frame pixels, in `warp.src` order ([`CORNERS`]), and optionally the
+/// lane threshold and its mode (absent: the values in force).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SetupRequest {
+    /// The corners, frame pixels (pixel (i, j) has its centre at (i, j)).
+    pub src: [[f64; 2]; 4],
+    /// `lane.threshold`, a grey level 0..=255.
+    #[serde(default)]
+    pub threshold: Option<f64>,
+    /// `lane.threshold_mode`: `fixed` or `otsu`.
+    #[serde(default)]
+    pub threshold_mode: Option<String>,
+}
+
+/// Checks a set-up request against the frame (every corner inside it, pixel centres
+/// `0 ..= width − 1`, `0 ..= height − 1`), the homography (it must exist: no three corners on
+/// one line, a convex quadrilateral in order) and the configuration's own checks (far edge
+/// above the near edge, not mirrored, the steering method still builds). Corners are kept to
+/// 1/100 pixel. Returns the configuration with `warp.src`, `lane.threshold` and
+/// `lane.threshold_mode` set; the error names the corner or the key and what is wrong.
+pub fn validate_setup(cfg: &Config, req: &SetupRequest) -> Result<Config, ControlError> {
+    let (w, h) = (cfg.camera.width, cfg.camera.height);
+    let mut src = req.src;
+    for (i, p) in src.iter_mut().enumerate() {
+        let name = CORNERS[i];
+        if !(p[0].is_finite() && p[1].is_finite()) {
+            return Err(ControlError::OutOfRange(format!(
+                "warp.src[{i}] ({name}) is not a finite number"
+            )));
+        }
+        let (xmax, ymax) = (f64::from(w - 1), f64::from(h - 1));
+        if !(0.0..=xmax).contains(&p[0]) || !(0.0..=ymax).contains(&p[1]) {
+            return Err(ControlError::OutOfRange(format!(
+                "warp.src[{i}] ({name}) = [{}, {}] lies outside the {w}x{h} frame (x 0 ..= {xmax}, y 0 ..= {ymax})",
+                p[0], p[1]
+            )));
+        }
+        *p = p.map(|v| (v * 100.0).round() / 100.0);
+    }
+    if let Err(e) = crate::lane::warp::Homography::from_quad_to_rect(&src, cfg.warp.out_width, cfg.warp.out_height) {
+        return Err(ControlError::OutOfRange(format!(
+            "warp.src: no bird's-eye view of these corners ({e}); click them in the order {}",
+            CORNERS.join(", ")
+        )));
+    }
+    let mut new = cfg.clone();
+    new.warp.src = src;
+    if let Some(t) = req.threshold {
+        if !(t.is_finite() && t.fract() == 0.0 && (0.0..=255.0).contains(&t)) {
+            return Err(ControlError::OutOfRange(format!(
+                "lane.threshold = {t} is out of range (allowed: a whole grey level 0 ..= 255)"
+            )));
+        }
+        new.lane.threshold = t as u8;
+    }
+    if let Some(m) = &req.threshold_mode {
+        new.lane.threshold_mode = match m.as_str() {
+            "fixed" => crate::config::ThresholdMode::Fixed,
+            "otsu" => crate::config::ThresholdMode::Otsu,
+            _ => {
+                return Err(ControlError::OutOfRange(format!(
+                    "lane.threshold_mode `{}` is not one of fixed, otsu",
+                    m.chars().take(32).collect::<String>()
+                )))
+            }
+        };
+    }
+    new.validate().map_err(|e| match e {
+        crate::config::ConfigError::Invalid { errors, .. } => ControlError::OutOfRange(
+            errors
+                .iter()
+                .map(|v| format!("{} must have: {}", v.key, v.allowed))
+                .collect::<Vec<_>>()
+                .join("; "),
+        ),
+        other => ControlError::OutOfRange(other.to_string()),
+    })?;
+    Ok(new)
 }
 
 /// Parses a JSON body into `T`, refusing oversized bodies and unknown fields.
@@ -170,6 +253,14 @@ pub enum Control {
     Reset,
     /// Simulator: the car to `s` metres along the track, at rest.
     PlaceAt(f64),
+    /// Set-up by clicking: the lane stage of this configuration (its `[warp]` and `[lane]`,
+    /// checked by [`validate_setup`]) from the next frame on.
+    Lane {
+        /// The configuration with the new ROI and threshold.
+        cfg: Box<Config>,
+        /// What changed, who asked and when, for telemetry.
+        note: String,
+    },
     /// Something that happened elsewhere (arm, disarm, e-stop), for the telemetry.
     Note(String),
 }
@@ -353,5 +444,60 @@ mod tests {
         assert!(parse_body::<SetRequest>(br#"{"key":"steering.kp""#).is_err());
         let big = vec![b' '; MAX_BODY + 1];
         assert!(parse_body::<SetRequest>(&big).is_err());
+    }
+
+    /// The set-up request's checks: corners inside the frame, a homography that exists, the
+    /// far edge above the near one, a whole grey level; each refusal names what is wrong.
+    #[test]
+    fn setup_requests_are_checked_and_name_what_is_wrong() {
+        let cfg = Config::default();
+        let ok = SetupRequest {
+            src: cfg.warp.src,
+            threshold: Some(150.0),
+            threshold_mode: Some("fixed".into()),
+        };
+        let new = validate_setup(&cfg, &ok).unwrap();
+        assert_eq!((new.warp.src, new.lane.threshold), (cfg.warp.src, 150));
+        // Corners kept to 1/100 pixel.
+        let mut r = ok.clone();
+        r.src[0] = [93.7249, 78.955];
+        assert_eq!(validate_setup(&cfg, &r).unwrap().warp.src[0], [93.72, 78.96]);
+        let err = |r: &SetupRequest| validate_setup(&cfg, r).unwrap_err().to_string();
+        let mut r = ok.clone();
+        r.src[2] = [320.0, 150.0];
+        let e = err(&r);
+        assert!(
+            e.contains("warp.src[2] (bottom-right)") && e.contains("outside the 320x240 frame"),
+            "{e}"
+        );
+        r.src[2] = [f64::NAN, 1.0];
+        assert!(err(&r).contains("not a finite number"));
+        // Three corners on one line: no homography.
+        let mut r = ok.clone();
+        r.src = [[10.0, 10.0], [20.0, 10.0], [30.0, 10.0], [10.0, 100.0]];
+        let e = err(&r);
+        assert!(
+            e.contains("warp.src: no bird's-eye view") && e.contains("collinear"),
+            "{e}"
+        );
+        // Crossed (the order of two corners swapped).
+        let mut r = ok.clone();
+        r.src.swap(2, 3);
+        assert!(err(&r).contains("convex"), "{}", err(&r));
+        // Upside down: the homography exists, the configuration's own check refuses it.
+        let mut r = ok.clone();
+        r.src = [cfg.warp.src[3], cfg.warp.src[2], cfg.warp.src[1], cfg.warp.src[0]];
+        let e = err(&r);
+        assert!(e.contains("warp.src must have") && e.contains("upside down"), "{e}");
+        let mut r = ok.clone();
+        r.threshold = Some(300.0);
+        assert!(err(&r).contains("lane.threshold = 300"));
+        r.threshold = Some(12.5);
+        assert!(err(&r).contains("whole grey level"));
+        let mut r = ok;
+        r.threshold_mode = Some("auto".into());
+        assert!(err(&r).contains("not one of fixed, otsu"));
+        assert!(parse_body::<SetupRequest>(br#"{"src":[[1,2],[3,4],[5,6]]}"#).is_err());
+        assert!(parse_body::<SetupRequest>(br#"{"src":[[1,2],[3,4],[5,6],[7,8]],"x":1}"#).is_err());
     }
 }

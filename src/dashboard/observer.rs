@@ -140,6 +140,17 @@ impl DashObserver {
                 }
                 false
             }
+            Control::Lane { cfg, note } => {
+                match p.set_lane_config(&cfg) {
+                    Ok(()) => {
+                        self.roi = cfg.warp.src;
+                        self.event(note);
+                    }
+                    // Checked by the server with the same configuration checks: not expected.
+                    Err(e) => self.event(format!("set-up refused by the pipeline: {e} ({note})")),
+                }
+                false
+            }
             Control::Note(n) => {
                 self.event(n);
                 false
@@ -254,5 +265,55 @@ impl Observer for DashObserver {
         };
         self.out.put(Arc::new(snap));
         Ok(Flow::Continue)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dashboard::messages::{validate_setup, SetupRequest};
+
+    /// Set-up by clicking: a new ROI and threshold reach the pipeline between two frames (its
+    /// next frame measures with them, bit for bit as a pipeline built with them), the stream's
+    /// ROI outline follows, and the change is an event of that frame. Under pure pursuit the
+    /// steering method is rebuilt with the new bird's-eye → floor map.
+    #[test]
+    fn a_set_up_acts_on_the_next_frame() {
+        let frame = image::open(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/lane_sample/frame_000.png"
+        ))
+        .unwrap()
+        .to_rgb8();
+        for method in ["pid", "pure_pursuit"] {
+            let cfg = Config::default()
+                .with_override(&format!("steering.method={method}"))
+                .unwrap();
+            let req = SetupRequest {
+                src: [[90.0, 82.0], [230.0, 82.0], [312.0, 155.0], [6.0, 155.0]],
+                threshold: Some(140.0),
+                threshold_mode: None,
+            };
+            let new = validate_setup(&cfg, &req).unwrap();
+            let mut p = Pipeline::new(&cfg).unwrap();
+            let mut ch = channel(&cfg, None, None);
+            assert!(ch.tx.send(Control::Lane {
+                cfg: Box::new(new.clone()),
+                note: "set-up: test".into()
+            }));
+            assert_eq!(ch.observer.before_frame(&mut p), Flow::Continue);
+            assert_eq!(ch.observer.roi, req.src);
+            let mut timer = crate::timing::NoTimer;
+            let got = p.step(&frame, 1.0 / 30.0, &mut timer);
+            let mut r = FrameRecord::new(1, "f", 0.0, &got.lane, &got.command, got.stage_us);
+            ch.observer.decorate(&mut r);
+            assert_eq!(r.events, vec!["set-up: test".to_string()]);
+            let mut want = Pipeline::new(&new).unwrap();
+            let expect = want.step(&frame, 1.0 / 30.0, &mut timer);
+            assert_eq!(p.lane().images().binary, want.lane().images().binary, "{method}");
+            assert_eq!(p.lane().images().level, 140);
+            assert_eq!((got.lane, got.command), (expect.lane, expect.command), "{method}");
+            assert_eq!(p.controller().steering().method().name(), method);
+        }
     }
 }

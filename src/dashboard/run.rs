@@ -37,9 +37,10 @@ impl Dash {
     }
 
     /// Starts the server on `listen` (default `dashboard.listen`) for `session`'s car; "save"
-    /// writes `local`. Under the simulator the run then ends at `sim.max_seconds` only.
-    /// Without the `dashboard` feature: [`DashboardError::NotBuilt`].
-    #[allow(unused_variables)]
+    /// writes `local`; the set-up page shows `setup_frame` (an image and its name) when given,
+    /// else a frozen camera frame. Under the simulator the run then ends at `sim.max_seconds`
+    /// only. Without the `dashboard` feature: [`DashboardError::NotBuilt`].
+    #[allow(unused_variables, clippy::too_many_arguments)]
     pub fn serve(
         listen: Option<String>,
         cfg: &Config,
@@ -47,6 +48,7 @@ impl Dash {
         session: &Session,
         stop: &StopSignal,
         clock: Arc<dyn Clock + Send + Sync>,
+        setup_frame: Option<(image::RgbImage, String)>,
     ) -> Result<Dash, DashboardError> {
         #[cfg(not(feature = "dashboard"))]
         {
@@ -70,6 +72,7 @@ impl Dash {
                 sent: Arc::new(super::shared::Sent::new(session.sent(), clock)),
                 world,
                 stop: stop.clone(),
+                setup_frame,
             })?;
             Ok(Dash {
                 obs: Some(ch.observer),

@@ -25,6 +25,18 @@ package), and checks what a student would see and do:
    neutral on the next frame (timed); at 390x844 the controls fit without horizontal
    scrolling.
 
+8. (issue 26, set-up by clicking) `rccar drive --camera sim --dry-run --dashboard --setup-frame
+   tests/data/lane_sample/frame_000.png`: the dashboard's "Set-up" link opens /setup with the
+   shipped sample frame frozen; four mouse clicks at config/car.toml's warp.src corners
+   (positions from the canvas's rect and the frame size) give the page those corners within
+   1 px; dragging a corner changes the bird's-eye preview and dragging it back restores it
+   byte for byte; the threshold slider (arrow keys) changes the binary image; "Apply" sets the
+   server's warp.src (within 1 px of car.toml's) and threshold, noted in the telemetry of a
+   later frame; "Save" writes them into local.toml (its comment kept) and `rccar config check`
+   reads them back; on a 390x844 phone with device pixel ratio 3 (mobile emulation, touch
+   events) four taps give the same corners and nothing scrolls sideways.
+   `--only setup` runs only this.
+
 The cross-origin part (6), the page loading, driving by hand (7) and an e-stop click are also
 run against `rccar drive --camera sim --dry-run --dashboard` (the car's own loop), which must
 wait disarmed and e-stopped without ending ("Stalled" after 6 s before issue 26).
@@ -96,12 +108,13 @@ def http(method, url, body=None, headers=None, timeout=10):
 class WebDriver:
     """The few W3C WebDriver commands the test needs."""
 
-    def __init__(self, port, user_dir):
+    def __init__(self, port, user_dir, mobile=None):
         self.base = f"http://127.0.0.1:{port}"
-        caps = {"capabilities": {"alwaysMatch": {
-            "browserName": "chrome",
-            "goog:chromeOptions": {"binary": "/usr/bin/chromium",
-                                   "args": CHROME_FLAGS + [f"--user-data-dir={user_dir}"]}}}}
+        opts = {"binary": "/usr/bin/chromium", "args": CHROME_FLAGS + [f"--user-data-dir={user_dir}"]}
+        if mobile:
+            # A phone: its viewport, device pixel ratio and touch events (chromedriver's emulation).
+            opts["mobileEmulation"] = mobile
+        caps = {"capabilities": {"alwaysMatch": {"browserName": "chrome", "goog:chromeOptions": opts}}}
         st, v = http("POST", self.base + "/session", caps, timeout=60)
         if st != 200:
             raise RuntimeError(f"chromedriver: cannot start a session: {st} {v}")
@@ -176,9 +189,10 @@ def main():
     ap.add_argument("--rccar", default=os.path.join(ROOT, "target/release/rccar"))
     ap.add_argument("--screenshot", help="also save the page here (docs/img/dashboard.png; the phone size beside it as dashboard_phone.png)")
     ap.add_argument("--keep", action="store_true", help="keep the temp folder")
-    ap.add_argument("--only", choices=["all", "manual", "page"], default="all",
+    ap.add_argument("--only", choices=["all", "manual", "page", "setup"], default="all",
                     help="manual: only driving by hand (sim and drive); page: only the plots, the e-stop's "
-                         "display time, the traffic and the phone size (sim); for a busy machine")
+                         "display time, the traffic and the phone size (sim); setup: only the set-up page; "
+                         "for a busy machine")
     a = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="rccar-dash-")
     cfgdir = os.path.join(tmp, "config")
@@ -192,6 +206,14 @@ def main():
     procs = []
     wd = None
     try:
+        if a.only == "setup":
+            dport = free_port()
+            procs.append(subprocess.Popen(["/usr/bin/chromedriver", f"--port={dport}"],
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            wait(lambda: _ok(f"http://127.0.0.1:{dport}/status"), 20, 0.2)
+            wd = WebDriver(dport, os.path.join(tmp, "chrome-profile"))
+            setup_suite(a, wd, dport, cfgdir, tmp, procs)
+            return
         sim = subprocess.Popen(
             [a.rccar, "sim", "--dashboard", "--listen", f"127.0.0.1:{port}", "--truth-boxes",
              "--config", os.path.join(cfgdir, "car.toml"), "--local", local,
@@ -373,6 +395,7 @@ def main():
         check("the sim is still running", sim.poll() is None)
         sim.terminate()
         drive_suite(a, wd, cfgdir, tmp, procs)
+        setup_suite(a, wd, dport, cfgdir, tmp, procs)
     finally:
         if wd:
             wd.quit()
@@ -386,7 +409,8 @@ def main():
             shutil.rmtree(tmp, ignore_errors=True)
         else:
             print(f"kept {tmp}")
-    print(f"{passed} passed, {failed} failed")
+        # Also after an early return (--only): the closing line the suite's runner reads.
+        print(f"{passed} passed, {failed} failed")
 
 
 ATTACK_PAGE = """<!doctype html><meta charset="utf-8"><title>another local origin</title>
@@ -506,6 +530,210 @@ def drive_suite(a, wd, cfgdir, tmp, procs):
     ended = drive.poll()
     check("[drive] e-stopped for 7 s and still running after the checks", ended is None,
           "ended by itself: " + open(log).read()[-300:] if ended is not None else "")
+
+
+SAMPLE_FRAME = "tests/data/lane_sample/frame_000.png"
+
+
+def setup_suite(a, wd, dport, cfgdir, tmp, procs):
+    """`setup` with a crash counted as a failure."""
+    try:
+        _setup_suite(a, wd, dport, cfgdir, tmp, procs)
+    except Exception as e:  # noqa: BLE001 - reported as a failed check
+        check("[setup] the set-up suite ran to its end", False, repr(e))
+
+
+def _canvas_box(wd):
+    """The frame canvas's content box in CSS pixels (viewport), as the page maps clicks."""
+    return wd.js("const c=document.getElementById('frame');const r=c.getBoundingClientRect();"
+                 "return [r.left+c.clientLeft, r.top+c.clientTop, r.width-2*c.clientLeft, r.height-2*c.clientTop];")
+
+
+def _frame_to_viewport(box, size, p):
+    """Frame pixel p (its centre) -> viewport CSS pixels, rounded as WebDriver takes them."""
+    left, top, w, h = box
+    return round(left + (p[0] + 0.5) * w / size[0]), round(top + (p[1] + 0.5) * h / size[1])
+
+
+def _click_corners(wd, corners, size, ptype):
+    """Clicks (or taps) the four corners in order, each at its pixel's place on the canvas."""
+    for i, p in enumerate(corners):
+        x, y = _frame_to_viewport(_canvas_box(wd), size, p)
+        wd.actions({"type": "pointer", "id": f"{ptype}-{i}", "parameters": {"pointerType": ptype}, "actions": [
+            {"type": "pointerMove", "duration": 0, "origin": "viewport", "x": x, "y": y},
+            {"type": "pointerDown", "button": 0}, {"type": "pause", "duration": 30},
+            {"type": "pointerUp", "button": 0}]})
+
+
+def _page_points(wd):
+    return wd.js("return window.setup.pts.map(p=>[p[0],p[1]])")
+
+
+def _max_err(a_pts, b_pts):
+    return max(abs(p[k] - q[k]) for p, q in zip(a_pts, b_pts) for k in (0, 1))
+
+
+def _preview_after(wd, n0, timeout=10):
+    """Waits for a preview newer than count n0 that answers the page's corners; its images."""
+    def done():
+        v = wd.js("const s=window.setup;return [s.previews, JSON.stringify(s.last||null)==JSON.stringify(s.pts.map(p=>[Math.round(p[0]*100)/100,Math.round(p[1]*100)/100])),"
+                  "document.getElementById('bird').src, document.getElementById('binary').src, document.getElementById('lane').textContent, document.getElementById('msg').textContent]")
+        return v if v[0] > n0 and v[1] else None
+    return wait(done, timeout, 0.05)
+
+
+def _setup_suite(a, wd, dport, cfgdir, tmp, procs):
+    """Issue 26, set-up by clicking, on `rccar drive --camera sim --dry-run --dashboard` with the
+    shipped sample frame given as the set-up frame."""
+    port = free_port()
+    local = os.path.join(cfgdir, "setup-local.toml")
+    with open(local, "w") as f:
+        f.write("# set-up overrides (the dashboard must keep this line)\n")
+    log = os.path.join(tmp, "setup.log")
+    out = os.path.join(tmp, "setup-out")
+    car_toml = os.path.join(cfgdir, "car.toml")
+    proc = subprocess.Popen(
+        [a.rccar, "drive", "--camera", "sim", "--dry-run", "--dashboard", "--listen", f"127.0.0.1:{port}",
+         "--setup-frame", SAMPLE_FRAME,  # relative to ROOT, the run's folder
+         "--config", car_toml, "--local", local, "--seconds", "300", "-o", out],
+        cwd=ROOT, stdout=open(log, "w"), stderr=subprocess.STDOUT)
+    procs.append(proc)
+    base = f"http://127.0.0.1:{port}"
+    up = wait(lambda: _state(base), 30, 0.1)
+    check("[setup] drive --dashboard --setup-frame serves /api/state", bool(up), f"port {port}")
+    if not up:
+        print(open(log).read()[-2000:])
+        return
+    with open(car_toml, "rb") as f:
+        want = tomllib.load(f)["warp"]["src"]
+    # The dashboard's one link to the set-up page.
+    wd.set_window(1400, 1000)
+    wd.go(base + "/")
+    wait(lambda: wd.js("return document.getElementById('setuplink') !== null"), 20, 0.1)
+    wd.click(wd.find("#setuplink"))
+    ready = wait(lambda: wd.js("return location.pathname === '/setup' && !!(window.setup && window.setup.ready)"), 20, 0.1)
+    st = http("GET", base + "/api/setup/state")[1]
+    size = (st["frame"]["width"], st["frame"]["height"])
+    shown = wd.js("const c=document.getElementById('frame');return [c.clientWidth, c.clientHeight, window.devicePixelRatio]")
+    check("[setup] the dashboard's Set-up link opens /setup with the shipped sample frame frozen",
+          bool(ready) and SAMPLE_FRAME in (st.get("frozen") or "") and st["corners"] == ["top-left", "top-right", "bottom-right", "bottom-left"],
+          f"frozen: {st.get('frozen')}; frame {size[0]}x{size[1]} px shown at {shown[0]}x{shown[1]} CSS px (scale {shown[0] / size[0]:.3f}, device pixel ratio {shown[2]})")
+    with urllib.request.urlopen(base + "/api/setup/frame", timeout=10) as r:
+        png = r.read()
+        ctype = r.headers.get("Content-Type")
+    w_png, h_png = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
+    check("[setup] GET /api/setup/frame: a PNG at the pipeline's frame size",
+          ctype == "image/png" and png[:8] == b"\x89PNG\r\n\x1a\n" and (w_png, h_png) == size, f"{ctype}, {w_png}x{h_png}, {len(png)} bytes")
+
+    # 1. Four clicks at car.toml's corners.
+    n0 = wd.js("return window.setup.previews")
+    _click_corners(wd, want, size, "mouse")
+    got = _page_points(wd)
+    err = _max_err(got, want) if len(got) == 4 else None
+    check("[setup] four clicks at car.toml's warp.src corners give those corners within 1 px",
+          err is not None and err <= 1.0, f"page {json.dumps([[round(v, 2) for v in p] for p in got])} vs car.toml {want}: max error {err if err is None else round(err, 3)} px")
+    pv = _preview_after(wd, n0)
+    check("[setup] the bird's-eye and binary previews arrive", bool(pv) and pv[2].startswith("data:image/png") and pv[3].startswith("data:image/png"),
+          (pv[4] if pv else "no preview") + (f" / {pv[5]}" if pv and pv[5] else ""))
+    wd.screenshot(os.path.join(tmp, "setup_1_clicked.png"))
+    if not pv:
+        return
+    bird0, binary0 = pv[2], pv[3]
+
+    # 2. A corner dragged 40 CSS px right changes the preview; dragged back restores it.
+    def drag(i, dx):
+        x, y = _frame_to_viewport(_canvas_box(wd), size, _page_points(wd)[i])
+        n = wd.js("return window.setup.previews")
+        wd.actions({"type": "pointer", "id": f"drag-{i}-{dx}", "parameters": {"pointerType": "mouse"}, "actions": [
+            {"type": "pointerMove", "duration": 0, "origin": "viewport", "x": x, "y": y},
+            {"type": "pointerDown", "button": 0},
+            {"type": "pointerMove", "duration": 150, "origin": "viewport", "x": x + dx, "y": y},
+            {"type": "pointerUp", "button": 0}]})
+        return _preview_after(wd, n)
+    before = _page_points(wd)
+    moved = drag(3, 40)
+    after = _page_points(wd)
+    check("[setup] dragging a corner moves it and changes the bird's-eye preview",
+          bool(moved) and moved[2] != bird0 and after[3][0] - before[3][0] > 5 and after[:3] == before[:3],
+          f"bottom-left {before[3]} -> {[round(v, 2) for v in after[3]]}")
+    wd.screenshot(os.path.join(tmp, "setup_2_dragged.png"))
+    back = drag(3, -40)
+    again = _page_points(wd)
+    check("[setup] dragged back: the same corner and the same preview, byte for byte",
+          bool(back) and _max_err(again, before) < 1e-9 and back[2] == bird0 and back[3] == binary0,
+          f"bottom-left {[round(v, 2) for v in again[3]]}")
+
+    # 3. The threshold slider (arrow keys on the focused slider): the binary image changes.
+    wd.js("document.getElementById('threshold').focus()")
+    n = wd.js("return window.setup.previews")
+    for _ in range(20):
+        wd.press("\ue012")  # ArrowLeft
+    thr = int(wd.js("return document.getElementById('threshold').value"))
+    pv = wait(lambda: (lambda v: v if v and "level 150" in v[4] else None)(_preview_after(wd, n, 2)), 10, 0.1)
+    check("[setup] the threshold slider changes the binary image live",
+          thr == 150 and bool(pv) and pv[3] != binary0, (pv[4] if pv else f"slider at {thr}, no preview at level 150"))
+    wd.screenshot(os.path.join(tmp, "setup_3_threshold.png"))
+    ms = sorted(wd.js("return window.setup.ms"))
+    check("[setup] preview round trip (page -> server's lane stage -> two PNGs -> page)",
+          bool(ms) and ms[len(ms) // 2] < 1000.0,
+          f"{len(ms)} previews: median {ms[len(ms) // 2]:.1f} ms, max {ms[-1]:.1f} ms" if ms else "none")
+    if a.screenshot:
+        shutil.copy(os.path.join(tmp, "setup_3_threshold.png"), os.path.join(os.path.dirname(a.screenshot), "setup.png"))
+
+    # 4. Apply: the server's warp.src and threshold, from a later frame on.
+    frame_before = _state(base)["frame"]
+    wd.click(wd.find("#apply"))
+    applied = wait(lambda: wd.js("return window.setup.applied"), 10, 0.1)
+    st = http("GET", base + "/api/setup/state")[1]
+    err = _max_err(st["src"], want)
+    check("[setup] Apply: the server's warp.src equals car.toml's within 1 px, threshold 150",
+          bool(applied) and err <= 1.0 and st["threshold"] == 150,
+          f"server warp.src {st['src']} vs car.toml {want}: max error {err:.3f} px; threshold {st['threshold']} ({st['threshold_mode']})")
+    rec = wait(lambda: _find_event(os.path.join(out, "telemetry.jsonl"), "set-up: warp.src=", frame_before), 10)
+    check("[setup] the loop takes it from a later frame (telemetry event)", rec is not None and rec["frame"] > frame_before,
+          f"frame {rec['frame']} (page saw frame {frame_before} before): {rec['events'][0][:160]}" if rec else "no event")
+
+    # 5. Save: local.toml has them, comment kept; the loader reads them back.
+    wd.click(wd.find("#save"))
+    saved = wait(lambda: "[warp]" in open(local).read(), 10)
+    text = open(local).read()
+    data = tomllib.loads(text)
+    src_saved = data.get("warp", {}).get("src")
+    check("[setup] Save writes warp.src and the threshold into local.toml, its comment kept",
+          bool(saved) and text.startswith("# set-up overrides") and src_saved == st["src"]
+          and data.get("lane", {}).get("threshold") == 150 and data.get("lane", {}).get("threshold_mode") == "fixed",
+          repr(text))
+    cc = subprocess.run([a.rccar, "config", "check", "--config", car_toml, "--local", local],
+                        cwd=ROOT, capture_output=True, text=True, timeout=60)
+    loaded = tomllib.loads(cc.stdout) if cc.returncode == 0 else {}
+    check("[setup] `rccar config check` reads local.toml back: the same warp.src and threshold",
+          cc.returncode == 0 and loaded["warp"]["src"] == st["src"] and loaded["lane"]["threshold"] == 150,
+          f"exit {cc.returncode}: warp.src {loaded.get('warp', {}).get('src')}, threshold {loaded.get('lane', {}).get('threshold')}" + (cc.stderr[-300:] if cc.returncode else ""))
+
+    # 6. A phone: 390x844 at device pixel ratio 3, touch. Four taps give the same corners.
+    phone_wd = WebDriver(dport, os.path.join(tmp, "chrome-phone"),
+                         mobile={"deviceMetrics": {"width": 390, "height": 844, "pixelRatio": 3.0, "touch": True}})
+    try:
+        phone_wd.go(base + "/setup")
+        wait(lambda: phone_wd.js("return !!(window.setup && window.setup.ready)"), 20, 0.1)
+        v = phone_wd.js("const d=document.documentElement;const c=document.getElementById('frame');"
+                        "return {vw: d.clientWidth, sw: d.scrollWidth, dpr: window.devicePixelRatio, canvas: c.clientWidth, backing: c.width,"
+                        " right: Math.max(...[...document.querySelectorAll('button,img,canvas,input,select')].map(e=>e.getBoundingClientRect().right))}")
+        check("[setup] 390x844 phone: one column, nothing scrolls sideways",
+              v["vw"] <= 390 and v["sw"] <= v["vw"] and v["right"] <= v["vw"] + 0.5, json.dumps(v))
+        n0 = phone_wd.js("return window.setup.previews")
+        _click_corners(phone_wd, want, size, "touch")
+        got = _page_points(phone_wd)
+        err = _max_err(got, want) if len(got) == 4 else None
+        pv = _preview_after(phone_wd, n0)
+        check("[setup] phone (device pixel ratio 3, touch): four taps give car.toml's corners within 1 px",
+              err is not None and err <= 1.0 and bool(pv),
+              f"canvas {v['canvas']} CSS px, backing store {v['backing']} px; max error {err if err is None else round(err, 3)} px")
+        phone_wd.screenshot(os.path.join(tmp, "setup_phone.png"))
+    finally:
+        phone_wd.quit()
+    check("[setup] the drive run is still going", proc.poll() is None, open(log).read()[-300:] if proc.poll() is not None else "")
+    proc.terminate()
 
 
 ELEMENT = "element-6066-11e4-a52e-4f735466cecf"

@@ -7,6 +7,7 @@ use super::conn::{Caller, ConnCtl, HEAD_DEADLINE};
 use super::hub;
 use super::log::Msg;
 use super::reply::{error, reply};
+use super::setup;
 use super::state::Shared;
 use super::status::state_json;
 use super::push;
@@ -55,6 +56,12 @@ pub fn router(sh: Arc<Shared>) -> Router {
         .route("/api/sim/step", post(sim))
         .route("/api/sim/reset", post(sim))
         .route("/api/sim/place", post(sim))
+        .route("/setup", get(setup::page))
+        .route("/api/setup/state", get(setup::state))
+        .route("/api/setup/frame", get(setup::frame))
+        .route("/api/setup/freeze", post(setup::freeze_now))
+        .route("/api/setup/preview", post(setup::preview))
+        .route("/api/setup/apply", post(setup::apply))
         // Only exact routes exist: `..`, `%2e`, `//` and the like are simply not found.
         .fallback(|| async { error(StatusCode::NOT_FOUND, "no such page") })
         .method_not_allowed_fallback(|| async { error(StatusCode::METHOD_NOT_ALLOWED, "wrong method") })
@@ -123,7 +130,7 @@ fn check(req: &Request<hyper::body::Incoming>, ctl: &ConnCtl, sh: &Shared) -> Re
         a.origin_ok(h).map_err(|w| no(&w))?;
     } else if m != Method::GET && m != Method::HEAD {
         a.control_ok(h).map_err(|w| no(&w))?;
-    } else if path == "/stream.mjpg" && !session {
+    } else if (path == "/stream.mjpg" || path == "/api/setup/frame") && !session {
         return Err(no("not logged in (enter the token printed at start on the page)"));
     }
     Ok(session)
@@ -152,7 +159,7 @@ fn estop(sh: &Shared, ctl: &ConnCtl, h: &HeaderMap) -> Response<Body> {
 
 /// Reads a control body: Content-Length only (no chunks), at most `MAX_BODY`, complete
 /// within the head deadline of the request's arrival.
-async fn body(h: &HeaderMap, b: Body, c: &Caller) -> Result<Bytes, Response<Body>> {
+pub(super) async fn body(h: &HeaderMap, b: Body, c: &Caller) -> Result<Bytes, Response<Body>> {
     if h.contains_key(header::TRANSFER_ENCODING) {
         return Err(error(
             StatusCode::LENGTH_REQUIRED,
@@ -215,7 +222,7 @@ async fn login(
     }
 }
 
-fn note(sh: &Shared, c: &Caller, what: &str) -> String {
+pub(super) fn note(sh: &Shared, c: &Caller, what: &str) -> String {
     format!(
         "{what} from dashboard {} at wall {:.3} s",
         c.ctl.peer.ip(),
@@ -361,7 +368,7 @@ async fn set(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h: 
     sh.changed
         .lock()
         .unwrap_or_else(|e| e.into_inner())
-        .insert(req.key.clone(), req.value);
+        .insert(req.key.clone(), req.value.into());
     reply(StatusCode::OK, &json!({"key": req.key, "value": req.value}))
 }
 
@@ -376,12 +383,12 @@ async fn save(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>, h:
     {
         return error(StatusCode::BAD_REQUEST, "save takes no parameters");
     }
-    let keys: Vec<(String, f64)> = sh
+    let keys: Vec<(String, local_toml::Saved)> = sh
         .changed
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .iter()
-        .map(|(k, v)| (k.clone(), *v))
+        .map(|(k, v)| (k.clone(), v.clone()))
         .collect();
     let (sh2, keys2) = (sh.clone(), keys.clone());
     let r = tokio::task::spawn_blocking(move || local_toml::save(&sh2.local, &keys2)).await;

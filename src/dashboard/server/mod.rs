@@ -12,6 +12,9 @@
 //!   `POST /api/sim/{pause,resume,step,reset,place}`: need the same-origin proof of
 //!   [`access`] (Host, Origin, `Content-Type: application/json`, the page's secret and, off
 //!   loopback, the login cookie); refusals answer 403 and are logged.
+//! - `GET /setup` the set-up page (issue 26, [`setup`]): `GET /api/setup/frame` (a frozen
+//!   frame as PNG; needs the login off loopback, as the stream), `GET /api/setup/state`,
+//!   `POST /api/setup/{freeze,preview,apply}` under the same proof as the other controls.
 //! - `POST /login` (not on loopback): the printed token once, for an HttpOnly,
 //!   SameSite=Strict session cookie.
 //!
@@ -28,7 +31,8 @@
 //! The modules import one another one way only, from the bottom up: [`reply`], [`log`] and
 //! [`conn`] (the connection table) import none of the others; [`access`] uses `reply` and
 //! `log`; [`state`] (what everything shares) holds an `access`, a `log` and a `conn`; then
-//! [`hub`], [`api`], [`accept`], and this file, which starts them.
+//! [`hub`], [`api`], [`setup`] (which uses `api`'s body reader), [`accept`], and this file,
+//! which starts them.
 
 mod accept;
 mod access;
@@ -38,6 +42,7 @@ mod hub;
 mod log;
 mod push;
 mod reply;
+mod setup;
 mod state;
 mod status;
 
@@ -75,6 +80,9 @@ pub struct Options {
     pub world: Option<SharedWorld>,
     /// The run's stop signal (the server's threads end with it).
     pub stop: StopSignal,
+    /// The set-up page's frame instead of the newest camera frame (`--setup-frame`), with
+    /// its file name.
+    pub setup_frame: Option<(image::RgbImage, String)>,
 }
 
 /// The running server; its threads end when the run's stop signal is set or it is dropped.
@@ -125,6 +133,8 @@ impl Server {
             max_viewers: o.cfg.dashboard.max_viewers as usize,
             cfg: Mutex::new(o.cfg),
             changed: Mutex::new(BTreeMap::new()),
+            frozen: Mutex::new(None),
+            setup_given: o.setup_frame,
             local: o.local,
             tx: o.tx.clone(),
             arm: o.arm,

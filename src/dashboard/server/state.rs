@@ -6,6 +6,7 @@ use super::access::Access;
 use super::conn::Conns;
 use super::log::Log;
 use crate::config::Config;
+use crate::dashboard::local_toml::Saved;
 use crate::dashboard::messages::{ControlSender, Live, PlotPoint, Snapshot};
 use crate::dashboard::shared::Sent;
 use crate::drive::Arming;
@@ -26,12 +27,26 @@ pub struct View {
     pub history: VecDeque<PlotPoint>,
 }
 
+/// The set-up page's frozen frame (issue 26).
+pub struct Frozen {
+    /// The frame, at the pipeline's size.
+    pub image: image::RgbImage,
+    /// … as PNG.
+    pub png: Vec<u8>,
+    /// Where it came from, e.g. `camera frame 412 at 13.73 s`.
+    pub what: String,
+}
+
 /// Everything the handlers, the hub and the watchdog share.
 pub struct Shared {
     /// The run's configuration with the page's changes applied.
     pub cfg: Mutex<Config>,
     /// The keys the page changed, and their values (what "save" writes).
-    pub changed: Mutex<BTreeMap<String, f64>>,
+    pub changed: Mutex<BTreeMap<String, Saved>>,
+    /// The set-up page's frozen frame (`None` until the page first asks for it).
+    pub frozen: Mutex<Option<Arc<Frozen>>>,
+    /// The set-up frame given at start (`--setup-frame`), and its file name.
+    pub setup_given: Option<(image::RgbImage, String)>,
     /// The override file "save" writes (`local.toml` or `--local`).
     pub local: PathBuf,
     /// The loop's inbox.
