@@ -103,6 +103,8 @@ pub struct ModeRequest {
 pub struct RecordRequest {
     /// Record frames from the next one on.
     pub on: bool,
+}
+
 /// The ROI corners' names, in `warp.src` order (config/car.toml's).
 pub const CORNERS: [&str; 4] = ["top-left", "top-right", "bottom-right", "bottom-left"];
 
