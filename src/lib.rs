@@ -33,6 +33,7 @@ pub mod health;
 pub mod imageio;
 pub mod lane;
 pub mod link;
+pub mod pad;
 pub mod pipeline;
 #[cfg(unix)]
 pub mod pipecam;

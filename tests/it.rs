@@ -22,6 +22,7 @@ mod labs_tools;
 mod lane_accuracy;
 mod lane_peak;
 mod lane_replay;
+mod pad;
 mod ranging_calibrate_cli;
 mod ranging_sim;
 mod record_replay;
