@@ -177,7 +177,7 @@ fn held_still_the_input_never_goes_stale() {
     }
     // at least 20 a second
     assert!(sent as f64 >= 3.0 * 20.0, "{sent} inputs in 3 s");
-    assert!(RESEND_MS <= 50);
+    const { assert!(RESEND_MS <= 50) };
 }
 
 #[test]

@@ -373,9 +373,9 @@ impl PadMachine {
                 })
             }
             (code::BTN_START, false) => {
-                if self.start.take().is_some_and(|h| !h.done) {
-                    out.push(PadAction::Refused("arm: hold Start longer (gamepad.arm_hold_ms)"));
-                }
+                // let go before the hold armed: say why nothing happened
+                let early = self.start.take().filter(|h| !h.done);
+                out.extend(early.map(|_| PadAction::Refused("arm: hold Start longer (gamepad.arm_hold_ms)")));
             }
             _ => {}
         }
