@@ -28,23 +28,27 @@ pub enum Part {
     Brake,
     /// The Pi's GPIO (button, LED) threads.
     Gpio,
+    /// A gamepad read on the car (`rccar drive --pad`): lost while unplugged. Not an
+    /// interlock: a pad that is gone gives neutral, and the other ways to arm still work.
+    Pad,
 }
 
 impl Part {
     /// Every part, in the order of [`HealthSnapshot`].
-    pub const ALL: [Part; 4] = [Part::Camera, Part::Link, Part::Brake, Part::Gpio];
+    pub const ALL: [Part; 5] = [Part::Camera, Part::Link, Part::Brake, Part::Gpio, Part::Pad];
 
     fn index(self) -> usize {
         self as usize
     }
 
-    /// Lower-case name (`camera`, `link`, `brake`, `gpio`).
+    /// Lower-case name (`camera`, `link`, `brake`, `gpio`, `pad`).
     pub fn name(self) -> &'static str {
         match self {
             Part::Camera => "camera",
             Part::Link => "link",
             Part::Brake => "brake",
             Part::Gpio => "gpio",
+            Part::Pad => "pad",
         }
     }
 }
@@ -110,13 +114,15 @@ pub struct HealthSnapshot {
     pub brake: PartState,
     /// The GPIO threads.
     pub gpio: PartState,
+    /// The car's gamepad.
+    pub pad: PartState,
 }
 
 /// The health of every part of one run. Shared by `Arc`.
 #[derive(Debug, Default)]
 pub struct Health {
-    states: [AtomicU8; 4],
-    notes: Mutex<[String; 4]>,
+    states: [AtomicU8; 5],
+    notes: Mutex<[String; 5]>,
     fatal: Mutex<Option<Fault>>,
     version: AtomicU64,
 }
@@ -188,6 +194,7 @@ impl Health {
             link: self.state(Part::Link),
             brake: self.state(Part::Brake),
             gpio: self.state(Part::Gpio),
+            pad: self.state(Part::Pad),
         }
     }
 
@@ -282,6 +289,7 @@ mod tests {
             link: PartState::Ok,
             brake: PartState::Ok,
             gpio: PartState::Ok,
+            pad: PartState::Unused,
         };
         assert_eq!(CarStatus::of(&ok, false, true, false, false), CarStatus::Driving);
         assert_eq!(CarStatus::of(&ok, false, false, false, false), CarStatus::Disarmed);

@@ -34,6 +34,7 @@ pub mod imageio;
 pub mod lane;
 pub mod lens;
 pub mod link;
+pub mod pad;
 pub mod pipeline;
 #[cfg(unix)]
 pub mod pipecam;

@@ -27,7 +27,7 @@ DEB_PACKAGES=(
 )
 # The Pi cross-build stage (tests/cross/run.sh) and its packages (skip with RCCAR_CROSS=0). Cold
 # it compiles every dependency for aarch64: ~6 min of CPU with `serial,gpio` (axum, hyper and
-# tokio of the suite's default `serial,gpio,dashboard` add a few minutes), ~11 min with the
+# tokio of the suite's default `serial,gpio,dashboard,gamepad` add a few minutes), ~11 min with the
 # camera (RCCAR_CROSS_CAMERA=1). With target/cross kept: 21 s when
 # nothing changed, a few minutes after a source change (rccar itself recompiled for aarch64).
 if [ "${RCCAR_CROSS:-1}" = 1 ]; then
@@ -112,7 +112,7 @@ stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
 stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
 # Everything behind a cargo feature is tested in ONE feature set (the car's, the dashboard and
 # libjpeg-turbo decoding), so the library is compiled once more, not once per feature.
-FEAT=serial,camera,gpio,dashboard,jpeg-turbo
+FEAT=serial,camera,gpio,dashboard,jpeg-turbo,gamepad
 # Build every feature-set test binary, the binary and the JPEG example first: the stages below
 # then only run, and the machine is quiet for the wall-clock ones.
 stage feature-build bash -c "cargo test --release --features $FEAT --no-run --lib --test car && cargo build --release --features $FEAT --bins --example decode"
@@ -129,7 +129,7 @@ stage drive-fil-laps cargo test --release --features $FEAT --test car -- --test-
   drive_fil::firmware_in_the_loop_drives_a_lap drive_fil::bit_errors_at_1e_3_for_a_lap
 stage drive-fil cargo test --release --features $FEAT --test car -- --test-threads 1 drive_fil:: drive_cli:: \
   --skip firmware_in_the_loop_drives_a_lap --skip bit_errors_at_1e_3_for_a_lap
-stage camera-gpio cargo test --release --features $FEAT --lib -- camera_source capture gpio
+stage camera-gpio cargo test --release --features $FEAT --lib -- camera_source capture gpio pad::
 stage dashboard-security cargo test --release --features $FEAT --test car -- --test-threads 1 dashboard_security::
 # the browser test runs target/release/rccar, built here with the dashboard
 # (the same target selection as feature-build: a build without a dev target resolves the

@@ -13,12 +13,15 @@
 //! through. A reconnect disarms; a lost link or a silent brake sensor is a fault; every way
 //! out — the end, INT, TERM, HUP, QUIT, a panic, a fault — sends neutral before files are
 //! closed, and a second signal sends neutral from another thread and exits at once.
+//!
+//! A gamepad on the car (`--pad`, `gamepad.enabled`, feature `gamepad`; docs/gamepad.md)
+//! drives, arms and stops through the same arming state and gate.
 
 use super::common::ConfigArgs;
 use super::signals::{say, say_err};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rccar::drive::{Actor, LoopEnd};
+use rccar::drive::{Actor, LoopEnd, Observer};
 use rccar::run_dir::{RunDir, RunState};
 use rccar::session::{ArmAt, CameraSpec, Level, SceneSpec, Session, SessionSpec, SinkSpec, SourceSpec, Timing};
 use std::path::PathBuf;
@@ -94,6 +97,8 @@ pub struct DriveArgs {
     pub config: ConfigArgs,
     #[command(flatten)]
     pub dash: super::dashboard::DashArgs,
+    #[command(flatten)]
+    pub pad: super::pad::PadArgs,
 }
 
 /// The session `rccar drive` asks for.
@@ -197,11 +202,17 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
         a.camera,
         a.port.as_deref().map_or("dry run (no port)".to_string(), |p| format!("link {p}")),
         cfg.camera.fps,
-        if a.arm { "arming from the first frame" } else { "disarmed (press the button, or arm on the dashboard)" }
+        if a.arm { "arming from the first frame" } else { "disarmed (press the button, arm on the dashboard, or hold Start on the pad)" }
     ));
+    let mut pad = a.pad.start(&cfg, &session, clock.clone(), true)?;
     let mut dash = a.dash.start(&cfg, a.config.local_target()?, &session, &stop, clock)?;
     super::outdir::started(&mut run);
-    let end = session.run(&mut dash);
+    let end = {
+        let mut obs: [&mut dyn Observer; 2] = [&mut dash, &mut pad];
+        session.run(&mut obs)
+    };
+    // The pad's thread stops before the files are closed (neutral has gone out).
+    drop(pad);
     say(&format!("drive: {}", session.stats().line()));
     // Neutral has gone out (the session's gate); now the files.
     let outcome = session.finish()?;

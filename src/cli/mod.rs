@@ -11,6 +11,7 @@ pub mod detect;
 pub mod drive;
 pub mod link;
 pub mod outdir;
+pub mod pad;
 pub mod plot;
 pub mod replay;
 pub mod report;

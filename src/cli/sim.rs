@@ -81,6 +81,8 @@ pub struct SimArgs {
     pub config: ConfigArgs,
     #[command(flatten)]
     pub dash: super::dashboard::DashArgs,
+    #[command(flatten)]
+    pub pad: super::pad::PadArgs,
 }
 
 /// The configuration with `--laps`, `--seconds` and `--seed` applied.
@@ -128,20 +130,22 @@ fn check_flags(a: &SimArgs, cfg: &Config, step: Option<StepRequest>) -> Result<b
 
 /// The simulated car, built by the library's session builder.
 fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, env: SessionEnv) -> Result<Session> {
+    let live = a.dash.dashboard || a.pad.pad.is_some();
     let mut spec = SessionSpec::new(
         SourceSpec::Sim {
             scene: SceneSpec::Shared(Arc::new(Scene::new(track))),
-            // --dashboard: paced at real time, the page arms the car (docs/dashboard.md).
-            timing: if a.dash.dashboard { Timing::RealTime } else { Timing::LockStep },
+            // --dashboard or --pad: paced at real time, a person arms the car
+            // (docs/dashboard.md, docs/gamepad.md).
+            timing: if live { Timing::RealTime } else { Timing::LockStep },
             stall: None,
             start_offset_m: a.start_offset,
         },
         SinkSpec::DryRun,
     );
-    spec.arm = if a.dash.dashboard { ArmAt::Operator } else { ArmAt::Start };
+    spec.arm = if live { ArmAt::Operator } else { ArmAt::Start };
     spec.truth_boxes = a.truth_boxes;
     spec.frames_viewed = a.record.is_some() || a.frames_to.is_some() || a.dash.dashboard;
-    spec.operator_ends_run = a.dash.dashboard;
+    spec.operator_ends_run = live;
     spec.telemetry = Some(run.join("telemetry.jsonl"));
     let session = Session::build(cfg, spec, env)?;
     if a.truth_boxes {
@@ -161,6 +165,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let stereo = check_flags(&a, &cfg, step)?;
     // The run folder (and the --record folders): new, or refused before anything is written.
     let sweeping = !a.sweep.is_empty();
+    super::pad::check_sim(&a.pad, sweeping)?;
     let record: [(&str, Option<&Path>); 2] = if sweeping {
         [("--record", None), ("--record-right", None)]
     } else {
@@ -176,6 +181,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let (clock, lines) = (env.clock.clone(), env.say.clone());
     let mut session = session(&a, &cfg, &track, &run, env)?;
     let world = session.world().expect("a simulation has a world").clone();
+    let mut pad = a.pad.start(&cfg, &session, clock.clone(), false)?;
     let mut dash = a.dash.start(&cfg, a.config.local_target()?, &session, &stop, clock)?;
     say(&format!(
         "sim: track {} ({:.2} m, tightest lane radius {:.2} m), {} lap(s), at most {} s",
@@ -193,9 +199,10 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let started = std::time::Instant::now();
     super::outdir::started(&mut run);
     let end = {
-        let mut obs: [&mut dyn Observer; 3] = [&mut report, &mut dash, &mut frames];
+        let mut obs: [&mut dyn Observer; 4] = [&mut report, &mut dash, &mut frames, &mut pad];
         session.run(&mut obs)
     };
+    drop(pad);
     if let Some(e) = frames.as_ref().and_then(|f| f.error.as_ref()) {
         eprintln!("sim: {e}; the run ended there");
     }

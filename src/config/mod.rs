@@ -24,6 +24,7 @@ mod check;
 mod classes;
 mod dashboard;
 mod detect;
+mod gamepad;
 mod gpio;
 mod lane;
 mod layers;
@@ -44,6 +45,7 @@ pub use camera::{CameraConfig, LensError};
 pub use classes::{ClassConfig, ClassesConfig};
 pub use dashboard::DashboardConfig;
 pub use detect::DetectConfig;
+pub use gamepad::{axis_code, GamepadConfig};
 pub use gpio::GpioConfig;
 pub use lane::{LaneConfig, LaneSetupError, PeakMode, ThresholdMode};
 pub use layers::{find_config, find_local, local_beside, path_keys, source_tree_config, LoadedConfig, MissingLocal};
@@ -200,6 +202,8 @@ pub struct Config {
     pub dashboard: DashboardConfig,
     /// `[manual]`: driving by hand (the input's deadline, the human's throttle ceiling).
     pub manual: ManualConfig,
+    /// `[gamepad]`: a gamepad read on the car (`rccar drive --pad`, feature `gamepad`).
+    pub gamepad: GamepadConfig,
     /// Stereo ranging with a second camera (src/stereo/, docs/stereo.md).
     pub stereo: StereoConfig,
 }

@@ -49,9 +49,9 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 echo "toolchain: $(/usr/bin/rustc --version), $(aarch64-linux-gnu-gcc --version | head -1), $(qemu-aarch64 --version | head -1)"
 
-# ---- features: the car's (serial, gpio, the dashboard's axum/hyper/tokio server) -----
+# ---- features: the car's (serial, gpio, the dashboard's axum/hyper/tokio server, the gamepad) -----
 # `camera` is built apart below (libclang); jpeg-turbo is not needed on the car.
-FEATURES=serial,gpio,dashboard
+FEATURES=serial,gpio,dashboard,gamepad
 CAMERA=${RCCAR_CROSS_CAMERA:-1}
 if [ "$CAMERA" != 0 ] && ! ls /usr/lib/llvm-*/lib/libclang*.so* >/dev/null 2>&1; then
   fail "missing: libclang-dev (bindgen, for --features camera)"; CAMERA=0
