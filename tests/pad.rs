@@ -256,13 +256,22 @@ fn mode_cycle_take_over_and_the_recording_button() {
         ev,
         vec![
             "pad: connected: Test pad",
-            "pad: recording button: not wired yet (--record records the whole run)"
+            "pad: recording button: this run has no recorder: start it with --record DIR to record"
         ]
     );
     assert!(
         s.iter().all(|st| !st.armed && st.input.is_none()),
         "no gesture here arms or drives"
     );
+    // A run with a recorder (`--record DIR` starts it on): X pauses it, as the page's button.
+    let mut car = Car::new(true);
+    let events = car.link.events();
+    car.arming.controls().record().make_available();
+    car.run(&fixture("modes.txt"));
+    let r = car.arming.controls().record();
+    assert!(!r.is_on(), "X paused the recording");
+    assert_eq!(r.last_change().1, Actor::Pad);
+    assert_eq!(events.take().last().map(String::as_str), Some("pad: recording paused"));
 }
 
 #[test]

@@ -139,7 +139,13 @@ impl PadLink {
                 PadAction::ToggleRecording => {
                     let line = match self.record.as_mut() {
                         Some(hook) => format!("pad: recording: {}", hook()),
-                        None => "pad: recording button: not wired yet (--record records the whole run)".to_string(),
+                        // The run's record switch (the page's too): pauses or resumes a
+                        // `--record` run's frames; without a recorder it says so.
+                        None => match self.arming.controls().record().toggle(Actor::Pad, self.clock.now_s()) {
+                            Ok(true) => "pad: recording on".to_string(),
+                            Ok(false) => "pad: recording paused".to_string(),
+                            Err(e) => format!("pad: recording button: {e}"),
+                        },
                     };
                     self.note(Level::Info, line);
                 }

@@ -189,7 +189,7 @@ pub enum PadAction {
     EStop,
     /// Release the emergency stop (the car stays disarmed).
     ReleaseEStop,
-    /// Start or stop recording (not wired to the recorder yet: see docs/gamepad.md).
+    /// Start or stop recording (the run's record switch, as the page's Record button).
     ToggleRecording,
     /// The pad is there (its name).
     Connected(String),
