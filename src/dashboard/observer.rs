@@ -296,7 +296,7 @@ mod tests {
             };
             let new = validate_setup(&cfg, &req).unwrap();
             let mut p = Pipeline::new(&cfg).unwrap();
-            let mut ch = channel(&cfg, None, None);
+            let mut ch = channel(&cfg, None, None, None);
             assert!(ch.tx.send(Control::Lane {
                 cfg: Box::new(new.clone()),
                 note: "set-up: test".into()

@@ -3,18 +3,19 @@
 //! [`super::access`] before it reaches the axum router.
 
 use super::access;
-use super::conn::{Caller, ConnCtl, HEAD_DEADLINE};
+use super::conn::{Caller, ConnCtl};
 use super::hub;
 use super::log::Msg;
 use super::reply::{error, reply};
 use super::setup;
 use super::state::Shared;
+use super::request::{body, note};
 use super::status::state_json;
 use super::push;
 use crate::dashboard::local_toml;
 use crate::dashboard::messages::{self, Control, DriveRequest, ModeRequest, PlaceRequest, RecordRequest, SetRequest};
 use crate::drive::{Actor, DriveMode};
-use axum::body::{Body, Bytes};
+use axum::body::Body;
 use axum::extract::State;
 use axum::http::{header, HeaderMap, HeaderValue, Method, Request, Response, StatusCode, Uri};
 use axum::routing::{get, post};
@@ -157,34 +158,6 @@ fn estop(sh: &Shared, ctl: &ConnCtl, h: &HeaderMap) -> Response<Body> {
     reply(StatusCode::OK, &json!({"estop": true}))
 }
 
-/// Reads a control body: Content-Length only (no chunks), at most `MAX_BODY`, complete
-/// within the head deadline of the request's arrival.
-pub(super) async fn body(h: &HeaderMap, b: Body, c: &Caller) -> Result<Bytes, Response<Body>> {
-    if h.contains_key(header::TRANSFER_ENCODING) {
-        return Err(error(
-            StatusCode::LENGTH_REQUIRED,
-            "chunked bodies are not accepted; send Content-Length",
-        ));
-    }
-    let len: usize = match h
-        .get(header::CONTENT_LENGTH)
-        .map(|v| v.to_str().ok().and_then(|s| s.parse().ok()))
-    {
-        None => 0,
-        Some(Some(n)) => n,
-        Some(None) => return Err(error(StatusCode::BAD_REQUEST, "bad Content-Length")),
-    };
-    if len > messages::MAX_BODY {
-        return Err(error(StatusCode::PAYLOAD_TOO_LARGE, "body larger than 4096 bytes"));
-    }
-    let left = HEAD_DEADLINE.saturating_sub(c.at.elapsed());
-    match tokio::time::timeout(left, axum::body::to_bytes(b, messages::MAX_BODY)).await {
-        Err(_) => Err(error(StatusCode::REQUEST_TIMEOUT, "body not complete within 3 s")),
-        Ok(Err(_)) => Err(error(StatusCode::BAD_REQUEST, "body shorter than Content-Length")),
-        Ok(Ok(b)) => Ok(b),
-    }
-}
-
 async fn page(State(sh): State<Arc<Shared>>, h: HeaderMap) -> Response<Body> {
     let mut r = Response::new(Body::from(sh.access.page(PAGE, &h)));
     r.headers_mut().insert(
@@ -222,13 +195,6 @@ async fn login(
     }
 }
 
-pub(super) fn note(sh: &Shared, c: &Caller, what: &str) -> String {
-    format!(
-        "{what} from dashboard {} at wall {:.3} s",
-        c.ctl.peer.ip(),
-        sh.sent.now()
-    )
-}
 
 async fn release(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller>) -> Response<Body> {
     sh.arm.release(Actor::Page);

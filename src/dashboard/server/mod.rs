@@ -31,8 +31,9 @@
 //! The modules import one another one way only, from the bottom up: [`reply`], [`log`] and
 //! [`conn`] (the connection table) import none of the others; [`access`] uses `reply` and
 //! `log`; [`state`] (what everything shares) holds an `access`, a `log` and a `conn`; then
-//! [`hub`], [`api`], [`setup`] (which uses `api`'s body reader), [`accept`], and this file,
-//! which starts them.
+//! [`status`] (what the page is told), [`request`] (reading a control body), [`hub`],
+//! [`push`] (the pushed state), [`setup`] (set-up by clicking), [`api`] (the routes),
+//! [`accept`], and this file, which starts them.
 
 mod accept;
 mod access;
@@ -41,6 +42,7 @@ mod conn;
 mod hub;
 mod log;
 mod push;
+mod request;
 mod reply;
 mod setup;
 mod state;

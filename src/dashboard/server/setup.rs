@@ -7,7 +7,7 @@
 //! checks as the other controls (`super::api::handle`); the frame, like the stream, needs the
 //! login off loopback.
 
-use super::api::{body, note};
+use super::request::{body, note};
 use super::conn::Caller;
 use super::reply::{error, reply};
 use super::state::{Frozen, Shared};
@@ -284,6 +284,13 @@ pub async fn apply(
         Ok(v) => v,
         Err(r) => return r,
     };
+    // A new ROI changes what the car steers by: only on a car that cannot move.
+    if sh.arm.is_armed() {
+        return error(
+            StatusCode::CONFLICT,
+            "the car is armed: disarm it before applying a new ROI or threshold",
+        );
+    }
     let mut cfg = sh.cfg.lock().unwrap_or_else(|e| e.into_inner());
     let (old_w, old_l) = (&cfg.warp, &cfg.lane);
     let what = format!(
