@@ -382,6 +382,8 @@ def main():
             wd.click(wd.find("#release"))
             set_armed(wd, base, True)
             time.sleep(3)
+            wd.js("window.scrollTo(0, 0)")
+            time.sleep(0.3)
             wd.screenshot(a.screenshot)
         # 6. Driving by hand (issue 26), and the phone size.
         manual_suite(wd, base, out, "sim", tmp)
@@ -801,7 +803,9 @@ def _manual_suite(wd, base, out, label, tmp, joystick=True, hold=1.5):
     check(f"[{label}] the mode switch: manual on the next frame, noted with who and when",
           bool(on) and rec is not None and rec.get("drive_mode") == "manual",
           f"frame {rec['frame']}: {rec['events']}" if rec else "no event")
-    # Disarmed: holding the up arrow sends input, the car never moves.
+    # Disarmed: holding the up arrow sends input, the car never moves. (A car that was driving
+    # just before coasts to a stop first: wait until it stands.)
+    wait(lambda: (lambda r: r is not None and abs(r["truth"].get("speed_mps", 0.0)) < 1e-6)(_last_truth(out)), 10)
     wd.js("document.activeElement.blur()")
     r0 = _last_truth(out)
     wd.actions({"type": "key", "id": "kbd", "actions": [{"type": "keyDown", "value": "\ue013"}]})  # ArrowUp
@@ -1042,6 +1046,8 @@ def phone(wd, label, tmp):
     fits = all(0 <= v[k][0] and v[k][1] <= v["vw"] + 0.5 for k in ("joy", "modes", "estop", "arm", "release"))
     check(f"[{label}] 390x844: the drive controls fit without horizontal scrolling",
           fits and v["sw"] <= v["vw"], json.dumps(v))
+    wd.js("window.scrollTo(0, 0)")
+    time.sleep(0.3)
     wd.screenshot(os.path.join(tmp, f"dashboard_phone_{label}.png"))
 
 
