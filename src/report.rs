@@ -571,6 +571,7 @@ mod tests {
         ] {
             assert_eq!(base64(i.as_bytes()), o);
         }
+        assert_eq!(base64(&[0xff, 0xfe, 0x00]), "//4A");
     }
 
     #[test]

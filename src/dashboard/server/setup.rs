@@ -13,6 +13,7 @@ use super::reply::{error, reply};
 use super::state::{Frozen, Shared};
 use crate::config::{Config, ThresholdMode};
 use crate::dashboard::local_toml::Saved;
+use crate::report::base64;
 use crate::dashboard::messages::{self, Control, SetupRequest, CORNERS};
 use axum::body::Body;
 use axum::extract::State;
@@ -40,24 +41,6 @@ fn mode_name(m: ThresholdMode) -> &'static str {
         ThresholdMode::Fixed => "fixed",
         ThresholdMode::Otsu => "otsu",
     }
-}
-
-/// Standard base64 (RFC 4648, with padding), for the preview's `data:` URLs.
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
-    for c in bytes.chunks(3) {
-        let n =
-            (u32::from(c[0]) << 16) | (u32::from(*c.get(1).unwrap_or(&0)) << 8) | u32::from(*c.get(2).unwrap_or(&0));
-        for k in 0..4 {
-            if k <= c.len() {
-                out.push(A[(n >> (18 - 6 * k)) as usize & 63] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
 }
 
 fn png<P: image::PixelWithColorType>(img: &image::ImageBuffer<P, Vec<P::Subpixel>>) -> Vec<u8>
@@ -340,22 +323,6 @@ pub async fn apply(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn base64_is_rfc_4648() {
-        for (i, o) in [
-            ("", ""),
-            ("f", "Zg=="),
-            ("fo", "Zm8="),
-            ("foo", "Zm9v"),
-            ("foob", "Zm9vYg=="),
-            ("fooba", "Zm9vYmE="),
-            ("foobar", "Zm9vYmFy"),
-        ] {
-            assert_eq!(base64(i.as_bytes()), o);
-        }
-        assert_eq!(base64(&[0xff, 0xfe, 0x00]), "//4A");
-    }
 
     /// The preview is the pipeline's own lane stage: the same images as a `LaneDetector` of
     /// that configuration measuring the frame.
