@@ -41,6 +41,7 @@ pub mod pipecam;
 pub mod ranging;
 pub mod record;
 pub mod report;
+pub mod route;
 pub mod run_dir;
 pub mod session;
 pub mod sim;

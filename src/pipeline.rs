@@ -105,6 +105,8 @@ pub struct FrameOutput {
     pub mode: Mode,
     /// What the behaviour machine was given.
     pub observations: Observations,
+    /// At a junction (`route.junctions`): fork or merge, the line kept, the way and why.
+    pub junction: Option<crate::lane::junction::JunctionReport>,
 }
 
 /// One object of a frame, ranged (a telemetry field).
@@ -356,6 +358,8 @@ pub struct Pipeline {
     frame_index: u64,
     /// Stereo ranging (`ranging.method = "stereo"`), used by [`Pipeline::step_stereo`].
     stereo: Option<crate::stereo::ranging::StereoRanging>,
+    /// The junction rule and the route (`route.junctions`), after the lane measurement.
+    junction: Option<crate::lane::junction::JunctionRule>,
 }
 
 /// The stereo ranging of `cfg` (`ranging.method = "stereo"`): a calibrated pair when
@@ -399,6 +403,10 @@ impl Pipeline {
             every_n: cfg.detect.every_n_frames.max(1) as u64,
             frame_index: 0,
             stereo: stereo_ranging(cfg)?,
+            junction: cfg
+                .route
+                .junctions
+                .then(|| crate::lane::junction::JunctionRule::new(cfg.route.steps.clone(), cfg.route.options())),
         })
     }
 
@@ -584,6 +592,14 @@ impl Pipeline {
         timer.lap_us();
         // 1. Lane.
         let lane = self.lane.measure(frame, timer, &mut stage_us);
+        // 1b. At a junction, the line of the chosen way (src/lane/junction.rs).
+        let (lane, junction) = match &mut self.junction {
+            Some(rule) => {
+                let im = self.lane.images();
+                rule.step(&im.binary, &im.hist, im.band_rows, &self.lane.options().lines, lane)
+            }
+            None => (lane, None),
+        };
         // 2. Detections (on every n-th frame; given boxes on every frame), ranged.
         let detect_now = given.is_some() || self.frame_index.is_multiple_of(self.every_n);
         self.frame_index += 1;
@@ -615,6 +631,7 @@ impl Pipeline {
             detect_us,
             mode: decision.mode,
             observations: obs,
+            junction,
         }
     }
 

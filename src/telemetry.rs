@@ -110,6 +110,10 @@ pub struct FrameRecord {
     /// camera's frame, the skew and how many boxes were ranged by stereo.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stereo: Option<StereoRecord>,
+    /// At a junction (`route.junctions`): `fork` or `merge`, the line kept, the way chosen
+    /// and why (`route`, `sign`, `default`), the route step (src/lane/junction.rs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub junction: Option<crate::lane::junction::JunctionReport>,
 }
 
 /// The stereo part of a frame's record (src/drive/stereo.rs).
@@ -174,6 +178,7 @@ impl FrameRecord {
             input_age_ms: None,
             car: None,
             stereo: None,
+            junction: None,
         }
     }
 
@@ -186,6 +191,7 @@ impl FrameRecord {
         self.speed_est_mps = Some(out.observations.speed_mps);
         self.odometry_m = Some(out.observations.odometry_m);
         self.detect_us = Some(out.detect_us);
+        self.junction = out.junction;
         self
     }
 

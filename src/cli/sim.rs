@@ -28,6 +28,10 @@ pub struct SimArgs {
     /// Track file (default: `sim.track` of the config, config/tracks/default.toml).
     #[arg(long)]
     pub track: Option<PathBuf>,
+    /// The way to take at each fork reached, comma-separated: `left,straight,right` (default:
+    /// `[route] steps`, else the track file's `route`). Turns the junction rule on.
+    #[arg(long)]
+    pub route: Option<String>,
     /// Laps to drive (default: `sim.laps`).
     #[arg(long)]
     pub laps: Option<u32>,
@@ -155,11 +159,49 @@ fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, env: SessionE
     Ok(session)
 }
 
+/// The track file: `--track` (a path, or a name such as `town` for `<name>.toml` beside the
+/// configured `sim.track`), else `sim.track`.
+fn track_path(arg: Option<&Path>, cfg: &Config) -> PathBuf {
+    let default = PathBuf::from(&cfg.sim.track);
+    match arg {
+        None => default,
+        Some(p) if p.exists() || p.components().count() > 1 || p.extension().is_some() => p.to_path_buf(),
+        Some(name) => default
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join(format!("{}.toml", name.display())),
+    }
+}
+
 /// Runs `rccar sim`.
 pub fn run(a: SimArgs) -> Result<ExitCode> {
-    let cfg = config(&a)?;
-    let track_path = a.track.clone().unwrap_or_else(|| PathBuf::from(&cfg.sim.track));
+    let mut cfg = config(&a)?;
+    let track_path = track_path(a.track.as_deref(), &cfg);
     let track = Track::load(&track_path)?;
+    let route = match a.route.as_deref() {
+        Some(r) => Some(rccar::route::parse_list(r).map_err(|e| anyhow::anyhow!("--route {r:?}: {e}"))?),
+        None => None,
+    };
+    let steps = rccar::sim::network::configure_route(&mut cfg, &track, route);
+    let plan = if track.junctions.is_empty() {
+        None
+    } else {
+        let plan = track
+            .plan(&steps, cfg.sim.laps.max(1))
+            .map_err(|e| anyhow::anyhow!("{}: {e}", track_path.display()))?;
+        say(&format!(
+            "sim: route [{}]: {} forks, {} merges, {} crossings on the track; the plan:",
+            rccar::route::to_list(&steps),
+            track.junctions.iter().filter(|j| j.kind == rccar::sim::network::JunctionKind::Fork).count(),
+            track.junctions.iter().filter(|j| j.kind == rccar::sim::network::JunctionKind::Merge).count(),
+            track.junctions.iter().filter(|j| j.kind == rccar::sim::network::JunctionKind::Crossing).count(),
+        ));
+        for l in rccar::sim::network::passage_lines(&track, &plan) {
+            say(&format!("    {l}"));
+        }
+        Some(plan)
+    };
+    let cfg = cfg;
     let font = system_font();
     let step = StepRequest::parse(a.start_offset, a.kick.as_deref(), track.spec.road.lane_width_m)?;
     let stereo = check_flags(&a, &cfg, step)?;
@@ -245,7 +287,22 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         ));
         return Ok(ExitCode::from(why.exit_code()));
     }
-    let ok = summary.laps >= cfg.sim.laps && summary.lane_departures == 0;
+    let mut ok = summary.laps >= cfg.sim.laps && summary.lane_departures == 0;
+    if let Some(plan) = &plan {
+        use rccar::sim::network::fork_ways_of;
+        let (want, got) = (fork_ways_of(plan), fork_ways_of(&summary.junctions));
+        if want == got {
+            say(&format!("  route: every fork as planned ({} forks)", got.len()));
+        } else {
+            say(&format!(
+                "  route: driven {} forks, planned {}; first difference at fork passage {} (a turn sign overrides the route)",
+                got.len(),
+                want.len(),
+                want.iter().zip(&got).position(|(a, b)| a != b).unwrap_or(want.len().min(got.len())) + 1
+            ));
+            ok = false;
+        }
+    }
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 

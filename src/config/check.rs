@@ -86,6 +86,7 @@ impl Config {
         self.record.check(&mut c);
         self.dashboard.check(&mut c);
         self.manual.check(&mut c);
+        self.route.check(&mut c);
         self.gamepad.check(&mut c);
         self.stereo.check(&mut c, self.camera.width);
         if c.0.is_empty() {

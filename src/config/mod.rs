@@ -29,6 +29,7 @@ mod gpio;
 mod lane;
 mod layers;
 mod manual;
+mod route;
 mod ranging;
 mod record;
 mod replay;
@@ -50,6 +51,7 @@ pub use gpio::GpioConfig;
 pub use lane::{LaneConfig, LaneSetupError, PeakMode, ThresholdMode};
 pub use layers::{find_config, find_local, local_beside, path_keys, source_tree_config, LoadedConfig, MissingLocal};
 pub use manual::ManualConfig;
+pub use route::RouteConfig;
 pub use ranging::{RangingConfig, RangingMethod};
 pub use record::RecordConfig;
 pub use replay::ReplayConfig;
@@ -202,6 +204,8 @@ pub struct Config {
     pub dashboard: DashboardConfig,
     /// `[manual]`: driving by hand (the input's deadline, the human's throttle ceiling).
     pub manual: ManualConfig,
+    /// `[route]`: the way at each fork and the junction rule (src/lane/junction.rs).
+    pub route: RouteConfig,
     /// `[gamepad]`: a gamepad read on the car (`rccar drive --pad`, feature `gamepad`).
     pub gamepad: GamepadConfig,
     /// Stereo ranging with a second camera (src/stereo/, docs/stereo.md).

@@ -7,6 +7,7 @@
 //! script can call on its own.
 
 pub mod edges;
+pub mod junction;
 pub mod lines;
 pub mod synth;
 pub mod threshold;

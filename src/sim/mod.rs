@@ -13,6 +13,7 @@ pub mod board;
 pub mod camera;
 pub mod glyphs;
 pub mod lens;
+pub mod network;
 pub mod plot;
 pub mod pwm;
 pub mod render;

@@ -126,6 +126,13 @@ pub struct TrackFile {
     /// Things placed on the floor.
     #[serde(default)]
     pub objects: Vec<ObjectSpec>,
+    /// Roads that leave a road and join one: junctions (src/sim/network.rs, docs/junctions.md).
+    #[serde(default)]
+    pub branches: Vec<super::network::BranchSpec>,
+    /// The route: the way to take at each fork reached, in driving order (`rccar sim --route`
+    /// replaces it).
+    #[serde(default)]
+    pub route: Vec<crate::route::Step>,
 }
 
 /// `[start]`: the beginning of the centre line, which is also where laps are counted.
@@ -333,6 +340,8 @@ pub struct Projection {
     pub curvature: f64,
     /// Which piece.
     pub piece: usize,
+    /// Which road (0 = the main loop; `s` is along this road).
+    pub road: usize,
 }
 
 impl Piece {
@@ -489,12 +498,17 @@ pub struct Track {
     pub name: String,
     /// The file as read (colours, floor settings).
     pub spec: TrackFile,
-    /// The centre line, in driving order.
+    /// The centre lines: the main loop's pieces in driving order, then each branch's
+    /// (see [`Track::roads`]).
     pub pieces: Vec<Piece>,
-    /// Distance along the centre line at the start of each piece, metres.
+    /// Distance along its road's centre line at the start of each piece, metres.
     pub piece_s0: Vec<f64>,
-    /// Total length of the road's centre line, metres.
+    /// Total length of the main road's centre line (the loop laps are counted on), metres.
     pub length: f64,
+    /// The roads: the main loop first, then the branches (src/sim/network.rs).
+    pub roads: Vec<super::network::Road>,
+    /// Forks, merges and crossings.
+    pub junctions: Vec<super::network::Junction>,
     /// Lateral offsets (left positive) of the painted line centres from the road's centre
     /// line, metres, with whether each is the dashed centre line.
     pub lines: Vec<(f64, bool)>,
@@ -548,7 +562,9 @@ impl Track {
         } else {
             r.lane_width_m / 2.0 + r.line_width_m / 2.0
         };
-        let (pieces, piece_s0, total) = Self::chain(&spec, outer, origin)?;
+        let (mut pieces, mut piece_s0, total) = Self::chain(&spec, outer, origin)?;
+        let (roads, junctions) =
+            super::network::build(&spec.branches, &mut pieces, &mut piece_s0, total, outer, origin)?;
 
         // Lines and the driven lane.
         let w = r.lane_width_m;
@@ -579,6 +595,8 @@ impl Track {
             pieces,
             piece_s0,
             length: total,
+            roads,
+            junctions,
             lines,
             drive_offset,
             floor_rect,
@@ -736,7 +754,7 @@ impl Track {
 
     /// Segment `i` as a piece starting at `p` with heading `h` (radians), checked (`outer` =
     /// the outer lines' distance from the centre line, which an arc's radius must exceed).
-    fn segment_piece(
+    pub(super) fn segment_piece(
         i: usize,
         seg: &SegmentSpec,
         p: [f64; 2],
@@ -957,7 +975,8 @@ impl Track {
     /// Point and heading of the road's centre line at distance `s` (wrapped to the loop).
     pub fn pose_at(&self, s: f64) -> ([f64; 2], f64) {
         let s = s.rem_euclid(self.length);
-        let i = self.piece_s0.partition_point(|&s0| s0 <= s).saturating_sub(1);
+        let main = self.roads[0].pieces.clone();
+        let i = self.piece_s0[main].partition_point(|&s0| s0 <= s).saturating_sub(1);
         self.pieces[i].pose_at(s - self.piece_s0[i])
     }
 
@@ -987,6 +1006,7 @@ impl Track {
             heading,
             curvature: self.pieces[i].curvature(),
             piece: i,
+            road: self.road_of(i),
         }
     }
 

@@ -89,6 +89,13 @@ pub struct Summary {
     pub lane_width_m: f64,
     /// Why the run ended.
     pub end: EndReason,
+    /// On a track with junctions: every junction passed, in order, with the way taken at each
+    /// fork (from the car's true position; src/sim/network.rs).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub junctions: Vec<super::network::Passage>,
+    /// The track's junctions as the report names them (for [`Summary::lines`]).
+    #[serde(skip)]
+    pub junction_lines: Vec<String>,
 }
 
 impl Summary {
@@ -115,6 +122,10 @@ impl Summary {
                 s.steer_reversals_per_s, s.lane_lost_frames
             ),
         ]
+        .into_iter()
+        .chain((!s.junction_lines.is_empty()).then(|| "  route driven:".to_string()))
+        .chain(s.junction_lines.iter().map(|l| format!("    {l}")))
+        .collect()
     }
 }
 
@@ -165,6 +176,8 @@ struct Score {
     lost: u64,
     still_s: f64,
     end: Option<EndReason>,
+    /// Junctions passed (tracks with junctions only).
+    passages: super::network::PassageLog,
 }
 
 /// The simulated world: track and objects, the car, its camera's renderer, the truth model and
@@ -396,6 +409,8 @@ impl World {
             lane_lost_frames: self.sc.lost,
             lane_width_m: self.scene.track.spec.road.lane_width_m,
             end: self.sc.end.unwrap_or(EndReason::TimeUp),
+            junctions: self.sc.passages.passages.clone(),
+            junction_lines: super::network::passage_lines(&self.scene.track, &self.sc.passages.passages),
         }
     }
 
@@ -480,8 +495,17 @@ impl World {
         if out.lane.error.is_none() {
             self.sc.lost += 1;
         }
-        // Progress and laps.
+        // Progress and laps; with junctions, laps are passes of the main road's start line.
         let len = track.length;
+        if !track.junctions.is_empty() {
+            let c = pose.to_world([vcfg.wheelbase_m / 2.0, 0.0]);
+            let lap = self.sc.passages.update(track, c, self.vehicle.speed * dt);
+            if lap {
+                let t_lap = t + dt;
+                self.sc.lap_times.push(t_lap - self.sc.last_lap_t);
+                self.sc.last_lap_t = t_lap;
+            }
+        }
         let mut ds = truth.s_m - self.sc.last_s;
         if ds < -len / 2.0 {
             ds += len;
@@ -491,7 +515,7 @@ impl World {
         self.sc.last_s = truth.s_m;
         self.sc.progress += ds;
         let laps_done = (self.sc.progress / len).floor().max(0.0) as usize;
-        while self.sc.lap_times.len() < laps_done {
+        while track.junctions.is_empty() && self.sc.lap_times.len() < laps_done {
             let t_lap = t + dt;
             self.sc.lap_times.push(t_lap - self.sc.last_lap_t);
             self.sc.last_lap_t = t_lap;

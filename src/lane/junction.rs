@@ -1,0 +1,366 @@
+//! Through a junction the lane method keeps working: at a fork it follows the line on the side
+//! of the chosen branch while the other line is missing or bends away, at a merge the line on
+//! the far side of the road coming in (docs/junctions.md).
+//!
+//! The paper's lane centre (Eq. 3, `L_c = (P_R − P_L)/2 + P_L`) assumes the two peaks of the
+//! column histogram are one lane's two lines. At a junction they are not: at a fork the lines
+//! of the two ways part (the histogram's two peaks drift apart), at a merge the line on the
+//! side of the road coming in jumps out to that road's far line. Taking the midpoint there
+//! steers the car into the gore between the roads. The rule, frame by frame:
+//!
+//! 1. On the road, the raw peaks P_L, P_R (each half of the histogram, as in Eq. 3) are
+//!    remembered while they are a lane apart.
+//! 2. When they are more than `fork_width` lane widths apart, the line that moved away from
+//!    where it was is the odd one. If it moved by more than `jump` lane widths since the last
+//!    frame it jumped, or if it leans in (its column in the upper half of the band is nearer
+//!    the lane than in the lower half: a road coming in), it is a **merge** (the car keeps the
+//!    other, steady line). If it leans out by more than `lean` lane widths it is bending away:
+//!    a **fork**, and the car chooses — a turn sign seen before the fork first, else the
+//!    route's next step, else `straight` — and keeps the line on that side (`left` → P_L,
+//!    `right` → P_R, `straight` → the steady line).
+//! 3. While at the junction the kept line gives the lane (the other is estimated from the lane
+//!    width, Sec. 3.2 v, unless it is a lane away where it should be); after `settle_frames`
+//!    frames with both lines a lane apart again the car is back on the road.
+//!
+//! The rule has no map: it counts forks as it meets them, so a route's steps are the forks in
+//! the order the car reaches them. Units: bird's-eye pixels, frames.
+
+use super::lines::{column_histogram_rows, peak_with, LaneMeasurement, LaneStatus, LineOptions};
+use image::GrayImage;
+use crate::route::{Step, Why};
+use serde::{Deserialize, Serialize};
+
+/// A side of the lane.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Side {
+    /// P_L.
+    Left,
+    /// P_R.
+    Right,
+}
+
+impl Side {
+    fn other(self) -> Side {
+        match self {
+            Side::Left => Side::Right,
+            Side::Right => Side::Left,
+        }
+    }
+}
+
+/// Tunables of the rule (`[route]` in car.toml).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JunctionOptions {
+    /// Peaks further apart than this many lane widths: a junction (> 1).
+    pub fork_width: f64,
+    /// The odd line moved by more than this many lane widths since the last frame: a merge.
+    pub jump: f64,
+    /// Frames with both lines a lane apart before the car is back on the road.
+    pub settle_frames: u32,
+    /// The odd line leans out (fork) or in (merge) by more than this many lane widths between
+    /// the lower and the upper half of the band; less: undecided, keep the steady line.
+    pub lean: f64,
+    /// Most frames a junction may last (then back on the road whatever the lines say).
+    pub max_frames: u32,
+    /// A turn sign seen within this many frames before a fork decides it.
+    pub sign_frames: u32,
+}
+
+impl Default for JunctionOptions {
+    fn default() -> Self {
+        Self {
+            fork_width: 1.2,
+            jump: 0.25,
+            lean: 0.03,
+            settle_frames: 8,
+            max_frames: 300,
+            sign_frames: 90,
+        }
+    }
+}
+
+/// What the rule is doing this frame (the `junction` field of telemetry).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct JunctionReport {
+    /// `fork` or `merge`.
+    pub kind: JunctionKind,
+    /// The line kept.
+    pub keep: Side,
+    /// At a fork: the way chosen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub way: Option<Step>,
+    /// At a fork: why that way.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub why: Option<Why>,
+    /// At a fork decided by the route: the step's index (from 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step: Option<usize>,
+    /// Forks met so far (this one included).
+    pub forks: u32,
+    /// True on the frame the junction was met.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub new: bool,
+}
+
+/// A fork or a merge.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JunctionKind {
+    /// The lines part: two ways on.
+    Fork,
+    /// A road comes in.
+    Merge,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct At {
+    report: JunctionReport,
+    frames: u32,
+    settled: u32,
+}
+
+/// The rule's state: the route, where the lines were, the junction the car is in.
+#[derive(Debug, Clone)]
+pub struct JunctionRule {
+    opts: JunctionOptions,
+    route: Vec<Step>,
+    next: usize,
+    forks: u32,
+    last: [Option<f64>; 2],
+    at: Option<At>,
+    sign: Option<(Step, u32)>,
+    /// Scratch: a column histogram of half the band.
+    half: Vec<u16>,
+}
+
+impl JunctionRule {
+    /// A rule following `route` (one step per fork).
+    pub fn new(route: Vec<Step>, opts: JunctionOptions) -> JunctionRule {
+        JunctionRule {
+            opts,
+            route,
+            next: 0,
+            forks: 0,
+            last: [None, None],
+            at: None,
+            sign: None,
+            half: Vec::new(),
+        }
+    }
+
+    /// The route's steps not yet used.
+    pub fn steps_left(&self) -> &[Step] {
+        &self.route[self.next.min(self.route.len())..]
+    }
+
+    /// A turn sign seen this frame (`Left` or `Right`): it decides the next fork met within
+    /// `sign_frames` frames, whatever the route says.
+    pub fn sign(&mut self, way: Step) {
+        self.sign = Some((way, self.opts.sign_frames));
+    }
+
+    /// One frame: the binary bird's-eye image and the histogram the lane was measured from
+    /// (`binary`, `hist`, `band_rows`, `lines`) and that measurement `m`; returns the lane to
+    /// steer by and, at a junction, the report.
+    pub fn step(
+        &mut self,
+        binary: &GrayImage,
+        hist: &[u16],
+        band_rows: u32,
+        lines: &LineOptions,
+        m: LaneMeasurement,
+    ) -> (LaneMeasurement, Option<JunctionReport>) {
+        let (w, mid) = (hist.len(), hist.len() / 2);
+        let min_count = (lines.min_peak * band_rows as f64).ceil().max(1.0) as u16;
+        let raw = [
+            peak_with(lines.peak, hist, 0..mid, min_count),
+            peak_with(lines.peak, hist, mid..w, min_count),
+        ];
+        let lane = lines.lane_width_px;
+        if let Some((way, left)) = self.sign {
+            self.sign = (left > 1).then_some((way, left - 1));
+        }
+        let Some(mut at) = self.at else {
+            // 1–2. On the road: remember the lines; meet a junction when they part.
+            if let [Some(l), Some(r)] = raw {
+                if r - l > self.opts.fork_width * lane {
+                    let moved = |i: usize, p: f64| self.last[i].map_or(0.0, |q: f64| (p - q).abs());
+                    let (dl, dr) = (moved(0, l), moved(1, r));
+                    let odd = if dl >= dr { Side::Left } else { Side::Right };
+                    let outward = self.lean_out(binary, band_rows, lines, odd);
+                    let jumped = dl.max(dr) > self.opts.jump * lane;
+                    let lean = self.opts.lean * lane;
+                    if !jumped && outward.is_none_or(|o| o.abs() <= lean) {
+                        // Undecided: keep the steady line this frame, decide on a later one.
+                        let report = JunctionReport {
+                            kind: JunctionKind::Merge,
+                            keep: odd.other(),
+                            way: None,
+                            why: None,
+                            step: None,
+                            forks: self.forks,
+                            new: false,
+                        };
+                        let saved = self.last;
+                        let (m, _) = self.keep(raw, lines, m, report);
+                        self.last = saved;
+                        return (m, None);
+                    }
+                    let report = if jumped || outward.is_some_and(|o| o < 0.0) {
+                        JunctionReport {
+                            kind: JunctionKind::Merge,
+                            keep: odd.other(),
+                            way: None,
+                            why: None,
+                            step: None,
+                            forks: self.forks,
+                            new: true,
+                        }
+                    } else {
+                        self.fork(odd)
+                    };
+                    self.at = Some(At {
+                        report,
+                        frames: 0,
+                        settled: 0,
+                    });
+                    return self.keep(raw, lines, m, report);
+                }
+            }
+            for (i, p) in [m.p_left, m.p_right].into_iter().enumerate() {
+                let estimated = if i == 0 { m.left_estimated } else { m.right_estimated };
+                if let (Some(p), false) = (p, estimated) {
+                    self.last[i] = Some(p);
+                }
+            }
+            return (m, None);
+        };
+        // 3. At a junction: keep the chosen line until the lane is a lane wide again.
+        at.frames += 1;
+        at.report.new = false;
+        let apart = match raw {
+            [Some(l), Some(r)] => ((r - l) - lane).abs() < 0.1 * lane,
+            _ => false,
+        };
+        at.settled = if apart { at.settled + 1 } else { 0 };
+        let report = at.report;
+        if at.settled >= self.opts.settle_frames || at.frames >= self.opts.max_frames {
+            self.at = None;
+        } else {
+            self.at = Some(at);
+        }
+        self.keep(raw, lines, m, report)
+    }
+
+    /// How far the `side` line leans out of the lane from the lower to the upper half of the
+    /// band, pixels (positive: it bends away ahead, a fork; negative: it comes in, a merge);
+    /// `None` when either half does not show it.
+    fn lean_out(&mut self, binary: &GrayImage, band_rows: u32, lines: &LineOptions, side: Side) -> Option<f64> {
+        let (w, h) = (binary.width() as usize, binary.height() as usize);
+        let band = (band_rows as usize).min(h);
+        let half_rows = band / 2;
+        if half_rows == 0 {
+            return None;
+        }
+        let range = match side {
+            Side::Left => 0..w / 2,
+            Side::Right => w / 2..w,
+        };
+        let min_count = (lines.min_peak * half_rows as f64).ceil().max(1.0) as u16;
+        self.half.resize(w, 0);
+        let peak_of = |rows: std::ops::Range<usize>, half: &mut Vec<u16>| {
+            column_histogram_rows(binary, rows, half);
+            peak_with(lines.peak, half, range.clone(), min_count)
+        };
+        let mut half = std::mem::take(&mut self.half);
+        let top = peak_of(h - band..h - band + half_rows, &mut half);
+        let bottom = peak_of(h - half_rows..h, &mut half);
+        self.half = half;
+        let (t, b) = (top?, bottom?);
+        Some(match side {
+            Side::Left => b - t,
+            Side::Right => t - b,
+        })
+    }
+
+    /// A fork met with `odd` the line bending away: the way, why, and the line to keep.
+    fn fork(&mut self, odd: Side) -> JunctionReport {
+        let (way, why, step) = if let Some((way, _)) = self.sign.take() {
+            // A sign decides; the route's step for this fork is used up all the same.
+            let step = (self.next < self.route.len()).then_some(self.next);
+            self.next += 1;
+            (way, Why::Sign, step)
+        } else if let Some(&way) = self.route.get(self.next) {
+            self.next += 1;
+            (way, Why::Route, Some(self.next - 1))
+        } else {
+            (Step::Straight, Why::Default, None)
+        };
+        self.forks += 1;
+        let keep = match way {
+            Step::Left => Side::Left,
+            Step::Right => Side::Right,
+            Step::Straight => odd.other(),
+        };
+        JunctionReport {
+            kind: JunctionKind::Fork,
+            keep,
+            way: Some(way),
+            why: Some(why),
+            step,
+            forks: self.forks,
+            new: true,
+        }
+    }
+
+    /// The lane from the kept line (the other one where it is a lane away, else estimated).
+    fn keep(
+        &mut self,
+        raw: [Option<f64>; 2],
+        lines: &LineOptions,
+        m: LaneMeasurement,
+        report: JunctionReport,
+    ) -> (LaneMeasurement, Option<JunctionReport>) {
+        let lane = lines.lane_width_px;
+        let plausible = |l: f64, r: f64| ((r - l) - lane).abs() <= lines.width_tolerance * lane;
+        let (k, o) = match report.keep {
+            Side::Left => (0, 1),
+            Side::Right => (1, 0),
+        };
+        let Some(kept) = raw[k] else {
+            // The kept line is not seen: steer by what the lane method found.
+            return (m, Some(report));
+        };
+        let other = raw[o].filter(|&p| {
+            let (l, r) = if k == 0 { (kept, p) } else { (p, kept) };
+            plausible(l, r)
+        });
+        let sign = if k == 0 { 1.0 } else { -1.0 };
+        let (pl, pr, status) = match (k, other) {
+            (0, Some(r)) => (kept, r, LaneStatus::Both),
+            (1, Some(l)) => (l, kept, LaneStatus::Both),
+            (0, None) => (kept, kept + sign * lane, LaneStatus::LeftOnly),
+            _ => (kept + sign * lane, kept, LaneStatus::RightOnly),
+        };
+        self.last = [Some(pl), Some(pr)];
+        let lane_center = (pr - pl) / 2.0 + pl;
+        let error_px = lane_center - m.frame_center;
+        // The image is 2·(L_F − offset) + 1 columns wide; the error is normalised by half of it.
+        let half = m.frame_center - lines.center_offset_px;
+        (
+            LaneMeasurement {
+                p_left: Some(pl),
+                p_right: Some(pr),
+                left_estimated: status == LaneStatus::RightOnly,
+                right_estimated: status == LaneStatus::LeftOnly,
+                lane_center: Some(lane_center),
+                frame_center: m.frame_center,
+                error_px: Some(error_px),
+                error: Some((error_px / half).clamp(-1.0, 1.0)),
+                status,
+            },
+            Some(report),
+        )
+    }
+}
