@@ -38,6 +38,7 @@ mod stereo_photos;
 mod stereo_pipeline;
 mod stereo_signs;
 mod stereo_sim;
+mod town_sim;
 mod stereo_track;
 
 /// Every tests/*.rs file is compiled: a module here or in tests/car.rs, or its own `[[test]]`

@@ -323,7 +323,9 @@ impl JunctionRule {
         report: JunctionReport,
     ) -> (LaneMeasurement, Option<JunctionReport>) {
         let lane = lines.lane_width_px;
-        let plausible = |l: f64, r: f64| ((r - l) - lane).abs() <= lines.width_tolerance * lane;
+        // The other line counts where a lane is no wider than it is at a junction's start.
+        let tol = (self.opts.fork_width - 1.0) * lane;
+        let plausible = |l: f64, r: f64| ((r - l) - lane).abs() <= tol;
         let (k, o) = match report.keep {
             Side::Left => (0, 1),
             Side::Right => (1, 0),
@@ -362,5 +364,123 @@ impl JunctionRule {
             },
             Some(report),
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lane::lines::{band_rows, column_histogram, measure, PeakMode};
+
+    const W: u32 = 320;
+    const H: u32 = 240;
+    const LINES: LineOptions = LineOptions {
+        band: 0.4,
+        min_peak: 0.3,
+        peak: PeakMode::Centroid,
+        lane_width_px: 190.0,
+        width_tolerance: 0.35,
+        center_offset_px: 0.0,
+    };
+
+    /// A binary bird's-eye image with a right line at 254.5 and a left line whose column is
+    /// `left + lean · (rows above the bottom) / band` (4 px wide).
+    fn frame(left: f64, lean: f64) -> GrayImage {
+        let band = band_rows(H, LINES.band) as f64;
+        GrayImage::from_fn(W, H, |x, y| {
+            let up = (H - 1 - y) as f64;
+            let l = left + lean * up / band;
+            let on = |c: f64| (x as f64 - c).abs() < 6.0;
+            image::Luma([if on(l) || on(254.5) { 255 } else { 0 }])
+        })
+    }
+
+    fn run(rule: &mut JunctionRule, img: &GrayImage) -> (LaneMeasurement, Option<JunctionReport>) {
+        let rows = band_rows(H, LINES.band);
+        let mut hist = vec![0; W as usize];
+        column_histogram(img, rows, &mut hist);
+        let m = measure(&hist, rows, &LINES);
+        rule.step(img, &hist, rows, &LINES, m)
+    }
+
+    #[test]
+    fn a_line_bending_away_is_a_fork_and_the_route_picks_the_line() {
+        for (step, keep) in [(Step::Left, Side::Left), (Step::Straight, Side::Right)] {
+            let mut rule = JunctionRule::new(vec![step], JunctionOptions::default());
+            let mut met = None;
+            for i in 0..40 {
+                // The left line drifts out 2 px a frame and leans out more the further ahead.
+                let drift = (i as f64 - 5.0).max(0.0) * 2.0;
+                let (m, r) = run(&mut rule, &frame(64.5 - drift, -drift));
+                if let Some(r) = r.filter(|r| r.new) {
+                    met = Some((i, r, m));
+                }
+            }
+            let (_, r, m) = met.expect("a fork was met");
+            assert_eq!((r.kind, r.way, r.why, r.keep), (JunctionKind::Fork, Some(step), Some(Why::Route), keep));
+            assert_eq!(r.step, Some(0));
+            // Keeping the right line: the left is estimated a lane width away.
+            if keep == Side::Right {
+                assert_eq!(m.status, LaneStatus::RightOnly);
+                assert!((m.p_left.unwrap() - (254.5 - 190.0)).abs() < 1.0);
+            }
+            assert!(rule.steps_left().is_empty());
+        }
+    }
+
+    #[test]
+    fn a_line_that_jumps_out_or_leans_in_is_a_merge_and_uses_no_step() {
+        for jump in [true, false] {
+            let mut rule = JunctionRule::new(vec![Step::Left], JunctionOptions::default());
+            for _ in 0..5 {
+                run(&mut rule, &frame(64.5, 0.0));
+            }
+            // Jumps out to another road's line at once, or drifts out leaning in towards the
+            // lane ahead (a road coming in).
+            let mut met = None;
+            for i in 1..40 {
+                let (left, lean) = if jump { (10.0, 0.0) } else { (64.5 - 2.0 * i as f64, 30.0) };
+                if let (m, Some(r)) = run(&mut rule, &frame(left, lean)) {
+                    met = Some((m, r));
+                    break;
+                }
+            }
+            let (m, r) = met.unwrap_or_else(|| panic!("jump {jump}: no junction"));
+            assert_eq!((r.kind, r.keep), (JunctionKind::Merge, Side::Right), "jump {jump}");
+            assert_eq!(r.way, None);
+            assert_eq!(rule.steps_left(), [Step::Left]);
+            assert!((m.lane_center.unwrap() - (254.5 - 95.0)).abs() < 1.0, "{m:?}");
+        }
+    }
+
+    #[test]
+    fn a_turn_sign_overrides_the_route() {
+        let mut rule = JunctionRule::new(vec![Step::Straight], JunctionOptions::default());
+        rule.sign(Step::Left);
+        let mut got = None;
+        for i in 0..40 {
+            let drift = (i as f64 - 5.0).max(0.0) * 2.0;
+            if let (_, Some(r)) = run(&mut rule, &frame(64.5 - drift, -drift)) {
+                got = got.or(Some(r));
+            }
+        }
+        let r = got.unwrap();
+        assert_eq!((r.way, r.why, r.keep), (Some(Step::Left), Some(Why::Sign), Side::Left));
+        // The route's step for that fork is used up.
+        assert!(rule.steps_left().is_empty());
+    }
+
+    #[test]
+    fn the_road_back_to_a_lane_width_ends_the_junction() {
+        let mut rule = JunctionRule::new(vec![], JunctionOptions::default());
+        for i in 0..25 {
+            let drift = (i as f64 - 5.0).max(0.0) * 2.0;
+            run(&mut rule, &frame(64.5 - drift, -drift));
+        }
+        assert!(rule.at.is_some());
+        for _ in 0..JunctionOptions::default().settle_frames {
+            run(&mut rule, &frame(64.5, 0.0));
+        }
+        assert!(rule.at.is_none());
     }
 }

@@ -1,0 +1,85 @@
+//! The town track's road network (issue 27's first "must show"): a route through six fork
+//! passages driven by the real pipeline with its detectors, every fork taken the way the route
+//! says (the simulator's truth of which road the car ended up on, against the plan the track
+//! predicts), no lane departure, the crossing crossed; and a route whose step names no way of
+//! its fork refused by the CLI before anything runs.
+
+use rccar::config::Config;
+use rccar::route::Step;
+use rccar::sim::network::{configure_route, fork_ways_of, JunctionKind};
+use rccar::sim::run::{EndReason, Simulation};
+use rccar::sim::track::Track;
+use std::path::Path;
+
+const ROOT: &str = env!("CARGO_MANIFEST_DIR");
+
+fn town() -> Track {
+    Track::load(&Path::new(ROOT).join("config/tracks/town.toml")).unwrap()
+}
+
+/// Drives `laps` of the town with `route` (None: the track's own), detectors on.
+fn drive(route: Option<Vec<Step>>, laps: u32) -> (rccar::sim::run::Summary, Vec<rccar::sim::network::Passage>, u32) {
+    let track = town();
+    let mut cfg = Config::default().with_override(&format!("sim.laps={laps}")).unwrap();
+    let steps = configure_route(&mut cfg, &track, route);
+    let plan = track.plan(&steps, laps).unwrap();
+    let mut sim = Simulation::new(&cfg, &track).unwrap();
+    sim.set_full_frames(false);
+    let (det, missing) = rccar::pipeline::load_detector(&cfg, &Path::new(ROOT).join("config")).unwrap();
+    assert!(missing.is_empty(), "{missing:?}");
+    sim.set_detector(det);
+    let mut forks_met = 0;
+    let summary = sim
+        .run(|_, s| {
+            if s.out.junction.is_some_and(|j| j.new && j.kind == rccar::lane::junction::JunctionKind::Fork) {
+                forks_met += 1;
+            }
+            Ok::<(), ()>(())
+        })
+        .unwrap();
+    (summary, plan, forks_met)
+}
+
+#[test]
+fn the_town_route_takes_every_fork_the_way_it_says() {
+    let (s, plan, met) = drive(None, 3);
+    for l in s.lines() {
+        eprintln!("{l}");
+    }
+    assert_eq!(s.end, EndReason::LapsDone, "{:?}", s.end);
+    assert_eq!(s.laps, 3);
+    assert_eq!(s.lane_departures, 0, "departures at {:?}", s.departures_at_m);
+    let (want, got) = (fork_ways_of(&plan), fork_ways_of(&s.junctions));
+    assert!(want.len() >= 6, "the shipped route passes {} forks", want.len());
+    assert_eq!(got, want, "forks driven (junction, way) vs planned");
+    // The pipeline met exactly the forks the car passed (no merge taken for a fork).
+    assert_eq!(met as usize, got.len());
+    // Each way of the network is driven: main, A, B, C, and the crossing is crossed both ways.
+    for road in ["A", "B", "C"] {
+        assert!(s.junctions.iter().any(|p| p.road == road), "never on {road}");
+    }
+    let crossings = s.junctions.iter().filter(|p| p.kind == JunctionKind::Crossing).count();
+    assert_eq!(crossings, 2);
+    assert!(s.xte_rms_m < 0.03, "cross-track RMS {:.4} m", s.xte_rms_m);
+}
+
+#[test]
+fn a_route_step_no_fork_offers_is_refused_before_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rccar"))
+        .current_dir(dir.path())
+        .args(["sim", "--config", &format!("{ROOT}/config/car.toml"), "--track", "town", "--route", "right", "--laps", "1", "--no-timing", "-o"])
+        .arg(dir.path().join("run"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("route step 1 is `right`") && err.contains("town.toml"), "{err}");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rccar"))
+        .current_dir(dir.path())
+        .args(["sim", "--config", &format!("{ROOT}/config/car.toml"), "--track", "town", "--route", "left,up", "--no-timing"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("step 2 is `up`"), "{err}");
+}
