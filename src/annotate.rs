@@ -97,6 +97,30 @@ pub fn annotate_with(
     out
 }
 
+/// The junction rule's state under the lane's text (src/lane/junction.rs): `FORK LEFT ROUTE 3`
+/// (the way and why; the route step from 1), `FORK RIGHT SIGN`, `MERGE KEEP RIGHT`.
+pub fn junction(img: &mut RgbImage, j: &crate::lane::junction::JunctionReport) {
+    use crate::lane::junction::{JunctionKind, Side};
+    let side = |s: Side| if s == Side::Left { "LEFT" } else { "RIGHT" };
+    let s = match j.kind {
+        JunctionKind::Fork => {
+            let way = j.way.map_or("", |w| match w {
+                crate::route::Step::Left => "LEFT",
+                crate::route::Step::Straight => "STRAIGHT",
+                crate::route::Step::Right => "RIGHT",
+            });
+            let why = match (j.why, j.step) {
+                (Some(crate::route::Why::Route), Some(k)) => format!("ROUTE {}", k + 1),
+                (Some(crate::route::Why::Sign), _) => "SIGN".into(),
+                _ => "DEFAULT".into(),
+            };
+            format!("FORK {way} {why}")
+        }
+        JunctionKind::Merge => format!("MERGE KEEP {}", side(j.keep)),
+    };
+    text(img, 3, 43, &s, YELLOW);
+}
+
 /// The bird's-eye binary image at 1/3 size with its histogram, top right.
 fn draw_inset(out: &mut RgbImage, images: &LaneImages, lane: &LaneMeasurement) {
     let (bw, bh) = images.binary.dimensions();

@@ -405,7 +405,7 @@ impl Pipeline {
             stereo: stereo_ranging(cfg)?,
             junction: cfg
                 .route
-                .junctions
+                .rule_on()
                 .then(|| crate::lane::junction::JunctionRule::new(cfg.route.steps.clone(), cfg.route.options())),
         })
     }

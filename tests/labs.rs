@@ -300,6 +300,7 @@ labs! {
     lab11 => "11-serial-link.md",
     lab12 => "12-behaviours.md",
     lab13 => "13-pure-pursuit.md",
+    lab14 => "14-routes.md",
 }
 
 #[test]

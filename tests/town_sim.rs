@@ -73,7 +73,7 @@ fn a_route_step_no_fork_offers_is_refused_before_the_run() {
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert_eq!(out.status.code(), Some(2), "a bad input exits 2: {err}");
     assert!(err.contains("route step 1 is `right`") && err.contains("town.toml"), "{err}");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_rccar"))
         .current_dir(dir.path())
@@ -82,4 +82,22 @@ fn a_route_step_no_fork_offers_is_refused_before_the_run() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("step 2 is `up`"), "{err}");
+}
+
+#[test]
+fn without_the_junction_rule_the_car_does_not_follow_the_route() {
+    // The same pipeline with `route.junctions = "off"`: Eq. 3 on the two peaks at the fork.
+    let track = town();
+    let mut cfg = Config::default()
+        .with_override("sim.laps=1")
+        .unwrap()
+        .with_override("route.junctions=\"off\"")
+        .unwrap();
+    let steps = configure_route(&mut cfg, &track, Some(vec![Step::Left]));
+    let plan = track.plan(&steps, 1).unwrap();
+    let mut sim = Simulation::new(&cfg, &track).unwrap();
+    sim.set_full_frames(false);
+    let s = sim.run(|_, _| Ok::<(), ()>(())).unwrap();
+    assert_ne!(fork_ways_of(&s.junctions), fork_ways_of(&plan), "the rule is what takes the branch");
+    assert_eq!(fork_ways_of(&s.junctions)[0], (0, Step::Straight));
 }

@@ -51,6 +51,11 @@ pub struct DriveArgs {
     /// Arm from the first frame (otherwise the start button or the dashboard arms).
     #[arg(long)]
     pub arm: bool,
+    /// The way to take at each fork met, comma-separated: `left,straight,right` (default:
+    /// `[route] steps`); with `route.junctions = "auto"` it turns the junction rule on
+    /// (docs/junctions.md).
+    #[arg(long)]
+    pub route: Option<String>,
     /// Stop after this many seconds of wall-clock time (default: until stopped); 0 < S <= 86400.
     #[arg(long)]
     pub seconds: Option<f64>,
@@ -172,6 +177,9 @@ pub fn run(a: DriveArgs) -> Result<ExitCode> {
     }
     if let Some(l) = a.laps {
         cfg = cfg.with_override(&format!("sim.laps={l}"))?;
+    }
+    if let Some(r) = a.route.as_deref() {
+        cfg.route.steps = rccar::route::parse_list(r).map_err(|e| anyhow::anyhow!("--route {r:?}: {e}"))?;
     }
     if let Some(mb) = a.record_max_mb {
         if !(1.0..=1_000_000.0).contains(&mb) {

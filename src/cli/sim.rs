@@ -295,7 +295,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             say(&format!("  route: every fork as planned ({} forks)", got.len()));
         } else {
             say(&format!(
-                "  route: driven {} forks, planned {}; first difference at fork passage {} (a turn sign overrides the route)",
+                "  route: driven {} forks, planned {}; first difference at fork passage {} (the telemetry's `junction` field says why each fork went its way)",
                 got.len(),
                 want.len(),
                 want.iter().zip(&got).position(|(a, b)| a != b).unwrap_or(want.len().min(got.len())) + 1

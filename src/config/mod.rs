@@ -51,7 +51,7 @@ pub use gpio::GpioConfig;
 pub use lane::{LaneConfig, LaneSetupError, PeakMode, ThresholdMode};
 pub use layers::{find_config, find_local, local_beside, path_keys, source_tree_config, LoadedConfig, MissingLocal};
 pub use manual::ManualConfig;
-pub use route::RouteConfig;
+pub use route::{Junctions, RouteConfig};
 pub use ranging::{RangingConfig, RangingMethod};
 pub use record::RecordConfig;
 pub use replay::ReplayConfig;

@@ -10,9 +10,10 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RouteConfig {
-    /// The junction rule is on: at a fork keep the line of the chosen way, at a merge the
-    /// steady line (off: the lane method as in the paper, for a track without junctions).
-    pub junctions: bool,
+    /// The junction rule: at a fork keep the line of the chosen way, at a merge the steady
+    /// line. `auto`: on when there is a route (`steps`, `--route`) or, in the simulator, the
+    /// track has junctions; `on`; `off` (the lane method as in the paper).
+    pub junctions: Junctions,
     /// The way at each fork reached, in order (`left`, `straight`, `right`); after the last,
     /// `straight`.
     pub steps: Vec<Step>,
@@ -36,7 +37,7 @@ impl Default for RouteConfig {
     fn default() -> Self {
         let o = JunctionOptions::default();
         Self {
-            junctions: false,
+            junctions: Junctions::Auto,
             steps: Vec::new(),
             fork_width: o.fork_width,
             jump: o.jump,
@@ -48,7 +49,28 @@ impl Default for RouteConfig {
     }
 }
 
+/// `route.junctions`: when the junction rule runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Junctions {
+    /// On when there is a route, or the simulator's track has junctions.
+    Auto,
+    /// Always.
+    On,
+    /// Never: Eq. 3 on the two peaks, as in the paper.
+    Off,
+}
+
 impl RouteConfig {
+    /// Whether the pipeline runs the junction rule (`auto`: when there is a route).
+    pub fn rule_on(&self) -> bool {
+        match self.junctions {
+            Junctions::On => true,
+            Junctions::Off => false,
+            Junctions::Auto => !self.steps.is_empty(),
+        }
+    }
+
     /// Checks of `[route]`: the ranges.
     pub(super) fn check(&self, c: &mut Checker) {
         c.range("route.fork_width", self.fork_width, 1.05, 2.0);

@@ -522,14 +522,17 @@ impl Track {
     }
 }
 
-/// Turns the junction rule on for a track with junctions and gives it a route: `route` (a
-/// `--route` flag) if given, else `[route] steps` of the config if any, else the track file's
-/// `route`. Returns the steps used. A track without junctions leaves `cfg` as it is.
+/// Gives the junction rule its route and, with `route.junctions = "auto"`, turns it on for a
+/// track with junctions: the steps are `route` (a `--route` flag) if given, else `[route]
+/// steps` of the config if any, else the track file's `route`. Returns the steps used. A track
+/// without junctions and no `--route` leaves `cfg` as it is.
 pub fn configure_route(cfg: &mut crate::config::Config, track: &Track, route: Option<Vec<Step>>) -> Vec<Step> {
     if track.junctions.is_empty() && route.is_none() {
         return cfg.route.steps.clone();
     }
-    cfg.route.junctions = true;
+    if cfg.route.junctions == crate::config::Junctions::Auto {
+        cfg.route.junctions = crate::config::Junctions::On;
+    }
     if let Some(r) = route {
         cfg.route.steps = r;
     } else if cfg.route.steps.is_empty() {

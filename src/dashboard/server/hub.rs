@@ -128,6 +128,9 @@ fn render(s: &Snapshot) -> RgbImage {
     // No inset: the bird's-eye view is drawn beside the frame, the scene stays visible.
     let mut ann = crate::annotate::annotate_with(&s.image, &s.roi, &s.homography, &s.lane_images, &s.lane, &s.command, false);
     draw_objects(&mut ann, &s.objects);
+    if let Some(j) = &s.record.junction {
+        crate::annotate::junction(&mut ann, j);
+    }
     let li = &s.lane_images;
     let (bw, bh) = li.bird.dimensions();
     let h = ann.height();

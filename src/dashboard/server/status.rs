@@ -122,6 +122,7 @@ pub fn state_json(sh: &Shared, since: f64, session: bool, full: bool) -> Value {
         o["speed"] = json!(r.speed_est_mps);
         o["status"] = json!(r.status);
         o["behaviour"] = json!(r.behaviour);
+        o["junction"] = json!(r.junction);
         o["latency_ms"] = json!(r.latency_ms);
         o["period_ms"] = json!(r.period_ms);
         o["paused"] = json!(sh.live.paused.load(Ordering::SeqCst));
