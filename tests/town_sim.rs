@@ -6,7 +6,8 @@
 
 use rccar::config::Config;
 use rccar::route::Step;
-use rccar::sim::network::{configure_route, fork_ways_of, JunctionKind};
+use rccar::sim::network::JunctionKind;
+use rccar::sim::plan::{configure_route, fork_ways_of};
 use rccar::sim::run::{EndReason, Simulation};
 use rccar::sim::track::Track;
 use std::path::Path;
@@ -18,7 +19,7 @@ fn town() -> Track {
 }
 
 /// Drives `laps` of the town with `route` (None: the track's own), detectors on.
-fn drive(route: Option<Vec<Step>>, laps: u32) -> (rccar::sim::run::Summary, Vec<rccar::sim::network::Passage>, u32) {
+fn drive(route: Option<Vec<Step>>, laps: u32) -> (rccar::sim::run::Summary, Vec<rccar::sim::plan::Passage>, u32) {
     let track = town();
     let mut cfg = Config::default().with_override(&format!("sim.laps={laps}")).unwrap();
     let steps = configure_route(&mut cfg, &track, route);

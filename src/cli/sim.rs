@@ -182,7 +182,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         Some(r) => Some(rccar::route::parse_list(r).map_err(|e| anyhow::anyhow!("--route {r:?}: {e}"))?),
         None => None,
     };
-    let steps = rccar::sim::network::configure_route(&mut cfg, &track, route);
+    let steps = rccar::sim::plan::configure_route(&mut cfg, &track, route);
     let plan = if track.junctions.is_empty() {
         None
     } else {
@@ -196,7 +196,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             track.junctions.iter().filter(|j| j.kind == rccar::sim::network::JunctionKind::Merge).count(),
             track.junctions.iter().filter(|j| j.kind == rccar::sim::network::JunctionKind::Crossing).count(),
         ));
-        for l in rccar::sim::network::passage_lines(&track, &plan) {
+        for l in rccar::sim::plan::passage_lines(&track, &plan) {
             say(&format!("    {l}"));
         }
         Some(plan)
@@ -289,7 +289,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     }
     let mut ok = summary.laps >= cfg.sim.laps && summary.lane_departures == 0;
     if let Some(plan) = &plan {
-        use rccar::sim::network::fork_ways_of;
+        use rccar::sim::plan::fork_ways_of;
         let (want, got) = (fork_ways_of(plan), fork_ways_of(&summary.junctions));
         if want == got {
             say(&format!("  route: every fork as planned ({} forks)", got.len()));

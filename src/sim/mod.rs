@@ -12,8 +12,10 @@
 pub mod board;
 pub mod camera;
 pub mod glyphs;
+pub mod geometry;
 pub mod lens;
 pub mod network;
+pub mod plan;
 pub mod plot;
 pub mod pwm;
 pub mod render;

@@ -131,12 +131,13 @@ pub fn path_plot(s: &Series, scene: &Scene) -> Result<RgbImage, PlotError> {
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(err)?;
         c.configure_mesh().disable_mesh().draw().map_err(err)?;
-        // Lines of the road, sampled every 2 cm.
-        let n = (track.length / 0.02).ceil() as usize;
+        // Lines of every road (the main loop, then the branches), sampled every 2 cm.
+        for (r, road) in track.roads.iter().enumerate() {
+        let n = (road.length / 0.02).ceil() as usize;
         for &(off, dashed) in &track.lines {
             let pts: Vec<(f64, f64)> = (0..=n)
                 .map(|i| {
-                    let (p, hd) = track.pose_at(track.length * i as f64 / n as f64);
+                    let (p, hd) = track.road_pose_at(r, road.length * i as f64 / n as f64);
                     (p[0] - off * hd.sin(), p[1] + off * hd.cos())
                 })
                 .collect();
@@ -147,6 +148,7 @@ pub fn path_plot(s: &Series, scene: &Scene) -> Result<RgbImage, PlotError> {
             } else {
                 c.draw_series(LineSeries::new(pts, col.stroke_width(2))).map_err(err)?;
             }
+        }
         }
         for o in track.enabled_objects() {
             // by how the class is drawn (the registry's shape), so a new class needs no entry here

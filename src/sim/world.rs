@@ -92,7 +92,7 @@ pub struct Summary {
     /// On a track with junctions: every junction passed, in order, with the way taken at each
     /// fork (from the car's true position; src/sim/network.rs).
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub junctions: Vec<super::network::Passage>,
+    pub junctions: Vec<super::plan::Passage>,
     /// The track's junctions as the report names them (for [`Summary::lines`]).
     #[serde(skip)]
     pub junction_lines: Vec<String>,
@@ -177,7 +177,7 @@ struct Score {
     still_s: f64,
     end: Option<EndReason>,
     /// Junctions passed (tracks with junctions only).
-    passages: super::network::PassageLog,
+    passages: super::plan::PassageLog,
 }
 
 /// The simulated world: track and objects, the car, its camera's renderer, the truth model and
@@ -410,7 +410,7 @@ impl World {
             lane_width_m: self.scene.track.spec.road.lane_width_m,
             end: self.sc.end.unwrap_or(EndReason::TimeUp),
             junctions: self.sc.passages.passages.clone(),
-            junction_lines: super::network::passage_lines(&self.scene.track, &self.sc.passages.passages),
+            junction_lines: super::plan::passage_lines(&self.scene.track, &self.sc.passages.passages),
         }
     }
 
