@@ -17,7 +17,7 @@
 
 use super::glyphs;
 use super::rng::{mix, SplitMix64};
-use super::track::{FloorSpec, Object, Piece, Track};
+use super::track::{FloorSpec, Mark, Object, Piece, Track, YIELD_DASH_M, YIELD_GAP_M};
 use crate::classes::SimShape;
 
 /// Side of one cell of the grid that tells which centre-line piece is near, metres.
@@ -63,6 +63,8 @@ pub struct Scene {
     grid_h: usize,
     /// Line centre offsets, half widths, dashed flag and colour.
     lines: Vec<LinePaint>,
+    /// The track's floor markings (`[[marks]]`) and their paint.
+    marks: Vec<(Mark, [f32; 3])>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -228,6 +230,7 @@ impl Scene {
             grid_w,
             grid_h,
             lines,
+            marks: track.marks.iter().map(|m| (*m, f(r.line_color))).collect(),
         }
     }
 
@@ -381,9 +384,38 @@ impl Scene {
                     }
                 }
             }
+            if !self.marks.is_empty() {
+                self.paint_marks(p, fp, tape, &mut c);
+            }
         }
         // 3. Light.
         ([c[0] * light, c[1] * light, c[2] * light], 0.0)
+    }
+
+    /// The floor markings over `c` at `p`: the same box-filter coverage as the lane lines, along
+    /// the road (the line's width) and across it (its length; a yield line's dashes filtered
+    /// the same way as the centre line's).
+    fn paint_marks(&self, p: [f64; 2], fp: &Footprint, tape: f32, c: &mut [f32; 3]) {
+        let (ju, jv) = (fp.ju, fp.jv);
+        for (m, rgb) in &self.marks {
+            let (d, n) = (m.dir, [-m.dir[1], m.dir[0]]);
+            let fa = ((d[0] * ju[0] + d[1] * ju[1]).abs() + (d[0] * jv[0] + d[1] * jv[1]).abs()).max(1e-5);
+            let fc = ((n[0] * ju[0] + n[1] * ju[1]).abs() + (n[0] * jv[0] + n[1] * jv[1]).abs()).max(1e-5);
+            let (along, across) = m.local(p);
+            if along.abs() > m.width / 2.0 + fa || across.abs() > m.length / 2.0 + fc {
+                continue;
+            }
+            let mut cov = box_coverage(along, fa, m.width / 2.0) * box_coverage(across, fc, m.length / 2.0);
+            if m.dashed() && cov > 0.0 {
+                cov *= dash_coverage(across + m.length / 2.0, fc, YIELD_DASH_M, YIELD_DASH_M + YIELD_GAP_M);
+            }
+            if cov > 0.0 {
+                let cf = cov as f32;
+                for (ch, lc) in c.iter_mut().zip(rgb) {
+                    *ch += (lc * tape - *ch) * cf;
+                }
+            }
+        }
     }
 
     /// Signed lateral offset of a floor point from the road's centre line (left positive),
@@ -833,18 +865,33 @@ fn piece_grid(track: &Track, lines: &[LinePaint]) -> (Vec<(u16, u16)>, usize, us
                     best = (d2, k as u16);
                 }
             }
-            if best.0 <= near * near {
+            // A cell near a floor mark probes too (it takes its nearest piece, and the mark
+            // counts in its clearance).
+            let mark_c = track
+                .marks
+                .iter()
+                .map(|m| mark_distance(m, p))
+                .fold(f64::INFINITY, f64::min);
+            if best.0 <= near * near || mark_c <= near {
                 grid[j * grid_w + i].0 = best.1;
                 let (_, lat, _) = track.pieces[best.1 as usize].project(p);
                 let c = lines
                     .iter()
                     .map(|l| (lat - l.offset).abs() - l.half_width)
-                    .fold(f64::INFINITY, f64::min);
+                    .fold(mark_c, f64::min);
                 grid[j * grid_w + i].1 = ((c - half_diag - 1e-4).max(0.0) * 1e4).floor().min(65535.0) as u16;
             }
         }
     }
     (grid, grid_w, grid_h, (near - reach - half_diag).max(0.0) as f32)
+}
+
+/// Distance from `p` to mark `m`'s rectangle (0 inside), metres.
+fn mark_distance(m: &Mark, p: [f64; 2]) -> f64 {
+    let (along, across) = m.local(p);
+    let a = (along.abs() - m.width / 2.0).max(0.0);
+    let b = (across.abs() - m.length / 2.0).max(0.0);
+    a.hypot(b)
 }
 
 #[cfg(test)]
