@@ -3,7 +3,8 @@
 //! calling.
 //!
 //! One frame (`dt` seconds after the previous one):
-//! 1. lane: bird's-eye warp, edges, histogram → `LaneMeasurement` (src/lane);
+//! 1. lane: bird's-eye warp, edges, histogram → `LaneMeasurement` (src/lane); a line across
+//!    the lane in the same bird's-eye images (src/lane/stop_line.rs);
 //! 2. detect: the classes' cascades on the frame (src/detect), or boxes handed in
 //!    ([`Pipeline::step_with`], the simulator's ground-truth switch), light state per light box;
 //! 3. dead reckoning: speed and distance from the previous command through `[vehicle]`;
@@ -30,6 +31,7 @@ use crate::detect::detector::DetectParams;
 use crate::detect::light::{LightReading, LightState};
 use crate::detect::stage::{CascadeSpec, DetectStage};
 use crate::detect::Rect;
+use crate::lane::stop_line::StopLineDetector;
 use crate::lane::warp::WarpError;
 use crate::lane::{LaneDetector, LaneMeasurement};
 use crate::ranging::track::{Measurement, Tracker};
@@ -356,6 +358,17 @@ pub struct Pipeline {
     frame_index: u64,
     /// Stereo ranging (`ranging.method = "stereo"`), used by [`Pipeline::step_stereo`].
     stereo: Option<crate::stereo::ranging::StereoRanging>,
+    /// Lines across the lane in the bird's-eye image (`None` when the ROI's corners do not
+    /// all see the floor).
+    stop_line: Option<StopLineDetector>,
+    stop_line_seen: Option<crate::lane::stop_line::StopLineSeen>,
+}
+
+/// The stop-line detector of `cfg`'s `[camera]`, `[warp]` and `lane.lane_width_px`.
+fn stop_line_detector(cfg: &Config) -> Option<StopLineDetector> {
+    let cam = crate::camera::PinholeCamera::from(&cfg.camera);
+    let h = crate::lane::warp::bird_to_floor(&cam, &cfg.warp.src, cfg.warp.out_width, cfg.warp.out_height)?;
+    Some(StopLineDetector::new(h, cfg.lane.lane_width_px, Default::default()))
 }
 
 /// The stereo ranging of `cfg` (`ranging.method = "stereo"`): a calibrated pair when
@@ -378,6 +391,8 @@ impl Pipeline {
     /// [`Pipeline::set_detector`] and [`load_detector`].
     pub fn new(cfg: &Config) -> Result<Self, PipelineError> {
         let ranging = cfg.box_ranging();
+        let mut behaviour = Behaviour::new((&cfg.behaviour).into());
+        behaviour.set_car(cfg.vehicle.wheelbase_m - cfg.vehicle.camera_x_m, (&cfg.vehicle).into());
         Ok(Self {
             lane: cfg.lane_detector()?,
             control: cfg.controller()?,
@@ -385,7 +400,7 @@ impl Pipeline {
             height: cfg.camera.height,
             detect: None,
             ranging,
-            behaviour: Behaviour::new((&cfg.behaviour).into()),
+            behaviour,
             dead: (&cfg.vehicle).into(),
             obstacle_lane_half_m: cfg.behaviour.obstacle_lane_half_m,
             time_s: 0.0,
@@ -399,6 +414,8 @@ impl Pipeline {
             every_n: cfg.detect.every_n_frames.max(1) as u64,
             frame_index: 0,
             stereo: stereo_ranging(cfg)?,
+            stop_line: stop_line_detector(cfg),
+            stop_line_seen: None,
         })
     }
 
@@ -429,6 +446,7 @@ impl Pipeline {
             self.control.set_steering(steering);
         }
         self.lane = lane;
+        self.stop_line = stop_line_detector(cfg);
         Ok(())
     }
 
@@ -584,6 +602,11 @@ impl Pipeline {
         timer.lap_us();
         // 1. Lane.
         let lane = self.lane.measure(frame, timer, &mut stage_us);
+        let im = self.lane.images();
+        self.stop_line_seen = self
+            .stop_line
+            .as_mut()
+            .and_then(|d| d.find(&im.binary, &im.bird, &lane));
         // 2. Detections (on every n-th frame; given boxes on every frame), ranged.
         let detect_now = given.is_some() || self.frame_index.is_multiple_of(self.every_n);
         self.frame_index += 1;
@@ -707,6 +730,7 @@ impl Pipeline {
             lane_seen,
             speed_mps: self.dead.speed_mps,
             odometry_m: self.dead.odometry_m,
+            stop_line: self.stop_line_seen,
             ..Default::default()
         };
         let nearer = |cur: Option<Ranged>, r: Ranged| match cur {

@@ -110,6 +110,10 @@ pub struct FrameRecord {
     /// camera's frame, the skew and how many boxes were ranged by stereo.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stereo: Option<StereoRecord>,
+    /// A stop or give-way line across the lane seen this frame: `distance_m` from the lens to
+    /// its near edge, `dashed`, `row` (bird's-eye); absent when none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stop_line: Option<crate::lane::stop_line::StopLineSeen>,
 }
 
 /// The stereo part of a frame's record (src/drive/stereo.rs).
@@ -174,6 +178,7 @@ impl FrameRecord {
             input_age_ms: None,
             car: None,
             stereo: None,
+            stop_line: None,
         }
     }
 
@@ -186,6 +191,7 @@ impl FrameRecord {
         self.speed_est_mps = Some(out.observations.speed_mps);
         self.odometry_m = Some(out.observations.odometry_m);
         self.detect_us = Some(out.detect_us);
+        self.stop_line = out.observations.stop_line;
         self
     }
 
