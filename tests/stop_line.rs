@@ -100,7 +100,11 @@ fn no_line_is_seen_on_three_laps_of_the_default_track() {
         .filter(|s| s.out.observations.stop_line.is_some())
         .map(|s| (s.frame, s.truth.s_m))
         .collect();
-    println!("default track: {} laps, {} frames, lines seen {seen:?}", sum.laps, steps.len());
+    println!(
+        "default track: {} laps, {} frames, lines seen {seen:?}",
+        sum.laps,
+        steps.len()
+    );
     assert_eq!(sum.laps, 3);
     assert!(seen.is_empty(), "false lines at (frame, s): {seen:?}");
 }
@@ -143,16 +147,21 @@ fn stop_sign_with_a_line_stops_at_the_line_holds_and_goes_on() {
     let front_x = |s: &StepOutput| s.truth.pose[0] + front * s.truth.pose[2].cos();
     let miss = front_x(&steps[z]) - near_edge;
     let held = steps[z].time_s - steps[a].time_s + 1.0 / cfg.camera.fps;
+    let entered = steps
+        .iter()
+        .find_map(|s| s.transition.as_ref().filter(|t| t.to.name() == "stop_sign"));
     println!(
-        "with a line: front {:+.1} mm from the line's near edge at rest, held {held:.2} s ({})",
+        "with a line: front {:+.1} mm from the line's near edge at rest, held {held:.2} s (entered: {:?})",
         miss * 1e3,
-        steps[a..=z].iter().find_map(|s| s.transition.as_ref()).map_or(String::new(), |t| t.reason.clone())
+        entered.map(|t| &t.reason)
     );
-    let entered = steps.iter().find_map(|s| s.transition.as_ref().filter(|t| t.to.name() == "stop_sign"));
     assert!(entered.is_some_and(|t| t.reason.contains("line")), "{entered:?}");
     assert!(miss.abs() <= 0.03, "front {miss} m from the line");
     assert!(held >= b.stop_hold_s - 1e-6, "held {held} s");
-    assert!(steps[z + 1..].iter().any(|s| front_x(s) > STOP_LINE_X + 0.5), "went on over the line");
+    assert!(
+        steps[z + 1..].iter().any(|s| front_x(s) > STOP_LINE_X + 0.5),
+        "went on over the line"
+    );
     assert_eq!(sum.lane_departures, 0);
 
     // Without the line: at rest where the ranged trigger puts it, as before.
@@ -164,7 +173,13 @@ fn stop_sign_with_a_line_stops_at_the_line_holds_and_goes_on() {
     let lens = steps[a].truth.pose[0] + cfg.vehicle.camera_x_m;
     let d = 3.0 - lens;
     let held = steps[z].time_s - steps[a].time_s + 1.0 / cfg.camera.fps;
-    println!("without a line: at rest {d:.3} m from the sign (window {:?}), held {held:.2} s", b.stop_window_m);
-    assert!(d >= b.stop_window_m[0] && d <= b.stop_window_m[1], "stopped {d} m before the sign");
+    println!(
+        "without a line: at rest {d:.3} m from the sign (window {:?}), held {held:.2} s",
+        b.stop_window_m
+    );
+    assert!(
+        d >= b.stop_window_m[0] && d <= b.stop_window_m[1],
+        "stopped {d} m before the sign"
+    );
     assert!(held >= b.stop_hold_s - 1e-6);
 }

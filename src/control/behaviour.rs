@@ -762,6 +762,47 @@ mod tests {
     }
 
     #[test]
+    fn stop_sign_with_a_line_stops_the_front_at_the_line() {
+        // Sign 2 m ahead of the lens; a line's near edge 1.9 m ahead, seen while 0.4..1.0 m
+        // away; the front 0.02 m ahead of the lens.
+        let (front, line) = (0.02, 1.9);
+        let obs = |odo: f64| Observations {
+            stop_sign: (2.0 - odo > 0.3).then(|| at(2.0 - odo)),
+            stop_line: (0.4..1.0)
+                .contains(&(line - odo))
+                .then_some(crate::lane::stop_line::StopLineSeen {
+                    distance_m: line - odo,
+                    dashed: false,
+                    row: 0.0,
+                }),
+            ..lane()
+        };
+        let mut r = Rig::new(defaults());
+        r.b.set_car(front, car());
+        let mut rest = None;
+        for _ in 0..(20.0 / DT) as usize {
+            let before = r.b.mode();
+            let d = r.frame(obs);
+            if before == Mode::StopSign && d.mode == Mode::Cruise {
+                rest = Some(r.car.odometry_m);
+            }
+            if before == Mode::Cruise && d.mode == Mode::StopSign {
+                assert!(r.b.last_transition().unwrap().reason.contains("line"));
+            }
+        }
+        // The front at rest at the line (within 2 mm), then on past it.
+        let rest = rest.expect("stopped and went on");
+        assert!((rest + front - line).abs() < 0.002, "front at {} m", rest + front);
+        assert!(r.car.odometry_m > line + 1.0);
+        // Without `set_car` no line is used: the ranged stop, well before the line.
+        let mut r = Rig::new(defaults());
+        for _ in 0..(3.0 / DT) as usize {
+            r.frame(obs);
+        }
+        assert!(r.car.odometry_m + front < line - 0.5, "{}", r.car.odometry_m);
+    }
+
+    #[test]
     fn flicker_of_one_frame_still_confirms_but_single_hits_do_not() {
         let cfg = defaults();
         // Seen, missed, seen, seen: 3 of the last 5 → confirmed on the 4th frame.

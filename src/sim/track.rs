@@ -395,12 +395,12 @@ impl Mark {
             return Err(bad("x/y", v, why));
         }
         let length = m.length_m.unwrap_or(road.lane_width_m + road.line_width_m);
-        if !(length >= 0.02 && length <= limits::MAX_MARK_LENGTH_M) {
+        if !(0.02..=limits::MAX_MARK_LENGTH_M).contains(&length) {
             let why = format!("must be 0.02..={} m", limits::MAX_MARK_LENGTH_M);
             return Err(bad("length_m", length.to_string(), why));
         }
         let width = m.width_m.unwrap_or(0.05);
-        if !(width >= 0.005 && width <= limits::MAX_MARK_WIDTH_M) {
+        if !(0.005..=limits::MAX_MARK_WIDTH_M).contains(&width) {
             let why = format!("must be 0.005..={} m", limits::MAX_MARK_WIDTH_M);
             return Err(bad("width_m", width.to_string(), why));
         }
