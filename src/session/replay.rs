@@ -84,7 +84,7 @@ impl Observer for ReplayTally {
         self.abs_err_sum += out.lane.error_px.map_or(0.0, f64::abs);
         self.total_us.push(out.stage_us.total_us);
         if let Some(dir) = &self.annotate_dir {
-            let img = annotate(
+            let mut img = annotate(
                 &ctx.frame.image,
                 &self.warp_src,
                 ctx.pipeline.lane().warp_map().homography(),
@@ -92,6 +92,13 @@ impl Observer for ReplayTally {
                 &out.lane,
                 &out.command,
             );
+            if let Some(seen) = &out.observations.stop_line {
+                let (h, w) = (
+                    ctx.pipeline.lane().warp_map().homography(),
+                    ctx.pipeline.lane().images().bird.width(),
+                );
+                crate::annotate::draw_stop_line(&mut img, h, w, seen);
+            }
             let p = dir.join(crate::source::output_name(&ctx.frame.name));
             img.save(&p)
                 .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;
