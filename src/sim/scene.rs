@@ -854,6 +854,7 @@ fn piece_grid(track: &Track, lines: &[LinePaint]) -> (Vec<(u16, u16)>, usize, us
     let near = reach + CELL_M + 0.05;
     let mut grid = vec![(u16::MAX, u16::MAX); grid_w * grid_h];
     let half_diag = CELL_M * std::f64::consts::FRAC_1_SQRT_2;
+    let mark_c = mark_clearance(track, grid_w, grid_h, near);
     for j in 0..grid_h {
         for i in 0..grid_w {
             let p = [x0 + (i as f64 + 0.5) * CELL_M, y0 + (j as f64 + 0.5) * CELL_M];
@@ -867,11 +868,7 @@ fn piece_grid(track: &Track, lines: &[LinePaint]) -> (Vec<(u16, u16)>, usize, us
             }
             // A cell near a floor mark probes too (it takes its nearest piece, and the mark
             // counts in its clearance).
-            let mark_c = track
-                .marks
-                .iter()
-                .map(|m| mark_distance(m, p))
-                .fold(f64::INFINITY, f64::min);
+            let mark_c = mark_c.get(j * grid_w + i).map_or(f64::INFINITY, |&c| c as f64);
             if best.0 <= near * near || mark_c <= near {
                 grid[j * grid_w + i].0 = best.1;
                 let (_, lat, _) = track.pieces[best.1 as usize].project(p);
@@ -884,6 +881,31 @@ fn piece_grid(track: &Track, lines: &[LinePaint]) -> (Vec<(u16, u16)>, usize, us
         }
     }
     (grid, grid_w, grid_h, (near - reach - half_diag).max(0.0) as f32)
+}
+
+/// For each grid cell (none without marks): the distance from its centre to the nearest mark,
+/// metres, for the cells near a mark (at least `reach` beyond its rectangle; infinite
+/// elsewhere). Each mark visits only the cells of its bounding box.
+fn mark_clearance(track: &Track, grid_w: usize, grid_h: usize, reach: f64) -> Vec<f32> {
+    if track.marks.is_empty() {
+        return Vec::new();
+    }
+    let [x0, y0, _, _] = track.floor_rect;
+    let mut out = vec![f32::INFINITY; grid_w * grid_h];
+    let cell = |v: f64, o: f64, n: usize| (((v - o) / CELL_M).floor().max(0.0) as usize).min(n - 1);
+    for m in &track.marks {
+        let r = m.length.hypot(m.width) / 2.0 + reach + CELL_M;
+        let (i0, i1) = (cell(m.pos[0] - r, x0, grid_w), cell(m.pos[0] + r, x0, grid_w));
+        let (j0, j1) = (cell(m.pos[1] - r, y0, grid_h), cell(m.pos[1] + r, y0, grid_h));
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let p = [x0 + (i as f64 + 0.5) * CELL_M, y0 + (j as f64 + 0.5) * CELL_M];
+                let c = &mut out[j * grid_w + i];
+                *c = c.min(mark_distance(m, p) as f32);
+            }
+        }
+    }
+    out
 }
 
 /// Distance from `p` to mark `m`'s rectangle (0 inside), metres.
@@ -920,5 +942,48 @@ mod tests {
         assert!((dash_coverage(0.13, 0.01, 0.1, 0.16)).abs() < 1e-9);
         // A footprint much longer than a period sees the average.
         assert!((dash_coverage(3.0, 1.6, 0.1, 0.16) - 0.625).abs() < 1e-9);
+    }
+
+    #[test]
+    fn marks_are_painted_on_and_off_the_road_and_their_cells_probe() {
+        let oval = "[road]\nlane_width_m = 0.3\n[[segments]]\ntype = \"straight\"\nlength_m = 2.0\n\
+                    [[segments]]\ntype = \"arc\"\nradius_m = 1.0\nangle_deg = 180\n\
+                    [[segments]]\ntype = \"straight\"\nlength_m = 2.0\n\
+                    [[segments]]\ntype = \"arc\"\nradius_m = 1.0\nangle_deg = 180\n";
+        // A stop line across the road at x = 1, and a yield line far off it (no piece near).
+        let marks = "[[marks]]\ntype = \"stop_line\"\nx = 1.0\ny = 0.0\n\
+                     [[marks]]\ntype = \"yield_line\"\nx = 1.0\ny = -0.9\nlength_m = 0.29\n";
+        let track = Track::from_toml_str(&format!("{oval}{marks}"), "t").unwrap();
+        let scene = Scene::new(&track);
+        let fp = Footprint {
+            ju: [0.001, 0.0],
+            jv: [0.0, 0.001],
+            size: 0.002,
+            fade: 1.0,
+        };
+        let at = |p: [f64; 2]| scene.floor_color(p, &fp, 1.0, 0.0, true).0[0];
+        let floor = at([1.3, -0.05]);
+        assert!(
+            at([1.0, -0.05]) > 200.0 && floor < 130.0,
+            "{} {floor}",
+            at([1.0, -0.05])
+        );
+        // The yield line: a dash at its right end, a gap 0.05 m in; floor beside it.
+        assert!(at([1.0, -0.9 - 0.135]) > 200.0, "{}", at([1.0, -1.035]));
+        assert!(at([1.0, -0.9 - 0.095]) < 130.0, "{}", at([1.0, -0.995]));
+        // Every cell's clearance is a lower bound of the distance to the marks.
+        let [x0, y0, _, _] = track.floor_rect;
+        for (c, &(k, clear)) in scene.grid.iter().enumerate() {
+            if k == u16::MAX {
+                continue;
+            }
+            let p = [
+                x0 + ((c % scene.grid_w) as f64 + 0.5) * CELL_M,
+                y0 + ((c / scene.grid_w) as f64 + 0.5) * CELL_M,
+            ];
+            for m in &track.marks {
+                assert!(clear as f64 * 1e-4 <= mark_distance(m, p), "cell {c}");
+            }
+        }
     }
 }
