@@ -121,6 +121,33 @@ pub fn junction(img: &mut RgbImage, j: &crate::lane::junction::JunctionReport) {
     text(img, 3, 43, &s, YELLOW);
 }
 
+/// A line across the lane (`StopLineSeen`) drawn over an annotated frame: its near edge's
+/// bird's-eye row mapped back into the camera view (magenta; in dashes for a yield line), with
+/// its distance. `homography` maps camera to bird's-eye pixels, `bird_w` is the bird's-eye
+/// width.
+pub fn draw_stop_line(
+    img: &mut RgbImage,
+    homography: &Homography,
+    bird_w: u32,
+    seen: &crate::lane::stop_line::StopLineSeen,
+) {
+    const MAGENTA: Rgb<u8> = Rgb([255, 60, 220]);
+    let Some(inv) = homography.inverse() else { return };
+    let n = if seen.dashed { 9 } else { 1 };
+    let step = (bird_w as f64 - 1.0) / n as f64;
+    for k in (0..n).step_by(2) {
+        let (u0, u1) = (k as f64 * step, (k + 1) as f64 * step);
+        if let (Some(a), Some(b)) = (inv.apply(u0, seen.row), inv.apply(u1, seen.row)) {
+            line(img, a.0, a.1, b.0, b.1, MAGENTA);
+            if k == 0 {
+                let label = if seen.dashed { "YIELD LINE" } else { "STOP LINE" };
+                let t = format!("{label} {:.2}M", seen.distance_m);
+                text(img, a.0.max(0.0) as i64 + 2, a.1 as i64 - 9, &t, MAGENTA);
+            }
+        }
+    }
+}
+
 /// The bird's-eye binary image at 1/3 size with its histogram, top right.
 fn draw_inset(out: &mut RgbImage, images: &LaneImages, lane: &LaneMeasurement) {
     let (bw, bh) = images.binary.dimensions();

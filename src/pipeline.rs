@@ -3,7 +3,8 @@
 //! calling.
 //!
 //! One frame (`dt` seconds after the previous one):
-//! 1. lane: bird's-eye warp, edges, histogram → `LaneMeasurement` (src/lane);
+//! 1. lane: bird's-eye warp, edges, histogram → `LaneMeasurement` (src/lane); a line across
+//!    the lane in the same bird's-eye images (src/lane/stop_line.rs);
 //! 2. detect: the classes' cascades on the frame (src/detect), or boxes handed in
 //!    ([`Pipeline::step_with`], the simulator's ground-truth switch), light state per light box;
 //! 3. dead reckoning: speed and distance from the previous command through `[vehicle]`;
@@ -30,6 +31,7 @@ use crate::detect::detector::DetectParams;
 use crate::detect::light::{LightReading, LightState};
 use crate::detect::stage::{CascadeSpec, DetectStage};
 use crate::detect::Rect;
+use crate::lane::stop_line::StopLineDetector;
 use crate::lane::warp::WarpError;
 use crate::lane::{LaneDetector, LaneMeasurement};
 use crate::ranging::track::{Measurement, Tracker};
@@ -360,6 +362,17 @@ pub struct Pipeline {
     stereo: Option<crate::stereo::ranging::StereoRanging>,
     /// The junction rule and the route (`route.junctions`), after the lane measurement.
     junction: Option<crate::lane::junction::JunctionRule>,
+    /// Lines across the lane in the bird's-eye image (`None` when the ROI's corners do not
+    /// all see the floor).
+    stop_line: Option<StopLineDetector>,
+    stop_line_seen: Option<crate::lane::stop_line::StopLineSeen>,
+}
+
+/// The stop-line detector of `cfg`'s `[camera]`, `[warp]` and `lane.lane_width_px`.
+fn stop_line_detector(cfg: &Config) -> Option<StopLineDetector> {
+    let cam = crate::camera::PinholeCamera::from(&cfg.camera);
+    let h = crate::lane::warp::bird_to_floor(&cam, &cfg.warp.src, cfg.warp.out_width, cfg.warp.out_height)?;
+    Some(StopLineDetector::new(h, cfg.lane.lane_width_px, Default::default()))
 }
 
 /// The stereo ranging of `cfg` (`ranging.method = "stereo"`): a calibrated pair when
@@ -382,6 +395,8 @@ impl Pipeline {
     /// [`Pipeline::set_detector`] and [`load_detector`].
     pub fn new(cfg: &Config) -> Result<Self, PipelineError> {
         let ranging = cfg.box_ranging();
+        let mut behaviour = Behaviour::new((&cfg.behaviour).into());
+        behaviour.set_car(cfg.vehicle.wheelbase_m - cfg.vehicle.camera_x_m, (&cfg.vehicle).into());
         Ok(Self {
             lane: cfg.lane_detector()?,
             control: cfg.controller()?,
@@ -389,7 +404,7 @@ impl Pipeline {
             height: cfg.camera.height,
             detect: None,
             ranging,
-            behaviour: Behaviour::new((&cfg.behaviour).into()),
+            behaviour,
             dead: (&cfg.vehicle).into(),
             obstacle_lane_half_m: cfg.behaviour.obstacle_lane_half_m,
             time_s: 0.0,
@@ -407,6 +422,8 @@ impl Pipeline {
                 .route
                 .rule_on()
                 .then(|| crate::lane::junction::JunctionRule::new(cfg.route.steps.clone(), cfg.route.options())),
+            stop_line: stop_line_detector(cfg),
+            stop_line_seen: None,
         })
     }
 
@@ -437,6 +454,7 @@ impl Pipeline {
             self.control.set_steering(steering);
         }
         self.lane = lane;
+        self.stop_line = stop_line_detector(cfg);
         Ok(())
     }
 
@@ -600,6 +618,11 @@ impl Pipeline {
             }
             None => (lane, None),
         };
+        let im = self.lane.images();
+        self.stop_line_seen = self
+            .stop_line
+            .as_mut()
+            .and_then(|d| d.find(&im.binary, &im.bird, &lane));
         // 2. Detections (on every n-th frame; given boxes on every frame), ranged.
         let detect_now = given.is_some() || self.frame_index.is_multiple_of(self.every_n);
         self.frame_index += 1;
@@ -724,6 +747,7 @@ impl Pipeline {
             lane_seen,
             speed_mps: self.dead.speed_mps,
             odometry_m: self.dead.odometry_m,
+            stop_line: self.stop_line_seen,
             ..Default::default()
         };
         let nearer = |cur: Option<Ranged>, r: Ranged| match cur {

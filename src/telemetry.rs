@@ -114,6 +114,10 @@ pub struct FrameRecord {
     /// and why (`route`, `sign`, `default`), the route step (src/lane/junction.rs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub junction: Option<crate::lane::junction::JunctionReport>,
+    /// A stop or give-way line across the lane seen this frame: `distance_m` from the lens to
+    /// its near edge, `dashed`, `row` (bird's-eye); absent when none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stop_line: Option<crate::lane::stop_line::StopLineSeen>,
 }
 
 /// The stereo part of a frame's record (src/drive/stereo.rs).
@@ -179,6 +183,7 @@ impl FrameRecord {
             car: None,
             stereo: None,
             junction: None,
+            stop_line: None,
         }
     }
 
@@ -192,6 +197,7 @@ impl FrameRecord {
         self.odometry_m = Some(out.observations.odometry_m);
         self.detect_us = Some(out.detect_us);
         self.junction = out.junction;
+        self.stop_line = out.observations.stop_line;
         self
     }
 

@@ -112,6 +112,8 @@ pub struct Observations {
     pub speed_mps: f64,
     /// Estimated distance driven since the start, metres.
     pub odometry_m: f64,
+    /// A stop or give-way line across the lane, seen in the bird's-eye image this frame.
+    pub stop_line: Option<crate::lane::stop_line::StopLineSeen>,
 }
 
 /// The states of the machine (no data: the timers live in [`Behaviour`]).
@@ -275,7 +277,32 @@ pub struct Behaviour {
     obstacle_w: Window,
     /// The transition of the last step.
     last: Option<Transition>,
+    /// Stopping at a line across the lane ([`Behaviour::stop_line_distance`]).
+    line: LineStop,
 }
+
+/// A stop sign with a line across the lane stops with the car's front at the line's near
+/// edge. The car's front is its front axle (`vehicle.wheelbase_m` ahead of the rear axle, so
+/// `wheelbase_m − camera_x_m` ahead of the lens). The line is remembered in odometry, since it
+/// leaves the camera's view about 0.4 m before the car reaches it.
+#[derive(Debug, Clone, Copy, Default)]
+struct LineStop {
+    /// The car's front ahead of the lens, metres.
+    front_m: f64,
+    /// The speed model (`[vehicle]`), for the approach; `None` until [`Behaviour::set_car`].
+    car: Option<DeadReckoning>,
+    /// Odometry at which the front reaches the last line seen, and whether it is dashed.
+    at: Option<(f64, bool)>,
+    /// The previous step's time, seconds.
+    prev_s: Option<f64>,
+    /// The last step's time step, seconds.
+    dt: f64,
+    /// The last step's estimated speed, m/s.
+    speed: f64,
+}
+
+/// A line belongs to a stop sign when it lies at most this far beyond the sign, metres.
+pub const LINE_PAST_SIGN_M: f64 = 0.3;
 
 impl Behaviour {
     /// A machine in `Cruise` at time 0.
@@ -296,7 +323,27 @@ impl Behaviour {
             green_w: Window::default(),
             obstacle_w: Window::default(),
             last: None,
+            line: LineStop::default(),
         }
+    }
+
+    /// The car the machine drives: its front `front_m` metres ahead of the lens (the front
+    /// axle: `vehicle.wheelbase_m − vehicle.camera_x_m`) and its speed model (`[vehicle]`).
+    /// Without it a stop sign never stops at a line (the car stops where the trigger puts it).
+    pub fn set_car(&mut self, front_m: f64, model: DeadReckoning) {
+        self.line.front_m = front_m;
+        self.line.car = Some(model);
+    }
+
+    /// Distance to stop at for a sign `sign_m` metres from the lens (`None`: the caller's
+    /// own), at odometry `odo`: from the car's front to the near edge of the line across the
+    /// lane seen last, when one lies ahead and at most [`LINE_PAST_SIGN_M`] beyond the sign;
+    /// with whether it is dashed. `None` without a line: stop at the ranged distance.
+    pub fn stop_line_distance(&self, odo: f64, sign_m: Option<f64>) -> Option<(f64, bool)> {
+        let (at, dashed) = self.line.at?;
+        let d = at - odo;
+        let reach = sign_m.unwrap_or(self.cfg.stop_trigger_m) - self.line.front_m + LINE_PAST_SIGN_M;
+        (self.line.car.is_some() && d > -0.1 && d <= reach).then_some((d, dashed))
     }
 
     /// The current state.
@@ -347,6 +394,15 @@ impl Behaviour {
     fn evidence(&mut self, obs: &Observations, now: f64) -> Evidence {
         let c = &self.cfg;
         let odo = obs.odometry_m;
+        // A line across the lane: remembered in odometry, forgotten once passed.
+        self.line.dt = self.line.prev_s.map_or(0.0, |t| now - t);
+        self.line.prev_s = Some(now);
+        self.line.speed = obs.speed_mps;
+        if let Some(l) = obs.stop_line {
+            self.line.at = Some((odo + l.distance_m - self.line.front_m, l.dashed));
+        } else if self.line.at.is_some_and(|(at, _)| odo > at + 0.5) {
+            self.line.at = None;
+        }
         let ignoring = now < self.ignore_until_s || odo < self.ignore_until_odo;
         let stop_near = obs.stop_sign.is_some_and(|s| s.distance_m < c.stop_trigger_m);
         self.stop_w.push(stop_near && !ignoring);
@@ -430,7 +486,10 @@ impl Behaviour {
                             "stop sign seen while passing".to_string()
                         } else {
                             let d = obs.stop_sign.map_or(f64::NAN, |s| s.distance_m);
-                            format!("stop sign at {d:.2} m")
+                            match self.stop_line_distance(odo, Some(d)) {
+                                Some((l, _)) => format!("stop sign at {d:.2} m, line {l:.2} m ahead"),
+                                None => format!("stop sign at {d:.2} m"),
+                            }
                         };
                         self.pending_stop = false;
                         self.go(Mode::StopSign, now, odo, why);
@@ -447,6 +506,7 @@ impl Behaviour {
                             self.ignore_until_s = now + c.stop_ignore_s;
                             self.ignore_until_odo = odo + c.stop_ignore_m;
                             self.stop_w = Window::default();
+                            self.line.at = None;
                             let held = now - t0;
                             self.go(Mode::Cruise, now, odo, format!("held {held:.2} s at the stop sign"));
                         }
@@ -500,6 +560,11 @@ impl Behaviour {
         let mut throttle_cap = 1.0;
         let (throttle, steer) = match self.mode {
             Mode::Cruise => (None, None),
+            // With a line ahead: the lane's throttle, capped so the car comes to rest at it.
+            Mode::StopSign if self.stop_line_distance(odo, None).is_some() => {
+                throttle_cap = self.line_approach(odo);
+                (None, None)
+            }
             Mode::StopSign | Mode::RedLight | Mode::Obstacle => (Some(0.0), None),
             // An S: first half towards the other lane, second half straightening up.
             Mode::PassOut => {
@@ -532,6 +597,22 @@ impl Behaviour {
             steer,
             throttle_cap,
         }
+    }
+}
+
+impl Behaviour {
+    /// The throttle cap that brings the front to rest at the line (step 3, stop sign with a
+    /// line). The speed model `v̇ = (u·V − v)/τ` held at `u` for one step `dt` and then at 0
+    /// travels exactly `u·V·dt + v·τ` (the lag's integral), so
+    /// `u = (d − v·τ) / (V·dt)`, clamped to 0..=1, puts the car's rest point on the line
+    /// (recomputed every frame).
+    fn line_approach(&self, odo: f64) -> f64 {
+        let (Some((d, _)), Some(car)) = (self.stop_line_distance(odo, None), self.line.car) else {
+            return 0.0;
+        };
+        let v = self.line.speed.max(0.0);
+        let dt = if self.line.dt > 0.0 { self.line.dt } else { 1.0 / 30.0 };
+        ((d - v * car.tau) / (car.max_speed * dt).max(1e-9)).clamp(0.0, 1.0)
     }
 }
 
@@ -678,6 +759,47 @@ mod tests {
         assert!((still - 5.0).abs() <= DT + 1e-9, "still {still} s");
         assert!(left.is_some());
         assert!(r.car.odometry_m > 2.0, "drove on past the sign");
+    }
+
+    #[test]
+    fn stop_sign_with_a_line_stops_the_front_at_the_line() {
+        // Sign 2 m ahead of the lens; a line's near edge 1.9 m ahead, seen while 0.4..1.0 m
+        // away; the front 0.02 m ahead of the lens.
+        let (front, line) = (0.02, 1.9);
+        let obs = |odo: f64| Observations {
+            stop_sign: (2.0 - odo > 0.3).then(|| at(2.0 - odo)),
+            stop_line: (0.4..1.0)
+                .contains(&(line - odo))
+                .then_some(crate::lane::stop_line::StopLineSeen {
+                    distance_m: line - odo,
+                    dashed: false,
+                    row: 0.0,
+                }),
+            ..lane()
+        };
+        let mut r = Rig::new(defaults());
+        r.b.set_car(front, car());
+        let mut rest = None;
+        for _ in 0..(20.0 / DT) as usize {
+            let before = r.b.mode();
+            let d = r.frame(obs);
+            if before == Mode::StopSign && d.mode == Mode::Cruise {
+                rest = Some(r.car.odometry_m);
+            }
+            if before == Mode::Cruise && d.mode == Mode::StopSign {
+                assert!(r.b.last_transition().unwrap().reason.contains("line"));
+            }
+        }
+        // The front at rest at the line (within 2 mm), then on past it.
+        let rest = rest.expect("stopped and went on");
+        assert!((rest + front - line).abs() < 0.002, "front at {} m", rest + front);
+        assert!(r.car.odometry_m > line + 1.0);
+        // Without `set_car` no line is used: the ranged stop, well before the line.
+        let mut r = Rig::new(defaults());
+        for _ in 0..(3.0 / DT) as usize {
+            r.frame(obs);
+        }
+        assert!(r.car.odometry_m + front < line - 0.5, "{}", r.car.odometry_m);
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! Lane detection after Rivera & Andaluz (2021), Sec. 3.2: ROI and bird's-eye warp
 //! ([`warp`]), grey threshold ([`threshold`]) and Canny edges ([`edges`]), column histogram,
-//! the two lines, the lane centre (Eq. 3) and the error (Eq. 2) ([`lines`]).
+//! the two lines, the lane centre (Eq. 3) and the error (Eq. 2) ([`lines`]); stop and give-way
+//! lines across the lane ([`stop_line`]).
 //!
 //! [`LaneDetector`] owns the precomputed warp map and every buffer, so measuring a frame
 //! allocates nothing. Each stage is also a plain function that tests and the OpenCV parity
@@ -9,6 +10,7 @@
 pub mod edges;
 pub mod junction;
 pub mod lines;
+pub mod stop_line;
 pub mod synth;
 pub mod threshold;
 pub mod warp;

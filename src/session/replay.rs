@@ -95,6 +95,13 @@ impl Observer for ReplayTally {
             if let Some(j) = &out.junction {
                 crate::annotate::junction(&mut img, j);
             }
+            if let Some(seen) = &out.observations.stop_line {
+                let (h, w) = (
+                    ctx.pipeline.lane().warp_map().homography(),
+                    ctx.pipeline.lane().images().bird.width(),
+                );
+                crate::annotate::draw_stop_line(&mut img, h, w, seen);
+            }
             let p = dir.join(crate::source::output_name(&ctx.frame.name));
             img.save(&p)
                 .map_err(|e| LoopError::Observer(format!("{}: cannot write: {e}", p.display())))?;

@@ -16,6 +16,12 @@ use std::path::PathBuf;
 pub mod limits {
     /// Most `[[segments]]`.
     pub const MAX_SEGMENTS: usize = 1000;
+    /// Most `[[marks]]`.
+    pub const MAX_MARKS: usize = 1000;
+    /// A mark's `length_m` (across the lane): 0.02..=this, metres.
+    pub const MAX_MARK_LENGTH_M: f64 = 5.0;
+    /// A mark's `width_m` (along the road): 0.005..=this, metres.
+    pub const MAX_MARK_WIDTH_M: f64 = 0.5;
     /// Most `[[objects]]`.
     pub const MAX_OBJECTS: usize = 1000;
     /// Longest straight, metres.

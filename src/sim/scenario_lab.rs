@@ -239,3 +239,24 @@ pub fn stop_sign_picture(cfg: &Config) -> image::RgbImage {
     );
     image::imageops::crop_imm(&img, x0, y0, x1.saturating_sub(x0).max(1), y1.saturating_sub(y0).max(1)).to_image()
 }
+
+/// Where the line of [`straight_with_stop_line`] lies: its middle's x, metres (its near edge
+/// is 0.025 m before, the sign 0.1 m after).
+pub const STOP_LINE_X: f64 = 2.9;
+
+/// The road of [`straight_with_object`] with a stop sign on the right verge 3 m from the start
+/// (facing the car, as on the default track) when `sign`, and a line across the driven lane
+/// 0.1 m before it when `mark` names one (`"stop_line"` or `"yield_line"`; default length and
+/// width: the lane plus a line, 0.05 m): the stop-at-the-line scenario of issue 27.
+pub fn straight_with_stop_line(sign: bool, mark: Option<&str>) -> Result<Track, super::track::TrackError> {
+    // The same road as `straight_with_object` (every other key at its default).
+    let mut text =
+        format!("name = \"straight with a stop line\"\n[road]\nlanes = 2\nlane_width_m = 0.30\ndash_m = 0.12\ngap_m = 0.05\n{SEGMENTS}");
+    if sign {
+        text += "[[objects]]\ntype = \"stop_sign\"\nx = 3.0\ny = -0.48\nyaw_deg = 180\n";
+    }
+    if let Some(kind) = mark {
+        text += &format!("[[marks]]\ntype = \"{kind}\"\nx = {STOP_LINE_X}\ny = -0.15\n");
+    }
+    Track::from_toml_str(&text, "straight_with_stop_line")
+}

@@ -17,7 +17,7 @@
 
 use super::glyphs;
 use super::rng::{mix, SplitMix64};
-use super::track::{FloorSpec, Object, Piece, Track};
+use super::track::{FloorSpec, Mark, Object, Piece, Track, YIELD_DASH_M, YIELD_GAP_M};
 use crate::classes::SimShape;
 
 /// Side of one cell of the grid that tells which centre-line piece is near, metres.
@@ -63,6 +63,8 @@ pub struct Scene {
     grid_h: usize,
     /// Line centre offsets, half widths, dashed flag and colour.
     lines: Vec<LinePaint>,
+    /// The track's floor markings (`[[marks]]`) and their paint.
+    marks: Vec<(Mark, [f32; 3])>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -228,6 +230,7 @@ impl Scene {
             grid_w,
             grid_h,
             lines,
+            marks: track.marks.iter().map(|m| (*m, f(r.line_color))).collect(),
         }
     }
 
@@ -381,9 +384,38 @@ impl Scene {
                     }
                 }
             }
+            if !self.marks.is_empty() {
+                self.paint_marks(p, fp, tape, &mut c);
+            }
         }
         // 3. Light.
         ([c[0] * light, c[1] * light, c[2] * light], 0.0)
+    }
+
+    /// The floor markings over `c` at `p`: the same box-filter coverage as the lane lines, along
+    /// the road (the line's width) and across it (its length; a yield line's dashes filtered
+    /// the same way as the centre line's).
+    fn paint_marks(&self, p: [f64; 2], fp: &Footprint, tape: f32, c: &mut [f32; 3]) {
+        let (ju, jv) = (fp.ju, fp.jv);
+        for (m, rgb) in &self.marks {
+            let (d, n) = (m.dir, [-m.dir[1], m.dir[0]]);
+            let fa = ((d[0] * ju[0] + d[1] * ju[1]).abs() + (d[0] * jv[0] + d[1] * jv[1]).abs()).max(1e-5);
+            let fc = ((n[0] * ju[0] + n[1] * ju[1]).abs() + (n[0] * jv[0] + n[1] * jv[1]).abs()).max(1e-5);
+            let (along, across) = m.local(p);
+            if along.abs() > m.width / 2.0 + fa || across.abs() > m.length / 2.0 + fc {
+                continue;
+            }
+            let mut cov = box_coverage(along, fa, m.width / 2.0) * box_coverage(across, fc, m.length / 2.0);
+            if m.dashed() && cov > 0.0 {
+                cov *= dash_coverage(across + m.length / 2.0, fc, YIELD_DASH_M, YIELD_DASH_M + YIELD_GAP_M);
+            }
+            if cov > 0.0 {
+                let cf = cov as f32;
+                for (ch, lc) in c.iter_mut().zip(rgb) {
+                    *ch += (lc * tape - *ch) * cf;
+                }
+            }
+        }
     }
 
     /// Signed lateral offset of a floor point from the road's centre line (left positive),
@@ -822,6 +854,7 @@ fn piece_grid(track: &Track, lines: &[LinePaint]) -> (Vec<(u16, u16)>, usize, us
     let near = reach + CELL_M + 0.05;
     let mut grid = vec![(u16::MAX, u16::MAX); grid_w * grid_h];
     let half_diag = CELL_M * std::f64::consts::FRAC_1_SQRT_2;
+    let mark_c = mark_clearance(track, grid_w, grid_h, near);
     for j in 0..grid_h {
         for i in 0..grid_w {
             let p = [x0 + (i as f64 + 0.5) * CELL_M, y0 + (j as f64 + 0.5) * CELL_M];
@@ -833,18 +866,54 @@ fn piece_grid(track: &Track, lines: &[LinePaint]) -> (Vec<(u16, u16)>, usize, us
                     best = (d2, k as u16);
                 }
             }
-            if best.0 <= near * near {
+            // A cell near a floor mark probes too (it takes its nearest piece, and the mark
+            // counts in its clearance).
+            let mark_c = mark_c.get(j * grid_w + i).map_or(f64::INFINITY, |&c| c as f64);
+            if best.0 <= near * near || mark_c <= near {
                 grid[j * grid_w + i].0 = best.1;
                 let (_, lat, _) = track.pieces[best.1 as usize].project(p);
                 let c = lines
                     .iter()
                     .map(|l| (lat - l.offset).abs() - l.half_width)
-                    .fold(f64::INFINITY, f64::min);
+                    .fold(mark_c, f64::min);
                 grid[j * grid_w + i].1 = ((c - half_diag - 1e-4).max(0.0) * 1e4).floor().min(65535.0) as u16;
             }
         }
     }
     (grid, grid_w, grid_h, (near - reach - half_diag).max(0.0) as f32)
+}
+
+/// For each grid cell (none without marks): the distance from its centre to the nearest mark,
+/// metres, for the cells near a mark (at least `reach` beyond its rectangle; infinite
+/// elsewhere). Each mark visits only the cells of its bounding box.
+fn mark_clearance(track: &Track, grid_w: usize, grid_h: usize, reach: f64) -> Vec<f32> {
+    if track.marks.is_empty() {
+        return Vec::new();
+    }
+    let [x0, y0, _, _] = track.floor_rect;
+    let mut out = vec![f32::INFINITY; grid_w * grid_h];
+    let cell = |v: f64, o: f64, n: usize| (((v - o) / CELL_M).floor().max(0.0) as usize).min(n - 1);
+    for m in &track.marks {
+        let r = m.length.hypot(m.width) / 2.0 + reach + CELL_M;
+        let (i0, i1) = (cell(m.pos[0] - r, x0, grid_w), cell(m.pos[0] + r, x0, grid_w));
+        let (j0, j1) = (cell(m.pos[1] - r, y0, grid_h), cell(m.pos[1] + r, y0, grid_h));
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let p = [x0 + (i as f64 + 0.5) * CELL_M, y0 + (j as f64 + 0.5) * CELL_M];
+                let c = &mut out[j * grid_w + i];
+                *c = c.min(mark_distance(m, p) as f32);
+            }
+        }
+    }
+    out
+}
+
+/// Distance from `p` to mark `m`'s rectangle (0 inside), metres.
+fn mark_distance(m: &Mark, p: [f64; 2]) -> f64 {
+    let (along, across) = m.local(p);
+    let a = (along.abs() - m.width / 2.0).max(0.0);
+    let b = (across.abs() - m.length / 2.0).max(0.0);
+    a.hypot(b)
 }
 
 #[cfg(test)]
@@ -873,5 +942,48 @@ mod tests {
         assert!((dash_coverage(0.13, 0.01, 0.1, 0.16)).abs() < 1e-9);
         // A footprint much longer than a period sees the average.
         assert!((dash_coverage(3.0, 1.6, 0.1, 0.16) - 0.625).abs() < 1e-9);
+    }
+
+    #[test]
+    fn marks_are_painted_on_and_off_the_road_and_their_cells_probe() {
+        let oval = "[road]\nlane_width_m = 0.3\n[[segments]]\ntype = \"straight\"\nlength_m = 2.0\n\
+                    [[segments]]\ntype = \"arc\"\nradius_m = 1.0\nangle_deg = 180\n\
+                    [[segments]]\ntype = \"straight\"\nlength_m = 2.0\n\
+                    [[segments]]\ntype = \"arc\"\nradius_m = 1.0\nangle_deg = 180\n";
+        // A stop line across the road at x = 1, and a yield line far off it (no piece near).
+        let marks = "[[marks]]\ntype = \"stop_line\"\nx = 1.0\ny = 0.0\n\
+                     [[marks]]\ntype = \"yield_line\"\nx = 1.0\ny = -0.9\nlength_m = 0.29\n";
+        let track = Track::from_toml_str(&format!("{oval}{marks}"), "t").unwrap();
+        let scene = Scene::new(&track);
+        let fp = Footprint {
+            ju: [0.001, 0.0],
+            jv: [0.0, 0.001],
+            size: 0.002,
+            fade: 1.0,
+        };
+        let at = |p: [f64; 2]| scene.floor_color(p, &fp, 1.0, 0.0, true).0[0];
+        let floor = at([1.3, -0.05]);
+        assert!(
+            at([1.0, -0.05]) > 200.0 && floor < 130.0,
+            "{} {floor}",
+            at([1.0, -0.05])
+        );
+        // The yield line: a dash at its right end, a gap 0.05 m in; floor beside it.
+        assert!(at([1.0, -0.9 - 0.135]) > 200.0, "{}", at([1.0, -1.035]));
+        assert!(at([1.0, -0.9 - 0.095]) < 130.0, "{}", at([1.0, -0.995]));
+        // Every cell's clearance is a lower bound of the distance to the marks.
+        let [x0, y0, _, _] = track.floor_rect;
+        for (c, &(k, clear)) in scene.grid.iter().enumerate() {
+            if k == u16::MAX {
+                continue;
+            }
+            let p = [
+                x0 + ((c % scene.grid_w) as f64 + 0.5) * CELL_M,
+                y0 + ((c / scene.grid_w) as f64 + 0.5) * CELL_M,
+            ];
+            for m in &track.marks {
+                assert!(clear as f64 * 1e-4 <= mark_distance(m, p), "cell {c}");
+            }
+        }
     }
 }

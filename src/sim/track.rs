@@ -50,6 +50,10 @@ pub struct TrackFile {
     /// replaces it).
     #[serde(default)]
     pub route: Vec<crate::route::Step>,
+    /// Markings painted on the floor (stop and give-way lines), independent of the road's
+    /// chain: see [`MarkSpec`].
+    #[serde(default)]
+    pub marks: Vec<MarkSpec>,
 }
 
 /// `[start]`: the beginning of the centre line, which is also where laps are counted.
@@ -201,6 +205,152 @@ fn cycle() -> [f64; 3] {
     [4.0, 1.0, 4.0]
 }
 
+// ---- Floor markings (`[[marks]]`): stop and give-way lines across a lane. ----
+
+/// What a `[[marks]]` table paints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MarkKind {
+    /// A solid line across the lane: stop here.
+    StopLine,
+    /// A dashed give-way line: dashes of [`YIELD_DASH_M`] with gaps of [`YIELD_GAP_M`] across
+    /// the lane.
+    YieldLine,
+}
+
+/// Length of one dash of a yield line (across the lane), metres.
+pub const YIELD_DASH_M: f64 = 0.04;
+/// Gap between the dashes of a yield line, metres.
+pub const YIELD_GAP_M: f64 = 0.03;
+
+/// One `[[marks]]` table: a line painted across a lane, in world coordinates like an object.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MarkSpec {
+    /// `stop_line` or `yield_line`.
+    #[serde(rename = "type")]
+    pub kind: MarkKind,
+    /// The middle of the line on the floor, metres.
+    pub x: f64,
+    /// The middle of the line on the floor, metres.
+    pub y: f64,
+    /// The direction of travel the line stops, degrees from +x; the line lies across it.
+    #[serde(default)]
+    pub yaw_deg: f64,
+    /// Length across the lane, metres (default: `road.lane_width_m + road.line_width_m`).
+    #[serde(default)]
+    pub length_m: Option<f64>,
+    /// Width along the road, metres (default 0.05).
+    #[serde(default)]
+    pub width_m: Option<f64>,
+}
+
+/// A mark after checks.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mark {
+    /// What it is.
+    pub kind: MarkKind,
+    /// Index in the file's `[[marks]]` list.
+    pub index: usize,
+    /// The line's middle, metres.
+    pub pos: [f64; 2],
+    /// (cos, sin) of the direction of travel it stops (the line lies across it).
+    pub dir: [f64; 2],
+    /// Across the lane, metres.
+    pub length: f64,
+    /// Along the road, metres.
+    pub width: f64,
+}
+
+impl Mark {
+    /// The point `p` in the mark's frame: (along the direction of travel from the line's
+    /// middle, to the left of it), metres.
+    #[inline]
+    pub fn local(&self, p: [f64; 2]) -> (f64, f64) {
+        let (dx, dy) = (p[0] - self.pos[0], p[1] - self.pos[1]);
+        (dx * self.dir[0] + dy * self.dir[1], self.dir[0] * dy - self.dir[1] * dx)
+    }
+
+    /// Whether the mark is dashed (a yield line).
+    pub fn dashed(&self) -> bool {
+        self.kind == MarkKind::YieldLine
+    }
+
+    /// Mark `i` of a track file checked: finite, on the floor `floor_rect`, sizes within
+    /// [`limits`]; `road` gives the default length.
+    fn place(i: usize, m: &MarkSpec, road: &RoadSpec, floor_rect: [f64; 4], origin: &str) -> Result<Mark, TrackError> {
+        let bad = |k: &str, value: String, problem: String| TrackError::Invalid {
+            origin: origin.into(),
+            key: format!("marks[{i}].{k}"),
+            value,
+            problem,
+        };
+        if !(m.x.is_finite() && m.y.is_finite() && m.yaw_deg.is_finite()) {
+            let v = format!("({}, {}, {})", m.x, m.y, m.yaw_deg);
+            return Err(bad("x/y/yaw_deg", v, "must be finite".into()));
+        }
+        let [x0, y0, x1, y1] = floor_rect;
+        if m.x < x0 || m.x > x1 || m.y < y0 || m.y > y1 {
+            let v = format!("({:.2}, {:.2})", m.x, m.y);
+            let why = format!("off the map; the floor spans x {x0:.2}..{x1:.2}, y {y0:.2}..{y1:.2} m");
+            return Err(bad("x/y", v, why));
+        }
+        let length = m.length_m.unwrap_or(road.lane_width_m + road.line_width_m);
+        if !(0.02..=limits::MAX_MARK_LENGTH_M).contains(&length) {
+            let why = format!("must be 0.02..={} m", limits::MAX_MARK_LENGTH_M);
+            return Err(bad("length_m", length.to_string(), why));
+        }
+        let width = m.width_m.unwrap_or(0.05);
+        if !(0.005..=limits::MAX_MARK_WIDTH_M).contains(&width) {
+            let why = format!("must be 0.005..={} m", limits::MAX_MARK_WIDTH_M);
+            return Err(bad("width_m", width.to_string(), why));
+        }
+        let (s, c) = m.yaw_deg.to_radians().sin_cos();
+        Ok(Mark {
+            kind: m.kind,
+            index: i,
+            pos: [m.x, m.y],
+            dir: [c, s],
+            length,
+            width,
+        })
+    }
+}
+
+/// The next mark ahead of a point, as the simulator's truth reports it.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MarkAhead {
+    /// Index in `[[marks]]`.
+    pub index: usize,
+    /// What it is.
+    pub kind: MarkKind,
+    /// Forward distance from the point to the line's near edge, metres (negative while the
+    /// point is over the line).
+    pub distance_m: f64,
+}
+
+impl Track {
+    /// The nearest mark ahead of floor point `p` for travel along `heading` (radians): one
+    /// that stops this direction (its yaw within 60° of `heading`), whose extent across the
+    /// lane holds `p`, and whose far edge `p` has not passed.
+    pub fn mark_ahead(&self, p: [f64; 2], heading: f64) -> Option<MarkAhead> {
+        let (hs, hc) = heading.sin_cos();
+        self.marks
+            .iter()
+            .filter(|m| m.dir[0] * hc + m.dir[1] * hs > 0.5)
+            .filter_map(|m| {
+                let (along, across) = m.local(p);
+                let d = -along - m.width / 2.0;
+                (across.abs() <= m.length / 2.0 && d > -m.width).then_some(MarkAhead {
+                    index: m.index,
+                    kind: m.kind,
+                    distance_m: d,
+                })
+            })
+            .min_by(|a, b| a.distance_m.total_cmp(&b.distance_m))
+    }
+}
+
 
 /// Where a point lies relative to the centre line.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -297,6 +447,8 @@ pub struct Track {
     pub floor_rect: [f64; 4],
     /// Every object in the file (disabled ones too; see [`Object`] and `enabled`).
     pub objects: Vec<(Object, bool)>,
+    /// The floor markings, in file order.
+    pub marks: Vec<Mark>,
 }
 
 impl Track {
@@ -364,6 +516,18 @@ impl Track {
         for (i, o) in spec.objects.iter().enumerate() {
             objects.push((Self::place_object(i, o, floor_rect, origin)?, o.enabled));
         }
+        // Floor markings.
+        if spec.marks.len() > limits::MAX_MARKS {
+            return Err(TrackError::Invalid {
+                origin: origin.into(),
+                key: "marks".into(),
+                value: format!("{} marks", spec.marks.len()),
+                problem: format!("at most {} marks", limits::MAX_MARKS),
+            });
+        }
+        let marks = (spec.marks.iter().enumerate())
+            .map(|(i, m)| Mark::place(i, m, r, floor_rect, origin))
+            .collect::<Result<Vec<_>, _>>()?;
 
         Ok(Track {
             name: if spec.name.is_empty() {
@@ -380,6 +544,7 @@ impl Track {
             drive_offset,
             floor_rect,
             objects,
+            marks,
             spec,
         })
     }
@@ -846,5 +1011,44 @@ angle_deg = 180
         assert_eq!(o.light_state(2.5), LightState::Amber);
         assert_eq!(o.light_state(4.0), LightState::Red);
         assert_eq!(o.light_state(6.5), LightState::Green);
+    }
+
+    #[test]
+    fn marks_parse_default_check_and_lie_ahead() {
+        let mark = |extra: &str| format!("{OVAL}\n[[marks]]\ntype = \"stop_line\"\nx = 1.5\ny = 0.0\n{extra}");
+        let t = Track::from_toml_str(&mark(""), "m").unwrap();
+        let m = t.marks[0];
+        assert_eq!(m.kind, MarkKind::StopLine);
+        assert!(
+            (m.length - 0.32).abs() < 1e-12 && (m.width - 0.05).abs() < 1e-12,
+            "{m:?}"
+        );
+        // From (1.0, 0.0) heading east the near edge is 0.475 m ahead; heading west none.
+        let a = t.mark_ahead([1.0, 0.0], 0.0).unwrap();
+        assert!((a.distance_m - 0.475).abs() < 1e-12, "{a:?}");
+        assert!(t.mark_ahead([1.0, 0.0], PI).is_none());
+        assert!(t.mark_ahead([1.0, 0.3], 0.0).is_none(), "beside the line");
+        assert!(t.mark_ahead([1.6, 0.0], 0.0).is_none(), "passed");
+        let t = Track::from_toml_str(
+            &mark("type = \"yield_line\"").replace("type = \"stop_line\"\n", ""),
+            "m",
+        )
+        .unwrap();
+        assert!(t.marks[0].dashed());
+        // Checks name the key (and an unknown key its line).
+        let e = Track::from_toml_str(&mark("length_m = 9.0"), "m")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("marks[0].length_m"), "{e}");
+        let e = Track::from_toml_str(&mark("width_m = 0.0"), "m")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("marks[0].width_m"), "{e}");
+        let e = Track::from_toml_str(&mark("").replace("x = 1.5", "x = 40.0"), "m")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("marks[0].x/y") && e.contains("off the map"), "{e}");
+        let e = Track::from_toml_str(&mark("colour = 3"), "m").unwrap_err().to_string();
+        assert!(e.contains("colour") && e.contains("line"), "{e}");
     }
 }

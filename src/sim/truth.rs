@@ -57,6 +57,10 @@ pub struct FrameTruth {
     pub center_col_hist: Option<f64>,
     /// Every drawn object in view: distance and image box (occlusion not considered).
     pub objects: Vec<ObjectBox>,
+    /// The next floor mark (`[[marks]]`) ahead in the car's lane: its forward distance from
+    /// the lens to the line's near edge (absent on tracks without marks, or none ahead).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mark_ahead: Option<super::track::MarkAhead>,
 }
 
 /// Computes ground truth for one camera and one pipeline configuration.
@@ -230,6 +234,7 @@ impl TruthModel {
             right_col_hist: rh,
             center_col_hist: lh.zip(rh).map(|(a, b)| (a + b) / 2.0),
             objects: Vec::new(),
+            mark_ahead: track.mark_ahead(pose.to_world([self.mount.x_m, 0.0]), pose.yaw),
         }
     }
 }
