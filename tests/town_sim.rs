@@ -18,8 +18,17 @@ fn town() -> Track {
     Track::load(&Path::new(ROOT).join("config/tracks/town.toml")).unwrap()
 }
 
+/// What the test keeps of each frame: time, the front axle's position, behaviour, speed.
+#[derive(Debug, Clone, Copy)]
+struct Frame {
+    t: f64,
+    front: [f64; 2],
+    mode: rccar::control::behaviour::Mode,
+    speed: f64,
+}
+
 /// Drives `laps` of the town with `route` (None: the track's own), detectors on.
-fn drive(route: Option<Vec<Step>>, laps: u32) -> (rccar::sim::run::Summary, Vec<rccar::sim::plan::Passage>, u32) {
+fn drive(route: Option<Vec<Step>>, laps: u32) -> (rccar::sim::run::Summary, Vec<rccar::sim::plan::Passage>, u32, Vec<Frame>) {
     let track = town();
     let mut cfg = Config::default().with_override(&format!("sim.laps={laps}")).unwrap();
     let steps = configure_route(&mut cfg, &track, route);
@@ -30,20 +39,44 @@ fn drive(route: Option<Vec<Step>>, laps: u32) -> (rccar::sim::run::Summary, Vec<
     assert!(missing.is_empty(), "{missing:?}");
     sim.set_detector(det);
     let mut forks_met = 0;
+    let mut frames = Vec::new();
+    let wheelbase = cfg.vehicle.wheelbase_m;
     let summary = sim
         .run(|_, s| {
+            let [x, y, yaw] = s.truth.pose;
+            frames.push(Frame {
+                t: s.time_s,
+                front: [x + wheelbase * yaw.cos(), y + wheelbase * yaw.sin()],
+                mode: s.out.mode,
+                speed: s.truth.speed_mps,
+            });
             if s.out.junction.is_some_and(|j| j.new && j.kind == rccar::lane::junction::JunctionKind::Fork) {
                 forks_met += 1;
             }
             Ok::<(), ()>(())
         })
         .unwrap();
-    (summary, plan, forks_met)
+    (summary, plan, forks_met, frames)
+}
+
+/// The stretches of standing still in `mode` (true speed below the behaviour's standstill speed,
+/// `behaviour.standstill_mps` = 1 cm/s): (first frame, last frame).
+fn stands(frames: &[Frame], mode: rccar::control::behaviour::Mode) -> Vec<(usize, usize)> {
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    for (i, f) in frames.iter().enumerate() {
+        if f.mode == mode && f.speed.abs() < 0.01 {
+            match out.last_mut() {
+                Some(l) if l.1 + 1 == i => l.1 = i,
+                _ => out.push((i, i)),
+            }
+        }
+    }
+    out
 }
 
 #[test]
 fn the_town_route_takes_every_fork_the_way_it_says() {
-    let (s, plan, met) = drive(None, 3);
+    let (s, plan, met, frames) = drive(None, 3);
     for l in s.lines() {
         eprintln!("{l}");
     }
@@ -62,6 +95,25 @@ fn the_town_route_takes_every_fork_the_way_it_says() {
     let crossings = s.junctions.iter().filter(|p| p.kind == JunctionKind::Crossing).count();
     assert_eq!(crossings, 2);
     assert!(s.xte_rms_m < 0.03, "cross-track RMS {:.4} m", s.xte_rms_m);
+    // The stop sign on B, with its stop line: the car's front axle stands at the line's near
+    // edge (x = 4.805 m, B heads west) within 3 cm, for the 5 s hold, then drives on.
+    let track = town();
+    let line = track.marks.iter().find(|m| m.kind == rccar::sim::track::MarkKind::StopLine).unwrap();
+    let near_edge = line.pos[0] + line.width / 2.0;
+    let at_b = stands(&frames, rccar::control::behaviour::Mode::StopSign);
+    let slowest = frames
+        .iter()
+        .filter(|f| f.mode == rccar::control::behaviour::Mode::StopSign)
+        .map(|f| f.speed)
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(at_b.len(), 1, "one stop at the stop sign on the route: {at_b:?} (slowest in stop_sign {slowest} m/s)");
+    let (a, b) = at_b[0];
+    let miss = frames[a].front[0] - near_edge;
+    let held = frames[b].t - frames[a].t;
+    eprintln!("stop line: front {:+.1} mm from its near edge, held {held:.2} s", miss * 1000.0);
+    assert!(miss.abs() <= 0.03, "front {miss:+.4} m from the stop line");
+    assert!(held >= 4.9, "held {held:.2} s");
+    assert!((frames[a].front[1] - line.pos[1]).abs() < 0.05, "stopped elsewhere: {:?}", frames[a].front);
 }
 
 #[test]

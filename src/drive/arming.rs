@@ -25,69 +25,13 @@
 //! returns what it actually sent.
 
 use crate::health::{Health, Part, PartState};
+pub use super::actor::{Actor, AtomicF64};
 use super::manual::Controls;
 use super::{Clock, StopReason, StopSignal};
 use crate::control::Command;
 use crate::sink::{Actuators, CommandSink, Connection, SinkError};
-use serde::Serialize;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 use std::sync::Arc;
-
-/// Who changed the arming state.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-#[repr(u8)]
-pub enum Actor {
-    /// rccar itself (a simulation armed from the start, the end of a run).
-    Program = 0,
-    /// The `--arm` flag.
-    Flag = 1,
-    /// The start/stop button (GPIO, or SIGUSR1 at the desk).
-    Button = 2,
-    /// The dashboard page.
-    Page = 3,
-    /// A gamepad.
-    Pad = 4,
-    /// A fleet broker.
-    Broker = 5,
-    /// The serial link (lost, reconnected, refused to arm).
-    Link = 6,
-    /// The ultrasonic brake sensor (dead).
-    Sensor = 7,
-    /// A heartbeat that stopped (the page went away).
-    Heartbeat = 8,
-}
-
-impl Actor {
-    pub(crate) fn from_u8(v: u8) -> Self {
-        match v {
-            1 => Actor::Flag,
-            2 => Actor::Button,
-            3 => Actor::Page,
-            4 => Actor::Pad,
-            5 => Actor::Broker,
-            6 => Actor::Link,
-            7 => Actor::Sensor,
-            8 => Actor::Heartbeat,
-            _ => Actor::Program,
-        }
-    }
-
-    /// Lower-case name, as telemetry events and the status line say it.
-    pub fn name(self) -> &'static str {
-        match self {
-            Actor::Program => "rccar",
-            Actor::Flag => "--arm",
-            Actor::Button => "button",
-            Actor::Page => "page",
-            Actor::Pad => "pad",
-            Actor::Broker => "broker",
-            Actor::Link => "link",
-            Actor::Sensor => "brake sensor",
-            Actor::Heartbeat => "heartbeat",
-        }
-    }
-}
 
 /// Why arming was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -221,35 +165,6 @@ impl Arming {
     /// them before the gate, so everything above still holds for a human.
     pub fn controls(&self) -> &Controls {
         &self.controls
-    }
-}
-
-/// A float in an atomic (its bits); NaN = not set.
-#[derive(Debug)]
-pub struct AtomicF64(AtomicU64);
-
-impl AtomicF64 {
-    /// Holding `v`.
-    pub fn new(v: f64) -> Self {
-        Self(AtomicU64::new(v.to_bits()))
-    }
-    /// Not set (NaN).
-    pub fn nan() -> Self {
-        Self(AtomicU64::new(f64::NAN.to_bits()))
-    }
-    /// The value.
-    pub fn get(&self) -> f64 {
-        f64::from_bits(self.0.load(Ordering::SeqCst))
-    }
-    /// Sets it.
-    pub fn set(&self, v: f64) {
-        self.0.store(v.to_bits(), Ordering::SeqCst)
-    }
-}
-
-impl Default for AtomicF64 {
-    fn default() -> Self {
-        Self::nan()
     }
 }
 

@@ -26,7 +26,7 @@
 //! mode change remembers who made it ([`Actor`]) and when, and the loop turns it into a
 //! telemetry event of the next frame.
 
-use super::arming::{Actor, AtomicF64};
+use super::actor::{Actor, AtomicF64};
 pub use crate::control::pilot::{DriveMode, Pilot};
 use crate::control::Command;
 use crate::timing::Clock;

@@ -26,6 +26,7 @@
 //! — the end of the source, a stop request, an error, a panic unwinding — sends neutral before
 //! the caller gets control back, so files are flushed *after* the motor is safe.
 
+pub mod actor;
 pub mod arming;
 pub mod manual;
 

@@ -162,7 +162,10 @@ impl Simulation {
     fn rebuild(&mut self) {
         let scene = lock(&self.world).scene().clone();
         // The settings were valid when the simulation was built: the same config again.
-        let mut s = Self::session(&self.cfg, scene, self.full_frames, self.truth_boxes)
+        // The camera's row plan is made from the pipeline as it is built, before the detector
+        // is installed: with a detector, render whole frames (else its rows would be black).
+        let whole = self.full_frames || self.detector.as_ref().is_some_and(|d| d.is_some());
+        let mut s = Self::session(&self.cfg, scene, whole, self.truth_boxes)
             .expect("a simulation's session builds again with the same configuration");
         if let Some(d) = self.detector.clone() {
             s.pipeline_mut().set_detector(d);
@@ -186,7 +189,8 @@ impl Simulation {
     /// ROI, plus the detectors' rows on detection frames, plus the blur's reach; see
     /// [`super::camera::SimCamera::set_row_plan`]); the pipeline then decides exactly as on
     /// full frames, at a fraction of the cost. [`Simulation::image`] then shows only those
-    /// rows. Default `true`. Set it before the first step.
+    /// rows. Default `true`. Set it before the first step. With a detector installed
+    /// ([`Simulation::set_detector`]) whole frames are rendered regardless.
     pub fn set_full_frames(&mut self, full: bool) {
         if full != self.full_frames {
             self.full_frames = full;
