@@ -14,7 +14,7 @@
 //! headings counter-clockwise from +x. Lateral offsets are positive to the left of the
 //! direction of travel.
 
-use crate::classes::ObjectClass;
+use crate::classes::{ObjectClass, TurnArrow};
 use serde::Deserialize;
 use std::f64::consts::{PI, TAU};
 use std::path::{Path, PathBuf};
@@ -253,7 +253,7 @@ pub enum SegmentSpec {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ObjectSpec {
-    /// `stop_sign`, `traffic_light` or `obstacle`.
+    /// `stop_sign`, `traffic_light`, `obstacle`, `yield_sign` or `turn_sign`.
     #[serde(rename = "type")]
     pub kind: ObjectClass,
     /// Position on the floor, metres.
@@ -282,6 +282,10 @@ pub struct ObjectSpec {
     /// Traffic light: where in its cycle it is at t = 0, seconds.
     #[serde(default)]
     pub phase_s: f64,
+    /// Turn sign: the way its arrow points, `left` or `right` (default right; other kinds
+    /// refuse the key).
+    #[serde(default)]
+    pub arrow: Option<TurnArrow>,
 }
 
 fn yes() -> bool {
@@ -453,6 +457,8 @@ pub struct Object {
     pub cycle_s: [f64; 3],
     /// Traffic light phase at t = 0, seconds.
     pub phase_s: f64,
+    /// Turn sign: the way its arrow points (`None` for other kinds).
+    pub arrow: Option<TurnArrow>,
 }
 
 /// A traffic light's lamp state.
@@ -931,6 +937,13 @@ impl Track {
                 "every phase must last > 0 s",
             ));
         }
+        if o.arrow.is_some() && !info.reads_arrow {
+            return Err(bad(
+                key("arrow"),
+                format!("{:?}", o.arrow.map_or("", |a| a.name())),
+                &format!("only a turn sign takes `arrow`, not a {}", o.kind.name()),
+            ));
+        }
         Ok(Object {
             kind: o.kind,
             index: i,
@@ -941,6 +954,7 @@ impl Track {
             color: o.color,
             cycle_s: o.cycle_s,
             phase_s: o.phase_s,
+            arrow: info.reads_arrow.then(|| o.arrow.unwrap_or(TurnArrow::Right)),
         })
     }
 
