@@ -20,7 +20,7 @@
 //! Without a detector (none loaded, or the cascade files missing) steps 2–3 find nothing and
 //! the car keeps its lane; the behaviour machine still handles a lost lane.
 
-use crate::classes::{ColourCue, Reaction};
+use crate::classes::{ColourCue, Reaction, TurnArrow};
 use crate::config::Config;
 use crate::control::behaviour::{Behaviour, DeadReckoning, Decision, LightColor, Mode, Observations, Ranged};
 use crate::control::steering::SteeringInput;
@@ -121,6 +121,9 @@ pub struct RangedObject {
     /// A traffic light's colour.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub light: Option<LightColor>,
+    /// A turn sign's arrow, `left` or `right` (read inside its box).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arrow: Option<TurnArrow>,
     /// σ of `distance_m`, metres (the track's filter; absent for an object without a range).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distance_sigma_m: Option<f64>,
@@ -350,8 +353,8 @@ pub struct Pipeline {
     detect_bands: [Option<crate::detect::RowBand>; ObjectClass::COUNT],
     /// Frame rows detection reads (set with the detector).
     detect_rows: Vec<std::ops::Range<usize>>,
-    tracker: Tracker<Option<LightColor>>,
-    measurements: Vec<Measurement<Option<LightColor>>>,
+    tracker: Tracker<Cues>,
+    measurements: Vec<Measurement<Cues>>,
     every_n: u64,
     frame_index: u64,
     /// Stereo ranging (`ranging.method = "stereo"`), used by [`Pipeline::step_stereo`].
@@ -500,7 +503,7 @@ impl Pipeline {
                     (l.region.y - grow).clamp(0, h),
                     (l.region.y + l.region.height + grow).clamp(0, h),
                 );
-                if (info.reads_light || refined) && y1 > y0 {
+                if (info.reads_light || info.reads_arrow || refined) && y1 > y0 {
                     spans.push(y0 as usize..y1 as usize);
                 }
             }
@@ -627,7 +630,8 @@ impl Pipeline {
             Some(boxes) => {
                 for b in boxes {
                     let r = self.ranging.range_outline(b.class, b.bbox);
-                    push_measured(&mut self.measurements, &mut self.objects, b.class, b.bbox, r, b.light);
+                    let cues = (b.light, b.arrow);
+                    push_measured(&mut self.measurements, &mut self.objects, b.class, b.bbox, r, cues);
                 }
             }
             None if detect_now => {
@@ -655,12 +659,18 @@ impl Pipeline {
                                 (r.y + r.height) as f64 - 0.5,
                             ];
                             let light = d.light.as_ref().map(|l| light_color(l, frame, r));
+                            let arrow = if class.info().reads_arrow {
+                                crate::detect::arrow::read_arrow(frame, r)
+                            } else {
+                                None
+                            };
                             let range = match stereo {
                                 Some(ref mut st) => st.range(class, r),
                                 None => None,
                             }
                             .or_else(|| self.ranging.range_in_image(frame, class, bbox));
-                            push_measured(&mut self.measurements, &mut self.objects, class, bbox, range, light);
+                            let cues = (light, arrow);
+                            push_measured(&mut self.measurements, &mut self.objects, class, bbox, range, cues);
                         }
                     }
                 }
@@ -692,7 +702,8 @@ impl Pipeline {
                 bbox: t.bbox,
                 distance_m: Some(t.distance_m),
                 lateral_m: Some(t.lateral_m),
-                light: t.extra,
+                light: t.extra.0,
+                arrow: t.extra.1,
                 distance_sigma_m: Some(t.sigma_m()),
                 measured_m: t.matched_now.then_some(t.measured_m),
                 track_id: Some(t.id),
@@ -734,6 +745,12 @@ impl Pipeline {
                         o.obstacle = nearer(o.obstacle, r);
                     }
                     obstacle_any = nearer(obstacle_any, r);
+                }
+                Reaction::Yield => o.yield_sign = nearer(o.yield_sign, r),
+                Reaction::TakeTurn => {
+                    if let (Some(a), true) = (ob.arrow, o.turn_sign.is_none_or(|(c, _)| c.distance_m > d)) {
+                        o.turn_sign = Some((r, a));
+                    }
                 }
             }
         }
@@ -786,29 +803,33 @@ impl Pipeline {
     }
 }
 
+/// What is read inside a box and carried by its track: a light's colour, a turn sign's arrow.
+type Cues = (Option<LightColor>, Option<TurnArrow>);
+
 /// A ranged box goes to the tracker; one without a range (above the horizon) is reported as
 /// it is, without a distance.
 fn push_measured(
-    meas: &mut Vec<Measurement<Option<LightColor>>>,
+    meas: &mut Vec<Measurement<Cues>>,
     objects: &mut Vec<RangedObject>,
     class: ObjectClass,
     bbox: [f64; 4],
     range: Option<crate::ranging::BoxRange>,
-    light: Option<LightColor>,
+    cues: Cues,
 ) {
     match range {
         Some(range) => meas.push(Measurement {
             class,
             bbox,
             range,
-            extra: light,
+            extra: cues,
         }),
         None => objects.push(RangedObject {
             class,
             bbox,
             distance_m: None,
             lateral_m: None,
-            light,
+            light: cues.0,
+            arrow: cues.1,
             distance_sigma_m: None,
             measured_m: None,
             track_id: None,
