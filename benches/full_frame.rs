@@ -1,4 +1,4 @@
-//! The whole frame with detection in the loop (issue 7): lane, three Haar cascades, ranging,
+//! The whole frame with detection in the loop (issue 7): lane, the classes' Haar cascades (five since issue 27), ranging,
 //! behaviour and control per 320×240 frame, side by side with the same work in OpenCV in the
 //! same run.
 //!
@@ -13,13 +13,13 @@
 //! 1. Frames: 24 simulator frames of config/tracks/scenarios.toml, taken on the approaches to
 //!    the stop sign, the traffic light and the obstacle (so the cascades have something to find),
 //!    written as PNG for the OpenCV side.
-//! 2. Cascades: config/cascades/{stop_sign,traffic_light,obstacle}.xml when all three exist,
-//!    else three stock OpenCV cascades from /usr/share/opencv4/haarcascades (frontalface_default,
+//! 2. Cascades: every class's config/cascades/<name>.xml when all exist (stop_sign,
+//!    traffic_light, obstacle, yield_sign, turn_sign), else three stock OpenCV cascades from /usr/share/opencv4/haarcascades (frontalface_default,
 //!    eye, fullbody) on both sides: the work per window is similar, the boxes are not meaningful.
 //! 3. Ours: `Pipeline::step` on one thread (the detector's `parallel` off).
 //!    OpenCV (`$RCCAR_PYTHON`, else `python3`; `cv2.setNumThreads(1)`): warpPerspective → grey →
 //!    GaussianBlur → Canny → threshold | edges → column histogram, then grey of the frame and
-//!    three `detectMultiScale(gray, scale_factor, min_neighbors, minSize)` (ranging and the
+//!    one `detectMultiScale(gray, scale_factor, min_neighbors, minSize)` per cascade (ranging and the
 //!    behaviour machine are a few µs and have no OpenCV counterpart).
 //! 4. Prints median and min per frame of both, and the ratios (ours / OpenCV).
 
@@ -238,7 +238,8 @@ fn main() {
         ln * 1e3
     );
     println!(
-        "  ours   lane + 3 cascades + ranging + behaviour: median {:8.3} ms  min {:8.3} ms ({} boxes over the reps)",
+        "  ours   lane + {} cascades + ranging + behaviour: median {:8.3} ms  min {:8.3} ms ({} boxes over the reps)",
+        cascades.len(),
         om * 1e3,
         on * 1e3,
         found

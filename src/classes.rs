@@ -22,6 +22,31 @@ pub enum ObjectClass {
     TrafficLight,
     /// An obstacle standing on the floor.
     Obstacle,
+    /// A yield sign: a red-bordered white inverted triangle on a post (box = the face).
+    YieldSign,
+    /// A turn sign: a blue disc with a white arrow pointing left or right (box = the disc).
+    TurnSign,
+}
+
+/// The direction a turn sign's arrow points (read inside its box, src/detect/arrow.rs; a
+/// track file's `arrow` key). Serialized `left` / `right`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TurnArrow {
+    /// Turn left.
+    Left,
+    /// Turn right.
+    Right,
+}
+
+impl TurnArrow {
+    /// `left` or `right`.
+    pub fn name(self) -> &'static str {
+        match self {
+            TurnArrow::Left => "left",
+            TurnArrow::Right => "right",
+        }
+    }
 }
 
 /// Which behaviour of `control::behaviour` reacts to a class.
@@ -33,6 +58,10 @@ pub enum Reaction {
     WaitForGreen,
     /// Stop (or pass through the other lane) while it blocks the lane (an obstacle).
     StopOrPass,
+    /// Creep past it, stopping while an obstacle is in the lane ahead (a yield sign).
+    Yield,
+    /// Take the branch its arrow shows (a turn sign; the route's, no throttle behaviour).
+    TakeTurn,
 }
 
 /// The colour cue ranging refines a detector box with (src/ranging/refine.rs).
@@ -42,6 +71,8 @@ pub enum ColourCue {
     RedFace,
     /// A dark housing with one lit lamp (a traffic light).
     LitHousing,
+    /// A blue disc inside a thin white rim (a turn sign): the blue pixels' outline.
+    BlueFace,
     /// No colour cue (obstacles differ): the box is ranged as it is.
     None,
 }
@@ -55,6 +86,10 @@ pub enum SimShape {
     LightHousing,
     /// A box standing on the floor; `size_m` = [length, width, height].
     Box,
+    /// A red-bordered white inverted triangle on a post; `size_m` = the top edge's length.
+    Triangle,
+    /// A blue disc with a white arrow on a post; `size_m` = the disc's diameter.
+    ArrowDisc,
 }
 
 impl SimShape {
@@ -62,7 +97,7 @@ impl SimShape {
     pub fn size_numbers(self) -> usize {
         match self {
             SimShape::Box => 3,
-            SimShape::Octagon | SimShape::LightHousing => 1,
+            SimShape::Octagon | SimShape::LightHousing | SimShape::Triangle | SimShape::ArrowDisc => 1,
         }
     }
 }
@@ -102,6 +137,8 @@ pub struct ClassInfo {
     pub defaults: ClassDefaults,
     /// The detect stage reads the lamp colour inside its boxes.
     pub reads_light: bool,
+    /// The detect stage reads an arrow's direction inside its boxes (a turn sign).
+    pub reads_arrow: bool,
     /// The colour cue that refines its boxes before ranging.
     pub colour_cue: ColourCue,
     /// The behaviour that reacts to it.
@@ -133,6 +170,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
             box_margin: 1.085,
         },
         reads_light: false,
+        reads_arrow: false,
         colour_cue: ColourCue::RedFace,
         reaction: Reaction::StopThenGo,
         shape: SimShape::Octagon,
@@ -154,6 +192,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
             box_margin: 1.21,
         },
         reads_light: true,
+        reads_arrow: false,
         colour_cue: ColourCue::LitHousing,
         reaction: Reaction::WaitForGreen,
         shape: SimShape::LightHousing,
@@ -175,6 +214,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
             box_margin: 1.36,
         },
         reads_light: false,
+        reads_arrow: false,
         colour_cue: ColourCue::None,
         reaction: Reaction::StopOrPass,
         shape: SimShape::Box,
@@ -182,14 +222,63 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         sim_height_m: None,
         train_window: (20, 16),
     },
+    ClassInfo {
+        class: ObjectClass::YieldSign,
+        name: "yield_sign",
+        aliases: &["yield"],
+        model_key: "classes.yield_sign.model",
+        defaults: ClassDefaults {
+            model: "cascades/yield_sign.xml",
+            region: [0.45, 0.0, 1.0, 0.6],
+            box_m: [0.11, 0.17],
+            size_m: [0.12, 0.104],
+            bottom_m: 0.118,
+            box_margin: 1.165,
+        },
+        reads_light: false,
+        reads_arrow: false,
+        colour_cue: ColourCue::None,
+        reaction: Reaction::Yield,
+        shape: SimShape::Triangle,
+        sim_size_m: [0.12, 0.0, 0.0],
+        sim_height_m: Some(0.17),
+        train_window: (18, 16),
+    },
+    ClassInfo {
+        class: ObjectClass::TurnSign,
+        name: "turn_sign",
+        aliases: &["turn"],
+        model_key: "classes.turn_sign.model",
+        defaults: ClassDefaults {
+            model: "cascades/turn_sign.xml",
+            region: [0.45, 0.0, 1.0, 0.6],
+            box_m: [0.09, 0.14],
+            size_m: [0.10, 0.10],
+            bottom_m: 0.12,
+            box_margin: 1.093,
+        },
+        reads_light: false,
+        reads_arrow: true,
+        colour_cue: ColourCue::BlueFace,
+        reaction: Reaction::TakeTurn,
+        shape: SimShape::ArrowDisc,
+        sim_size_m: [0.10, 0.0, 0.0],
+        sim_height_m: Some(0.17),
+        train_window: (16, 16),
+    },
 ];
 
 impl ObjectClass {
     /// How many classes there are (the length of per-class arrays).
-    pub const COUNT: usize = 3;
+    pub const COUNT: usize = 5;
     /// Every class, in registry order.
-    pub const ALL: [ObjectClass; ObjectClass::COUNT] =
-        [ObjectClass::StopSign, ObjectClass::TrafficLight, ObjectClass::Obstacle];
+    pub const ALL: [ObjectClass; ObjectClass::COUNT] = [
+        ObjectClass::StopSign,
+        ObjectClass::TrafficLight,
+        ObjectClass::Obstacle,
+        ObjectClass::YieldSign,
+        ObjectClass::TurnSign,
+    ];
 
     /// Its registry entry.
     pub fn info(self) -> &'static ClassInfo {
@@ -201,7 +290,7 @@ impl ObjectClass {
         self as usize
     }
 
-    /// Its name (`stop_sign`, `traffic_light`, `obstacle`).
+    /// Its name (`stop_sign`, `traffic_light`, `obstacle`, `yield_sign`, `turn_sign`).
     pub fn name(self) -> &'static str {
         self.info().name
     }
@@ -238,5 +327,38 @@ mod tests {
         assert_eq!(ObjectClass::from_label("stop"), Some(ObjectClass::StopSign));
         assert_eq!(ObjectClass::from_label("light"), Some(ObjectClass::TrafficLight));
         assert_eq!(ObjectClass::from_label("face"), None);
+    }
+
+    #[test]
+    fn the_yield_and_turn_signs_are_registered() {
+        let y = ObjectClass::YieldSign.info();
+        assert_eq!(
+            (y.name, y.reaction, y.shape),
+            ("yield_sign", Reaction::Yield, SimShape::Triangle)
+        );
+        assert_eq!(y.defaults.model, "cascades/yield_sign.xml");
+        assert_eq!(y.train_window, (18, 16));
+        let t = ObjectClass::TurnSign.info();
+        assert_eq!(
+            (t.name, t.reaction, t.shape),
+            ("turn_sign", Reaction::TakeTurn, SimShape::ArrowDisc)
+        );
+        assert_eq!(t.defaults.model, "cascades/turn_sign.xml");
+        assert_eq!(t.train_window, (16, 16));
+        // Only the turn sign reads an arrow, only the light a lamp.
+        for c in ObjectClass::ALL {
+            assert_eq!(c.info().reads_arrow, c == ObjectClass::TurnSign, "{c}");
+            assert_eq!(c.info().reads_light, c == ObjectClass::TrafficLight, "{c}");
+        }
+        // A triangle's box: the face's height is √3/2 of its width.
+        assert!((y.defaults.size_m[1] - y.defaults.size_m[0] * 0.75f64.sqrt()).abs() < 1e-3);
+        assert_eq!(ObjectClass::from_label("yield"), Some(ObjectClass::YieldSign));
+        assert_eq!(ObjectClass::from_label("turn"), Some(ObjectClass::TurnSign));
+        assert_eq!(serde_json::to_string(&TurnArrow::Left).unwrap(), "\"left\"");
+        assert_eq!(
+            serde_json::from_str::<TurnArrow>("\"right\"").unwrap(),
+            TurnArrow::Right
+        );
+        assert_eq!(TurnArrow::Left.name(), "left");
     }
 }

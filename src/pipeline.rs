@@ -21,7 +21,7 @@
 //! Without a detector (none loaded, or the cascade files missing) steps 2–3 find nothing and
 //! the car keeps its lane; the behaviour machine still handles a lost lane.
 
-use crate::classes::{ColourCue, Reaction};
+use crate::classes::{ColourCue, Reaction, TurnArrow};
 use crate::config::Config;
 use crate::control::behaviour::{Behaviour, DeadReckoning, Decision, LightColor, Mode, Observations, Ranged};
 use crate::control::steering::SteeringInput;
@@ -125,6 +125,9 @@ pub struct RangedObject {
     /// A traffic light's colour.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub light: Option<LightColor>,
+    /// A turn sign's arrow, `left` or `right` (read inside its box).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arrow: Option<TurnArrow>,
     /// σ of `distance_m`, metres (the track's filter; absent for an object without a range).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distance_sigma_m: Option<f64>,
@@ -354,8 +357,8 @@ pub struct Pipeline {
     detect_bands: [Option<crate::detect::RowBand>; ObjectClass::COUNT],
     /// Frame rows detection reads (set with the detector).
     detect_rows: Vec<std::ops::Range<usize>>,
-    tracker: Tracker<Option<LightColor>>,
-    measurements: Vec<Measurement<Option<LightColor>>>,
+    tracker: Tracker<Cues>,
+    measurements: Vec<Measurement<Cues>>,
     every_n: u64,
     frame_index: u64,
     /// Stereo ranging (`ranging.method = "stereo"`), used by [`Pipeline::step_stereo`].
@@ -367,6 +370,10 @@ pub struct Pipeline {
     stop_line: Option<StopLineDetector>,
     stop_line_seen: Option<crate::lane::stop_line::StopLineSeen>,
 }
+
+/// A turn sign nearer than this (lens to sign, metres) decides the next fork: far enough to see
+/// it before the car is at the fork, near enough not to take a sign at the fork after.
+pub const TURN_SIGN_NEAR_M: f64 = 2.0;
 
 /// The stop-line detector of `cfg`'s `[camera]`, `[warp]` and `lane.lane_width_px`.
 fn stop_line_detector(cfg: &Config) -> Option<StopLineDetector> {
@@ -526,7 +533,7 @@ impl Pipeline {
                     (l.region.y - grow).clamp(0, h),
                     (l.region.y + l.region.height + grow).clamp(0, h),
                 );
-                if (info.reads_light || refined) && y1 > y0 {
+                if (info.reads_light || info.reads_arrow || refined) && y1 > y0 {
                     spans.push(y0 as usize..y1 as usize);
                 }
             }
@@ -630,6 +637,15 @@ impl Pipeline {
         self.track_objects(dt_s, detect_now);
         // 5. Behaviour.
         let obs = self.observations(lane.error.is_some());
+        // A turn sign near decides the next fork (the junction rule reads it from the next frame).
+        if let (Some(rule), Some((r, arrow))) = (&mut self.junction, obs.turn_sign) {
+            if r.distance_m <= TURN_SIGN_NEAR_M {
+                rule.sign(match arrow {
+                    crate::classes::TurnArrow::Left => crate::route::Step::Left,
+                    crate::classes::TurnArrow::Right => crate::route::Step::Right,
+                });
+            }
+        }
         let decision = self.behaviour.step(&obs, self.time_s);
         let detect_us = timer.lap_us();
         // 6. Control, then the behaviour's overrides.
@@ -667,7 +683,8 @@ impl Pipeline {
             Some(boxes) => {
                 for b in boxes {
                     let r = self.ranging.range_outline(b.class, b.bbox);
-                    push_measured(&mut self.measurements, &mut self.objects, b.class, b.bbox, r, b.light);
+                    let cues = (b.light, b.arrow);
+                    push_measured(&mut self.measurements, &mut self.objects, b.class, b.bbox, r, cues);
                 }
             }
             None if detect_now => {
@@ -695,12 +712,18 @@ impl Pipeline {
                                 (r.y + r.height) as f64 - 0.5,
                             ];
                             let light = d.light.as_ref().map(|l| light_color(l, frame, r));
+                            let arrow = if class.info().reads_arrow {
+                                crate::detect::arrow::read_arrow(frame, r)
+                            } else {
+                                None
+                            };
                             let range = match stereo {
                                 Some(ref mut st) => st.range(class, r),
                                 None => None,
                             }
                             .or_else(|| self.ranging.range_in_image(frame, class, bbox));
-                            push_measured(&mut self.measurements, &mut self.objects, class, bbox, range, light);
+                            let cues = (light, arrow);
+                            push_measured(&mut self.measurements, &mut self.objects, class, bbox, range, cues);
                         }
                     }
                 }
@@ -732,7 +755,8 @@ impl Pipeline {
                 bbox: t.bbox,
                 distance_m: Some(t.distance_m),
                 lateral_m: Some(t.lateral_m),
-                light: t.extra,
+                light: t.extra.0,
+                arrow: t.extra.1,
                 distance_sigma_m: Some(t.sigma_m()),
                 measured_m: t.matched_now.then_some(t.measured_m),
                 track_id: Some(t.id),
@@ -775,6 +799,12 @@ impl Pipeline {
                         o.obstacle = nearer(o.obstacle, r);
                     }
                     obstacle_any = nearer(obstacle_any, r);
+                }
+                Reaction::Yield => o.yield_sign = nearer(o.yield_sign, r),
+                Reaction::TakeTurn => {
+                    if let (Some(a), true) = (ob.arrow, o.turn_sign.is_none_or(|(c, _)| c.distance_m > d)) {
+                        o.turn_sign = Some((r, a));
+                    }
                 }
             }
         }
@@ -827,29 +857,33 @@ impl Pipeline {
     }
 }
 
+/// What is read inside a box and carried by its track: a light's colour, a turn sign's arrow.
+type Cues = (Option<LightColor>, Option<TurnArrow>);
+
 /// A ranged box goes to the tracker; one without a range (above the horizon) is reported as
 /// it is, without a distance.
 fn push_measured(
-    meas: &mut Vec<Measurement<Option<LightColor>>>,
+    meas: &mut Vec<Measurement<Cues>>,
     objects: &mut Vec<RangedObject>,
     class: ObjectClass,
     bbox: [f64; 4],
     range: Option<crate::ranging::BoxRange>,
-    light: Option<LightColor>,
+    cues: Cues,
 ) {
     match range {
         Some(range) => meas.push(Measurement {
             class,
             bbox,
             range,
-            extra: light,
+            extra: cues,
         }),
         None => objects.push(RangedObject {
             class,
             bbox,
             distance_m: None,
             lateral_m: None,
-            light,
+            light: cues.0,
+            arrow: cues.1,
             distance_sigma_m: None,
             measured_m: None,
             track_id: None,

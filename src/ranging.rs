@@ -567,7 +567,7 @@ impl BoxRanging {
     /// The range of a colour outline (src/ranging/refine.rs) of a stop sign's red area or a
     /// light's housing, each edge known to `σ_e = 0.5` px. Cues, fused by inverse variance:
     ///
-    /// 1. width (stop sign): the red area, `red_fraction·W` wide, is widest at the face's
+    /// 1. width (stop sign, turn sign): the red area (the blue disc, [`BLUE_FRACTION`]·W), `red_fraction·W` wide, is widest at the face's
     ///    centre height z_c: `Z = f·W_r / w_px`, `d = (Z − (h − z_c)·sin α) / cos α`;
     /// 2. height: a vertical edge from z_b to z_t at forward distance d spans
     ///    `f·H·d / (Z_b·Z_t)` rows (`Z_i = d cos α + (h − z_i) sin α`), solved for d;
@@ -579,11 +579,13 @@ impl BoxRanging {
         if !(w_px > 0.0 && h_px > 0.0) || cb.height_m <= 0.0 {
             return None;
         }
-        // The coloured part: the red area of a sign (centred on the face), a light's housing.
-        let k = if class.info().colour_cue == ColourCue::RedFace {
-            self.red_fraction
-        } else {
-            1.0
+        // The coloured part: the red area of a sign (centred on the face), a turn sign's blue
+        // disc inside its white rim, a light's housing.
+        let cue = class.info().colour_cue;
+        let k = match cue {
+            ColourCue::RedFace => self.red_fraction,
+            ColourCue::BlueFace => BLUE_FRACTION,
+            _ => 1.0,
         };
         let (hh, zc) = (cb.height_m * k, cb.bottom_m + cb.height_m / 2.0);
         let (zb, zt) = (zc - hh / 2.0, zc + hh / 2.0);
@@ -592,7 +594,7 @@ impl BoxRanging {
         let mut cues: [Option<(f64, f64)>; 3] = [None; 3];
         let sw = SIGMA_EDGE * std::f64::consts::SQRT_2;
         // 1. Width.
-        if class.info().colour_cue == ColourCue::RedFace && cb.width_m > 0.0 {
+        if matches!(cue, ColourCue::RedFace | ColourCue::BlueFace) && cb.width_m > 0.0 {
             let z = f * cb.width_m * k / w_px;
             let d = (z - (self.tilt.h - zc) * s) / c;
             if d > 0.0 {
@@ -629,6 +631,10 @@ impl BoxRanging {
         })
     }
 }
+
+/// The share of a turn sign's disc, across, that is blue inside its white rim (the
+/// simulator's sign, src/sim/scene.rs).
+pub const BLUE_FRACTION: f64 = 0.92;
 
 /// The `d` in `[lo, hi]` where the monotonic function `f` equals `target` (bisection on
 /// log d), or `None` when `target` is outside `f`'s range there.
@@ -826,6 +832,8 @@ mod tests {
                 class(0.10, 0.10, 0.12, 1.085),
                 class(0.0, 0.12, 0.10, 1.21),
                 class(0.0, 0.0, 0.0, 1.36),
+                class(0.12, 0.104, 0.118, 1.165),
+                class(0.10, 0.10, 0.12, 1.093),
             ],
             centre_sigma_px: 1.0,
             size_sigma: 0.06,

@@ -54,6 +54,8 @@ pub struct GivenBox {
     pub bbox: [f64; 4],
     /// A traffic light's colour.
     pub light: Option<LightColor>,
+    /// A turn sign's arrow.
+    pub arrow: Option<crate::classes::TurnArrow>,
 }
 
 /// The other camera's image of a stereo frame (the reference camera's is [`Frame::image`]).

@@ -31,6 +31,7 @@ mod runs;
 mod session;
 mod sim_loop;
 mod sim_replay;
+mod sign_classes;
 mod sim_track;
 mod stereo_cli;
 mod stereo_loop;

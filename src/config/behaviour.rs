@@ -57,6 +57,12 @@ pub struct BehaviourConfig {
     pub lost_throttle: f64,
     /// Stop after the lane has been lost this long, seconds.
     pub lost_stop_s: f64,
+    /// Slow down for a yield sign confirmed nearer than this, metres.
+    pub yield_slow_m: f64,
+    /// Throttle cap while yielding (0..1).
+    pub yield_creep: f64,
+    /// While yielding, an obstacle in the lane nearer than this stops the car, metres.
+    pub yield_clear_m: f64,
 }
 
 impl Default for BehaviourConfig {
@@ -85,6 +91,9 @@ impl Default for BehaviourConfig {
             pass_return_m: 3.5,
             lost_throttle: 0.2,
             lost_stop_s: 1.0,
+            yield_slow_m: 1.0,
+            yield_creep: 0.25,
+            yield_clear_m: 1.2,
         }
     }
 }
@@ -126,6 +135,9 @@ impl BehaviourConfig {
         c.range("behaviour.pass_return_m", b.pass_return_m, 0.1, 50.0);
         c.range("behaviour.lost_throttle", b.lost_throttle, 0.0, 1.0);
         c.range("behaviour.lost_stop_s", b.lost_stop_s, 0.0, 60.0);
+        c.range("behaviour.yield_slow_m", b.yield_slow_m, 0.05, 10.0);
+        c.range("behaviour.yield_creep", b.yield_creep, 0.0, 1.0);
+        c.range("behaviour.yield_clear_m", b.yield_clear_m, 0.05, 10.0);
     }
 }
 
@@ -155,6 +167,9 @@ impl From<&BehaviourConfig> for BehaviourOptions {
             pass_throttle: b.pass_throttle,
             lost_throttle: b.lost_throttle,
             lost_stop_s: b.lost_stop_s,
+            yield_slow_m: b.yield_slow_m,
+            yield_creep: b.yield_creep,
+            yield_clear_m: b.yield_clear_m,
         }
     }
 }

@@ -265,7 +265,7 @@ mod tests {
         assert_eq!(
             e,
             "t.toml: unknown key `classes.bicycle`, the classes are `stop_sign`, `traffic_light`, \
-             `obstacle` (a new one needs its entry in src/classes.rs)"
+             `obstacle`, `yield_sign`, `turn_sign` (a new one needs its entry in src/classes.rs)"
         );
         let e = Config::from_toml_str("[classes.stop_signs]\nbottom_m = 0.1\n", "t.toml")
             .unwrap_err()

@@ -10,12 +10,15 @@
 //!     │  obstacle in lane < obstacle_stop_m                   (or no light for light_lost_s)
 //!     ├─────────────────────────────────────► Obstacle ──(pass_enabled, stood pass_wait_s)──►
 //!     │                                         PassOut → PassAlong → PassBack → Cruise
+//!     ├── yield sign confirmed < yield_slow_m ──► Yield (throttle ≤ yield_creep) ── passed ──► Cruise
+//!     │                obstacle in lane < yield_clear_m ──► YieldStop ── lane clear ──► Yield
 //!     └── lane lost ──► LaneLost (lost_throttle, then 0 after lost_stop_s) ── lane seen ──► Cruise
 //! ```
 //!
 //! Priorities: an obstacle in the lane beats everything but a pass under way; a red light
 //! beats a stop sign. A stop sign confirmed while passing is remembered and obeyed as soon as
-//! the car is back in its lane (it never stops in the other lane).
+//! the car is back in its lane (it never stops in the other lane). A yield sign comes after
+//! both; a turn sign is only observed (the route takes it; no throttle behaviour).
 //!
 //! Time and observations are passed in ([`Behaviour::step`]); the machine never reads a clock,
 //! so every test is deterministic. The car has no wheel encoder: speed and distance come from
@@ -72,6 +75,12 @@ pub struct BehaviourOptions {
     pub lost_throttle: f64,
     /// Stop after the lane has been lost this long, seconds.
     pub lost_stop_s: f64,
+    /// Slow down for a yield sign confirmed nearer than this, metres.
+    pub yield_slow_m: f64,
+    /// Throttle cap while yielding, 0..=1.
+    pub yield_creep: f64,
+    /// While yielding, an obstacle in the lane nearer than this stops the car, metres.
+    pub yield_clear_m: f64,
 }
 
 /// A traffic light's colour as the detector read it.
@@ -108,6 +117,10 @@ pub struct Observations {
     pub light: Option<(Ranged, LightColor)>,
     /// The nearest obstacle, if any (the machine decides whether it is in the lane).
     pub obstacle: Option<Ranged>,
+    /// The nearest yield sign, if any.
+    pub yield_sign: Option<Ranged>,
+    /// The nearest turn sign and its arrow, if any (for the route; no throttle behaviour).
+    pub turn_sign: Option<(Ranged, crate::classes::TurnArrow)>,
     /// Estimated speed, m/s (from [`DeadReckoning`]).
     pub speed_mps: f64,
     /// Estimated distance driven since the start, metres.
@@ -136,12 +149,18 @@ pub enum Mode {
     PassBack,
     /// The lane is not seen: slow, then stop.
     LaneLost,
+    /// Creeping past a yield sign.
+    Yield,
+    /// At a yield sign with an obstacle in the lane: stopping at the yield point (or before
+    /// the obstacle) and standing while it stays.
+    YieldStop,
 }
 
 impl Mode {
-    /// A state in which standing still is intended (stop sign, red light, obstacle).
+    /// A state in which standing still is intended (stop sign, red light, obstacle, yielding
+    /// to one).
     pub fn is_waiting(self) -> bool {
-        matches!(self, Mode::StopSign | Mode::RedLight | Mode::Obstacle)
+        matches!(self, Mode::StopSign | Mode::RedLight | Mode::Obstacle | Mode::YieldStop)
     }
 
     /// One of the three passing states (the car may be in the other lane).
@@ -160,6 +179,8 @@ impl Mode {
             Mode::PassAlong => "pass_along",
             Mode::PassBack => "pass_back",
             Mode::LaneLost => "lane_lost",
+            Mode::Yield => "yield",
+            Mode::YieldStop => "yield_stop",
         }
     }
 }
@@ -271,6 +292,12 @@ pub struct Behaviour {
     /// Last time a traffic light was seen, seconds.
     light_seen_at: f64,
     lane_lost_since: Option<f64>,
+    /// Odometry at which the car reaches the confirmed yield point ([`yield_point_m`]).
+    yield_at_odo: f64,
+    /// Distance of the obstacle that blocks a yield when last seen, metres.
+    yield_obstacle_m: f64,
+    yield_w: Window,
+    yield_block_w: Window,
     stop_w: Window,
     red_w: Window,
     green_w: Window,
@@ -318,6 +345,10 @@ impl Behaviour {
             pending_stop: false,
             light_seen_at: f64::NEG_INFINITY,
             lane_lost_since: None,
+            yield_at_odo: f64::NEG_INFINITY,
+            yield_obstacle_m: f64::INFINITY,
+            yield_w: Window::default(),
+            yield_block_w: Window::default(),
             stop_w: Window::default(),
             red_w: Window::default(),
             green_w: Window::default(),
@@ -433,6 +464,23 @@ impl Behaviour {
         let green_ok = self.green_w.last_all(c.green_confirm_frames);
         let obstacle_ok = self.confirmed(self.obstacle_w);
         let obstacle_gone = self.obstacle_w.count(c.window_frames) == 0;
+        // Yield: the sign near, and what blocks the lane ahead while yielding.
+        let yield_at = yield_point_m(obs);
+        self.yield_w.push(yield_at.is_some_and(|d| d < c.yield_slow_m));
+        let yield_ok = self.confirmed(self.yield_w);
+        if let (true, Some(d)) = (yield_ok, yield_at) {
+            // A give-way (or stop) line across the lane near the sign is where to stand.
+            self.yield_at_odo = odo + self.stop_line_distance(odo, Some(d)).map_or(d, |(l, _)| l);
+        }
+        let block = obs
+            .obstacle
+            .filter(|o| o.distance_m < c.yield_clear_m && o.lateral_m.abs() <= c.obstacle_lane_half_m);
+        self.yield_block_w.push(block.is_some());
+        if let Some(o) = block {
+            self.yield_obstacle_m = o.distance_m;
+        }
+        let yield_blocked = self.confirmed(self.yield_block_w);
+        let yield_clear = self.yield_block_w.count(c.window_frames) == 0;
         let still = obs.speed_mps.abs() < c.standstill_mps;
         if still && self.standstill_since.is_none() {
             self.standstill_since = Some(now);
@@ -456,6 +504,9 @@ impl Behaviour {
             obstacle_ok,
             obstacle_gone,
             in_pass,
+            yield_ok: yield_ok || odo < self.yield_at_odo,
+            yield_blocked,
+            yield_clear,
         }
     }
 
@@ -471,6 +522,9 @@ impl Behaviour {
             obstacle_ok,
             obstacle_gone,
             in_pass,
+            yield_ok,
+            yield_blocked,
+            yield_clear,
         } = e;
         if obstacle_ok && !in_pass && self.mode != Mode::Obstacle {
             let d = obs.obstacle.map_or(f64::NAN, |o| o.distance_m);
@@ -493,6 +547,9 @@ impl Behaviour {
                         };
                         self.pending_stop = false;
                         self.go(Mode::StopSign, now, odo, why);
+                    } else if yield_ok && obs.lane_seen {
+                        let d = self.yield_at_odo - odo;
+                        self.go(Mode::Yield, now, odo, format!("yield sign at {d:.2} m"));
                     } else if self.mode == Mode::Cruise && !obs.lane_seen {
                         self.go(Mode::LaneLost, now, odo, "lane not seen".into());
                     } else if self.mode == Mode::LaneLost && obs.lane_seen {
@@ -531,6 +588,25 @@ impl Behaviour {
                         self.go(Mode::Cruise, now, odo, "lane clear".into());
                     } else if c.pass_enabled && self.standstill_since.is_some_and(|t0| now - t0 >= c.pass_wait_s) {
                         self.go(Mode::PassOut, now, odo, "passing the obstacle".into());
+                    }
+                }
+                Mode::Yield => {
+                    if yield_blocked {
+                        let d = self.yield_obstacle_m;
+                        let why = format!("yielding: obstacle in lane at {d:.2} m");
+                        self.go(Mode::YieldStop, now, odo, why);
+                    } else if odo >= self.yield_at_odo {
+                        self.yield_at_odo = f64::NEG_INFINITY;
+                        self.yield_w = Window::default();
+                        self.go(Mode::Cruise, now, odo, "past the yield sign".into());
+                    } else if !obs.lane_seen {
+                        self.go(Mode::LaneLost, now, odo, "lane not seen".into());
+                    }
+                }
+                Mode::YieldStop => {
+                    if yield_clear {
+                        self.yield_obstacle_m = f64::INFINITY;
+                        self.go(Mode::Yield, now, odo, "lane clear".into());
                     }
                 }
                 Mode::PassOut => {
@@ -590,6 +666,17 @@ impl Behaviour {
                 throttle_cap = if lost >= c.lost_stop_s { 0.0 } else { c.lost_throttle };
                 (None, None)
             }
+            // Creep; blocked, stand at the yield point or obstacle_stop_m before the obstacle.
+            // With a line: roll to rest with the front on it (as at a stop sign's line).
+            Mode::Yield | Mode::YieldStop => {
+                throttle_cap = c.yield_creep;
+                if self.mode == Mode::YieldStop && self.stop_line_distance(odo, None).is_some() {
+                    throttle_cap = throttle_cap.min(self.line_approach(odo));
+                }
+                let at_point = odo >= self.yield_at_odo || self.yield_obstacle_m <= c.obstacle_stop_m;
+                let stand = self.mode == Mode::YieldStop && at_point;
+                (stand.then_some(0.0), None)
+            }
         };
         Decision {
             mode: self.mode,
@@ -625,6 +712,19 @@ struct Evidence {
     obstacle_ok: bool,
     obstacle_gone: bool,
     in_pass: bool,
+    /// A yield sign confirmed near, or its point still ahead.
+    yield_ok: bool,
+    /// An obstacle confirmed in the lane within `yield_clear_m`.
+    yield_blocked: bool,
+    /// No such obstacle in the whole window.
+    yield_clear: bool,
+}
+
+/// How far ahead of the lens a yielding car stops when the way is not clear, metres: the
+/// yield sign's ranged distance; a line across the lane near it takes over where the sign's
+/// point is set ([`Behaviour::stop_line_distance`]).
+fn yield_point_m(obs: &Observations) -> Option<f64> {
+    obs.yield_sign.map(|s| s.distance_m)
 }
 
 #[cfg(test)]
@@ -657,6 +757,9 @@ mod tests {
             pass_throttle: 0.35,
             lost_throttle: 0.2,
             lost_stop_s: 1.0,
+            yield_slow_m: 1.0,
+            yield_creep: 0.25,
+            yield_clear_m: 1.2,
         }
     }
 
@@ -1080,6 +1183,93 @@ mod tests {
         let d = b.step(&lane(), t + DT);
         assert_eq!((d.mode, d.throttle), (Mode::Cruise, None));
         assert_eq!(b.last_transition().unwrap().reason, "lane seen again");
+    }
+
+    /// A yield sign 1.6 m ahead at odometry 0 (seen while more than 0.3 m ahead of the lens),
+    /// and, with `obstacle`, an obstacle in the lane 0.6 m beyond it.
+    fn yield_scene(odo: f64, obstacle: bool) -> Observations {
+        let sign = 1.6 - odo;
+        Observations {
+            yield_sign: (sign > 0.3).then(|| at(sign)),
+            obstacle: obstacle.then(|| at(sign + 0.6)),
+            ..lane()
+        }
+    }
+
+    #[test]
+    fn yield_creeps_near_the_sign_and_cruises_past_it() {
+        let mut r = Rig::new(defaults());
+        let mut modes = vec![];
+        for _ in 0..300 {
+            let odo = r.car.odometry_m;
+            let d = r.frame(|odo| yield_scene(odo, false));
+            modes.push((odo, d.mode, d.throttle_cap));
+        }
+        // Cruise beyond yield_slow_m; creep (throttle capped) within; cruise again past it.
+        let first = modes.iter().find(|m| m.1 == Mode::Yield).expect("yielded");
+        assert!(first.0 > 0.55 && first.0 < 0.75, "slowed at odometry {}", first.0);
+        assert!(modes.iter().filter(|m| m.1 == Mode::Yield).all(|m| m.2 == 0.25));
+        assert!(modes.iter().all(|m| m.1 != Mode::YieldStop), "never stops when clear");
+        let last = modes.iter().rposition(|m| m.1 == Mode::Yield).unwrap();
+        let (before, after) = (modes[last], modes[last + 1]);
+        assert!(before.0 < 1.6 && after.0 >= 1.6, "{before:?} {after:?}");
+        assert_eq!(modes[last + 1].1, Mode::Cruise);
+        // The creep is slower than cruising (lane throttle 0.5 in the rig: 0.5 m/s).
+        let creeping = r.log.iter().rfind(|l| l.1 == Mode::Yield).unwrap().2;
+        assert!((creeping - 0.25).abs() < 0.01, "{creeping}");
+    }
+
+    #[test]
+    fn yield_stops_while_an_obstacle_is_in_the_lane_and_goes_when_clear() {
+        let mut r = Rig::new(defaults());
+        let mut stood = 0;
+        let mut yield_stop_at = None;
+        for _ in 0..400 {
+            let d = r.frame(|odo| yield_scene(odo, true));
+            if d.mode == Mode::YieldStop {
+                yield_stop_at.get_or_insert(r.car.odometry_m);
+                if r.car.speed_mps.abs() < 0.01 {
+                    stood += 1;
+                }
+            }
+        }
+        assert!(yield_stop_at.is_some(), "stopped for the obstacle");
+        assert!(stood > 30, "stood {stood} frames");
+        // Stood at the sign (coasting from the creep, 0.25 m/s × τ 0.3 s + a frame, past it), well
+        // before the obstacle.
+        let odo = r.car.odometry_m;
+        assert!((1.6..=1.6 + 0.09).contains(&odo), "stood at odometry {odo}");
+        assert!(1.6 + 0.6 - odo >= defaults().obstacle_stop_m, "{odo}");
+        assert_eq!(r.b.mode(), Mode::YieldStop);
+        // It holds while the obstacle stays.
+        for _ in 0..60 {
+            assert_eq!(r.frame(|odo| yield_scene(odo, true)).throttle, Some(0.0));
+        }
+        // Clear: back to creeping, then past the sign to cruise.
+        let mut seen = vec![];
+        for _ in 0..200 {
+            seen.push(r.frame(|odo| yield_scene(odo, false)).mode);
+        }
+        let lane_clear = seen.iter().position(|m| *m == Mode::Yield).expect("went on");
+        assert!(lane_clear <= 5, "within a window: {lane_clear}");
+        assert_eq!(*seen.last().unwrap(), Mode::Cruise);
+        assert!(r.car.odometry_m > 1.7);
+    }
+
+    #[test]
+    fn yield_ignores_an_obstacle_beside_the_lane_or_far_away() {
+        let mut r = Rig::new(defaults());
+        for _ in 0..300 {
+            let d = r.frame(|odo| Observations {
+                obstacle: Some(Ranged {
+                    distance_m: 0.6,
+                    lateral_m: 0.3,
+                }),
+                ..yield_scene(odo, false)
+            });
+            assert_ne!(d.mode, Mode::YieldStop);
+        }
+        assert_eq!(r.b.mode(), Mode::Cruise);
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //!   -> Detector::new(cascade)        keeps pyramid, integral and scratch buffers
 //!   -> Detector::detect(&gray, &DetectParams) -> Vec<Detection>   every frame
 //!   -> light_state(&rgb, rect)       traffic-light colour inside a box
+//!   -> arrow::read_arrow(&rgb, rect) a turn sign's arrow inside a box
 //! ```
 //!
 //! [`DetectStage`] bundles labelled cascades (stop, light, obstacle) for the pipeline and runs
@@ -16,6 +17,7 @@
 //! `docs/detect.md` and `tests/parity/detect_parity.py` for the measured agreement).
 
 pub mod annotate;
+pub mod arrow;
 pub mod cascade;
 pub mod detector;
 pub mod group;

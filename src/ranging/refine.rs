@@ -5,7 +5,8 @@
 //! with a bias that changes with distance); the object's colour edge is a pixel sharp. The
 //! region searched is the box grown by `grow` on every side; inside it:
 //!
-//! 1. Stop sign: a pixel is red when `R ≥ 50`, `R ≥ 1.8·G` and `R ≥ 1.6·B`. Traffic light: a
+//! 1. Stop sign: a pixel is red when `R ≥ 50`, `R ≥ 1.8·G` and `R ≥ 1.6·B` (turn sign: blue
+//!    when `B ≥ 50`, `B ≥ 1.6·R` and `B ≥ 1.2·G`). Traffic light: a
 //!    pixel is dark when its luminance is at most `2·L₁₀ + 8`, with L₁₀ the region's 10th
 //!    percentile (the housing's own level, whatever the exposure: the housing is the darkest
 //!    thing in its box, its post and the floor behind are 2.5–4× brighter, and a two-class
@@ -65,6 +66,10 @@ pub fn outline(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<[f6
             let t = 2 * p10 + 8;
             Box::new(move |p: [u8; 3]| luma(p) <= t)
         }
+        ColourCue::BlueFace => Box::new(|p: [u8; 3]| {
+            let (r, g, b) = (p[0] as u32, p[1] as u32, p[2] as u32);
+            b >= 50 && 10 * b >= 16 * r && 10 * b >= 12 * g
+        }),
         ColourCue::None => return None,
     };
     // 2. Profiles.
@@ -81,6 +86,8 @@ pub fn outline(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<[f6
     }
     let frac = match cue {
         ColourCue::RedFace => 0.2,
+        // A disc's chord is 10% of its diameter 0.5% of the radius from its edge.
+        ColourCue::BlueFace => 0.1,
         _ => 0.5,
     };
     if n < 12 {

@@ -11,6 +11,9 @@ use super::track::Track;
 use crate::route::{Step, Why};
 use serde::Serialize;
 
+/// A turn sign decides the fork at most this far after it along the road, metres.
+pub const SIGN_REACH_M: f64 = 3.0;
+
 /// One junction passed on a planned (or a driven) path.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Passage {
@@ -71,14 +74,15 @@ impl Track {
                 let jn = &self.junctions[j];
                 match jn.kind {
                     JunctionKind::Fork => {
-                        let (want, why) = match route.get(step) {
-                            Some(&w) => (w, Why::Route),
-                            None => (Self::default_way(jn.ways), Why::Default),
+                        let (want, why) = match (self.turn_sign_before(j), route.get(step)) {
+                            (Some(w), _) => (w, Why::Sign),
+                            (None, Some(&w)) => (w, Why::Route),
+                            (None, None) => (Self::default_way(jn.ways), Why::Default),
                         };
                         let idx = jn.ways.iter().position(|&w| w == want).ok_or_else(|| {
                             format!(
-                                "route step {} is `{want}`, but fork {j} at ({:.2}, {:.2}) m on `{}` offers {} and {}",
-                                step + 1,
+                                "{} is `{want}`, but fork {j} at ({:.2}, {:.2}) m on `{}` offers {} and {}",
+                                if why == Why::Sign { "the turn sign before it".to_string() } else { format!("route step {}", step + 1) },
                                 jn.pos[0],
                                 jn.pos[1],
                                 self.roads[jn.road].name,
@@ -86,8 +90,9 @@ impl Track {
                                 jn.ways[1]
                             )
                         })?;
-                        let used = (why == Why::Route).then_some(step);
-                        if why == Why::Route {
+                        // A sign uses up the fork's step as the route's word would (as the car does).
+                        let used = (why != Why::Default && step < route.len()).then_some(step);
+                        if why != Why::Default {
                             step += 1;
                         }
                         let next = if idx == 0 { road } else { jn.other };
@@ -149,6 +154,26 @@ impl Track {
             }
         }
         Err("the route does not come back to the start line (a loop of branches without the main road?)".into())
+    }
+
+    /// The way an enabled turn sign standing before fork `j` shows: beside its road (within
+    /// 0.8 m of the centre line) and at most [`SIGN_REACH_M`] before the fork. The pipeline obeys
+    /// such a sign whatever the route says (src/lane/junction.rs); so does the plan.
+    pub fn turn_sign_before(&self, j: usize) -> Option<Step> {
+        let jn = &self.junctions[j];
+        let len = self.roads[jn.road].length;
+        self.enabled_objects().find_map(|o| {
+            let arrow = o.arrow?;
+            let (s, lat) = self.project_on(jn.road, o.pos);
+            let mut before = jn.s - s;
+            if jn.road == 0 {
+                before = before.rem_euclid(len);
+            }
+            (before > 0.0 && before <= SIGN_REACH_M && lat.abs() < 0.8).then_some(match arrow {
+                crate::classes::TurnArrow::Left => Step::Left,
+                crate::classes::TurnArrow::Right => Step::Right,
+            })
+        })
     }
 
     /// The way the car keeps on a fork with no step and no sign: `straight`, else `right`.

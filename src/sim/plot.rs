@@ -153,9 +153,9 @@ pub fn path_plot(s: &Series, scene: &Scene) -> Result<RgbImage, PlotError> {
         for o in track.enabled_objects() {
             // by how the class is drawn (the registry's shape), so a new class needs no entry here
             let col = match o.kind.info().shape {
-                SimShape::Octagon => RED,
+                SimShape::Octagon | SimShape::Triangle => RED,
                 SimShape::LightHousing => GREEN,
-                SimShape::Box => BLUE,
+                SimShape::Box | SimShape::ArrowDisc => BLUE,
             };
             c.draw_series(std::iter::once(Circle::new((o.pos[0], o.pos[1]), 5, col.filled())))
                 .map_err(err)?;

@@ -132,8 +132,9 @@ impl Prim {
             Prim::Panel { center, dir, kind } => {
                 // A flat panel: depth 0 along its normal; half size across and up.
                 let r = match kind {
-                    PanelKind::StopFace { width } => width / 2.0,
+                    PanelKind::StopFace { width } | PanelKind::YieldFace { width } => width / 2.0,
                     PanelKind::Lamp { radius, .. } => radius,
+                    PanelKind::ArrowDisc { diameter, .. } => diameter / 2.0,
                 };
                 (center, dir, [0.0, r, r])
             }
@@ -157,6 +158,20 @@ pub enum PanelKind {
     StopFace {
         /// Across the flats, metres.
         width: f64,
+    },
+    /// A yield sign's face: an inverted equilateral triangle whose top edge is `width` long,
+    /// white with a red border, centred on its bounding box.
+    YieldFace {
+        /// The top edge, metres.
+        width: f64,
+    },
+    /// A turn sign's face: a blue disc with a white rim and a white arrow pointing left
+    /// (`right` false) or right.
+    ArrowDisc {
+        /// The disc's diameter, metres.
+        diameter: f64,
+        /// The arrow points to the viewer's right.
+        right: bool,
     },
     /// A round lamp of `radius`; bright when lit.
     Lamp {
@@ -525,6 +540,27 @@ impl Scene {
                     });
                 }
             }
+            SimShape::Triangle | SimShape::ArrowDisc => {
+                // A sign on a post like the stop sign; its face's half height below the centre.
+                let (w, half_h) = (o.size[0], Self::face_half_height(o));
+                let kind = if o.kind.info().shape == SimShape::Triangle {
+                    PanelKind::YieldFace { width: w }
+                } else {
+                    let right = o.arrow != Some(crate::classes::TurnArrow::Left);
+                    PanelKind::ArrowDisc { diameter: w, right }
+                };
+                out.push(Prim::Box {
+                    center: [x, y, (o.height - half_h) / 2.0],
+                    half: [0.006, 0.006, (o.height - half_h) / 2.0],
+                    dir: [c, s],
+                    rgb: [150.0, 150.0, 155.0],
+                });
+                out.push(Prim::Panel {
+                    center: [x + 0.007 * c, y + 0.007 * s, o.height],
+                    dir: [c, s],
+                    kind,
+                });
+            }
             SimShape::Box => {
                 let [l, w, h] = o.size;
                 let rgb = [o.color[0] as f32, o.color[1] as f32, o.color[2] as f32];
@@ -538,12 +574,22 @@ impl Scene {
         }
     }
 
+    /// Half the height of a sign's face or a light's housing (a yield sign's triangle is √3/2
+    /// as high as its top edge is long), metres.
+    pub fn face_half_height(o: &Object) -> f64 {
+        match o.kind.info().shape {
+            SimShape::Triangle => o.size[0] * 0.75f64.sqrt() / 2.0,
+            _ => o.size[0] / 2.0,
+        }
+    }
+
     /// The corners of the smallest upright box (turned with the object) that contains it,
     /// world metres: screen bounds for rendering and ground-truth image boxes.
     pub fn object_bounds(o: &Object) -> [[f64; 3]; 8] {
         // Half extents along the facing direction and across it, and the top.
         let (hx, hy, top) = match o.kind.info().shape {
-            SimShape::Octagon => (0.015, o.size[0] / 2.0, o.height + o.size[0] / 2.0),
+            SimShape::Octagon | SimShape::ArrowDisc => (0.015, o.size[0] / 2.0, o.height + o.size[0] / 2.0),
+            SimShape::Triangle => (0.015, o.size[0] / 2.0, o.height + Self::face_half_height(o)),
             SimShape::LightHousing => (o.size[0] * 0.17, o.size[0] * 0.19, o.height + o.size[0] / 2.0),
             SimShape::Box => (o.size[0] / 2.0, o.size[1] / 2.0, o.size[2]),
         };
@@ -694,6 +740,56 @@ impl Scene {
                     t,
                     rgb: if dist < 0.09 { white } else { red },
                 })
+            }
+            PanelKind::YieldFace { width } => {
+                // Distance inside the triangle's nearest edge (top edge at +h/2, vertex down).
+                let h = width * 0.75f64.sqrt();
+                let half_w = (w + h / 2.0) / h * width / 2.0;
+                let m = (h / 2.0 - w).min((half_w - u.abs()) * 0.75f64.sqrt());
+                if m < 0.0 || w < -h / 2.0 {
+                    return None;
+                }
+                if !front {
+                    let g = 120.0 * light;
+                    return Some(Hit {
+                        t,
+                        rgb: [g, g, g * 1.03],
+                    });
+                }
+                // The border: a third of the inradius (h / 3).
+                let rgb = if m < h / 9.0 {
+                    [196.0 * light, 22.0 * light, 28.0 * light]
+                } else {
+                    [235.0 * light, 235.0 * light, 232.0 * light]
+                };
+                Some(Hit { t, rgb })
+            }
+            PanelKind::ArrowDisc { diameter, right } => {
+                let r = diameter / 2.0;
+                let r2 = u * u + w * w;
+                if r2 > r * r {
+                    return None;
+                }
+                if !front {
+                    let g = 120.0 * light;
+                    return Some(Hit {
+                        t,
+                        rgb: [g, g, g * 1.03],
+                    });
+                }
+                let white = [235.0 * light, 235.0 * light, 232.0 * light];
+                let blue = [22.0 * light, 70.0 * light, 190.0 * light];
+                // A thin white rim; the arrow: a shaft and a head, pointing along +a.
+                let a = if right { u / r } else { -u / r };
+                let b = (w / r).abs();
+                let shaft = (-0.55..=0.05).contains(&a) && b <= 0.14;
+                let head = (0.0..=0.6).contains(&a) && b <= 0.45 * (0.6 - a) / 0.6;
+                let rgb = if r2 > (0.92 * r) * (0.92 * r) || shaft || head {
+                    white
+                } else {
+                    blue
+                };
+                Some(Hit { t, rgb })
             }
             PanelKind::Lamp { radius, rgb, lit } => {
                 let r2 = u * u + w * w;

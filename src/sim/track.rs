@@ -14,7 +14,7 @@
 //! headings counter-clockwise from +x. Lateral offsets are positive to the left of the
 //! direction of travel.
 
-use crate::classes::ObjectClass;
+use crate::classes::{ObjectClass, TurnArrow};
 pub use super::geometry::{limits, segment_piece, wrap_pi, Piece, SegmentSpec, TrackError};
 use serde::Deserialize;
 use std::path::Path;
@@ -164,7 +164,7 @@ impl Default for FloorSpec {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ObjectSpec {
-    /// `stop_sign`, `traffic_light` or `obstacle`.
+    /// `stop_sign`, `traffic_light`, `obstacle`, `yield_sign` or `turn_sign`.
     #[serde(rename = "type")]
     pub kind: ObjectClass,
     /// Position on the floor, metres.
@@ -193,6 +193,10 @@ pub struct ObjectSpec {
     /// Traffic light: where in its cycle it is at t = 0, seconds.
     #[serde(default)]
     pub phase_s: f64,
+    /// Turn sign: the way its arrow points, `left` or `right` (default right; other kinds
+    /// refuse the key).
+    #[serde(default)]
+    pub arrow: Option<TurnArrow>,
 }
 
 fn yes() -> bool {
@@ -391,6 +395,8 @@ pub struct Object {
     pub cycle_s: [f64; 3],
     /// Traffic light phase at t = 0, seconds.
     pub phase_s: f64,
+    /// Turn sign: the way its arrow points (`None` for other kinds).
+    pub arrow: Option<TurnArrow>,
 }
 
 /// A traffic light's lamp state.
@@ -813,6 +819,13 @@ impl Track {
                 "every phase must last > 0 s",
             ));
         }
+        if o.arrow.is_some() && !info.reads_arrow {
+            return Err(bad(
+                key("arrow"),
+                format!("{:?}", o.arrow.map_or("", |a| a.name())),
+                &format!("only a turn sign takes `arrow`, not a {}", o.kind.name()),
+            ));
+        }
         Ok(Object {
             kind: o.kind,
             index: i,
@@ -823,6 +836,7 @@ impl Track {
             color: o.color,
             cycle_s: o.cycle_s,
             phase_s: o.phase_s,
+            arrow: info.reads_arrow.then(|| o.arrow.unwrap_or(TurnArrow::Right)),
         })
     }
 

@@ -422,7 +422,11 @@ impl World {
         let mount = self.renderer.mount();
         let class = b.kind;
         let on_post = class.info().shape != SimShape::Box;
-        let bottom_z = if on_post { ob.height - ob.size[0] / 2.0 } else { 0.0 };
+        let bottom_z = if on_post {
+            ob.height - Scene::face_half_height(ob)
+        } else {
+            0.0
+        };
         let mut bbox = b.bbox;
         if on_post {
             let (_, v) = mount.project_world(pose, [ob.pos[0], ob.pos[1], bottom_z])?;
@@ -436,7 +440,12 @@ impl World {
             TrackLight::Amber => LightColor::Amber,
             TrackLight::Green => LightColor::Green,
         });
-        Some(GivenBox { class, bbox, light })
+        Some(GivenBox {
+            class,
+            bbox,
+            light,
+            arrow: ob.arrow,
+        })
     }
 
     fn score_frame(&mut self, truth: &FrameTruth, out: &FrameOutput, dt: f64, t: f64, held: bool) {

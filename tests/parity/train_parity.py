@@ -7,7 +7,7 @@ detectMultiScale boxes are compared with `rccar detect`'s: every OpenCV box must
 box with IoU >= 0.9 (>= 99% of them), and the recall against the ground truth is printed for
 both. Prints "N passed, N failed" (one check per model and parameter set).
 
-    python3 tests/parity/train_parity.py [--quick] [stop_sign traffic_light obstacle]
+    python3 tests/parity/train_parity.py [--quick] [stop_sign traffic_light obstacle yield_sign turn_sign]
 Env: RCCAR_BIN (default target/release/rccar), RCCAR_TRAIN_BIN (target/release/rccar-train),
 RCCAR_TRAIN_OUT (default out/training: where the held-out frames are, made if missing).
 """
@@ -19,7 +19,9 @@ import sys
 import cv2
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-KINDS = ["stop_sign", "traffic_light", "obstacle"]
+KINDS = ["stop_sign", "traffic_light", "obstacle", "yield_sign", "turn_sign"]
+# The lighting's change of each kind's held-out frames (as training/models/train_all.sh).
+LIGHT_VARIATION = {"yield_sign": "0.3", "turn_sign": "0.3"}
 
 
 def iou(a, b):
@@ -54,7 +56,8 @@ def main():
         info = os.path.join(out, kind, "eval", "info.dat")
         if not os.path.exists(info) or sum(1 for _ in open(info)) < count:
             subprocess.run([trainer, "gen", "--kind", kind, "--split", "eval", "--count", "300",
-                            "--seed", "1001", "--out", os.path.dirname(info)], cwd=ROOT, check=True)
+                            "--seed", "1001", "--light-variation", LIGHT_VARIATION.get(kind, "0"),
+                            "--out", os.path.dirname(info)], cwd=ROOT, check=True)
         lines = [l.split() for l in open(info) if l.strip()][:count]
         paths = [os.path.join(os.path.dirname(info), l[0]) for l in lines]
         truth = {p: [tuple(map(int, l[2 + 4 * k:6 + 4 * k])) for k in range(int(l[1]))] for p, l in zip(paths, lines)}

@@ -620,7 +620,7 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
 
 #[derive(clap::Args)]
 struct GenArgs {
-    /// stop_sign | traffic_light | obstacle.
+    /// stop_sign | traffic_light | obstacle | yield_sign | turn_sign.
     #[arg(long)]
     kind: String,
     /// What to make.
@@ -638,7 +638,7 @@ struct GenArgs {
     /// Track file the objects are placed on.
     #[arg(long, default_value = "config/tracks/default.toml")]
     track: PathBuf,
-    /// Window WxH (default per kind: stop 16x16, light 8x20, obstacle 20x16).
+    /// Window WxH (default per kind: stop 16x16, light 8x20, obstacle 20x16, yield 18x16, turn 16x16).
     #[arg(long)]
     window: Option<String>,
     /// Object placements to spread the frames over.
@@ -650,6 +650,10 @@ struct GenArgs {
     /// Farthest object distance, metres.
     #[arg(long, default_value_t = 1.5)]
     max_distance: f64,
+    /// Peak relative change of the lighting, 0..=0.9 (as `[sim] light_variation`), at a
+    /// random phase per frame, on top of the random exposure (0 = off).
+    #[arg(long, default_value_t = 0.0)]
+    light_variation: f64,
 }
 
 fn parse_wh(s: &str) -> anyhow::Result<(u32, u32)> {
@@ -689,6 +693,7 @@ fn run_gen(a: GenArgs) -> anyhow::Result<ExitCode> {
         distance_m: (a.min_distance, a.max_distance),
         window,
         scenes: a.scenes,
+        light_variation: a.light_variation,
     };
     let t = std::time::Instant::now();
     let bar = indicatif::ProgressBar::new(a.count as u64);

@@ -12,7 +12,8 @@
 //!   an info.dat-style `bg.txt` naming the target object's box where it is in view, so the
 //!   trainer never takes it as a negative;
 //! * `eval`: full grey frames with exactly one target object at 0.2–1.5 m, fully in view, and
-//!   an `info.dat` of its box (the held-out set: use seeds not used for training).
+//!   an `info.dat` of its box (the held-out set: use seeds not used for training); for a turn
+//!   sign also the colour frames (`rgb/`) and each sign's arrow (`arrows.txt`).
 //!
 //! The target box is what the cascade window covers: the sign's face square, the light's
 //! housing, the obstacle's projected bounding box with a 20% margin, widened to the window's aspect ratio about
@@ -117,11 +118,13 @@ pub fn target_box(mount: &CameraMount, pose: &Pose, ob: &Object, aspect: f64) ->
     let [x, y] = ob.pos;
     let mut pts: Vec<[f64; 3]> = Vec::with_capacity(8);
     match ob.kind.info().shape {
-        SimShape::Octagon => {
+        SimShape::Octagon | SimShape::Triangle | SimShape::ArrowDisc => {
+            // The face's bounding rectangle (a triangle is √3/2 as high as wide).
             let half = ob.size[0] / 2.0;
+            let half_h = Scene::face_half_height(ob);
             let (fx, fy) = (x + 0.007 * c, y + 0.007 * s);
             for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
-                pts.push([fx - a * half * s, fy + a * half * c, ob.height + b * half]);
+                pts.push([fx - a * half * s, fy + a * half * c, ob.height + b * half_h]);
             }
         }
         SimShape::LightHousing => {
@@ -184,6 +187,9 @@ pub struct GenOptions {
     pub window: (u32, u32),
     /// Different object placements (scenes) to spread the frames over.
     pub scenes: usize,
+    /// Peak relative change of the scene's lighting (`[sim] light_variation`), drawn per
+    /// frame at a random phase on top of the exposure; 0 = off (the shipped three kinds).
+    pub light_variation: f64,
 }
 
 impl GenOptions {
@@ -205,6 +211,9 @@ impl GenOptions {
         }
         if !(1..=MAX_COUNT).contains(&self.count) {
             return bad(format!("--count {}: must be 1..={MAX_COUNT}", self.count));
+        }
+        if !(self.light_variation.is_finite() && (0.0..=0.9).contains(&self.light_variation)) {
+            return bad(format!("--light-variation {}: must be 0..=0.9", self.light_variation));
         }
         if !(1..=MAX_SCENES).contains(&self.scenes) {
             return bad(format!("--scenes {}: must be 1..={MAX_SCENES}", self.scenes));
@@ -244,6 +253,7 @@ fn spec(kind: ObjectClass, x: f64, y: f64, yaw: f64) -> ObjectSpec {
         color: [60, 90, 160],
         cycle_s: [4.0, 1.0, 4.0],
         phase_s: 0.0,
+        arrow: None,
     }
 }
 
@@ -319,6 +329,15 @@ impl SimGen {
                     }
                 }
                 SimShape::Octagon => o.size_m = vec![uniform(rng, 0.095, 0.105)],
+                SimShape::Triangle => o.size_m = vec![uniform(rng, 0.114, 0.126)],
+                SimShape::ArrowDisc => {
+                    o.size_m = vec![uniform(rng, 0.095, 0.105)];
+                    o.arrow = Some(if rng.next_f64() < 0.5 {
+                        rccar::classes::TurnArrow::Left
+                    } else {
+                        rccar::classes::TurnArrow::Right
+                    });
+                }
                 SimShape::LightHousing => {
                     o.size_m = vec![uniform(rng, 0.115, 0.125)];
                     o.phase_s = uniform(rng, 0.0, 9.0);
@@ -347,8 +366,9 @@ impl SimGen {
         })
     }
 
-    /// Random camera effects.
-    fn options(&self, rng: &mut SplitMix64) -> RenderOptions {
+    /// Random camera effects (with `o.light_variation`, the lighting's gain over the time
+    /// the frame is rendered at).
+    fn options(&self, o: &GenOptions, rng: &mut SplitMix64) -> RenderOptions {
         RenderOptions {
             noise_sigma: uniform(rng, 0.0, 4.0),
             blur_px: if rng.next_f64() < 0.4 {
@@ -357,7 +377,7 @@ impl SimGen {
                 0.0
             },
             exposure: uniform(rng, 0.6, 1.4),
-            light_variation: 0.0,
+            light_variation: o.light_variation,
             light_period_s: 10.0,
             seed: rng.next_u64(),
         }
@@ -449,10 +469,13 @@ impl SimGen {
             }
             let time = if t.kind.info().shape == SimShape::LightHousing {
                 Self::light_time(t, rng)
+            } else if o.light_variation > 0.0 {
+                // Any phase of the lighting's change (10 s period).
+                uniform(rng, 0.0, 10.0)
             } else {
                 0.0
             };
-            return Some((pose, time, b, self.options(rng)));
+            return Some((pose, time, b, self.options(o, rng)));
         }
         None
     }
@@ -473,6 +496,17 @@ impl SimGen {
             "info.dat"
         });
         let mut out = std::io::BufWriter::new(std::fs::File::create(&list).map_err(|e| io_err(&list, e))?);
+        // Held-out frames of a class that reads an arrow: the colour frames too (rgb/) and the
+        // true arrow of each (arrows.txt), to score the arrow reading.
+        let arrows_path = dir.join("arrows.txt");
+        let mut arrows = if o.split == Split::Eval && o.kind.info().reads_arrow {
+            std::fs::create_dir_all(dir.join("rgb")).map_err(|e| io_err(dir, e))?;
+            Some(std::io::BufWriter::new(
+                std::fs::File::create(&arrows_path).map_err(|e| io_err(&arrows_path, e))?,
+            ))
+        } else {
+            None
+        };
         let mut rng = SplitMix64::new(mix(o.seed ^ 0x5EED_0000 ^ (o.kind as u64) << 8 ^ o.split as u64));
         let scenes = o.scenes.max(1);
         let per_scene = o.count.div_ceil(scenes);
@@ -510,6 +544,11 @@ impl SimGen {
                         rccar::detect::gray_from_rgb(&img, &mut gray);
                         if o.split == Split::Eval {
                             gray.save(&path).map_err(|e| io_err(&path, e))?;
+                            if let (Some(a), Some(arrow)) = (arrows.as_mut(), placed.target.arrow) {
+                                let rgb = dir.join("rgb").join(&name);
+                                img.save(&rgb).map_err(|e| io_err(&rgb, e))?;
+                                writeln!(a, "{name} {}", arrow.name()).map_err(|e| io_err(&arrows_path, e))?;
+                            }
                             let r = round_box(b);
                             format!("{name} 1 {} {} {} {}", r[0], r[1], r[2], r[3])
                         } else {
@@ -540,6 +579,9 @@ impl SimGen {
             empty_scenes = if in_scene == 0 { empty_scenes + 1 } else { 0 };
         }
         out.flush().map_err(|e| io_err(&list, e))?;
+        if let Some(mut a) = arrows {
+            a.flush().map_err(|e| io_err(&arrows_path, e))?;
+        }
         Ok(list)
     }
 
@@ -639,7 +681,7 @@ impl SimGen {
             return Ok(None);
         }
         let t = uniform(rng, 0.0, 9.0);
-        let ro = self.options(rng);
+        let ro = self.options(o, rng);
         let img = self.render(placed, &pose, t, ro, n as u64);
         rccar::detect::gray_from_rgb(&img, gray);
         gray.save(path).map_err(|e| io_err(path, e))?;

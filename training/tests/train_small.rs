@@ -30,6 +30,7 @@ fn gen(dir: &Path, split: Split, count: usize, seed: u64) -> PathBuf {
             distance_m: (0.2, 1.0),
             window: (16, 16),
             scenes: 4,
+            light_variation: 0.0,
         },
         &dir.join(format!("{split:?}")),
         &mut |_| {},

@@ -177,7 +177,8 @@ fn render(s: &Snapshot) -> RgbImage {
 }
 
 /// Each detected object's box in magenta with its class and range ("STOP 0.84M"; a light
-/// with its colour), the label above the box or inside it at the top edge.
+/// with its colour, a turn sign with its arrow: "TURN SIGN LEFT 0.84M"), the label above the
+/// box or inside it at the top edge.
 fn draw_objects(img: &mut RgbImage, objects: &[crate::pipeline::RangedObject]) {
     use crate::annotate::{line, text};
     let c = Rgb([255, 0, 255]);
@@ -189,6 +190,9 @@ fn draw_objects(img: &mut RgbImage, objects: &[crate::pipeline::RangedObject]) {
         let mut label = o.class.name().replace('_', " ").to_uppercase();
         if let Some(light) = o.light {
             label = format!("{label} {light:?}").to_uppercase();
+        }
+        if let Some(arrow) = o.arrow {
+            label = format!("{label} {}", arrow.name()).to_uppercase();
         }
         if let Some(d) = o.distance_m {
             label = format!("{label} {d:.2}M");
