@@ -5,6 +5,13 @@
 //! Semantics follow OpenCV's `threshold(..., THRESH_BINARY)`: a pixel becomes 255 when it is
 //! *strictly* brighter than the level, else 0. Otsu (1979) picks the level that maximises the
 //! between-class variance of the grey histogram, computed as OpenCV's `getThreshVal_Otsu_8u`.
+//!
+//! Under shadows and bright patches no single level fits the whole bird's-eye image: the
+//! adaptive threshold compares each pixel with the mean of the `block × block` square round
+//! it instead ([`adaptive_or_edges`], bit-exact to OpenCV's `adaptiveThreshold` with
+//! `ADAPTIVE_THRESH_MEAN_C`, `THRESH_BINARY`: 255 where `src > mean − C`; the mean is
+//! `boxFilter` with replicated borders, rounded to a grey level). The box sums are running
+//! sums, so the cost does not grow with the block.
 
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
@@ -17,6 +24,83 @@ pub enum ThresholdMode {
     Fixed,
     /// Otsu's method picks the level per frame.
     Otsu,
+    /// Each pixel against the mean of the square round it (`lane.adaptive_block`,
+    /// `lane.adaptive_c`).
+    Adaptive,
+}
+
+/// Scratch of [`box_mean`]: one row of column sums (with replicated borders) per image.
+#[derive(Debug, Clone, Default)]
+pub struct BoxScratch {
+    cols: Vec<u32>,
+    pad: Vec<u32>,
+}
+
+/// The mean of the `block × block` square (odd `block`) round each pixel of `src`, borders
+/// replicated, rounded to the nearest grey level as OpenCV's `boxFilter(..., normalize=true,
+/// BORDER_REPLICATE)` on 8-bit images (a float product, rounded; an odd area never ties).
+pub fn box_mean(src: &GrayImage, block: u32, scratch: &mut BoxScratch, out: &mut GrayImage) {
+    assert_eq!(src.dimensions(), out.dimensions());
+    assert!(block % 2 == 1, "block must be odd");
+    let (w, h) = (src.width() as usize, src.height() as usize);
+    if w == 0 || h == 0 {
+        return;
+    }
+    let r = (block / 2) as usize;
+    let s = src.as_raw();
+    let row = |y: isize| -> &[u8] {
+        let y = y.clamp(0, h as isize - 1) as usize;
+        &s[y * w..(y + 1) * w]
+    };
+    // 1. Column sums of the first window (rows -r..=r, replicated).
+    scratch.cols.clear();
+    scratch.cols.resize(w, 0);
+    for dy in -(r as isize)..=r as isize {
+        for (c, &p) in scratch.cols.iter_mut().zip(row(dy)) {
+            *c += p as u32;
+        }
+    }
+    scratch.pad.clear();
+    scratch.pad.resize(w + 2 * r, 0);
+    let scale = (1.0 / (block as f64 * block as f64)) as f32;
+    let o: &mut [u8] = out;
+    for y in 0..h {
+        // 2. The row's column sums with r replicated on each side, then a running sum along x.
+        let cols = &scratch.cols;
+        let pad = &mut scratch.pad;
+        pad[r..r + w].copy_from_slice(cols);
+        let (first, last) = (cols[0], cols[w - 1]);
+        pad[..r].fill(first);
+        pad[r + w..].fill(last);
+        let mut acc: u32 = pad[..block as usize].iter().sum();
+        let orow = &mut o[y * w..(y + 1) * w];
+        for x in 0..w {
+            orow[x] = (acc as f32 * scale).round_ties_even() as u8;
+            if x + 1 < w {
+                acc = acc + pad[x + block as usize] - pad[x];
+            }
+        }
+        // 3. Slide the column window down one row.
+        if y + 1 < h {
+            let (add, sub) = (row((y + 1 + r) as isize), row(y as isize - r as isize));
+            for ((c, &a), &b) in scratch.cols.iter_mut().zip(add).zip(sub) {
+                *c = *c + a as u32 - b as u32;
+            }
+        }
+    }
+}
+
+/// OpenCV's `adaptiveThreshold(src, 255, ADAPTIVE_THRESH_MEAN_C, THRESH_BINARY, block, c)`
+/// for a whole-number `c`, given the box mean `mean` ([`box_mean`]), united with `edges`: 255
+/// where `src > mean − c` or an edge. Negative `c` = the pixel must be brighter than the mean.
+pub fn adaptive_or_edges(src: &GrayImage, mean: &GrayImage, c: i32, edges: &GrayImage, out: &mut GrayImage) {
+    assert_eq!(src.dimensions(), out.dimensions());
+    assert_eq!(mean.dimensions(), out.dimensions());
+    assert_eq!(edges.dimensions(), out.dimensions());
+    let o: &mut [u8] = out;
+    for (((o, &s), &m), &e) in o.iter_mut().zip(src.as_raw()).zip(mean.as_raw()).zip(edges.as_raw()) {
+        *o = if s as i32 > m as i32 - c { 255 } else { e };
+    }
 }
 
 /// Otsu's threshold level for `img` (0..=255).
@@ -100,6 +184,96 @@ mod tests {
         // matches imageproc's Otsu within one grey level
         let r = imageproc::contrast::otsu_level(&img);
         assert!(t.abs_diff(r) <= 1, "{t} vs imageproc {r}");
+    }
+
+    /// The box mean against a plain sum over the clamped square, rounded, on noise images of
+    /// odd sizes, blocks smaller and larger than the image.
+    #[test]
+    fn box_mean_is_the_rounded_mean_of_the_replicated_square() {
+        let mut seed = 7u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 56) as u8
+        };
+        let mut scratch = BoxScratch::default();
+        for (w, h) in [(1u32, 1u32), (5, 3), (37, 23), (64, 9)] {
+            let img = GrayImage::from_fn(w, h, |_, _| image::Luma([rnd()]));
+            for block in [3u32, 5, 9, 41] {
+                let mut got = GrayImage::new(w, h);
+                box_mean(&img, block, &mut scratch, &mut got);
+                let r = (block / 2) as i64;
+                for y in 0..h as i64 {
+                    for x in 0..w as i64 {
+                        let mut sum = 0u64;
+                        for dy in -r..=r {
+                            for dx in -r..=r {
+                                let (xx, yy) = ((x + dx).clamp(0, w as i64 - 1), (y + dy).clamp(0, h as i64 - 1));
+                                sum += img.get_pixel(xx as u32, yy as u32)[0] as u64;
+                            }
+                        }
+                        let want = (sum as f64 / (block * block) as f64).round() as u8;
+                        assert_eq!(got.get_pixel(x as u32, y as u32)[0], want, "{w}x{h} block {block} at ({x},{y})");
+                    }
+                }
+            }
+        }
+    }
+
+    /// A bird's-eye image under changing light: a lit floor with a gradient, a deep shadow
+    /// over the rows the histogram sums (the tape there darker than the lit floor) and a
+    /// bright sun patch (brighter than the tape in the shade). The fixed level and Otsu's lose
+    /// the lines; the adaptive threshold finds both where they are.
+    #[test]
+    fn adaptive_finds_the_lines_in_a_shadow_where_fixed_and_otsu_fail() {
+        let (w, h) = (320u32, 240u32);
+        let (left, right) = (60u32..73, 250u32..263);
+        let img = GrayImage::from_fn(w, h, |x, y| {
+            let tape = left.contains(&x) || right.contains(&x);
+            let mut v = if tape { 225.0 } else { 90.0 + 30.0 * x as f64 / w as f64 };
+            if y >= 130 {
+                v *= 0.3; // the shadow
+            } else if (100..220).contains(&x) && y < 120 {
+                v = 235.0; // the sun patch between the lines
+            }
+            image::Luma([v.round() as u8])
+        });
+        let opts = crate::lane::LaneOptions::from(&crate::config::LaneConfig::default());
+        let band = crate::lane::lines::band_rows(h, opts.lines.band);
+        let no_edges = GrayImage::new(w, h);
+        let mut binary = GrayImage::new(w, h);
+        let mut hist = vec![0u16; w as usize];
+        let mut lines_of = |binary: &GrayImage| {
+            crate::lane::lines::column_histogram(binary, band, &mut hist);
+            crate::lane::lines::measure(&hist, band, &opts.lines)
+        };
+        let found = |m: &crate::lane::LaneMeasurement| {
+            m.status == crate::lane::LaneStatus::Both
+                && (m.p_left.unwrap() - 66.0).abs() < 2.0
+                && (m.p_right.unwrap() - 256.0).abs() < 2.0
+        };
+        threshold_or_edges(&img, opts.threshold, &no_edges, &mut binary);
+        let fixed = lines_of(&binary);
+        let otsu = otsu_level(&img);
+        threshold_or_edges(&img, otsu, &no_edges, &mut binary);
+        let by_otsu = lines_of(&binary);
+        let mut mean = GrayImage::new(w, h);
+        box_mean(&img, opts.adaptive.0, &mut BoxScratch::default(), &mut mean);
+        adaptive_or_edges(&img, &mean, opts.adaptive.1, &no_edges, &mut binary);
+        let adaptive = lines_of(&binary);
+        assert!(!found(&fixed), "fixed {fixed:?}");
+        assert!(!found(&by_otsu), "otsu (level {otsu}) {by_otsu:?}");
+        assert!(found(&adaptive), "adaptive {adaptive:?}");
+        // No floor passes inside the shadow or the patch (beyond half a block from their
+        // edges: at a hard edge the lit side's strip is brighter than its mean).
+        let r = opts.adaptive.0 / 2;
+        let floor_on = binary
+            .enumerate_pixels()
+            .filter(|&(x, y, p)| {
+                let inside = y > 130 + r || ((100 + r..220 - r).contains(&x) && y + r < 120);
+                p[0] > 0 && inside && !left.contains(&x) && !right.contains(&x)
+            })
+            .count();
+        assert_eq!(floor_on, 0, "{floor_on} floor pixels pass");
     }
 
     #[test]
