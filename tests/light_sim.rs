@@ -154,6 +154,7 @@ fn bad_light_and_threshold_values_name_the_key() {
         ("sim.light_noise=40", "sim.light_noise"),
         ("lane.adaptive_block=40", "lane.adaptive_block"),
         ("lane.adaptive_block=1", "lane.adaptive_block"),
+        ("lane.adaptive_block=129", "lane.adaptive_block"),
         ("lane.adaptive_c=300", "lane.adaptive_c"),
     ] {
         let e = Config::default().with_override(set).expect_err(set);
@@ -166,7 +167,7 @@ fn bad_light_and_threshold_values_name_the_key() {
         assert!(msg.contains(key), "{set}: {msg}");
     }
     // −1 (the level's) and the ends of the ranges are fine.
-    for set in ["sim.light_shadows=-1", "sim.light_glare=3", "lane.adaptive_block=255", "lane.adaptive_c=-255"] {
+    for set in ["sim.light_shadows=-1", "sim.light_glare=3", "lane.adaptive_block=127", "lane.adaptive_c=-255"] {
         Config::default().with_override(set).expect(set);
     }
 }

@@ -20,7 +20,7 @@ pub struct LaneConfig {
     /// Grey level, 0..=255: pixels strictly brighter are "line".
     pub threshold: u8,
     /// `adaptive`: side of the square round each pixel whose mean it is compared with, odd,
-    /// 3..=255 pixels.
+    /// 3..=127 pixels.
     pub adaptive_block: u32,
     /// `adaptive`: a pixel is "line" when brighter than that mean − C (OpenCV's C), grey
     /// levels −255..=255; negative = brighter than the mean by that much.
@@ -73,8 +73,8 @@ impl LaneConfig {
     /// image's width `bird_width` (`warp.out_width`), pixels.
     pub(super) fn check(&self, c: &mut Checker, bird_width: u32) {
         let l = self;
-        if l.adaptive_block % 2 == 0 || !(3..=255).contains(&l.adaptive_block) {
-            c.fail("lane.adaptive_block", l.adaptive_block.to_string(), "an odd number 3 ..= 255");
+        if l.adaptive_block % 2 == 0 || !(3..=127).contains(&l.adaptive_block) {
+            c.fail("lane.adaptive_block", l.adaptive_block.to_string(), "an odd number 3 ..= 127");
         }
         c.range("lane.adaptive_c", l.adaptive_c, -255, 255);
         c.range("lane.canny_low", l.canny_low, 0, 2040);

@@ -69,10 +69,8 @@ pub struct LaneImages {
     pub hist: Vec<u16>,
     /// Rows in the histogram band.
     pub band_rows: u32,
-    /// Threshold level used (fixed or Otsu's; 0 for the adaptive thresholds).
+    /// Threshold level used (fixed or Otsu's; 0 for the adaptive threshold).
     pub level: u8,
-    /// The local mean of the adaptive thresholds (empty otherwise).
-    pub mean: GrayImage,
 }
 
 impl LaneImages {
@@ -127,7 +125,6 @@ impl LaneDetector {
                 hist: vec![0; out_w as usize],
                 band_rows,
                 level: 0,
-                mean: GrayImage::new(0, 0),
             },
             box_scratch: threshold::BoxScratch::default(),
         })
@@ -161,11 +158,7 @@ impl LaneDetector {
                 threshold::threshold_or_edges(&im.bird, im.level, &im.edges, &mut im.binary)
             }
             ThresholdMode::Adaptive => {
-                if im.mean.dimensions() != im.bird.dimensions() {
-                    im.mean = GrayImage::new(im.bird.width(), im.bird.height());
-                }
-                threshold::box_mean(&im.bird, block, &mut self.box_scratch, &mut im.mean);
-                threshold::adaptive_or_edges(&im.bird, &im.mean, c, &im.edges, &mut im.binary);
+                threshold::adaptive_or_edges(&im.bird, block, c, &im.edges, &mut self.box_scratch, &mut im.binary)
             }
         }
         times.threshold_us = timer.lap_us();

@@ -29,78 +29,108 @@ pub enum ThresholdMode {
     Adaptive,
 }
 
-/// Scratch of [`box_mean`]: one row of column sums (with replicated borders) per image.
+/// Scratch of the box sums: the column sums of the current window and one padded row.
 #[derive(Debug, Clone, Default)]
 pub struct BoxScratch {
     cols: Vec<u32>,
     pad: Vec<u32>,
+    sums: Vec<u32>,
 }
 
-/// The mean of the `block × block` square (odd `block`) round each pixel of `src`, borders
-/// replicated, rounded to the nearest grey level as OpenCV's `boxFilter(..., normalize=true,
-/// BORDER_REPLICATE)` on 8-bit images (a float product, rounded; an odd area never ties).
-pub fn box_mean(src: &GrayImage, block: u32, scratch: &mut BoxScratch, out: &mut GrayImage) {
-    assert_eq!(src.dimensions(), out.dimensions());
+/// Calls `row(y, sums)` for each row of `src` with the sums of the `block × block` square
+/// (odd `block`) round each of its pixels, borders replicated (OpenCV's `BORDER_REPLICATE`).
+/// Running sums: two additions per pixel whatever the block.
+fn box_sums(src: &GrayImage, block: u32, scratch: &mut BoxScratch, mut row: impl FnMut(usize, &[u32])) {
     assert!(block % 2 == 1, "block must be odd");
     let (w, h) = (src.width() as usize, src.height() as usize);
     if w == 0 || h == 0 {
         return;
     }
-    let r = (block / 2) as usize;
+    let (r, b) = ((block / 2) as usize, block as usize);
     let s = src.as_raw();
-    let row = |y: isize| -> &[u8] {
+    let line = |y: isize| -> &[u8] {
         let y = y.clamp(0, h as isize - 1) as usize;
         &s[y * w..(y + 1) * w]
     };
+    let BoxScratch { cols, pad, sums } = scratch;
     // 1. Column sums of the first window (rows -r..=r, replicated).
-    scratch.cols.clear();
-    scratch.cols.resize(w, 0);
+    cols.clear();
+    cols.resize(w, 0);
     for dy in -(r as isize)..=r as isize {
-        for (c, &p) in scratch.cols.iter_mut().zip(row(dy)) {
+        for (c, &p) in cols.iter_mut().zip(line(dy)) {
             *c += p as u32;
         }
     }
-    scratch.pad.clear();
-    scratch.pad.resize(w + 2 * r, 0);
-    let scale = (1.0 / (block as f64 * block as f64)) as f32;
-    let o: &mut [u8] = out;
+    pad.resize(w + 2 * r, 0);
+    sums.resize(w, 0);
     for y in 0..h {
         // 2. The row's column sums with r replicated on each side, then a running sum along x.
-        let cols = &scratch.cols;
-        let pad = &mut scratch.pad;
         pad[r..r + w].copy_from_slice(cols);
         let (first, last) = (cols[0], cols[w - 1]);
         pad[..r].fill(first);
         pad[r + w..].fill(last);
-        let mut acc: u32 = pad[..block as usize].iter().sum();
-        let orow = &mut o[y * w..(y + 1) * w];
-        for x in 0..w {
-            orow[x] = (acc as f32 * scale).round_ties_even() as u8;
-            if x + 1 < w {
-                acc = acc + pad[x + block as usize] - pad[x];
-            }
+        let mut acc: u32 = pad[..b].iter().sum();
+        sums[0] = acc;
+        for x in 1..w {
+            acc = acc + pad[x + b - 1] - pad[x - 1];
+            sums[x] = acc;
         }
+        row(y, sums);
         // 3. Slide the column window down one row.
         if y + 1 < h {
-            let (add, sub) = (row((y + 1 + r) as isize), row(y as isize - r as isize));
-            for ((c, &a), &b) in scratch.cols.iter_mut().zip(add).zip(sub) {
+            let (add, sub) = (line((y + 1 + r) as isize), line(y as isize - r as isize));
+            for ((c, &a), &b) in cols.iter_mut().zip(add).zip(sub) {
                 *c = *c + a as u32 - b as u32;
             }
         }
     }
 }
 
-/// OpenCV's `adaptiveThreshold(src, 255, ADAPTIVE_THRESH_MEAN_C, THRESH_BINARY, block, c)`
-/// for a whole-number `c`, given the box mean `mean` ([`box_mean`]), united with `edges`: 255
-/// where `src > mean − c` or an edge. Negative `c` = the pixel must be brighter than the mean.
-pub fn adaptive_or_edges(src: &GrayImage, mean: &GrayImage, c: i32, edges: &GrayImage, out: &mut GrayImage) {
+/// The mean of the `block × block` square (odd `block`, at most 127) round each pixel of
+/// `src`, borders replicated, rounded to the nearest grey level: OpenCV's `boxFilter(...,
+/// normalize=true, BORDER_REPLICATE)` on 8-bit images. (OpenCV rounds a float product; an odd
+/// area never ties, and up to 127 × 127 the float's error is smaller than the distance to a
+/// tie, so the exact rounding here is the same.)
+pub fn box_mean(src: &GrayImage, block: u32, scratch: &mut BoxScratch, out: &mut GrayImage) {
     assert_eq!(src.dimensions(), out.dimensions());
-    assert_eq!(mean.dimensions(), out.dimensions());
-    assert_eq!(edges.dimensions(), out.dimensions());
+    let w = src.width() as usize;
+    let area = block * block;
     let o: &mut [u8] = out;
-    for (((o, &s), &m), &e) in o.iter_mut().zip(src.as_raw()).zip(mean.as_raw()).zip(edges.as_raw()) {
-        *o = if s as i32 > m as i32 - c { 255 } else { e };
-    }
+    box_sums(src, block, scratch, |y, sums| {
+        for (o, &s) in o[y * w..(y + 1) * w].iter_mut().zip(sums) {
+            *o = ((2 * s + area) / (2 * area)) as u8;
+        }
+    });
+}
+
+/// OpenCV's `adaptiveThreshold(src, 255, ADAPTIVE_THRESH_MEAN_C, THRESH_BINARY, block, c)`
+/// (odd `block` 3..=127, whole-number `c`) united with `edges`: 255 where `src > mean − c`
+/// (the mean as [`box_mean`]) or an edge. Negative `c` = brighter than the mean by at least
+/// 1 − c. Compared in integers without the mean: `round(sum / area) < src + c` is
+/// `2 sum < (2 (src + c) − 1) area`.
+pub fn adaptive_or_edges(
+    src: &GrayImage,
+    block: u32,
+    c: i32,
+    edges: &GrayImage,
+    scratch: &mut BoxScratch,
+    out: &mut GrayImage,
+) {
+    assert_eq!(src.dimensions(), out.dimensions());
+    assert_eq!(edges.dimensions(), out.dimensions());
+    assert!(block <= 127, "block must be at most 127");
+    let w = src.width() as usize;
+    let area = (block * block) as i32;
+    let (s_all, e_all) = (src.as_raw(), edges.as_raw());
+    let o: &mut [u8] = out;
+    box_sums(src, block, scratch, |y, sums| {
+        let span = y * w..(y + 1) * w;
+        let (o, s, e) = (&mut o[span.clone()], &s_all[span.clone()], &e_all[span]);
+        for (((o, &s), &e), &sum) in o.iter_mut().zip(s).zip(e).zip(sums) {
+            let pass = 2 * (sum as i32) < (2 * (s as i32 + c) - 1) * area;
+            *o = if pass { 255 } else { e };
+        }
+    });
 }
 
 /// Otsu's threshold level for `img` (0..=255).
@@ -219,6 +249,26 @@ mod tests {
         }
     }
 
+    /// The fused comparison is `src > mean − c` with the mean of [`box_mean`], for every c.
+    #[test]
+    fn adaptive_is_src_above_the_mean_minus_c() {
+        let img = GrayImage::from_fn(53, 31, |x, y| image::Luma([((x * 37 + y * 91 + x * y * 13) % 251) as u8]));
+        let edges = GrayImage::from_fn(53, 31, |x, y| image::Luma([if (x + 2 * y) % 17 == 0 { 255 } else { 0 }]));
+        let mut scratch = BoxScratch::default();
+        for block in [3u32, 11, 41, 127] {
+            let mut mean = GrayImage::new(53, 31);
+            box_mean(&img, block, &mut scratch, &mut mean);
+            for c in [-255, -20, -5, 0, 3, 255] {
+                let mut out = GrayImage::new(53, 31);
+                adaptive_or_edges(&img, block, c, &edges, &mut scratch, &mut out);
+                for ((&o, (&s, &m)), &e) in out.as_raw().iter().zip(img.as_raw().iter().zip(mean.as_raw())).zip(edges.as_raw()) {
+                    let want = if s as i32 > m as i32 - c { 255 } else { e };
+                    assert_eq!(o, want, "block {block} c {c}: src {s} mean {m}");
+                }
+            }
+        }
+    }
+
     /// A bird's-eye image under changing light: a lit floor with a gradient, a deep shadow
     /// over the rows the histogram sums (the tape there darker than the lit floor) and a
     /// bright sun patch (brighter than the tape in the shade). The fixed level and Otsu's lose
@@ -256,9 +306,7 @@ mod tests {
         let otsu = otsu_level(&img);
         threshold_or_edges(&img, otsu, &no_edges, &mut binary);
         let by_otsu = lines_of(&binary);
-        let mut mean = GrayImage::new(w, h);
-        box_mean(&img, opts.adaptive.0, &mut BoxScratch::default(), &mut mean);
-        adaptive_or_edges(&img, &mean, opts.adaptive.1, &no_edges, &mut binary);
+        adaptive_or_edges(&img, opts.adaptive.0, opts.adaptive.1, &no_edges, &mut BoxScratch::default(), &mut binary);
         let adaptive = lines_of(&binary);
         assert!(!found(&fixed), "fixed {fixed:?}");
         assert!(!found(&by_otsu), "otsu (level {otsu}) {by_otsu:?}");

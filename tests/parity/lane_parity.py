@@ -127,11 +127,11 @@ VARIANTS = [
     ("exact", ["warp.exact=true"]),
     ("exact-otsu-noblur", ["warp.exact=true", "lane.threshold_mode=otsu", "lane.blur=false"]),
     # cv2.adaptiveThreshold(ADAPTIVE_THRESH_MEAN_C, THRESH_BINARY): the shipped block and C,
-    # then a small block with a positive C and one wider than the image is tall.
+    # then a small block with a positive C and the largest (127: wider than the bird's-eye band).
     ("exact-adaptive", ["warp.exact=true", "lane.threshold_mode=adaptive"]),
     ("exact-adaptive-7", ["warp.exact=true", "lane.threshold_mode=adaptive", "lane.adaptive_block=7",
                           "lane.adaptive_c=3"]),
-    ("exact-adaptive-255", ["warp.exact=true", "lane.threshold_mode=adaptive", "lane.adaptive_block=255",
+    ("exact-adaptive-127", ["warp.exact=true", "lane.threshold_mode=adaptive", "lane.adaptive_block=127",
                             "lane.adaptive_c=-20"]),
 ]
 
