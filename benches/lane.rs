@@ -111,7 +111,11 @@ fn main() {
     }
     let allocs = ALLOCS.load(Ordering::Relaxed) - allocs_before;
     // The adaptive threshold's stage (lane.threshold_mode = "adaptive"), beside the fixed one.
-    let mut adet = cfg.with_override("lane.threshold_mode=adaptive").unwrap().lane_detector().unwrap();
+    let mut adet = cfg
+        .with_override("lane.threshold_mode=adaptive")
+        .unwrap()
+        .lane_detector()
+        .unwrap();
     for f in &frames {
         adet.measure(f, &mut Warm, &mut times);
     }
@@ -155,7 +159,12 @@ fn main() {
         println!("  ours   {n:30} {:8.1} / {:8.1}", med * 1e6, min * 1e6);
     }
     let (a_med, a_min) = median_min(&mut adaptive);
-    println!("  ours   {:30} {:8.1} / {:8.1}", "adaptive threshold|edges", a_med * 1e6, a_min * 1e6);
+    println!(
+        "  ours   {:30} {:8.1} / {:8.1}",
+        "adaptive threshold|edges",
+        a_med * 1e6,
+        a_min * 1e6
+    );
     let (our_med, our_min) = median_min(&mut ours[5]);
     println!(
         "  ours   {:30} {:8.1} / {:8.1}",

@@ -90,7 +90,9 @@ fn a_shadow_darkens_the_rendered_floor_by_its_depth() {
         let (a, b) = (plain.render_new(&pose, 0.0, 0), shaded.render_new(&pose, 0.0, 0));
         for v in (120..240).step_by(7) {
             for u in (20..300).step_by(7) {
-                let Some(g) = mount.camera.ground_of_pixel(u as f64, v as f64) else { continue };
+                let Some(g) = mount.camera.ground_of_pixel(u as f64, v as f64) else {
+                    continue;
+                };
                 let factor_at = |du: f64| {
                     let g = mount.camera.ground_of_pixel(u as f64 + du, v as f64).unwrap();
                     map.at(mount.to_world(&pose, [g.0, g.1]))
@@ -100,12 +102,18 @@ fn a_shadow_darkens_the_rendered_floor_by_its_depth() {
                 if (factor_at(-8.0) - f).abs() > 1e-3 || (factor_at(8.0) - f).abs() > 1e-3 {
                     continue;
                 }
-                let (pa, pb) = (a.get_pixel(u as u32, v as u32)[0] as f32, b.get_pixel(u as u32, v as u32)[0] as f32);
+                let (pa, pb) = (
+                    a.get_pixel(u as u32, v as u32)[0] as f32,
+                    b.get_pixel(u as u32, v as u32)[0] as f32,
+                );
                 if pa < 40.0 {
                     continue;
                 }
                 let ratio = pb / pa;
-                assert!((ratio - f).abs() < 0.02 + 1.0 / pa, "pixel ({u},{v}) at s={s:.2}: {pb}/{pa} vs factor {f}");
+                assert!(
+                    (ratio - f).abs() < 0.02 + 1.0 / pa,
+                    "pixel ({u},{v}) at s={s:.2}: {pb}/{pa} vs factor {f}"
+                );
                 checked += 1;
                 if f as f64 <= 1.0 - 0.75 * depth + 1e-3 {
                     darker += 1;
@@ -139,7 +147,10 @@ fn level_zero_changes_no_pixel() {
     for s in [0.5, 9.0, 20.0, 33.0] {
         let (p, yaw) = track.lane_pose_at(s);
         let pose = Pose { x: p[0], y: p[1], yaw };
-        assert!(a.render_new(&pose, s, 3) == b.render_new(&pose, s, 3), "frame at s={s} differs");
+        assert!(
+            a.render_new(&pose, s, 3) == b.render_new(&pose, s, 3),
+            "frame at s={s} differs"
+        );
     }
 }
 
@@ -167,7 +178,12 @@ fn bad_light_and_threshold_values_name_the_key() {
         assert!(msg.contains(key), "{set}: {msg}");
     }
     // −1 (the level's) and the ends of the ranges are fine.
-    for set in ["sim.light_shadows=-1", "sim.light_glare=3", "lane.adaptive_block=127", "lane.adaptive_c=-255"] {
+    for set in [
+        "sim.light_shadows=-1",
+        "sim.light_glare=3",
+        "lane.adaptive_block=127",
+        "lane.adaptive_c=-255",
+    ] {
         Config::default().with_override(set).expect(set);
     }
 }

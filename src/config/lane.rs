@@ -73,8 +73,12 @@ impl LaneConfig {
     /// image's width `bird_width` (`warp.out_width`), pixels.
     pub(super) fn check(&self, c: &mut Checker, bird_width: u32) {
         let l = self;
-        if l.adaptive_block % 2 == 0 || !(3..=127).contains(&l.adaptive_block) {
-            c.fail("lane.adaptive_block", l.adaptive_block.to_string(), "an odd number 3 ..= 127");
+        if l.adaptive_block.is_multiple_of(2) || !(3..=127).contains(&l.adaptive_block) {
+            c.fail(
+                "lane.adaptive_block",
+                l.adaptive_block.to_string(),
+                "an odd number 3 ..= 127",
+            );
         }
         c.range("lane.adaptive_c", l.adaptive_c, -255, 255);
         c.range("lane.canny_low", l.canny_low, 0, 2040);

@@ -242,7 +242,11 @@ mod tests {
                             }
                         }
                         let want = (sum as f64 / (block * block) as f64).round() as u8;
-                        assert_eq!(got.get_pixel(x as u32, y as u32)[0], want, "{w}x{h} block {block} at ({x},{y})");
+                        assert_eq!(
+                            got.get_pixel(x as u32, y as u32)[0],
+                            want,
+                            "{w}x{h} block {block} at ({x},{y})"
+                        );
                     }
                 }
             }
@@ -252,8 +256,12 @@ mod tests {
     /// The fused comparison is `src > mean − c` with the mean of [`box_mean`], for every c.
     #[test]
     fn adaptive_is_src_above_the_mean_minus_c() {
-        let img = GrayImage::from_fn(53, 31, |x, y| image::Luma([((x * 37 + y * 91 + x * y * 13) % 251) as u8]));
-        let edges = GrayImage::from_fn(53, 31, |x, y| image::Luma([if (x + 2 * y) % 17 == 0 { 255 } else { 0 }]));
+        let img = GrayImage::from_fn(53, 31, |x, y| {
+            image::Luma([((x * 37 + y * 91 + x * y * 13) % 251) as u8])
+        });
+        let edges = GrayImage::from_fn(53, 31, |x, y| {
+            image::Luma([if (x + 2 * y) % 17 == 0 { 255 } else { 0 }])
+        });
         let mut scratch = BoxScratch::default();
         for block in [3u32, 11, 41, 127] {
             let mut mean = GrayImage::new(53, 31);
@@ -261,7 +269,12 @@ mod tests {
             for c in [-255, -20, -5, 0, 3, 255] {
                 let mut out = GrayImage::new(53, 31);
                 adaptive_or_edges(&img, block, c, &edges, &mut scratch, &mut out);
-                for ((&o, (&s, &m)), &e) in out.as_raw().iter().zip(img.as_raw().iter().zip(mean.as_raw())).zip(edges.as_raw()) {
+                for ((&o, (&s, &m)), &e) in out
+                    .as_raw()
+                    .iter()
+                    .zip(img.as_raw().iter().zip(mean.as_raw()))
+                    .zip(edges.as_raw())
+                {
                     let want = if s as i32 > m as i32 - c { 255 } else { e };
                     assert_eq!(o, want, "block {block} c {c}: src {s} mean {m}");
                 }
@@ -306,7 +319,14 @@ mod tests {
         let otsu = otsu_level(&img);
         threshold_or_edges(&img, otsu, &no_edges, &mut binary);
         let by_otsu = lines_of(&binary);
-        adaptive_or_edges(&img, opts.adaptive.0, opts.adaptive.1, &no_edges, &mut BoxScratch::default(), &mut binary);
+        adaptive_or_edges(
+            &img,
+            opts.adaptive.0,
+            opts.adaptive.1,
+            &no_edges,
+            &mut BoxScratch::default(),
+            &mut binary,
+        );
         let adaptive = lines_of(&binary);
         assert!(!found(&fixed), "fixed {fixed:?}");
         assert!(!found(&by_otsu), "otsu (level {otsu}) {by_otsu:?}");

@@ -70,7 +70,11 @@ impl LightOptions {
     /// that is ≥ 0 (`sim.light_shadows` …; −1 = the level's).
     pub fn from_level(level: u32, overrides: [f64; 4], seed: u64) -> LightOptions {
         let p = PRESETS[(level as usize).min(PRESETS.len() - 1)];
-        let v: Vec<f64> = p.iter().zip(overrides).map(|(&p, o)| if o >= 0.0 { o } else { p }).collect();
+        let v: Vec<f64> = p
+            .iter()
+            .zip(overrides)
+            .map(|(&p, o)| if o >= 0.0 { o } else { p })
+            .collect();
         LightOptions {
             shadows: v[0],
             glare: v[1],
@@ -143,7 +147,7 @@ impl Shape {
 /// The shadows and patches of `opts` along `track`'s route, placed from `opts.seed`.
 pub fn shapes(track: &Track, opts: &LightOptions) -> Vec<Shape> {
     let mut out = Vec::new();
-    let mut rng = SplitMix64::new(opts.seed ^ 0x4C49_4748_54);
+    let mut rng = SplitMix64::new(opts.seed ^ 0x004C_4947_4854);
     let len = track.length;
     let turn = |a: f64| [a.cos(), a.sin()];
     if opts.shadows > 0.0 {
@@ -295,7 +299,10 @@ mod tests {
         let o = LightOptions::from_level(0, [-1.0; 4], 1);
         assert!(!o.has_map() && o.dim() == 1.0 && o.noise == 0.0 && Tint::new(o.dusk).is_none());
         let o = LightOptions::from_level(3, [0.2, -1.0, 0.0, -1.0], 1);
-        assert_eq!((o.shadows, o.glare, o.dusk, o.noise), (0.2, PRESETS[3][1], 0.0, PRESETS[3][3]));
+        assert_eq!(
+            (o.shadows, o.glare, o.dusk, o.noise),
+            (0.2, PRESETS[3][1], 0.0, PRESETS[3][3])
+        );
     }
 
     /// A shadow darkens the floor at its core by its depth, leaves the floor well outside it

@@ -253,8 +253,12 @@ impl Renderer {
         } else {
             Vec::new()
         };
-        let light_map = (opts.light.has_map())
-            .then(|| Arc::new(LightMap::new(&scene.track, &super::light::shapes(&scene.track, &opts.light))));
+        let light_map = (opts.light.has_map()).then(|| {
+            Arc::new(LightMap::new(
+                &scene.track,
+                &super::light::shapes(&scene.track, &opts.light),
+            ))
+        });
         let tint = Tint::new(opts.light.dusk);
         Renderer {
             scene,
@@ -359,7 +363,9 @@ impl Renderer {
             // compiler vectorises; no division per pixel).
             match &self.light_map {
                 None => lerp_fill(&mut self.light, w, LIGHT_STEP, |u| scene.illumination(at(u))),
-                Some(m) => lerp_fill(&mut self.light, w, LIGHT_STEP, |u| scene.illumination(at(u)) * m.at(at(u))),
+                Some(m) => lerp_fill(&mut self.light, w, LIGHT_STEP, |u| {
+                    scene.illumination(at(u)) * m.at(at(u))
+                }),
             }
             if textured {
                 lerp_fill(&mut self.tex, w, tstep, |u| scene.texture_at(at(u)) * row.fade);
