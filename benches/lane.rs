@@ -110,6 +110,25 @@ fn main() {
         }
     }
     let allocs = ALLOCS.load(Ordering::Relaxed) - allocs_before;
+    // The adaptive threshold's stage (lane.threshold_mode = "adaptive"), beside the fixed one.
+    let mut adet = cfg
+        .with_override("lane.threshold_mode=adaptive")
+        .unwrap()
+        .lane_detector()
+        .unwrap();
+    for f in &frames {
+        adet.measure(f, &mut Warm, &mut times);
+    }
+    let mut adaptive: Vec<f64> = (0..reps)
+        .map(|_| {
+            let mut acc = 0.0;
+            for f in &frames {
+                adet.measure(f, &mut Clock(Instant::now()), &mut times);
+                acc += times.threshold_us as f64 * 1e-9;
+            }
+            acc / frames.len() as f64
+        })
+        .collect();
 
     // OpenCV: the same stages in Python, same frames.
     let m = det.warp_map().homography().inverse().unwrap().0;
@@ -139,6 +158,13 @@ fn main() {
         let (med, min) = median_min(&mut ours[k]);
         println!("  ours   {n:30} {:8.1} / {:8.1}", med * 1e6, min * 1e6);
     }
+    let (a_med, a_min) = median_min(&mut adaptive);
+    println!(
+        "  ours   {:30} {:8.1} / {:8.1}",
+        "adaptive threshold|edges",
+        a_med * 1e6,
+        a_min * 1e6
+    );
     let (our_med, our_min) = median_min(&mut ours[5]);
     println!(
         "  ours   {:30} {:8.1} / {:8.1}",
@@ -154,7 +180,7 @@ fn main() {
         Some(cv) => {
             let stages = &cv["stages"];
             println!("OpenCV {} (cv2.setNumThreads(1)):", cv["opencv"].as_str().unwrap_or("?"));
-            for k in ["warp", "gray", "blur", "canny", "threshold", "histogram"] {
+            for k in ["warp", "gray", "blur", "canny", "threshold", "histogram", "adaptive"] {
                 let mut v: Vec<f64> = stages[k].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
                 let (med, min) = median_min(&mut v);
                 println!("  opencv {k:30} {:8.1} / {:8.1}", med * 1e6, min * 1e6);

@@ -23,6 +23,7 @@ mod lane_accuracy;
 mod lane_peak;
 mod lane_replay;
 mod lens_sim;
+mod light_sim;
 mod pad;
 mod ranging_calibrate_cli;
 mod ranging_sim;

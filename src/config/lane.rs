@@ -15,10 +15,16 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LaneConfig {
-    /// `fixed` or `otsu`.
+    /// `fixed`, `otsu` or `adaptive`.
     pub threshold_mode: ThresholdMode,
     /// Grey level, 0..=255: pixels strictly brighter are "line".
     pub threshold: u8,
+    /// `adaptive`: side of the square round each pixel whose mean it is compared with, odd,
+    /// 3..=127 pixels.
+    pub adaptive_block: u32,
+    /// `adaptive`: a pixel is "line" when brighter than that mean − C (OpenCV's C), grey
+    /// levels −255..=255; negative = brighter than the mean by that much.
+    pub adaptive_c: i32,
     /// Canny hysteresis low threshold (L1 gradient magnitude of the 3x3 Sobel).
     pub canny_low: u16,
     /// Canny hysteresis high threshold.
@@ -47,6 +53,8 @@ impl Default for LaneConfig {
         Self {
             threshold_mode: ThresholdMode::Fixed,
             threshold: 170,
+            adaptive_block: 41,
+            adaptive_c: -5,
             canny_low: 100,
             canny_high: 200,
             blur: true,
@@ -65,6 +73,14 @@ impl LaneConfig {
     /// image's width `bird_width` (`warp.out_width`), pixels.
     pub(super) fn check(&self, c: &mut Checker, bird_width: u32) {
         let l = self;
+        if l.adaptive_block.is_multiple_of(2) || !(3..=127).contains(&l.adaptive_block) {
+            c.fail(
+                "lane.adaptive_block",
+                l.adaptive_block.to_string(),
+                "an odd number 3 ..= 127",
+            );
+        }
+        c.range("lane.adaptive_c", l.adaptive_c, -255, 255);
         c.range("lane.canny_low", l.canny_low, 0, 2040);
         c.range("lane.canny_high", l.canny_high, 0, 2040);
         if l.canny_low > l.canny_high {
@@ -89,6 +105,7 @@ impl From<&LaneConfig> for LaneOptions {
         Self {
             threshold_mode: l.threshold_mode,
             threshold: l.threshold,
+            adaptive: (l.adaptive_block, l.adaptive_c),
             canny: CannyOptions {
                 low: l.canny_low,
                 high: l.canny_high,

@@ -39,6 +39,17 @@ pub struct SimConfig {
     /// p1, p2, k3] on `[camera]`'s pinhole (src/sim/lens.rs `LensWarp`); all zero = an ideal
     /// lens. The truth stays the ideal camera's.
     pub lens_distortion: [f64; 5],
+    /// Changing light along the route (src/sim/light.rs, docs/light.md): 0 = none, 1..3 =
+    /// preset shadows, bright patches, dusk and low-light noise, strongest at 3.
+    pub light_level: u32,
+    /// Darkening in a shadow's core, fraction 0..0.9; −1 = the level's.
+    pub light_shadows: f64,
+    /// Extra light in a bright patch's core, fraction 0..3; −1 = the level's.
+    pub light_glare: f64,
+    /// Dusk: global dimming (and a warmer colour), fraction 0..0.9; −1 = the level's.
+    pub light_dusk: f64,
+    /// Extra sensor noise, grey levels 0..32; −1 = the level's.
+    pub light_noise: f64,
 }
 
 impl Default for SimConfig {
@@ -57,6 +68,11 @@ impl Default for SimConfig {
             stereo_error_deg: [0.0; 3],
             stereo_error_k1: 0.0,
             lens_distortion: [0.0; 5],
+            light_level: 0,
+            light_shadows: -1.0,
+            light_glare: -1.0,
+            light_dusk: -1.0,
+            light_noise: -1.0,
         }
     }
 }
@@ -85,6 +101,23 @@ impl SimConfig {
             c.range(&format!("sim.lens_distortion[{i}]"), *v, -bound, bound);
             // (the same bounds gate the fold check in `check_sim_lens`)
         }
+        c.range("sim.light_level", m.light_level, 0, 3);
+        for (key, v, hi) in [
+            ("sim.light_shadows", m.light_shadows, 0.9),
+            ("sim.light_glare", m.light_glare, 3.0),
+            ("sim.light_dusk", m.light_dusk, 0.9),
+            ("sim.light_noise", m.light_noise, 32.0),
+        ] {
+            if v != -1.0 && !(0.0..=hi).contains(&v) {
+                c.fail(key, v.to_string(), &format!("-1 (the level's) or 0 ..= {hi}"));
+            }
+        }
+    }
+
+    /// The light variation of `light_level` and the `light_*` overrides.
+    pub fn light(&self) -> crate::sim::light::LightOptions {
+        let o = [self.light_shadows, self.light_glare, self.light_dusk, self.light_noise];
+        crate::sim::light::LightOptions::from_level(self.light_level, o, self.seed as u64)
     }
 }
 

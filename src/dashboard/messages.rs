@@ -169,9 +169,10 @@ pub fn validate_setup(cfg: &Config, req: &SetupRequest) -> Result<Config, Contro
         new.lane.threshold_mode = match m.as_str() {
             "fixed" => crate::config::ThresholdMode::Fixed,
             "otsu" => crate::config::ThresholdMode::Otsu,
+            "adaptive" => crate::config::ThresholdMode::Adaptive,
             _ => {
                 return Err(ControlError::OutOfRange(format!(
-                    "lane.threshold_mode `{}` is not one of fixed, otsu",
+                    "lane.threshold_mode `{}` is not one of fixed, otsu, adaptive",
                     m.chars().take(32).collect::<String>()
                 )))
             }

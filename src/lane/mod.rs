@@ -50,6 +50,9 @@ pub struct LaneOptions {
     pub threshold_mode: ThresholdMode,
     /// Fixed grey level (0..=255).
     pub threshold: u8,
+    /// Adaptive threshold: side of the square the mean is taken over (odd), pixels, and C (a
+    /// pixel is line when brighter than the mean − C), grey levels.
+    pub adaptive: (u32, i32),
     /// Canny thresholds and blur.
     pub canny: CannyOptions,
     /// Histogram band and line finding.
@@ -69,7 +72,7 @@ pub struct LaneImages {
     pub hist: Vec<u16>,
     /// Rows in the histogram band.
     pub band_rows: u32,
-    /// Threshold level used (fixed or Otsu's).
+    /// Threshold level used (fixed or Otsu's; 0 for the adaptive threshold).
     pub level: u8,
 }
 
@@ -102,6 +105,7 @@ pub struct LaneDetector {
     gray_frame: GrayImage,
     exact_warp: bool,
     images: LaneImages,
+    box_scratch: threshold::BoxScratch,
 }
 
 impl LaneDetector {
@@ -125,6 +129,7 @@ impl LaneDetector {
                 band_rows,
                 level: 0,
             },
+            box_scratch: threshold::BoxScratch::default(),
         })
     }
 
@@ -145,11 +150,20 @@ impl LaneDetector {
         edges::canny(&im.bird, &self.opts.canny, &mut self.scratch, &mut im.edges);
         times.canny_us = timer.lap_us();
         // 3. Threshold, united with the edges.
+        let (block, c) = self.opts.adaptive;
         im.level = match self.opts.threshold_mode {
             ThresholdMode::Fixed => self.opts.threshold,
             ThresholdMode::Otsu => threshold::otsu_level(&im.bird),
+            ThresholdMode::Adaptive => 0,
         };
-        threshold::threshold_or_edges(&im.bird, im.level, &im.edges, &mut im.binary);
+        match self.opts.threshold_mode {
+            ThresholdMode::Fixed | ThresholdMode::Otsu => {
+                threshold::threshold_or_edges(&im.bird, im.level, &im.edges, &mut im.binary)
+            }
+            ThresholdMode::Adaptive => {
+                threshold::adaptive_or_edges(&im.bird, block, c, &im.edges, &mut self.box_scratch, &mut im.binary)
+            }
+        }
         times.threshold_us = timer.lap_us();
         // 4. Column histogram of the band nearest the car.
         lines::column_histogram(&im.binary, im.band_rows, &mut im.hist);

@@ -5,6 +5,13 @@
 //! Semantics follow OpenCV's `threshold(..., THRESH_BINARY)`: a pixel becomes 255 when it is
 //! *strictly* brighter than the level, else 0. Otsu (1979) picks the level that maximises the
 //! between-class variance of the grey histogram, computed as OpenCV's `getThreshVal_Otsu_8u`.
+//!
+//! Under shadows and bright patches no single level fits the whole bird's-eye image: the
+//! adaptive threshold compares each pixel with the mean of the `block × block` square round
+//! it instead ([`adaptive_or_edges`], bit-exact to OpenCV's `adaptiveThreshold` with
+//! `ADAPTIVE_THRESH_MEAN_C`, `THRESH_BINARY`: 255 where `src > mean − C`; the mean is
+//! `boxFilter` with replicated borders, rounded to a grey level). The box sums are running
+//! sums, so the cost does not grow with the block.
 
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
@@ -17,6 +24,113 @@ pub enum ThresholdMode {
     Fixed,
     /// Otsu's method picks the level per frame.
     Otsu,
+    /// Each pixel against the mean of the square round it (`lane.adaptive_block`,
+    /// `lane.adaptive_c`).
+    Adaptive,
+}
+
+/// Scratch of the box sums: the column sums of the current window and one padded row.
+#[derive(Debug, Clone, Default)]
+pub struct BoxScratch {
+    cols: Vec<u32>,
+    pad: Vec<u32>,
+    sums: Vec<u32>,
+}
+
+/// Calls `row(y, sums)` for each row of `src` with the sums of the `block × block` square
+/// (odd `block`) round each of its pixels, borders replicated (OpenCV's `BORDER_REPLICATE`).
+/// Running sums: two additions per pixel whatever the block.
+fn box_sums(src: &GrayImage, block: u32, scratch: &mut BoxScratch, mut row: impl FnMut(usize, &[u32])) {
+    assert!(block % 2 == 1, "block must be odd");
+    let (w, h) = (src.width() as usize, src.height() as usize);
+    if w == 0 || h == 0 {
+        return;
+    }
+    let (r, b) = ((block / 2) as usize, block as usize);
+    let s = src.as_raw();
+    let line = |y: isize| -> &[u8] {
+        let y = y.clamp(0, h as isize - 1) as usize;
+        &s[y * w..(y + 1) * w]
+    };
+    let BoxScratch { cols, pad, sums } = scratch;
+    // 1. Column sums of the first window (rows -r..=r, replicated).
+    cols.clear();
+    cols.resize(w, 0);
+    for dy in -(r as isize)..=r as isize {
+        for (c, &p) in cols.iter_mut().zip(line(dy)) {
+            *c += p as u32;
+        }
+    }
+    pad.resize(w + 2 * r, 0);
+    sums.resize(w, 0);
+    for y in 0..h {
+        // 2. The row's column sums with r replicated on each side, then a running sum along x.
+        pad[r..r + w].copy_from_slice(cols);
+        let (first, last) = (cols[0], cols[w - 1]);
+        pad[..r].fill(first);
+        pad[r + w..].fill(last);
+        let mut acc: u32 = pad[..b].iter().sum();
+        sums[0] = acc;
+        for x in 1..w {
+            acc = acc + pad[x + b - 1] - pad[x - 1];
+            sums[x] = acc;
+        }
+        row(y, sums);
+        // 3. Slide the column window down one row.
+        if y + 1 < h {
+            let (add, sub) = (line((y + 1 + r) as isize), line(y as isize - r as isize));
+            for ((c, &a), &b) in cols.iter_mut().zip(add).zip(sub) {
+                *c = *c + a as u32 - b as u32;
+            }
+        }
+    }
+}
+
+/// The mean of the `block × block` square (odd `block`, at most 127) round each pixel of
+/// `src`, borders replicated, rounded to the nearest grey level: OpenCV's `boxFilter(...,
+/// normalize=true, BORDER_REPLICATE)` on 8-bit images. (OpenCV rounds a float product; an odd
+/// area never ties, and up to 127 × 127 the float's error is smaller than the distance to a
+/// tie, so the exact rounding here is the same.)
+pub fn box_mean(src: &GrayImage, block: u32, scratch: &mut BoxScratch, out: &mut GrayImage) {
+    assert_eq!(src.dimensions(), out.dimensions());
+    let w = src.width() as usize;
+    let area = block * block;
+    let o: &mut [u8] = out;
+    box_sums(src, block, scratch, |y, sums| {
+        for (o, &s) in o[y * w..(y + 1) * w].iter_mut().zip(sums) {
+            *o = ((2 * s + area) / (2 * area)) as u8;
+        }
+    });
+}
+
+/// OpenCV's `adaptiveThreshold(src, 255, ADAPTIVE_THRESH_MEAN_C, THRESH_BINARY, block, c)`
+/// (odd `block` 3..=127, whole-number `c`) united with `edges`: 255 where `src > mean − c`
+/// (the mean as [`box_mean`]) or an edge. Negative `c` = brighter than the mean by at least
+/// 1 − c. Compared in integers without the mean: `round(sum / area) < src + c` is
+/// `2 sum < (2 (src + c) − 1) area`.
+pub fn adaptive_or_edges(
+    src: &GrayImage,
+    block: u32,
+    c: i32,
+    edges: &GrayImage,
+    scratch: &mut BoxScratch,
+    out: &mut GrayImage,
+) {
+    assert_eq!(src.dimensions(), out.dimensions());
+    assert_eq!(edges.dimensions(), out.dimensions());
+    assert!(block <= 127, "block must be at most 127");
+    let w = src.width() as usize;
+    let area = (block * block) as i32;
+    let (s_all, e_all) = (src.as_raw(), edges.as_raw());
+    let o: &mut [u8] = out;
+    box_sums(src, block, scratch, |y, sums| {
+        let span = y * w..(y + 1) * w;
+        let (o, s, e) = (&mut o[span.clone()], &s_all[span.clone()], &e_all[span]);
+        for (((o, &s), &e), &sum) in o.iter_mut().zip(s).zip(e).zip(sums) {
+            let pass = 2 * (sum as i32) < (2 * (s as i32 + c) - 1) * area;
+            *o = if pass { 255 } else { e };
+        }
+    });
 }
 
 /// Otsu's threshold level for `img` (0..=255).
@@ -100,6 +214,134 @@ mod tests {
         // matches imageproc's Otsu within one grey level
         let r = imageproc::contrast::otsu_level(&img);
         assert!(t.abs_diff(r) <= 1, "{t} vs imageproc {r}");
+    }
+
+    /// The box mean against a plain sum over the clamped square, rounded, on noise images of
+    /// odd sizes, blocks smaller and larger than the image.
+    #[test]
+    fn box_mean_is_the_rounded_mean_of_the_replicated_square() {
+        let mut seed = 7u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 56) as u8
+        };
+        let mut scratch = BoxScratch::default();
+        for (w, h) in [(1u32, 1u32), (5, 3), (37, 23), (64, 9)] {
+            let img = GrayImage::from_fn(w, h, |_, _| image::Luma([rnd()]));
+            for block in [3u32, 5, 9, 41] {
+                let mut got = GrayImage::new(w, h);
+                box_mean(&img, block, &mut scratch, &mut got);
+                let r = (block / 2) as i64;
+                for y in 0..h as i64 {
+                    for x in 0..w as i64 {
+                        let mut sum = 0u64;
+                        for dy in -r..=r {
+                            for dx in -r..=r {
+                                let (xx, yy) = ((x + dx).clamp(0, w as i64 - 1), (y + dy).clamp(0, h as i64 - 1));
+                                sum += img.get_pixel(xx as u32, yy as u32)[0] as u64;
+                            }
+                        }
+                        let want = (sum as f64 / (block * block) as f64).round() as u8;
+                        assert_eq!(
+                            got.get_pixel(x as u32, y as u32)[0],
+                            want,
+                            "{w}x{h} block {block} at ({x},{y})"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// The fused comparison is `src > mean − c` with the mean of [`box_mean`], for every c.
+    #[test]
+    fn adaptive_is_src_above_the_mean_minus_c() {
+        let img = GrayImage::from_fn(53, 31, |x, y| {
+            image::Luma([((x * 37 + y * 91 + x * y * 13) % 251) as u8])
+        });
+        let edges = GrayImage::from_fn(53, 31, |x, y| {
+            image::Luma([if (x + 2 * y) % 17 == 0 { 255 } else { 0 }])
+        });
+        let mut scratch = BoxScratch::default();
+        for block in [3u32, 11, 41, 127] {
+            let mut mean = GrayImage::new(53, 31);
+            box_mean(&img, block, &mut scratch, &mut mean);
+            for c in [-255, -20, -5, 0, 3, 255] {
+                let mut out = GrayImage::new(53, 31);
+                adaptive_or_edges(&img, block, c, &edges, &mut scratch, &mut out);
+                for ((&o, (&s, &m)), &e) in out
+                    .as_raw()
+                    .iter()
+                    .zip(img.as_raw().iter().zip(mean.as_raw()))
+                    .zip(edges.as_raw())
+                {
+                    let want = if s as i32 > m as i32 - c { 255 } else { e };
+                    assert_eq!(o, want, "block {block} c {c}: src {s} mean {m}");
+                }
+            }
+        }
+    }
+
+    /// A bird's-eye image under changing light: a lit floor with a gradient, a deep shadow
+    /// over the rows the histogram sums (the tape there darker than the lit floor) and a
+    /// bright sun patch (brighter than the tape in the shade). The fixed level and Otsu's lose
+    /// the lines; the adaptive threshold finds both where they are.
+    #[test]
+    fn adaptive_finds_the_lines_in_a_shadow_where_fixed_and_otsu_fail() {
+        let (w, h) = (320u32, 240u32);
+        let (left, right) = (60u32..73, 250u32..263);
+        let img = GrayImage::from_fn(w, h, |x, y| {
+            let tape = left.contains(&x) || right.contains(&x);
+            let mut v = if tape { 225.0 } else { 90.0 + 30.0 * x as f64 / w as f64 };
+            if y >= 130 {
+                v *= 0.3; // the shadow
+            } else if (100..220).contains(&x) && y < 120 {
+                v = 235.0; // the sun patch between the lines
+            }
+            image::Luma([v.round() as u8])
+        });
+        let opts = crate::lane::LaneOptions::from(&crate::config::LaneConfig::default());
+        let band = crate::lane::lines::band_rows(h, opts.lines.band);
+        let no_edges = GrayImage::new(w, h);
+        let mut binary = GrayImage::new(w, h);
+        let mut hist = vec![0u16; w as usize];
+        let mut lines_of = |binary: &GrayImage| {
+            crate::lane::lines::column_histogram(binary, band, &mut hist);
+            crate::lane::lines::measure(&hist, band, &opts.lines)
+        };
+        let found = |m: &crate::lane::LaneMeasurement| {
+            m.status == crate::lane::LaneStatus::Both
+                && (m.p_left.unwrap() - 66.0).abs() < 2.0
+                && (m.p_right.unwrap() - 256.0).abs() < 2.0
+        };
+        threshold_or_edges(&img, opts.threshold, &no_edges, &mut binary);
+        let fixed = lines_of(&binary);
+        let otsu = otsu_level(&img);
+        threshold_or_edges(&img, otsu, &no_edges, &mut binary);
+        let by_otsu = lines_of(&binary);
+        adaptive_or_edges(
+            &img,
+            opts.adaptive.0,
+            opts.adaptive.1,
+            &no_edges,
+            &mut BoxScratch::default(),
+            &mut binary,
+        );
+        let adaptive = lines_of(&binary);
+        assert!(!found(&fixed), "fixed {fixed:?}");
+        assert!(!found(&by_otsu), "otsu (level {otsu}) {by_otsu:?}");
+        assert!(found(&adaptive), "adaptive {adaptive:?}");
+        // No floor passes inside the shadow or the patch (beyond half a block from their
+        // edges: at a hard edge the lit side's strip is brighter than its mean).
+        let r = opts.adaptive.0 / 2;
+        let floor_on = binary
+            .enumerate_pixels()
+            .filter(|&(x, y, p)| {
+                let inside = y > 130 + r || ((100 + r..220 - r).contains(&x) && y + r < 120);
+                p[0] > 0 && inside && !left.contains(&x) && !right.contains(&x)
+            })
+            .count();
+        assert_eq!(floor_on, 0, "{floor_on} floor pixels pass");
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! runs ([`run`]), scored against ground truth ([`truth`]). [`scene`] holds what the camera
 //! looks at (floor, lines, walls, objects), [`glyphs`] the stroke letters of the signs,
 //! [`plot`] the run's plots, [`sweep`] gain sweeps over one or two keys, [`step`]
-//! step-response figures, [`rng`] the seeded generator. Usage and the track format:
+//! step-response figures, [`rng`] the seeded generator, [`light`] shadows, bright patches and dusk. Usage and the track format:
 //! `docs/sim.md`.
 //!
 //! Units: metres, seconds, radians (degrees only in files). World frame x east, y north,
@@ -14,6 +14,7 @@ pub mod camera;
 pub mod glyphs;
 pub mod geometry;
 pub mod lens;
+pub mod light;
 pub mod network;
 pub mod plan;
 pub mod plot;

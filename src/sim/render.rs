@@ -16,6 +16,7 @@
 //! `Renderer` on the same scene, and [`Renderer::object_boxes`] gives the image box of each
 //! object for training crops and ground truth. Units: metres, seconds, pixels.
 
+use super::light::{LightMap, LightOptions, Tint};
 use super::rng::{mix, SplitMix64};
 use super::scene::{Footprint, Prim, Scene};
 use super::track::Object;
@@ -79,6 +80,8 @@ pub struct RenderOptions {
     pub light_period_s: f64,
     /// Seed of the noise.
     pub seed: u64,
+    /// Shadows, bright patches, dusk and low-light noise ([`super::light`]).
+    pub light: LightOptions,
 }
 
 impl RenderOptions {
@@ -91,6 +94,7 @@ impl RenderOptions {
             light_variation: c.light_variation,
             light_period_s: c.light_period_s,
             seed: c.seed as u64,
+            light: c.light(),
         }
     }
 
@@ -103,6 +107,7 @@ impl RenderOptions {
             light_variation: 0.0,
             light_period_s: 10.0,
             seed: 0,
+            light: LightOptions::off(),
         }
     }
 }
@@ -151,6 +156,8 @@ struct View {
     lens: [f64; 2],
     /// Global gain: exposure and the slow lighting change.
     gain: f32,
+    /// The floor's and walls' gain: `gain` and dusk's dimming (the objects keep `gain`).
+    room_gain: f32,
 }
 
 /// Renders a scene through one camera.
@@ -175,6 +182,9 @@ pub struct Renderer {
     tex: Vec<f32>,
     /// (sin, cos) of the camera's tilt.
     tilt_sc: (f64, f64),
+    /// Shadows and bright patches on the floor, and dusk's colour (none at light level 0).
+    light_map: Option<Arc<LightMap>>,
+    tint: Option<Tint>,
 }
 
 impl Renderer {
@@ -229,9 +239,10 @@ impl Renderer {
         }
         // Triangular noise (two uniform bytes), standard deviation `noise_sigma`.
         let n = 3 * w * h + NOISE_SLACK;
-        let a = opts.noise_sigma * 6f64.sqrt() / 255.0;
+        let sigma = opts.noise_sigma + opts.light.noise;
+        let a = sigma * 6f64.sqrt() / 255.0;
         let mut rng = SplitMix64::new(opts.seed ^ 0x006E_6F69_7365);
-        let noise = if opts.noise_sigma > 0.0 {
+        let noise = if sigma > 0.0 {
             (0..n)
                 .map(|_| {
                     let r = rng.next_u64();
@@ -242,6 +253,13 @@ impl Renderer {
         } else {
             Vec::new()
         };
+        let light_map = (opts.light.has_map()).then(|| {
+            Arc::new(LightMap::new(
+                &scene.track,
+                &super::light::shapes(&scene.track, &opts.light),
+            ))
+        });
+        let tint = Tint::new(opts.light.dusk);
         Renderer {
             scene,
             mount,
@@ -255,6 +273,8 @@ impl Renderer {
             light: Vec::new(),
             tex: Vec::new(),
             tilt_sc: cam.tilt_rad.sin_cos(),
+            light_map,
+            tint,
         }
     }
 
@@ -296,10 +316,15 @@ impl Renderer {
             yaw: pose.yaw.sin_cos(),
             lens: pose.to_world([self.mount.x_m, 0.0]),
             gain,
+            room_gain: gain * self.opts.light.dim(),
         };
         // 2. Floor, walls, ceiling, row by row.
         for v in rows.clone() {
             self.render_row(&view, v, img);
+        }
+        if let Some(t) = &self.tint {
+            let w = cam.width as usize;
+            t.apply(&mut img.as_mut()[3 * w * rows.start..3 * w * rows.end]);
         }
         // 3. Objects, far ones first.
         self.render_objects(pose, t_s, &view, &rows, img);
@@ -312,7 +337,7 @@ impl Renderer {
     fn render_row(&mut self, view: &View, v: usize, img: &mut RgbImage) {
         let w = self.mount.camera.width as usize;
         let scene = &*self.scene;
-        let (o, (sy, cy), lens, gain) = (view.o, view.yaw, view.lens, view.gain);
+        let (o, (sy, cy), lens, gain) = (view.o, view.yaw, view.lens, view.room_gain);
         let buf: &mut [u8] = img.as_mut();
         let rot = |x: f64, y: f64| -> [f64; 2] { [cy * x - sy * y, sy * x + cy * y] };
         let row = self.rows[v];
@@ -336,7 +361,12 @@ impl Renderer {
         if row.floor {
             // Samples, then per-pixel values by linear interpolation (simple loops the
             // compiler vectorises; no division per pixel).
-            lerp_fill(&mut self.light, w, LIGHT_STEP, |u| scene.illumination(at(u)));
+            match &self.light_map {
+                None => lerp_fill(&mut self.light, w, LIGHT_STEP, |u| scene.illumination(at(u))),
+                Some(m) => lerp_fill(&mut self.light, w, LIGHT_STEP, |u| {
+                    scene.illumination(at(u)) * m.at(at(u))
+                }),
+            }
             if textured {
                 lerp_fill(&mut self.tex, w, tstep, |u| scene.texture_at(at(u)) * row.fade);
             }

@@ -7,9 +7,10 @@ For every input frame, rccar (`rccar stages`) and OpenCV each compute:
   -> binary threshold (cv2.threshold, strictly greater) OR edges -> column histogram of the band
   -> P_left / P_right (the same peak rule, ported below) -> L_c.
 It prints per-stage pixel differences and both sides' lane positions, and passes an image when
-P_left and P_right agree within 1 px. It runs three variants of the configuration: the default
+P_left and P_right agree within 1 px. It runs six variants of the configuration: the default
 (grey first, then warp: within one grey level of OpenCV), `warp.exact=true` (colour warp then
-grey, which must match OpenCV bit for bit in every stage) and exact with Otsu and no blur. Inputs: the shipped sample frames (tests/data/lane_sample)
+grey, which must match OpenCV bit for bit in every stage), exact with Otsu and no blur, and exact
+with the adaptive threshold (cv2.adaptiveThreshold, ADAPTIVE_THRESH_MEAN_C) at three blocks. Inputs: the shipped sample frames (tests/data/lane_sample)
 and real photos from scikit-image's bundled data, resized to the camera size.
 
 Usage: python tests/parity/lane_parity.py [--rccar target/release/rccar] [--config config/car.toml]
@@ -87,7 +88,12 @@ def opencv_stages(rgb, rec, cfg):
         level = int(level)
     else:
         level = lane["threshold"]
-    _, thr = cv2.threshold(bird, level, 255, cv2.THRESH_BINARY)
+    if lane["threshold_mode"] == "adaptive":
+        level = 0
+        thr = cv2.adaptiveThreshold(bird, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY,
+                                    lane["adaptive_block"], lane["adaptive_c"])
+    else:
+        _, thr = cv2.threshold(bird, level, 255, cv2.THRESH_BINARY)
     binary = cv2.bitwise_or(thr, edges)
     band = rec["band_rows"]
     hist = (binary[H - band:] > 0).sum(axis=0).astype(np.int64)
@@ -120,6 +126,13 @@ VARIANTS = [
     ("default", []),
     ("exact", ["warp.exact=true"]),
     ("exact-otsu-noblur", ["warp.exact=true", "lane.threshold_mode=otsu", "lane.blur=false"]),
+    # cv2.adaptiveThreshold(ADAPTIVE_THRESH_MEAN_C, THRESH_BINARY): the shipped block and C,
+    # then a small block with a positive C and the largest (127: wider than the bird's-eye band).
+    ("exact-adaptive", ["warp.exact=true", "lane.threshold_mode=adaptive"]),
+    ("exact-adaptive-7", ["warp.exact=true", "lane.threshold_mode=adaptive", "lane.adaptive_block=7",
+                          "lane.adaptive_c=3"]),
+    ("exact-adaptive-127", ["warp.exact=true", "lane.threshold_mode=adaptive", "lane.adaptive_block=127",
+                            "lane.adaptive_c=-20"]),
 ]
 
 
@@ -134,7 +147,7 @@ def apply(cfg, sets):
     for kv in sets:
         key, value = kv.split("=", 1)
         sec, name = key.split(".")
-        cfg[sec][name] = tomllib.loads(f"v = {value}")["v"] if value not in ("otsu", "fixed") else value
+        cfg[sec][name] = tomllib.loads(f"v = {value}")["v"] if value not in ("otsu", "fixed", "adaptive") else value
     return cfg
 
 

@@ -40,6 +40,7 @@ fn mode_name(m: ThresholdMode) -> &'static str {
     match m {
         ThresholdMode::Fixed => "fixed",
         ThresholdMode::Otsu => "otsu",
+        ThresholdMode::Adaptive => "adaptive",
     }
 }
 
