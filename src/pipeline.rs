@@ -705,6 +705,11 @@ impl Pipeline {
                                 continue;
                             };
                             let r = d.rect;
+                            let face = [r.x as f64 - 0.5, r.y as f64 - 0.5, (r.x + r.width) as f64 - 0.5, (r.y + r.height) as f64 - 0.5];
+                            // A box without its class's face colour is the cascade's mistake.
+                            if !crate::ranging::refine::shows_colour(frame, class, face) {
+                                continue;
+                            }
                             let bbox = [
                                 r.x as f64 - 0.5,
                                 r.y as f64 - 0.5,

@@ -292,6 +292,8 @@ pub struct Behaviour {
     /// Last time a traffic light was seen, seconds.
     light_seen_at: f64,
     lane_lost_since: Option<f64>,
+    /// Odometry when the lane was lost (a yielding car creeps across a crossing's gap).
+    lane_lost_odo: Option<f64>,
     /// Odometry at which the car reaches the confirmed yield point ([`yield_point_m`]).
     yield_at_odo: f64,
     /// Distance of the obstacle that blocks a yield when last seen, metres.
@@ -345,6 +347,7 @@ impl Behaviour {
             pending_stop: false,
             light_seen_at: f64::NEG_INFINITY,
             lane_lost_since: None,
+            lane_lost_odo: None,
             yield_at_odo: f64::NEG_INFINITY,
             yield_obstacle_m: f64::INFINITY,
             yield_w: Window::default(),
@@ -493,6 +496,7 @@ impl Behaviour {
         } else {
             Some(self.lane_lost_since.unwrap_or(now))
         };
+        self.lane_lost_odo = if obs.lane_seen { None } else { Some(self.lane_lost_odo.unwrap_or(odo)) };
         let in_pass = matches!(self.mode, Mode::PassOut | Mode::PassAlong | Mode::PassBack);
         if in_pass && stop_ok {
             self.pending_stop = true;
@@ -599,7 +603,8 @@ impl Behaviour {
                         self.yield_at_odo = f64::NEG_INFINITY;
                         self.yield_w = Window::default();
                         self.go(Mode::Cruise, now, odo, "past the yield sign".into());
-                    } else if !obs.lane_seen {
+                    } else if self.lane_lost_odo.is_some_and(|o0| odo - o0 > YIELD_LOST_M) {
+                        // A crossing's gap in the lines is short; creeping, it takes a while.
                         self.go(Mode::LaneLost, now, odo, "lane not seen".into());
                     }
                 }
@@ -675,7 +680,17 @@ impl Behaviour {
                 }
                 let at_point = odo >= self.yield_at_odo || self.yield_obstacle_m <= c.obstacle_stop_m;
                 let stand = self.mode == Mode::YieldStop && at_point;
-                (stand.then_some(0.0), None)
+                // Across a crossing's gap (lane lost) the throttle law would stop the car:
+                // creep on, holding the steering (YIELD_LOST_M at most).
+                let creep_blind = self.mode == Mode::Yield && self.lane_lost_odo.is_some();
+                let throttle = if stand {
+                    Some(0.0)
+                } else if creep_blind {
+                    Some(c.yield_creep)
+                } else {
+                    None
+                };
+                (throttle, None)
             }
         };
         Decision {
@@ -719,6 +734,10 @@ struct Evidence {
     /// No such obstacle in the whole window.
     yield_clear: bool,
 }
+
+/// A yielding car goes on creeping with the lane lost for this far (a crossing's gap in the
+/// lines, where a give-way sign stands), metres; then it is lane-lost as anywhere.
+pub const YIELD_LOST_M: f64 = 0.8;
 
 /// How far ahead of the lens a yielding car stops when the way is not clear, metres: the
 /// yield sign's ranged distance; a line across the lane near it takes over where the sign's

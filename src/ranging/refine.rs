@@ -26,6 +26,49 @@ use image::RgbImage;
 /// How much the search region exceeds the box on each side, as a fraction of its size.
 pub const GROW: f64 = 0.15;
 
+/// Smallest fraction of a detector box's pixels in its class's face colour (red for a stop or
+/// yield sign, blue for a turn sign) for the box to count: a box without its colour is a false
+/// positive of the cascade (a stop sign's cascade firing on a blue turn sign, say).
+pub const MIN_COLOUR_FRACTION: f64 = 0.05;
+
+/// Whether a detector box of `class` shows the class's face colour (at least
+/// [`MIN_COLOUR_FRACTION`] of its pixels); classes without a face colour always do.
+pub fn shows_colour(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> bool {
+    let test: fn([u8; 3]) -> bool = match class.info().colour_cue {
+        ColourCue::RedFace => red,
+        ColourCue::BlueFace => blue,
+        ColourCue::LitHousing | ColourCue::None => return true,
+    };
+    let (w, h) = (img.width() as i64, img.height() as i64);
+    let x0 = ((bbox[0] + 0.5).floor() as i64).clamp(0, w);
+    let x1 = ((bbox[2] + 0.5).ceil() as i64).clamp(0, w);
+    let y0 = ((bbox[1] + 0.5).floor() as i64).clamp(0, h);
+    let y1 = ((bbox[3] + 0.5).ceil() as i64).clamp(0, h);
+    let total = ((x1 - x0) * (y1 - y0)).max(0) as f64;
+    if total == 0.0 {
+        return false;
+    }
+    let mut n = 0usize;
+    for y in y0..y1 {
+        for x in x0..x1 {
+            n += test(img.get_pixel(x as u32, y as u32).0) as usize;
+        }
+    }
+    n as f64 >= MIN_COLOUR_FRACTION * total
+}
+
+/// A red face's pixel (stop and yield signs).
+fn red(p: [u8; 3]) -> bool {
+    let (r, g, b) = (p[0] as u32, p[1] as u32, p[2] as u32);
+    r >= 50 && 10 * r >= 18 * g && 10 * r >= 16 * b
+}
+
+/// A blue face's pixel (turn signs).
+fn blue(p: [u8; 3]) -> bool {
+    let (r, g, b) = (p[0] as u32, p[1] as u32, p[2] as u32);
+    b >= 50 && 10 * b >= 16 * r && 10 * b >= 12 * g
+}
+
 /// The tight outline of `class`'s coloured part inside `bbox` (see the module notes), or
 /// `None` (no refinement for obstacles, too few pixels, box outside the image).
 pub fn outline(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<[f64; 4]> {
@@ -43,10 +86,7 @@ pub fn outline(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<[f6
     // 1. The pixel test.
     let cue = class.info().colour_cue;
     let test: Box<dyn Fn([u8; 3]) -> bool> = match cue {
-        ColourCue::RedFace => Box::new(|p: [u8; 3]| {
-            let (r, g, b) = (p[0] as u32, p[1] as u32, p[2] as u32);
-            r >= 50 && 10 * r >= 18 * g && 10 * r >= 16 * b
-        }),
+        ColourCue::RedFace => Box::new(red),
         ColourCue::LitHousing => {
             let mut hist = [0u32; 256];
             for y in y0..y1 {
@@ -66,10 +106,7 @@ pub fn outline(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<[f6
             let t = 2 * p10 + 8;
             Box::new(move |p: [u8; 3]| luma(p) <= t)
         }
-        ColourCue::BlueFace => Box::new(|p: [u8; 3]| {
-            let (r, g, b) = (p[0] as u32, p[1] as u32, p[2] as u32);
-            b >= 50 && 10 * b >= 16 * r && 10 * b >= 12 * g
-        }),
+        ColourCue::BlueFace => Box::new(blue),
         ColourCue::None => return None,
     };
     // 2. Profiles.
