@@ -621,7 +621,7 @@ impl Pipeline {
         let (lane, junction) = match &mut self.junction {
             Some(rule) => {
                 let im = self.lane.images();
-                rule.step(&im.binary, &im.hist, im.band_rows, &self.lane.options().lines, lane)
+                rule.step(&im.binary, &im.hist, im.band_rows, &self.lane.options().lines, lane, self.dead.odometry_m)
             }
             None => (lane, None),
         };
@@ -640,10 +640,11 @@ impl Pipeline {
         // A turn sign near decides the next fork (the junction rule reads it from the next frame).
         if let (Some(rule), Some((r, arrow))) = (&mut self.junction, obs.turn_sign) {
             if r.distance_m <= TURN_SIGN_NEAR_M {
-                rule.sign(match arrow {
+                let way = match arrow {
                     crate::classes::TurnArrow::Left => crate::route::Step::Left,
                     crate::classes::TurnArrow::Right => crate::route::Step::Right,
-                });
+                };
+                rule.sign(way, obs.odometry_m, r.distance_m);
             }
         }
         let decision = self.behaviour.step(&obs, self.time_s);

@@ -29,12 +29,23 @@ struct Frame {
 
 /// Drives `laps` of the town with `route` (None: the track's own), detectors on.
 fn drive(route: Option<Vec<Step>>, laps: u32) -> (rccar::sim::run::Summary, Vec<rccar::sim::plan::Passage>, u32, Vec<Frame>) {
-    let track = town();
+    drive_on(town(), route, laps, None)
+}
+
+/// Drives `track` for `laps` (or `seconds` of simulated time), detectors on.
+fn drive_on(
+    track: Track,
+    route: Option<Vec<Step>>,
+    laps: u32,
+    seconds: Option<f64>,
+) -> (rccar::sim::run::Summary, Vec<rccar::sim::plan::Passage>, u32, Vec<Frame>) {
     let mut cfg = Config::default().with_override(&format!("sim.laps={laps}")).unwrap();
+    if let Some(s) = seconds {
+        cfg.sim.max_seconds = s;
+    }
     let steps = configure_route(&mut cfg, &track, route);
-    let plan = track.plan(&steps, laps).unwrap();
+    let plan = track.plan(&steps, laps.max(1)).unwrap();
     let mut sim = Simulation::new(&cfg, &track).unwrap();
-    sim.set_full_frames(false);
     let (det, missing) = rccar::pipeline::load_detector(&cfg, &Path::new(ROOT).join("config")).unwrap();
     assert!(missing.is_empty(), "{missing:?}");
     sim.set_detector(det);
@@ -114,6 +125,57 @@ fn the_town_route_takes_every_fork_the_way_it_says() {
     assert!(miss.abs() <= 0.03, "front {miss:+.4} m from the stop line");
     assert!(held >= 4.9, "held {held:.2} s");
     assert!((frames[a].front[1] - line.pos[1]).abs() < 0.05, "stopped elsewhere: {:?}", frames[a].front);
+    // The yield sign on A with nothing crossing: the car creeps past it, never stops.
+    use rccar::control::behaviour::Mode;
+    assert!(frames.iter().any(|f| f.mode == Mode::Yield), "never yielded on A");
+    assert!(frames.iter().all(|f| f.mode != Mode::YieldStop), "stopped at the yield sign with nothing crossing");
+    assert!(stands(&frames, Mode::Yield).is_empty());
+}
+
+/// The town with an edit of its text (a sign switched on, an obstacle added).
+fn town_with(edit: impl Fn(&str) -> String) -> Track {
+    let text = std::fs::read_to_string(Path::new(ROOT).join("config/tracks/town.toml")).unwrap();
+    Track::from_toml_str(&edit(&text), "town.toml").unwrap()
+}
+
+#[test]
+fn turn_signs_decide_their_fork_against_the_route() {
+    // Fork B: the route says straight, the "turn left" sign before B says left.
+    let route = vec![Step::Straight, Step::Left, Step::Straight];
+    let (s, plan, _, _) = drive(Some(route), 1);
+    let b = plan.iter().find(|p| p.kind == JunctionKind::Fork && p.road == "B").expect("the plan takes B");
+    assert_eq!((b.way, b.why, b.step), (Some(Step::Left), Some(rccar::route::Why::Sign), Some(2)));
+    assert_eq!(fork_ways_of(&s.junctions), fork_ways_of(&plan), "driven vs planned (with the sign)");
+    assert_eq!(s.lane_departures, 0);
+    // Fork C with its "turn right" sign switched on: the route says left (stay on main).
+    let track = town_with(|t| t.replace("yaw_deg = 180\nenabled = false", "yaw_deg = 180\nenabled = true"));
+    assert!(track.enabled_objects().filter(|o| o.arrow.is_some()).count() == 2, "the right-turn sign is on");
+    let (s, plan, _, _) = drive_on(track, Some(vec![Step::Straight, Step::Left]), 1, None);
+    let c = &plan.iter().filter(|p| p.kind == JunctionKind::Fork).collect::<Vec<_>>()[1];
+    assert_eq!((c.way, c.why, c.road.as_str()), (Some(Step::Right), Some(rccar::route::Why::Sign), "C"));
+    assert_eq!(fork_ways_of(&s.junctions), fork_ways_of(&plan));
+    assert_eq!(s.lane_departures, 0);
+}
+
+#[test]
+fn a_yield_stops_at_its_line_while_an_obstacle_is_in_the_crossing() {
+    // An obstacle in the crossing of A and B; the route takes A (left at the first fork).
+    let track = town_with(|t| {
+        format!("{t}\n[[objects]]\ntype = \"obstacle\"\nx = 4.5\ny = 6.5\nsize_m = [0.15, 0.12, 0.10]\ncolor = [170, 70, 40]\n")
+    });
+    let line = track.marks.iter().find(|m| m.kind == rccar::sim::track::MarkKind::YieldLine).unwrap();
+    let near_edge = line.pos[1] - line.width / 2.0;
+    let (_, _, _, frames) = drive_on(track, Some(vec![Step::Left]), 0, Some(35.0));
+    use rccar::control::behaviour::Mode;
+    let st = stands(&frames, Mode::YieldStop);
+    assert!(!st.is_empty(), "never stood yielding");
+    let (a, b) = (st[0].0, st.last().unwrap().1);
+    let miss = frames[a].front[1] - near_edge;
+    eprintln!("yield line: front {:+.1} mm from its near edge, stood {:.1} s", miss * 1000.0, frames[b].t - frames[a].t);
+    assert!(miss.abs() <= 0.03, "front {miss:+.4} m from the give-way line");
+    // It stays while the obstacle stays, and never reaches the crossing.
+    assert!(frames[b].t - frames[a].t > 3.0);
+    assert!(frames.iter().all(|f| f.front[1] < near_edge + 0.03));
 }
 
 #[test]

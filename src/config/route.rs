@@ -29,8 +29,8 @@ pub struct RouteConfig {
     pub settle_frames: u32,
     /// Most frames a junction lasts (10..3000).
     pub max_frames: u32,
-    /// A turn sign decides a fork met within this many frames after it was seen (1..3000).
-    pub sign_frames: u32,
+    /// A turn sign decides a fork met at most this far past the sign, metres (0.5..20).
+    pub sign_reach_m: f64,
 }
 
 impl Default for RouteConfig {
@@ -44,7 +44,7 @@ impl Default for RouteConfig {
             lean: o.lean,
             settle_frames: o.settle_frames,
             max_frames: o.max_frames,
-            sign_frames: o.sign_frames,
+            sign_reach_m: o.sign_reach_m,
         }
     }
 }
@@ -78,7 +78,7 @@ impl RouteConfig {
         c.range("route.lean", self.lean, 0.005, 0.5);
         c.range("route.settle_frames", self.settle_frames, 1, 100);
         c.range("route.max_frames", self.max_frames, 10, 3000);
-        c.range("route.sign_frames", self.sign_frames, 1, 3000);
+        c.range("route.sign_reach_m", self.sign_reach_m, 0.5, 20.0);
         if self.steps.len() > crate::route::MAX_STEPS {
             c.range("route.steps (count)", self.steps.len(), 0, crate::route::MAX_STEPS);
         }
@@ -92,7 +92,7 @@ impl RouteConfig {
             lean: self.lean,
             settle_frames: self.settle_frames,
             max_frames: self.max_frames,
-            sign_frames: self.sign_frames,
+            sign_reach_m: self.sign_reach_m,
         }
     }
 }

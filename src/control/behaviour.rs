@@ -475,9 +475,10 @@ impl Behaviour {
             // A give-way (or stop) line across the lane near the sign is where to stand.
             self.yield_at_odo = odo + self.stop_line_distance(odo, Some(d)).map_or(d, |(l, _)| l);
         }
+        // In the lane ahead, or beside it where a crossing road runs (something crossing).
         let block = obs
             .obstacle
-            .filter(|o| o.distance_m < c.yield_clear_m && o.lateral_m.abs() <= c.obstacle_lane_half_m);
+            .filter(|o| o.distance_m < c.yield_clear_m && o.lateral_m.abs() <= YIELD_SIDE_M.max(c.obstacle_lane_half_m));
         self.yield_block_w.push(block.is_some());
         if let Some(o) = block {
             self.yield_obstacle_m = o.distance_m;
@@ -530,7 +531,9 @@ impl Behaviour {
             yield_blocked,
             yield_clear,
         } = e;
-        if obstacle_ok && !in_pass && self.mode != Mode::Obstacle {
+        // Yielding to it already: the yield stop stands at the line (an obstacle in the crossing
+        // beyond the line is what a give-way line is for).
+        if obstacle_ok && !in_pass && self.mode != Mode::Obstacle && self.mode != Mode::YieldStop {
             let d = obs.obstacle.map_or(f64::NAN, |o| o.distance_m);
             self.go(Mode::Obstacle, now, odo, format!("obstacle in lane at {d:.2} m"));
         } else {
@@ -678,13 +681,23 @@ impl Behaviour {
                 if self.mode == Mode::YieldStop && self.stop_line_distance(odo, None).is_some() {
                     throttle_cap = throttle_cap.min(self.line_approach(odo));
                 }
-                let at_point = odo >= self.yield_at_odo || self.yield_obstacle_m <= c.obstacle_stop_m;
+                // obstacle_stop_m before an obstacle, unless it stands beyond the line (in the
+                // crossing): then the line.
+                let beyond_line = self
+                    .stop_line_distance(odo, None)
+                    .is_some_and(|(l, _)| self.yield_obstacle_m > l + self.line.front_m);
+                let at_point =
+                    odo >= self.yield_at_odo || (!beyond_line && self.yield_obstacle_m <= c.obstacle_stop_m);
                 let stand = self.mode == Mode::YieldStop && at_point;
                 // Across a crossing's gap (lane lost) the throttle law would stop the car:
                 // creep on, holding the steering (YIELD_LOST_M at most).
-                let creep_blind = self.mode == Mode::Yield && self.lane_lost_odo.is_some();
+                let creep_blind = self.lane_lost_odo.is_some();
+                let to_line = self.mode == Mode::YieldStop && self.stop_line_distance(odo, None).is_some();
                 let throttle = if stand {
                     Some(0.0)
+                } else if to_line {
+                    // Rolling to rest with the front on the line, the lane seen or not.
+                    Some(c.yield_creep.min(self.line_approach(odo)))
                 } else if creep_blind {
                     Some(c.yield_creep)
                 } else {
@@ -734,6 +747,12 @@ struct Evidence {
     /// No such obstacle in the whole window.
     yield_clear: bool,
 }
+
+/// While yielding, an obstacle this far to either side of the car's axis (lens to its box
+/// centre, metres) blocks the way: it is on the crossing road, about to cross (a lane and a
+/// half of a classroom track). Elsewhere only an obstacle in the lane (`obstacle_lane_half_m`)
+/// counts.
+pub const YIELD_SIDE_M: f64 = 0.5;
 
 /// A yielding car goes on creeping with the lane lost for this far (a crossing's gap in the
 /// lines, where a give-way sign stands), metres; then it is lane-lost as anywhere.

@@ -15,7 +15,7 @@
 //!    frame it jumped, or if it leans in (its column in the upper half of the band is nearer
 //!    the lane than in the lower half: a road coming in), it is a **merge** (the car keeps the
 //!    other, steady line). If it leans out by more than `lean` lane widths it is bending away:
-//!    a **fork**, and the car chooses — a turn sign seen before the fork first, else the
+//!    a **fork**, and the car chooses — a turn sign seen at most `sign_reach_m` before the fork first, else the
 //!    route's next step, else `straight` — and keeps the line on that side (`left` → P_L,
 //!    `right` → P_R, `straight` → the steady line).
 //! 3. While at the junction the kept line gives the lane (the other is estimated from the lane
@@ -63,8 +63,9 @@ pub struct JunctionOptions {
     pub lean: f64,
     /// Most frames a junction may last (then back on the road whatever the lines say).
     pub max_frames: u32,
-    /// A turn sign seen within this many frames before a fork decides it.
-    pub sign_frames: u32,
+    /// A turn sign decides a fork the car meets at most this far (odometry, metres) past the
+    /// sign.
+    pub sign_reach_m: f64,
 }
 
 impl Default for JunctionOptions {
@@ -75,7 +76,7 @@ impl Default for JunctionOptions {
             lean: 0.03,
             settle_frames: 8,
             max_frames: 300,
-            sign_frames: 90,
+            sign_reach_m: 3.0,
         }
     }
 }
@@ -129,7 +130,8 @@ pub struct JunctionRule {
     forks: u32,
     last: [Option<f64>; 2],
     at: Option<At>,
-    sign: Option<(Step, u32)>,
+    /// A turn sign's way, until the odometry passes this (metres).
+    sign: Option<(Step, f64)>,
     /// Scratch: a column histogram of half the band.
     half: Vec<u16>,
 }
@@ -154,15 +156,17 @@ impl JunctionRule {
         &self.route[self.next.min(self.route.len())..]
     }
 
-    /// A turn sign seen this frame (`Left` or `Right`): it decides the next fork met within
-    /// `sign_frames` frames, whatever the route says.
-    pub fn sign(&mut self, way: Step) {
-        self.sign = Some((way, self.opts.sign_frames));
+    /// A turn sign seen this frame (`Left` or `Right`), `sign_m` ahead of the lens at odometry
+    /// `odometry_m`: it decides the next fork met at most `sign_reach_m` past the sign, whatever
+    /// the route says.
+    pub fn sign(&mut self, way: Step, odometry_m: f64, sign_m: f64) {
+        self.sign = Some((way, odometry_m + sign_m + self.opts.sign_reach_m));
     }
 
     /// One frame: the binary bird's-eye image and the histogram the lane was measured from
     /// (`binary`, `hist`, `band_rows`, `lines`) and that measurement `m`; returns the lane to
-    /// steer by and, at a junction, the report.
+    /// steer by and, at a junction, the report. `odometry_m`: the distance driven so far (for
+    /// a turn sign's reach).
     pub fn step(
         &mut self,
         binary: &GrayImage,
@@ -170,6 +174,7 @@ impl JunctionRule {
         band_rows: u32,
         lines: &LineOptions,
         m: LaneMeasurement,
+        odometry_m: f64,
     ) -> (LaneMeasurement, Option<JunctionReport>) {
         let (w, mid) = (hist.len(), hist.len() / 2);
         let min_count = (lines.min_peak * band_rows as f64).ceil().max(1.0) as u16;
@@ -178,8 +183,8 @@ impl JunctionRule {
             peak_with(lines.peak, hist, mid..w, min_count),
         ];
         let lane = lines.lane_width_px;
-        if let Some((way, left)) = self.sign {
-            self.sign = (left > 1).then_some((way, left - 1));
+        if self.sign.is_some_and(|(_, until)| odometry_m > until) {
+            self.sign = None;
         }
         let Some(mut at) = self.at else {
             // 1–2. On the road: remember the lines; meet a junction when they part.
@@ -400,7 +405,7 @@ mod tests {
         let mut hist = vec![0; W as usize];
         column_histogram(img, rows, &mut hist);
         let m = measure(&hist, rows, &LINES);
-        rule.step(img, &hist, rows, &LINES, m)
+        rule.step(img, &hist, rows, &LINES, m, 0.0)
     }
 
     #[test]
@@ -456,7 +461,7 @@ mod tests {
     #[test]
     fn a_turn_sign_overrides_the_route() {
         let mut rule = JunctionRule::new(vec![Step::Straight], JunctionOptions::default());
-        rule.sign(Step::Left);
+        rule.sign(Step::Left, 0.0, 1.0);
         let mut got = None;
         for i in 0..40 {
             let drift = (i as f64 - 5.0).max(0.0) * 2.0;
