@@ -256,7 +256,8 @@ fn main() {
                 cln * 1e3
             );
             println!(
-                "  opencv lane + 3 detectMultiScale           median {:8.3} ms  min {:8.3} ms",
+                "  opencv lane + {} detectMultiScale           median {:8.3} ms  min {:8.3} ms",
+                cascades.len(),
                 cm * 1e3,
                 cn * 1e3
             );
