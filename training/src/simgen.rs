@@ -380,6 +380,8 @@ impl SimGen {
             light_variation: o.light_variation,
             light_period_s: 10.0,
             seed: rng.next_u64(),
+            // No shadows or dusk (`sim.light_level` 0): the shipped models' data as before.
+            light: rccar::sim::light::LightOptions::off(),
         }
     }
 
