@@ -475,10 +475,9 @@ impl Behaviour {
             // A give-way (or stop) line across the lane near the sign is where to stand.
             self.yield_at_odo = odo + self.stop_line_distance(odo, Some(d)).map_or(d, |(l, _)| l);
         }
-        // In the lane ahead, or beside it where a crossing road runs (something crossing).
         let block = obs
             .obstacle
-            .filter(|o| o.distance_m < c.yield_clear_m && o.lateral_m.abs() <= YIELD_SIDE_M.max(c.obstacle_lane_half_m));
+            .filter(|o| o.distance_m < c.yield_clear_m && o.lateral_m.abs() <= c.obstacle_lane_half_m);
         self.yield_block_w.push(block.is_some());
         if let Some(o) = block {
             self.yield_obstacle_m = o.distance_m;
@@ -747,12 +746,6 @@ struct Evidence {
     /// No such obstacle in the whole window.
     yield_clear: bool,
 }
-
-/// While yielding, an obstacle this far to either side of the car's axis (lens to its box
-/// centre, metres) blocks the way: it is on the crossing road, about to cross (a lane and a
-/// half of a classroom track). Elsewhere only an obstacle in the lane (`obstacle_lane_half_m`)
-/// counts.
-pub const YIELD_SIDE_M: f64 = 0.5;
 
 /// A yielding car goes on creeping with the lane lost for this far (a crossing's gap in the
 /// lines, where a give-way sign stands), metres; then it is lane-lost as anywhere.

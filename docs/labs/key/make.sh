@@ -432,6 +432,18 @@ if want 13; then
   sweep 13 ld l13_ld "$C"
 fi
 
+# ---- lab 14: routes ------------------------------------------------------------------------
+if want 14; then
+  ROUTE=straight,left,left,left,straight,right
+  C="rccar sim --track town --laps 3 --route $ROUTE --no-timing"
+  rccar sim --no-local --track "$REPO/config/tracks/town.toml" --laps 3 --route $ROUTE --no-timing -o l14 >/dev/null
+  fig 14 "tour/laps" "$(jq .laps l14/summary.json)" 0 laps "$C"
+  fig 14 "tour/departures" "$(jq .lane_departures l14/summary.json)" 0 departures "$C"
+  fig 14 "tour/forks" "$(jq '[.junctions[] | select(.kind == "fork")] | length' l14/summary.json)" 0 forks "$C; fork passages driven"
+  fig 14 "tour/crossings" "$(jq '[.junctions[] | select(.kind == "crossing")] | length' l14/summary.json)" 0 crossings "$C; the crossing, crossed"
+  fig 14 "tour/rms_m" "$(jq .xte_rms_m l14/summary.json)" 0.0005 m "$C"
+fi
+
 # ---- write the key ------------------------------------------------------------------------------------------------
 # one figure per line, so that a regenerated key diffs figure by figure
 {
