@@ -25,6 +25,7 @@ pub mod classes;
 pub mod config;
 pub mod control;
 pub mod dashboard;
+pub mod dataset;
 pub mod detect;
 pub mod drive;
 pub mod fields;

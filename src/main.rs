@@ -49,6 +49,10 @@ enum Cmd {
     Plot(cli::plot::PlotArgs),
     /// Write DIR/report.md and a self-contained DIR/report.html for a run's output folder.
     Report(cli::report::ReportArgs),
+    /// Recordings as datasets: list label histograms, cut frame ranges, merge, and move data to
+    /// and from Donkey Car's tub v2 (`data ls|cut|merge|export|import`, docs/data.md).
+    #[command(subcommand)]
+    Data(cli::data::DataCmd),
 }
 
 fn main() -> ExitCode {
@@ -74,6 +78,7 @@ fn main() -> ExitCode {
         Cmd::Camera(c) => cli::camera::run(c),
         Cmd::Plot(a) => cli::plot::run(a),
         Cmd::Report(a) => cli::report::run(a),
+        Cmd::Data(c) => cli::data::run(c),
     };
     match result {
         Ok(code) => code,

@@ -7,6 +7,7 @@ pub mod camera;
 pub mod common;
 pub mod config;
 pub mod dashboard;
+pub mod data;
 pub mod detect;
 pub mod drive;
 pub mod link;
