@@ -11,6 +11,7 @@ mod behaviour_scenarios;
 mod broken_pipe;
 mod calib_sim;
 mod cli_robustness;
+mod data_cmd;
 mod detect_bad_input;
 mod detect_band;
 mod detect_cascades;
