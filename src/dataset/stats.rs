@@ -188,15 +188,19 @@ impl LabelStats {
         for k in 0..BINS {
             let (lo, hi) = (EDGES[k], EDGES[k + 1]);
             let bar = |c: usize| "#".repeat((c * 20).div_ceil(most));
-            out.push(format!(
-                "{:>+5.2}..{:<+5.2}  {:>7} {:<20} {:>7} {}",
-                lo,
-                hi,
-                self.steer_hist[k],
-                bar(self.steer_hist[k]),
-                self.throttle_hist[k],
-                bar(self.throttle_hist[k])
-            ));
+            out.push(
+                format!(
+                    "{:>+5.2}..{:<+5.2}  {:>7} {:<20} {:>7} {}",
+                    lo,
+                    hi,
+                    self.steer_hist[k],
+                    bar(self.steer_hist[k]),
+                    self.throttle_hist[k],
+                    bar(self.throttle_hist[k])
+                )
+                .trim_end()
+                .to_string(),
+            );
         }
         for w in &self.warnings {
             out.push(format!("warning: {w}"));

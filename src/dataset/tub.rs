@@ -203,9 +203,8 @@ pub fn read(dir: &Path) -> Result<Dataset, DatasetError> {
             .filter(|l| !l.iter().all(u8::is_ascii_whitespace))
             .collect();
         check_catalog_manifest(dir, name, lines.len(), position)?;
-        let mut line_no = 0;
-        for raw in text.split(|&b| b == b'\n') {
-            line_no += 1;
+        for (k, raw) in text.split(|&b| b == b'\n').enumerate() {
+            let line_no = k + 1;
             if raw.iter().all(u8::is_ascii_whitespace) {
                 continue;
             }
@@ -430,7 +429,7 @@ pub fn write(
             mode_name(s.mode),
             Value::from(s.throttle),
         );
-        if index as usize % MAX_LEN == 0 {
+        if (index as usize).is_multiple_of(MAX_LEN) {
             catalogs.push((
                 format!("catalog_{}.catalog", catalogs.len()),
                 index,
