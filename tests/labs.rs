@@ -301,6 +301,7 @@ labs! {
     lab12 => "12-behaviours.md",
     lab13 => "13-pure-pursuit.md",
     lab14 => "14-routes.md",
+    lab15 => "15-data-balance.md",
 }
 
 #[test]

@@ -444,6 +444,20 @@ if want 14; then
   fig 14 "tour/rms_m" "$(jq .xte_rms_m l14/summary.json)" 0.0005 m "$C"
 fi
 
+# ---- lab 15: data balance ----------------------------------------------------------------------
+if want 15; then
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --record F -o R; rccar data ls F --telemetry R/telemetry.jsonl --json"
+  $SIM --laps 1 --record l15_frames -o l15_run >/dev/null
+  rccar data ls l15_frames --telemetry l15_run/telemetry.jsonl --json > l15_ls.json
+  rm -rf l15_frames   # about 450 MB of PNG
+  share() { jq "100 * $1 / .stats.frames" l15_ls.json; }
+  fig 15 "lap/frames" "$(jq .stats.frames l15_ls.json)" 5 frames "$C"
+  fig 15 "lap/left_pct" "$(share '.stats.steer_left_straight_right[0]')" 0.5 % "$C; steer < -0.05"
+  fig 15 "lap/straight_pct" "$(share '.stats.steer_left_straight_right[1]')" 0.5 % "$C; -0.05 <= steer < 0.05"
+  fig 15 "lap/right_pct" "$(share '.stats.steer_left_straight_right[2]')" 0.5 % "$C; steer >= 0.05"
+  fig 15 "lap/turning_left_pct" "$(jq '.stats.steer_left_straight_right as $s | 100 * $s[0] / ($s[0] + $s[2])' l15_ls.json)" 0.5 % "$C; of the turning frames"
+fi
+
 # ---- write the key ------------------------------------------------------------------------------------------------
 # one figure per line, so that a regenerated key diffs figure by figure
 {
