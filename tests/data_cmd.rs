@@ -285,6 +285,15 @@ fn sim_drive_cut_merge_export_read_back_import_and_replay() {
     );
     assert_eq!(lines(&t("replayed").join("telemetry.jsonl")).len(), 550);
 
+    // A simulator's run folder holds the telemetry, not the frames: said so.
+    let o = rccar(&["data", "ls"], &[&t("run")]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("none of the 600 frames of"),
+        "{}",
+        text(&o)
+    );
+
     // Inputs untouched all along.
     assert!(snapshot(&t("frames")) == before, "the recorded frames were changed");
 }

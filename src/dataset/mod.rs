@@ -341,6 +341,7 @@ fn read_recording(dir: &Path, tel: &Path, kind: Kind) -> Result<Dataset, Dataset
     };
     let mut last: Option<(u64, f64, usize)> = None;
     let mut used = 0usize;
+    let mut no_image = 0usize;
     for (k, raw) in text.split(|&b| b == b'\n').enumerate() {
         let line_no = k + 1;
         if raw.iter().all(u8::is_ascii_whitespace) {
@@ -398,6 +399,7 @@ fn read_recording(dir: &Path, tel: &Path, kind: Kind) -> Result<Dataset, Dataset
         let file = v.get("file").and_then(Value::as_str).unwrap_or("");
         let image = by_index.get(&frame).or_else(|| by_name.get(file)).cloned();
         let Some(image) = image else {
+            no_image += 1;
             skip(
                 &mut ds,
                 format!("frame {frame}: no image file (deleted by the disk budget, or never written)"),
@@ -422,6 +424,15 @@ fn read_recording(dir: &Path, tel: &Path, kind: Kind) -> Result<Dataset, Dataset
         });
     }
     ds.unlabelled_frames = frames_on_disk.saturating_sub(used);
+    if used == 0 && no_image > 0 {
+        return Err(DatasetError::Bad {
+            path: dir.into(),
+            reason: format!(
+                "none of the {no_image} frames of {} is here (seg_NNNNNN/frame_NNNNNNNNN.jpg, or the files its lines name); a run folder of `rccar sim -o RUN` holds the telemetry only: give the frames' folder (`--record DIR`) with --telemetry RUN/{TELEMETRY_FILE}",
+                tel.display()
+            ),
+        });
+    }
     Ok(ds)
 }
 
