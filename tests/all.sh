@@ -104,14 +104,17 @@ stage build cargo build --release --workspace --all-targets
 stage cargo-test cargo test --release --workspace --no-fail-fast
 stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
+# JPEG as cv2.imread decodes it, in the default build (libjpeg-turbo's C code via mozjpeg, a
+# default feature; issue 28): pixels and `rccar detect`'s boxes on OpenCV's sample JPEGs.
+stage jpeg-parity "$RCCAR_PYTHON" tests/parity/jpeg_parity.py
 stage train-parity "$RCCAR_PYTHON" tests/parity/train_parity.py --quick
 stage calib-parity "$RCCAR_PYTHON" tests/parity/calib_parity.py
 stage firmware make -C firmware all sim
 stage protocol-c make -C firmware test
 stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
 stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
-# Everything behind a cargo feature is tested in ONE feature set (the car's, the dashboard and
-# libjpeg-turbo decoding), so the library is compiled once more, not once per feature.
+# Everything behind a cargo feature is tested in ONE feature set (the car's and the dashboard;
+# libjpeg-turbo decoding is a default feature), so the library is compiled once more, not once per feature.
 FEAT=serial,camera,gpio,dashboard,jpeg-turbo,gamepad
 # Build every feature-set test binary, the binary and the JPEG example first: the stages below
 # then only run, and the machine is quiet for the wall-clock ones.
@@ -135,8 +138,6 @@ stage dashboard-security cargo test --release --features $FEAT --test car -- --t
 # (the same target selection as feature-build: a build without a dev target resolves the
 # dependencies' features differently and compiles the library again)
 stage dashboard-browser bash -c "cargo build --release --features $FEAT --bins --example decode && \"\$RCCAR_PYTHON\" tests/dashboard/browser_test.py"
-# rccar with jpeg-turbo (libjpeg-turbo's C code via mozjpeg; needs gcc), in the same feature set.
-stage jpeg-parity env RCCAR_JPEG_FEATURES=$FEAT "$RCCAR_PYTHON" tests/parity/jpeg_parity.py
 # The Pi cross-build check: aarch64 build (Debian's rustc-web), replay and a 20 s sim under
 # qemu-aarch64, decisions compared with the native run (see the top for the switches).
 if [ "${RCCAR_CROSS:-1}" = 1 ]; then

@@ -153,7 +153,21 @@ fn parse(path: &Path) -> Page {
 
 /// Runs every `sh` block of `docs/labs/<file>` as one script; panics naming the line.
 fn run_lab(file: &str) {
-    let path = repo().join("docs/labs").join(file);
+    run_page(&format!("docs/labs/{file}"), Duration::from_secs(300));
+}
+
+/// What a page's run left: its output and the folder it ran in (kept until dropped).
+struct PageRun {
+    stdout: String,
+    stderr: String,
+    work: tempfile::TempDir,
+}
+
+/// Runs every `sh` block of the page `rel` (relative to the repository) as one script, as
+/// [`run_lab`] does, within `limit`; panics naming the Markdown line of a failing command.
+fn run_page(rel: &str, limit: Duration) -> PageRun {
+    let file = rel;
+    let path = repo().join(rel);
     let page = parse(&path);
     assert!(
         !page.needs_serial || cfg!(feature = "serial"),
@@ -212,7 +226,6 @@ fn run_lab(file: &str) {
         s
     });
     // A lab that hangs must fail, not stall the suite.
-    let limit = Duration::from_secs(300);
     let status = loop {
         if let Some(st) = child.try_wait().unwrap() {
             break Some(st);
@@ -258,11 +271,12 @@ fn run_lab(file: &str) {
             .map(|n| n.to_string())
             .unwrap_or_else(|| "?".into());
         panic!(
-            "docs/labs/{file}:{line}: command failed ({status})\n--- stdout\n{}\n--- stderr\n{}",
+            "{file}:{line}: command failed ({status})\n--- stdout\n{}\n--- stderr\n{}",
             tail(&stdout),
             tail(&stderr)
         );
     }
+    PageRun { stdout, stderr, work }
 }
 
 /// The lab pages: `NN-name.md` in docs/labs.
@@ -303,6 +317,122 @@ labs! {
     lab14 => "14-routes.md",
     lab15 => "15-data-balance.md",
 }
+
+/// Issue 28, must-show 2: docs/training.md's real-photo recipe runs as written (its `sh`
+/// blocks with the page's quick counts), from frames with boxes and from a folder of crops, on
+/// material made here: the simulator's track without objects as the car's two recordings,
+/// photo-like frames (the simulator's stop sign on OpenCV's sample photos, Debian opencv-doc)
+/// for the sign, none of it committed. Then the held-out figures both `evaluate` runs printed
+/// (shown on stderr) are checked at minNeighbors 3 against what this data gave, with room for
+/// a sign or two: see `RECIPE_*` and docs/training.md, "The recipe as a test".
+///
+/// Without opencv-doc the test says so and passes, unless `RCCAR_OPENCV_DOC` is set (as
+/// tests/all.sh does after installing it).
+#[test]
+fn training_recipe() {
+    let (doc, required) = match std::env::var_os("RCCAR_OPENCV_DOC") {
+        Some(d) => (PathBuf::from(d), true),
+        None => (PathBuf::from("/usr/share/doc/opencv-doc/examples/data"), false),
+    };
+    if !doc.join("baboon.jpg").is_file() {
+        assert!(!required, "{}: OpenCV's sample photos missing (apt-get install opencv-doc)", doc.display());
+        eprintln!("skipped: OpenCV's sample photos not installed (apt-get install opencv-doc)");
+        return;
+    }
+    let run = run_page("docs/training.md", Duration::from_secs(900));
+    let d = run.work.path();
+    // The page's output without `rccar detect`'s JSON lines: the summaries and both tables.
+    let shown: Vec<&str> = run.stdout.lines().filter(|l| !l.starts_with('{')).collect();
+    eprintln!("--- the recipe's output\n{}", shown.join("\n"));
+    // Step 2: lists relative to themselves (issue 28: they were absolute), and a next step.
+    let pos = std::fs::read_to_string(d.join("data/pos.dat")).expect("data/pos.dat");
+    assert!(pos.lines().all(|l| l.starts_with("../photos/frames/")), "{pos}");
+    assert!(run.stdout.contains("next: rccar-train distort --templates-from-info data/pos.dat"));
+    // Step 3: the crops' window is the one given; the boxes' one says what it is.
+    assert!(run.stdout.contains("window 14x14"), "{}", run.stdout);
+    // Step 4: the summary names the per-frame figures, and the positives the stages used.
+    let summary = |key: &str| run.stdout.lines().filter(|l| l.starts_with(key)).collect::<Vec<_>>();
+    let held = summary("held-out ");
+    assert_eq!(held.len(), 2, "{held:?}");
+    assert!(held.iter().all(|l| l.contains("per frame without the object (280)")), "{held:?}");
+    let pos = summary("positives ");
+    assert!(pos.len() == 2 && pos.iter().all(|l| l.contains("per stage used")), "{pos:?}");
+    // The held-out negatives come from other folders than training's: no same-source note.
+    assert!(!run.stderr.contains("come from the folders training's backgrounds"), "{}", run.stderr);
+    // Step 5: both models, figures named, the track recording's line.
+    for (model, min_recall, max_fp_neg, max_fp_track) in [
+        ("data/model", RECIPE_BOXES.0, RECIPE_BOXES.1, RECIPE_BOXES.2),
+        ("data/model-crops", RECIPE_CROPS.0, RECIPE_CROPS.1, RECIPE_CROPS.2),
+    ] {
+        let rep: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join(model).join("report.json")).expect("report.json"))
+                .expect("json");
+        let p3 = &rep["points"][3];
+        let recall = p3["recall"].as_f64().expect("recall");
+        let fp_neg = p3["fp_per_negative_frame"].as_f64().expect("FP per negative frame");
+        let track = rep["frames_detail"]
+            .as_array()
+            .expect("frames_detail")
+            .iter()
+            .filter(|f| f[0].as_str().is_some_and(|n| n.contains("track-b")))
+            .map(|f| f[2].as_u64().expect("fp"))
+            .collect::<Vec<_>>();
+        let fp_track = track.iter().sum::<u64>() as f64 / track.len().max(1) as f64;
+        eprintln!(
+            "{model}: recall {recall:.3} ({} of {} boxes), {fp_neg:.4} FP per frame without the sign ({} frames), \
+             {fp_track:.4} per track-b frame ({} frames)",
+            p3["true_positives"],
+            rep["boxes"],
+            rep["negative_frames"],
+            track.len()
+        );
+        assert_eq!(rep["sign_frames"].as_u64(), Some(24));
+        assert_eq!(rep["negative_frames"].as_u64(), Some(40 + 240));
+        assert_eq!(track.len(), 240, "the 8 s recording of track-b");
+        assert!(recall >= min_recall, "{model}: recall {recall} < {min_recall}");
+        assert!(fp_neg <= max_fp_neg, "{model}: {fp_neg} FP per negative frame > {max_fp_neg}");
+        assert!(fp_track <= max_fp_track, "{model}: {fp_track} FP per track frame > {max_fp_track}");
+    }
+    assert!(run.stdout.contains("track-b: 240 frames without the object"), "{}", run.stdout);
+    // Held-out negatives from training's own files, then from its folders: said (one stage).
+    let train = |bg: &str, holdout: &str, out: &str| {
+        let o = Command::new(bin_dir().join("rccar-train"))
+            .args(["train", "--pos", "data/distorted/info.dat", "--bg", bg, "--holdout", holdout])
+            .args(["--num-stages", "1", "--num-neg", "50", "--out", out])
+            .current_dir(d)
+            .output()
+            .expect("rccar-train");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).to_string()
+    };
+    let so = train("track-a", "track-a", "same-files");
+    assert!(so.contains("240 of the 240 held-out frames without the object are also training backgrounds"), "{so}");
+    let bg = std::fs::read_to_string(d.join("data/bg.txt")).expect("bg.txt");
+    let lines: Vec<&str> = bg.lines().collect();
+    std::fs::write(d.join("data/half.txt"), lines[..40].join("\n")).expect("half");
+    std::fs::write(d.join("data/rest.txt"), lines[40..].join("\n")).expect("rest");
+    let so = train("data/half.txt", "data/rest.txt", "same-folder");
+    assert!(so.contains("40 of the 40 held-out frames without the object come from the folders"), "{so}");
+    // The command the page used to give (a --bg list no step made) fails naming the file once.
+    let out = Command::new(bin_dir().join("rccar-train"))
+        .args(["distort", "--templates-from-info", "data/pos.dat", "--bg", "data/bg_distort.txt", "--out", "x"])
+        .current_dir(d)
+        .output()
+        .expect("rccar-train");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert_eq!(err.matches("bg_distort.txt").count(), 1, "{err}");
+    assert_eq!(err.matches("os error 2").count(), 1, "{err}");
+}
+
+/// What the recipe test accepts at minNeighbors 3, (recall ≥, FP per frame without the sign ≤,
+/// FP per track-b frame ≤), for the model from boxes and the one from crops. Measured (the
+/// run is seeded; docs/training.md, "The recipe as a test"): boxes 0.958 (23/24), 2.00, 0.975;
+/// crops 0.833 (20/24), 3.02, 1.61 — 12 stages on 30 signs and 80 photos make a weak cascade,
+/// and the test says so rather than hide it. Accepted: two signs of the 24 fewer, and about
+/// 1.5× the false positives.
+const RECIPE_BOXES: (f64, f64, f64) = (0.875, 3.0, 1.5);
+const RECIPE_CROPS: (f64, f64, f64) = (0.75, 4.5, 2.5);
 
 #[test]
 fn every_lab_page_has_a_test() {

@@ -81,6 +81,11 @@ pub struct SimArgs {
     /// Give the behaviours the objects' true image boxes instead of running the cascades.
     #[arg(long)]
     pub truth_boxes: bool,
+    /// Take every sign, light and obstacle off the track (as switched off in the track file):
+    /// with `--record`, the recording of the track without the sign that a detector's training
+    /// starts from (docs/training.md, step 1).
+    #[arg(long)]
+    pub no_objects: bool,
     #[command(flatten)]
     pub config: ConfigArgs,
     #[command(flatten)]
@@ -177,7 +182,12 @@ fn track_path(arg: Option<&Path>, cfg: &Config) -> PathBuf {
 pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut cfg = config(&a)?;
     let track_path = track_path(a.track.as_deref(), &cfg);
-    let track = Track::load(&track_path)?;
+    let mut track = Track::load(&track_path)?;
+    if a.no_objects {
+        for o in &mut track.objects {
+            o.1 = false;
+        }
+    }
     let route = match a.route.as_deref() {
         Some(r) => Some(rccar::route::parse_list(r).map_err(|e| anyhow::anyhow!("--route {r:?}: {e}"))?),
         None => None,

@@ -50,7 +50,9 @@ fi
 echo "toolchain: $(/usr/bin/rustc --version), $(aarch64-linux-gnu-gcc --version | head -1), $(qemu-aarch64 --version | head -1)"
 
 # ---- features: the car's (serial, gpio, the dashboard's axum/hyper/tokio server, the gamepad) -----
-# `camera` is built apart below (libclang); jpeg-turbo is not needed on the car.
+# `camera` is built apart below (libclang). The default features come too: `jpeg-turbo` (issue
+# 28) cross-compiles libjpeg-turbo's C (and its NEON code) with aarch64-linux-gnu-gcc, so the car
+# decodes its recordings and a class's photos as cv2.imread does (checked in 4 below).
 FEATURES=serial,gpio,dashboard,gamepad
 CAMERA=${RCCAR_CROSS_CAMERA:-1}
 if [ "$CAMERA" != 0 ] && ! ls /usr/lib/llvm-*/lib/libclang*.so* >/dev/null 2>&1; then
@@ -179,7 +181,35 @@ else
   FAILED=$((FAILED + 1)); echo "$out"
 fi
 
-# ---- 4. the wiring picture of docs/pi.md follows config/car.toml [gpio] ----------------
+# ---- 4. JPEG decoded on aarch64 as natively (libjpeg-turbo, a default feature) ----------
+# `rccar detect` on OpenCV's sample JPEGs (Debian opencv-doc): the boxes and the annotated
+# copies (the decoded pixels with the boxes drawn, as PNG) of the aarch64 build must be the
+# native build's, byte for byte; the native build's are cv2.imread's (jpeg-parity stage). The
+# aarch64 libjpeg-turbo runs its NEON code, the native one its C code (no nasm).
+DOC=${RCCAR_OPENCV_DOC:-/usr/share/doc/opencv-doc/examples/data}
+JPEGS=()
+for f in baboon building fruits home lena left01 messi5 orange; do [ -f "$DOC/$f.jpg" ] && JPEGS+=("$DOC/$f.jpg"); done
+if [ ${#JPEGS[@]} -lt 4 ]; then
+  if [ -n "${RCCAR_OPENCV_DOC:-}" ]; then fail "OpenCV's sample JPEGs missing in $DOC (opencv-doc)"
+  else echo "skip JPEG check: no OpenCV sample JPEGs in $DOC (apt-get install opencv-doc)"; fi
+else
+  DET=(detect --cascade config/cascades/stop_sign.xml --cascade config/cascades/traffic_light.xml)
+  echo "== ${DET[*]} on ${#JPEGS[@]} of OpenCV's sample JPEGs (native, then aarch64 under qemu)"
+  run native "$OUT/native/jpeg" "$NATIVE" "${DET[@]}" --out "$OUT/native/jpeg" "${JPEGS[@]}"; rn=$?
+  run aarch64 "$OUT/aarch64/jpeg" "${QEMU[@]}" "$BIN" "${DET[@]}" --out "$OUT/aarch64/jpeg" "${JPEGS[@]}"; ra=$?
+  nb=$(grep -o '"x"' "$OUT/native/jpeg.log" | wc -l)
+  if [ $rn -ne 0 ] || [ $ra -ne 0 ]; then
+    fail "JPEG detect exit codes: native $rn, aarch64 $ra (logs $OUT/*/jpeg.log)"
+  elif ! cmp -s "$OUT/native/jpeg.log" "$OUT/aarch64/jpeg.log"; then
+    fail "JPEG detect: the aarch64 boxes differ from the native ones ($OUT/*/jpeg.log)"
+  elif ! diff -rq "$OUT/native/jpeg" "$OUT/aarch64/jpeg" >/dev/null; then
+    fail "JPEG detect: the aarch64 decoded pixels differ: $(diff -rq "$OUT/native/jpeg" "$OUT/aarch64/jpeg" | head -3 | tr '\n' ' ')"
+  else
+    pass "JPEG: ${#JPEGS[@]} OpenCV sample JPEGs decoded identically on aarch64 (annotated copies byte for byte) and the same $nb boxes"
+  fi
+fi
+
+# ---- 5. the wiring picture of docs/pi.md follows config/car.toml [gpio] ----------------
 if out=$(python3 docs/img/wiring.py --check 2>&1); then pass "$out"; else fail "$out"; fi
 
 echo "note: the camera (V4L2) and the GPIO are compiled, not opened: no device under qemu."

@@ -118,12 +118,45 @@ pub fn read_csv(csv: &Path) -> Result<Labels, Vec<String>> {
     })
 }
 
-/// `path` relative to `base` when it lies under it, else absolute (info.dat paths are
-/// relative to the info.dat's folder).
-fn rel(path: &Path, base: &Path) -> String {
-    let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
-    let (p, b) = (abs(path), abs(base));
-    p.strip_prefix(&b).map(|r| r.to_path_buf()).unwrap_or(p).display().to_string()
+/// `path` relative to `base` (info.dat paths are relative to the info.dat's folder), with `..`
+/// where it lies outside it (`data/pos.dat` naming `frames/a.jpg` writes `../frames/a.jpg`), so
+/// the lists keep working when the project folder is moved; absolute only when the two share no
+/// root. Lexical: `.` and `..` are resolved on the names, symbolic links are not followed.
+pub fn rel(path: &Path, base: &Path) -> String {
+    use std::path::Component;
+    let norm = |p: &Path| {
+        // `Path::new("pos.dat").parent()` is the empty path: the working folder.
+        let p = if p.as_os_str().is_empty() { Path::new(".") } else { p };
+        let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+        let mut out: Vec<Component> = Vec::new();
+        for c in abs.components() {
+            match c {
+                Component::CurDir => {}
+                Component::ParentDir => {
+                    if matches!(out.last(), Some(Component::Normal(_))) {
+                        out.pop();
+                    }
+                }
+                c => out.push(c),
+            }
+        }
+        out.into_iter().collect::<PathBuf>()
+    };
+    let (p, b) = (norm(path), norm(base));
+    let (pc, bc): (Vec<_>, Vec<_>) = (p.components().collect(), b.components().collect());
+    let common = pc.iter().zip(&bc).take_while(|(x, y)| x == y).count();
+    // Different roots (another drive): only the absolute path names the file.
+    if common == 0 {
+        return p.display().to_string();
+    }
+    let mut r = PathBuf::new();
+    for _ in common..bc.len() {
+        r.push("..");
+    }
+    for c in &pc[common..] {
+        r.push(c);
+    }
+    r.display().to_string()
 }
 
 /// Writes `info` (images with boxes) and, when some lines have no box, `bg` (frames without
@@ -152,6 +185,25 @@ pub fn write_lists(l: &Labels, info: &Path, bg: Option<&Path>) -> std::io::Resul
         std::fs::write(bg, t)?;
     }
     Ok((imgs, boxes, empty.len()))
+}
+
+/// Writes every box cut out of its image as `DIR/<image stem>_<k>.png` (k = the box's number
+/// on that image, from 1): a folder of crops, as `distort --template DIR` takes them. Returns
+/// the crops written.
+pub fn write_crops(l: &Labels, dir: &Path) -> Result<usize, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut n = 0;
+    for (p, boxes) in l.images.iter().filter(|(_, b)| !b.is_empty()) {
+        let img = image::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
+        let stem = p.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+        for (k, r) in boxes.iter().enumerate() {
+            let c = img.crop_imm(r.x as u32, r.y as u32, r.width as u32, r.height as u32);
+            let out = dir.join(format!("{stem}_{}.png", k + 1));
+            c.save(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+            n += 1;
+        }
+    }
+    Ok(n)
 }
 
 fn draw_rect(img: &mut RgbImage, r: Rect, c: [u8; 3], t: i32) {
@@ -259,6 +311,8 @@ mod tests {
         assert!(sk.is_empty() && lines[0].boxes.len() == 2);
         let files = previews(&l, &d.join("preview"), 48).expect("previews");
         assert_eq!(files.len(), 2);
+        assert_eq!(write_crops(&l, &d.join("crops")).expect("crops"), 2);
+        assert_eq!(image::image_dimensions(d.join("crops/a_2.png")).expect("crop"), (20, 20));
         let sheet = image::open(d.join("preview/crops.png")).expect("sheet");
         assert_eq!(sheet.width(), 2 * 52 + 4);
         // Every bad line is named; nothing accepted.
@@ -274,5 +328,29 @@ mod tests {
         assert!(e[2].contains(":4:") && e[2].contains("whole pixels"), "{}", e[2]);
         assert!(e[3].contains(":5:") && e[3].contains("3 fields"), "{}", e[3]);
         assert!(e[4].contains(":6:") && e[4].contains("empty"), "{}", e[4]);
+    }
+
+    /// Issue 28: `boxes --out data/pos.dat` naming `frames/a.jpg` wrote an absolute path.
+    #[test]
+    fn list_paths_are_relative_to_the_list_even_outside_its_folder() {
+        let d = tempfile::tempdir().expect("tmp");
+        let b = d.path().join("data");
+        assert_eq!(rel(&d.path().join("frames/a.jpg"), &b), "../frames/a.jpg");
+        assert_eq!(rel(&b.join("x/a.jpg"), &b), "x/a.jpg");
+        assert_eq!(rel(&d.path().join("data/../frames/./a.jpg"), &d.path().join("data/sub/")), "../../frames/a.jpg");
+        // Relative inputs are taken against the working folder.
+        assert_eq!(rel(Path::new("frames/a.jpg"), Path::new("data")), "../frames/a.jpg");
+        assert_eq!(rel(Path::new("a.jpg"), Path::new("")), "a.jpg");
+        // And the list reads back to the same file.
+        std::fs::create_dir_all(d.path().join("frames")).expect("dir");
+        image::GrayImage::from_pixel(40, 30, image::Luma([7])).save(d.path().join("frames/a.png")).expect("png");
+        let csv = d.path().join("boxes.csv");
+        std::fs::write(&csv, "frames/a.png,1,1,20,20\n").expect("csv");
+        let l = read_csv(&csv).expect("good");
+        write_lists(&l, &b.join("pos.dat"), None).expect("write");
+        let text = std::fs::read_to_string(b.join("pos.dat")).expect("info");
+        assert_eq!(text, "../frames/a.png 1 1 1 20 20\n");
+        let (lines, _) = crate::samples::read_info(&b.join("pos.dat")).expect("parse");
+        assert!(lines[0].path.exists(), "{}", lines[0].path.display());
     }
 }

@@ -28,8 +28,19 @@ pub struct Point {
     pub recall: f64,
     /// TP / detections (1 when there are none).
     pub precision: f64,
-    /// FP / frames.
+    /// FP / frames, over all frames (those with the object too).
     pub fp_per_frame: f64,
+    /// False positives on the frames without the object (a bg.txt's frames, a folder).
+    #[serde(default)]
+    pub fp_negative_frames: usize,
+    /// Those / the frames without the object (`None` when there are none): the figure to
+    /// compare with what the car sees on a track without the object.
+    #[serde(default)]
+    pub fp_per_negative_frame: Option<f64>,
+    /// False positives on the frames with the object / those frames (`None` when there are
+    /// none): boxes beside or around the object.
+    #[serde(default)]
+    pub fp_per_sign_frame: Option<f64>,
 }
 
 /// A whole evaluation.
@@ -41,6 +52,12 @@ pub struct Report {
     pub frames: usize,
     /// Labelled boxes.
     pub boxes: usize,
+    /// Frames without the object (no box): every detection there is a false positive.
+    #[serde(default)]
+    pub negative_frames: usize,
+    /// Frames with at least one box.
+    #[serde(default)]
+    pub sign_frames: usize,
     /// IoU needed for a match.
     pub iou: f64,
     /// Scale factor used.
@@ -123,7 +140,10 @@ pub fn evaluate(
         min_neighbors: 0,
         ..DetectParams::default()
     };
-    let mut acc = vec![(0usize, 0usize, 0usize); mns.len()];
+    // (TP, FP, misses, FP on frames without the object) per minNeighbors.
+    let mut acc = vec![(0usize, 0usize, 0usize, 0usize); mns.len()];
+    let negative_frames = frames.iter().filter(|f| f.2.is_empty()).count();
+    let sign_frames = frames.len() - negative_frames;
     let mut times = Vec::new();
     let mut detail = Vec::new();
     let mut boxes = 0;
@@ -148,6 +168,9 @@ pub fn evaluate(
             acc[k].0 += tp;
             acc[k].1 += fp;
             acc[k].2 += miss;
+            if truth.is_empty() {
+                acc[k].3 += fp;
+            }
             if mn == report_mn {
                 detail.push((fname.clone(), tp, fp));
             }
@@ -157,7 +180,7 @@ pub fn evaluate(
     let points = mns
         .iter()
         .zip(&acc)
-        .map(|(&mn, &(tp, fp, miss))| Point {
+        .map(|(&mn, &(tp, fp, miss, fp_neg))| Point {
             min_neighbors: mn,
             true_positives: tp,
             false_positives: fp,
@@ -165,6 +188,9 @@ pub fn evaluate(
             recall: tp as f64 / boxes.max(1) as f64,
             precision: if tp + fp > 0 { tp as f64 / (tp + fp) as f64 } else { 1.0 },
             fp_per_frame: fp as f64 / n,
+            fp_negative_frames: fp_neg,
+            fp_per_negative_frame: (negative_frames > 0).then(|| fp_neg as f64 / negative_frames as f64),
+            fp_per_sign_frame: (sign_frames > 0).then(|| (fp - fp_neg) as f64 / sign_frames as f64),
         })
         .collect();
     let mut sorted = times.clone();
@@ -173,6 +199,8 @@ pub fn evaluate(
         cascade: name.to_string(),
         frames: frames.len(),
         boxes,
+        negative_frames,
+        sign_frames,
         iou,
         scale_factor,
         min_size,
@@ -246,5 +274,37 @@ mod tests {
         ];
         assert_eq!(match_boxes(&d, &t, 0.5), (1, 2, 0));
         assert_eq!(match_boxes(&[], &t, 0.5), (0, 0, 1));
+    }
+
+    /// Issue 28: false positives on frames without the object and on frames with it are
+    /// reported apart (the all-frames figure mixed them without saying so).
+    #[test]
+    fn false_positives_are_split_by_frame_kind() {
+        let mut c = Cascade::from_file(std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../config/cascades/stop_sign.xml"
+        )))
+        .expect("cascade");
+        // A window every sample passes: stage thresholds far below any sum.
+        for st in c.stages.iter_mut() {
+            st.threshold = -1e9;
+        }
+        let (cw, ch) = (c.width, c.height);
+        let img = GrayImage::from_fn(48, 32, |x, y| image::Luma([((x * 37 + y * 91) % 251) as u8]));
+        let frames = vec![
+            ("neg1".to_string(), img.clone(), vec![]),
+            ("neg2".to_string(), img.clone(), vec![]),
+            ("sign".to_string(), img.clone(), vec![Rect::new(0, 0, cw, ch)]),
+        ];
+        let r = evaluate(c, "test", &frames, 1.1, (0, 0), 0.5, &[0], 0).expect("eval");
+        assert_eq!((r.negative_frames, r.sign_frames), (2, 1));
+        let p = &r.points[0];
+        // Every window of every frame is a raw hit; the sign frame's one box matches at most one.
+        assert!(p.fp_negative_frames > 0);
+        let neg = p.fp_per_negative_frame.expect("negatives");
+        let sign = p.fp_per_sign_frame.expect("signs");
+        assert!((neg * 2.0 - p.fp_negative_frames as f64).abs() < 1e-9);
+        assert!((neg * 2.0 + sign - p.false_positives as f64).abs() < 1e-9, "{p:?}");
+        assert!((p.fp_per_frame * 3.0 - p.false_positives as f64).abs() < 1e-9);
     }
 }

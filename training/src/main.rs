@@ -48,8 +48,8 @@ struct DistortArgs {
     /// box is cut out of its photo.
     #[arg(long = "templates-from-info", num_args = 1..)]
     templates_from_info: Vec<PathBuf>,
-    /// Backgrounds to paste onto (bg.txt: one image per line). Another set than training's --bg
-    /// is better (docs/training.md, "Which backgrounds").
+    /// Backgrounds to paste onto (bg.txt: one image per line, or a folder). Another set than
+    /// training's --bg is better (docs/training.md, "Which backgrounds").
     #[arg(long = "bg", required = true)]
     bg: Vec<PathBuf>,
     /// Samples to write. Train with --num-pos up to about count / 1.04 (each stage drops a few;
@@ -60,8 +60,9 @@ struct DistortArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Window WxH the samples are made for: the pasted object is at least this big. Written
-    /// into info.dat; `train` then uses it for -W/-H. Default: from the templates' boxes
-    /// (with --templates-from-info), else 20x20.
+    /// into info.dat; `train` then uses it for -W/-H. Default: from the boxes (with
+    /// --templates-from-info), else (crops) the crops' median aspect at 20 px on the shorter
+    /// side; with crops, give the smallest object in your frames / 1.21.
     #[arg(long)]
     window: Option<String>,
     /// Output folder (PNG crops + info.dat).
@@ -327,12 +328,20 @@ fn run_distort(a: DistortArgs) -> anyhow::Result<ExitCode> {
     if templates.is_empty() {
         bail!("no templates: give --template FILE|FOLDER|GLOB or --templates-from-info info.dat");
     }
+    // From the boxes of --templates-from-info; without boxes (crops given with --template)
+    // the crops' aspect at 20 px, said so.
+    let crop_sizes: Vec<(u32, u32)> = templates.iter().map(|t| t.dimensions()).collect();
     let window = match &a.window {
         Some(w) => parse_wh(w)?,
-        None => rccar_train::plan::choose_window(&info_lines).map_or((20, 20), |c| {
-            eprintln!("{}", c.why);
-            c.size
-        }),
+        None => match rccar_train::plan::choose_window(&info_lines)
+            .or_else(|| rccar_train::plan::window_for_crops(&crop_sizes))
+        {
+            Some(c) => {
+                eprintln!("{}", c.why);
+                c.size
+            }
+            None => (20, 20),
+        },
     };
     let (bgs, skipped) = samples::load_backgrounds(&a.bg)?;
     for s in &skipped {
@@ -403,6 +412,10 @@ struct BoxesArgs {
     /// Folder for previews: every labelled image with its boxes drawn, and crops.png.
     #[arg(long)]
     preview: Option<PathBuf>,
+    /// Also write every box cut out as its own PNG into this folder (a folder of crops, as
+    /// `distort --template DIR` takes).
+    #[arg(long)]
+    crops: Option<PathBuf>,
 }
 
 fn run_boxes(a: BoxesArgs) -> anyhow::Result<ExitCode> {
@@ -434,6 +447,14 @@ fn run_boxes(a: BoxesArgs) -> anyhow::Result<ExitCode> {
             files.len()
         );
     }
+    if let Some(dir) = &a.crops {
+        let n = rccar_train::annotate::write_crops(&labels, dir).map_err(anyhow::Error::msg)?;
+        println!("{}: {n} crops, one PNG per box", dir.display());
+    }
+    println!(
+        "next: rccar-train distort --templates-from-info {} --bg <pictures to paste on> --out <dir>   (docs/training.md, step 3)",
+        a.out.display()
+    );
     Ok(ExitCode::SUCCESS)
 }
 
@@ -521,8 +542,9 @@ struct EvalArgs {
     /// Cascade XML.
     #[arg(long)]
     cascade: PathBuf,
-    /// Labelled frames: info.dat files (boxes) and bg.txt files (frames without the object,
-    /// where every detection is a false positive); several may follow.
+    /// Labelled frames: info.dat files (boxes), bg.txt files or folders (frames without the
+    /// object, where every detection is a false positive); several may follow, and each gets a
+    /// line of its own in the output.
     #[arg(long, required = true, num_args = 1..)]
     info: Vec<PathBuf>,
     /// Output folder for report.json and curve.png (default: next to the cascade).
@@ -553,7 +575,15 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
     check_detector("", a.scale_factor, a.min_neighbors, min_size)?;
     within("--iou", a.iou, 0.01, 1.0, "")?;
     let cascade = rccar::detect::Cascade::from_file(&a.cascade)?;
-    let frames = load_frames(&a.info)?;
+    // Frames list by list, so each list's figures can be named (a track recording's false
+    // positives are the estimate for the car's own frames).
+    let mut frames = Vec::new();
+    let mut lists = Vec::new();
+    for f in &a.info {
+        let start = frames.len();
+        frames.extend(load_frames(std::slice::from_ref(f))?);
+        lists.push((f.display().to_string(), start..frames.len()));
+    }
     let info_name = a
         .info
         .iter()
@@ -593,22 +623,62 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
         eprintln!("{FONT} not found (Debian fonts-dejavu-core): no curve.png");
     }
     println!(
-        "{} frames, {} boxes, IoU >= {}, scale factor {}, min size {}x{}",
-        rep.frames, rep.boxes, rep.iou, rep.scale_factor, rep.min_size.0, rep.min_size.1
+        "{} frames: {} with the object ({} boxes), {} without; IoU >= {}, scale factor {}, min size {}x{}",
+        rep.frames,
+        rep.sign_frames,
+        rep.boxes,
+        rep.negative_frames,
+        rep.iou,
+        rep.scale_factor,
+        rep.min_size.0,
+        rep.min_size.1
     );
-    println!("minNeighbors  recall  precision  FP/frame   TP   FP  miss");
+    // FP/neg: per frame without the object; FP/sign: beside the object on its frames; FP/all:
+    // over every frame (the held-out early stop's figure).
+    let per = |v: Option<f64>| v.map_or("       -".to_string(), |v| format!("{v:>8.4}"));
+    println!("minNeighbors  recall  precision    FP/neg   FP/sign    FP/all   TP   FP  miss");
     for p in &rep.points {
         println!(
-            "{:>12}  {:.4}  {:>9.4}  {:>8.4}  {:>3}  {:>3}  {:>4}{}",
+            "{:>12}  {:.4}  {:>9.4}  {}  {}  {:>8.4}  {:>3}  {:>3}  {:>4}{}",
             p.min_neighbors,
             p.recall,
             p.precision,
+            per(p.fp_per_negative_frame),
+            per(p.fp_per_sign_frame),
             p.fp_per_frame,
             p.true_positives,
             p.false_positives,
             p.misses,
             if p.min_neighbors == a.min_neighbors { "  <-" } else { "" }
         );
+    }
+    println!(
+        "FP/neg: false positives per frame without the object; FP/sign: per frame with it (boxes beside it); \
+         FP/all: over all {} frames",
+        rep.frames
+    );
+    // (frames_detail is kept at the printed minNeighbors, one of 0-10)
+    if lists.len() > 1 && rep.frames_detail.len() == frames.len() {
+        println!("at minNeighbors {}, list by list:", a.min_neighbors);
+        for (name, range) in &lists {
+            let part = &rep.frames_detail[range.clone()];
+            let with = frames[range.clone()].iter().filter(|f| !f.2.is_empty()).count();
+            let boxes: usize = frames[range.clone()].iter().map(|f| f.2.len()).sum();
+            let (found, fp): (usize, usize) = part.iter().fold((0, 0), |(t, f), d| (t + d.1, f + d.2));
+            let n = range.len();
+            if with == 0 {
+                println!(
+                    "  {name}: {n} frames without the object, {fp} false positives = {:.4} per frame",
+                    fp as f64 / n.max(1) as f64
+                );
+            } else {
+                println!(
+                    "  {name}: {n} frames, {with} with the object: recall {:.4} ({found}/{boxes}), {fp} false positives = {:.4} per frame",
+                    found as f64 / boxes.max(1) as f64,
+                    fp as f64 / n.max(1) as f64
+                );
+            }
+        }
     }
     println!(
         "time per {}x{} frame: median {:.2} ms, mean {:.2} ms, max {:.2} ms",
@@ -716,7 +786,8 @@ struct TrainArgs {
     /// Positives: info.dat files (`path count x y w h ...`); repeat for several.
     #[arg(long = "pos", required = true, num_args = 1..)]
     pos: Vec<PathBuf>,
-    /// Backgrounds: bg.txt / info.dat files (boxes on a line are kept out of the negatives).
+    /// Backgrounds: bg.txt / info.dat files (boxes on a line are kept out of the negatives), or
+    /// folders (every .png/.jpg in them and their subfolders, e.g. a recording of the track).
     #[arg(long = "bg", required = true, num_args = 1..)]
     bg: Vec<PathBuf>,
     /// Window width, pixels. Default: the window `distort` wrote into the info.dat, else chosen
@@ -755,8 +826,9 @@ struct TrainArgs {
     /// Most weak classifiers per stage.
     #[arg(long, default_value_t = 100)]
     max_weak_count: u32,
-    /// Memory for the training data, MiB: backgrounds, samples and the precomputed feature
-    /// values (what is left after the data; features that do not fit are sampled).
+    /// Memory for the whole run, MiB: backgrounds, held-out frames, samples and 32 MiB for the
+    /// program first; the precomputed feature values get the rest (features that do not fit
+    /// are sampled).
     #[arg(long, default_value_t = 512)]
     mem_mb: usize,
     /// Seed.
@@ -774,7 +846,7 @@ struct TrainArgs {
     /// 20 stages (docs/training.md).
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
     upside_down_negatives: bool,
-    /// Held-out frames (info.dat with boxes and/or bg.txt without), never trained on: after
+    /// Held-out frames (info.dat with boxes; bg.txt or a folder without), never trained on: after
     /// every stage the cascade is run over them and training stops once the false positives
     /// per frame reach --target-fp-per-frame.
     #[arg(long = "holdout", num_args = 1..)]
@@ -826,9 +898,13 @@ impl Progress for Bars {
         if let Some(b) = self.bar.take() {
             b.finish_and_clear();
         }
+        let neg = l
+            .holdout_fp_per_negative_frame
+            .map(|v| format!(" ({v:.4} per frame without the object)"))
+            .unwrap_or_default();
         let ho = match (l.holdout_recall, l.holdout_fp_per_frame) {
-            (Some(r), Some(f)) => format!(", held-out recall {r:.3} FP/frame {f:.4}"),
-            (None, Some(f)) => format!(", held-out FP/frame {f:.4}"),
+            (Some(r), Some(f)) => format!(", held-out recall {r:.3} FP/frame {f:.4}{neg}"),
+            (None, Some(f)) => format!(", held-out FP/frame {f:.4}{neg}"),
             _ => String::new(),
         };
         eprintln!(
@@ -938,9 +1014,65 @@ struct Summary<'a> {
     window: (i32, i32, &'a str),
     num_pos: usize,
     usable: usize,
+    /// Positives the stages trained on (fewest, most), from stages.json.
+    stage_pos: Option<(usize, usize)>,
+    /// What the held-out negatives share with training's backgrounds, when they do.
+    holdout_source: Option<String>,
     backgrounds: usize,
     seconds: f64,
     note: Option<String>,
+}
+
+/// Whether the held-out frames without the object come from where training's backgrounds
+/// come from (the same files, or the same folders), said as a note: then their false
+/// positives say how the cascade does on those places, not on a room or track it never saw.
+fn same_source(
+    bgs: &[samples::Background],
+    holdout: &[(String, image::GrayImage, Vec<rccar::detect::Rect>)],
+) -> Option<String> {
+    use std::collections::BTreeSet;
+    let canon = |s: &str| std::fs::canonicalize(s).unwrap_or_else(|_| PathBuf::from(s));
+    let files: BTreeSet<PathBuf> = bgs.iter().map(|b| canon(&b.name)).collect();
+    let dirs: BTreeSet<PathBuf> = files.iter().filter_map(|f| f.parent().map(|d| d.to_path_buf())).collect();
+    let negs: Vec<PathBuf> = holdout.iter().filter(|f| f.2.is_empty()).map(|f| canon(&f.0)).collect();
+    let same_file = negs.iter().filter(|f| files.contains(*f)).count();
+    let shared: BTreeSet<&std::path::Path> = negs
+        .iter()
+        .filter_map(|f| f.parent())
+        .filter(|d| dirs.contains(*d))
+        .collect();
+    let same_dir = negs
+        .iter()
+        .filter(|f| f.parent().is_some_and(|d| dirs.contains(d)))
+        .count();
+    if same_file > 0 {
+        Some(format!(
+            "{same_file} of the {} held-out frames without the object are also training backgrounds: they are not held \
+             out, and their false positives say nothing about new frames",
+            negs.len()
+        ))
+    } else if same_dir > 0 {
+        let names: Vec<String> = shared.iter().take(3).map(|d| d.display().to_string()).collect();
+        Some(format!(
+            "{same_dir} of the {} held-out frames without the object come from the folders training's backgrounds come \
+             from ({}{}): their false positives are for those places and that session; on a room or track training \
+             never saw expect more (hold out another recording of the track, docs/training.md step 1)",
+            negs.len(),
+            names.join(", "),
+            if shared.len() > 3 { ", ..." } else { "" }
+        ))
+    } else {
+        None
+    }
+}
+
+/// The fewest and most positives a stage of `out/stages.json` trained on.
+fn stage_positives_used(out: &std::path::Path) -> Option<(usize, usize)> {
+    let text = std::fs::read_to_string(out.join("stages.json")).ok()?;
+    let file: train::StageFile = serde_json::from_str(&text).ok()?;
+    let lo = file.log.iter().map(|l| l.num_pos).min()?;
+    let hi = file.log.iter().map(|l| l.num_pos).max()?;
+    Some((lo, hi))
 }
 
 /// The summary of a finished training, on stdout.
@@ -949,19 +1081,34 @@ fn print_summary(a: &TrainArgs, out: &train::TrainOutcome, s: &Summary) {
     println!("cascade      {}", out.xml.display());
     println!("stages       {} ({})", out.stages, out.reason);
     println!("window       {width}x{height} ({why})");
-    println!("positives    {} per stage of {} usable", s.num_pos, s.usable);
+    match s.stage_pos {
+        Some((lo, hi)) if lo != hi => println!(
+            "positives    {} per stage asked, {lo}-{hi} used (a stage takes those the cascade so far accepts), of {} usable",
+            s.num_pos, s.usable
+        ),
+        Some((lo, _)) => println!("positives    {lo} per stage used ({} asked) of {} usable", s.num_pos, s.usable),
+        None => println!("positives    {} per stage asked of {} usable", s.num_pos, s.usable),
+    }
     println!(
         "negatives    {} per stage from {} backgrounds",
         a.num_neg, s.backgrounds
     );
     if let Some(c) = &out.holdout {
+        let (neg, sign) = c.frames;
+        let split = |v: Option<f64>, n: usize, what: &str| v.map(|v| format!("; {v:.4} per frame {what} ({n})"));
         println!(
-            "held-out     {} false positives per frame (target {}){} at minNeighbors {}",
-            format_args!("{:.4}", c.fp_per_frame),
+            "held-out     {:.4} false positives per frame over all {} frames (target {}){}{}{} at minNeighbors {}",
+            c.fp_per_frame,
+            neg + sign,
             a.target_fp_per_frame,
+            split(c.fp_per_negative_frame, neg, "without the object").unwrap_or_default(),
+            split(c.fp_per_sign_frame, sign, "with it").unwrap_or_default(),
             c.recall.map(|r| format!(", recall {r:.4}")).unwrap_or_default(),
             a.holdout_min_neighbors
         );
+    }
+    if let Some(n) = &s.holdout_source {
+        println!("held-out     {n}");
     }
     println!("time         {:.1} s", s.seconds);
     if let Some(n) = &s.note {
@@ -973,6 +1120,15 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
     use rccar_train::plan;
     use std::io::IsTerminal;
     let holdout_min_size = check_train_args(&a)?;
+    if let Some(d) = a.pos.iter().find(|p| p.is_dir()) {
+        bail!(
+            "--pos {}: a folder; positives are info.dat files with boxes. A folder of cut-out signs (crops) \
+             becomes samples with `rccar-train distort --template {} --bg <pictures> --out <dir>` \
+             (docs/training.md, step 3); train on its info.dat",
+            d.display(),
+            d.display()
+        );
+    }
     if let Some(t) = a.threads {
         rayon::ThreadPoolBuilder::new().num_threads(t).build_global().ok();
     }
@@ -989,11 +1145,19 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
     if skipped.len() > 20 {
         eprintln!("... {} more skipped lines/boxes", skipped.len() - 20);
     }
-    eprintln!("{} positives ({} lines/boxes skipped)", pos.len(), skipped.len());
-    if pos.is_empty() {
+    // Usable: loaded and not too flat for the detector (training leaves those out), so the
+    // per-stage count below and the summary agree with the stage log.
+    let usable = train::usable_positives(&pos, w, h);
+    eprintln!(
+        "{} positives loaded ({} lines/boxes skipped), {usable} usable ({} too flat for the detector)",
+        pos.len(),
+        skipped.len(),
+        pos.len() - usable
+    );
+    if usable == 0 {
         bail!("no usable positive in {:?}", a.pos);
     }
-    let (num_pos, note) = plan::choose_num_pos(a.num_pos, pos.len(), a.num_stages, a.min_hit_rate);
+    let (num_pos, note) = plan::choose_num_pos(a.num_pos, usable, a.num_stages, a.min_hit_rate);
     if let Some(n) = &note {
         eprintln!("note: {n}");
     }
@@ -1003,6 +1167,10 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
     }
     eprintln!("{} background images", bgs.len());
     let holdout = load_holdout(&a, holdout_min_size)?;
+    let holdout_source = holdout.as_ref().and_then(|h| same_source(&bgs, &h.frames));
+    if let Some(n) = &holdout_source {
+        eprintln!("note: {n}");
+    }
     let opts = TrainOptions {
         params: ModelParams {
             width,
@@ -1033,7 +1201,9 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
     let summary = Summary {
         window: (width, height, &why),
         num_pos,
-        usable: pos.len(),
+        usable,
+        stage_pos: stage_positives_used(&a.out),
+        holdout_source,
         backgrounds: bgs.len(),
         seconds: t.elapsed().as_secs_f64(),
         note,

@@ -83,7 +83,63 @@ pub fn choose_window(lines: &[InfoLine]) -> Option<WindowChoice> {
     let mut short: Vec<f64> = boxes.iter().map(|(w, h)| w.min(*h)).collect();
     short.sort_by(|a, b| a.total_cmp(b));
     let p5 = short[(short.len() as f64 * 0.05) as usize];
-    let side = ((p5 / SMALLEST_MARGIN).floor() as u32).clamp(AUTO_SIDE.0, AUTO_SIDE.1);
+    let wanted = (p5 / SMALLEST_MARGIN).floor() as u32;
+    let side = wanted.clamp(AUTO_SIDE.0, AUTO_SIDE.1);
+    let size = if aspect >= 1.0 {
+        (((side as f64 * aspect).round() as u32).min(64), side)
+    } else {
+        (side, ((side as f64 / aspect).round() as u32).min(64))
+    };
+    // Say what the window really is against those boxes: the 1.21 rule, or the clamp.
+    let ratio = p5 / side as f64;
+    let rule = if side == wanted {
+        format!("the window is {ratio:.2}x smaller so they are found at several scales")
+    } else if side < wanted {
+        format!(
+            "{:.0} px / {SMALLEST_MARGIN} = {wanted} px is above the {} px limit, so the window is {ratio:.2}x smaller \
+             than them (a larger window trains much more slowly and finds no more at 320x240)",
+            p5, AUTO_SIDE.1
+        )
+    } else {
+        format!(
+            "{:.0} px / {SMALLEST_MARGIN} = {wanted} px is below the {} px limit, so those boxes are only {ratio:.2} \
+             times the window: they are found at fewer scales, and boxes under {} px not at all",
+            p5, AUTO_SIDE.0, side
+        )
+    };
+    Some(WindowChoice {
+        size,
+        why: format!(
+            "window {}x{} from {} boxes: median aspect {:.2}, 5% of boxes are under {:.0} px on their shorter side; {rule} \
+             (sides kept within {}-{} px)",
+            size.0,
+            size.1,
+            boxes.len(),
+            aspect,
+            p5,
+            AUTO_SIDE.0,
+            AUTO_SIDE.1
+        ),
+    })
+}
+
+/// The window for templates given as crops (`distort --template`), whose sizes say nothing of
+/// how large the object is in the car's frames: the crops' median aspect ratio at the largest
+/// automatic side ([`AUTO_SIDE`]`.1`, 20 px), and why; `None` without templates. With frames
+/// and boxes the window comes from the boxes ([`choose_window`]); with crops, `--window` from
+/// the smallest object in your frames ÷ 1.21 is better.
+pub fn window_for_crops(sizes: &[(u32, u32)]) -> Option<WindowChoice> {
+    let mut aspects: Vec<f64> = sizes
+        .iter()
+        .filter(|(w, h)| *w > 0 && *h > 0)
+        .map(|&(w, h)| w as f64 / h as f64)
+        .collect();
+    if aspects.is_empty() {
+        return None;
+    }
+    aspects.sort_by(|a, b| a.total_cmp(b));
+    let aspect = aspects[aspects.len() / 2];
+    let side = AUTO_SIDE.1;
     let size = if aspect >= 1.0 {
         (((side as f64 * aspect).round() as u32).min(64), side)
     } else {
@@ -92,16 +148,13 @@ pub fn choose_window(lines: &[InfoLine]) -> Option<WindowChoice> {
     Some(WindowChoice {
         size,
         why: format!(
-            "window {}x{} from {} boxes: median aspect {:.2}, 5% of boxes are under {:.0} px on their shorter side, \
-             the window is {:.2}x smaller so they are found at several scales (sides kept within {}-{} px)",
+            "window {}x{} for {} crops: their median aspect {aspect:.2} at {side} px on the shorter side (crops do not \
+             say how large the object is in the car's frames: objects smaller than about {} px will not be found; \
+             give --window WxH = the smallest object in your frames / {SMALLEST_MARGIN})",
             size.0,
             size.1,
-            boxes.len(),
-            aspect,
-            p5,
-            SMALLEST_MARGIN,
-            AUTO_SIDE.0,
-            AUTO_SIDE.1
+            sizes.len(),
+            (side as f64 * SMALLEST_MARGIN).round()
         ),
     })
 }
@@ -176,6 +229,22 @@ mod tests {
         assert!((35..=36).contains(&c.size.1), "{}", c.why);
         // Tiny boxes: never below 12.
         assert_eq!(choose_window(&lines(&[(8, 8); 10])).expect("boxes").size, (12, 12));
+        // Issue 28: the message says what the window is against the boxes, clamp included
+        // (66 px boxes with a 20 px window are 3.30x larger, not 1.21x).
+        let c = choose_window(&lines(&[(66, 66); 20])).expect("boxes");
+        assert_eq!(c.size, (20, 20));
+        assert!(c.why.contains("3.30x smaller") && c.why.contains("above the 20 px limit"), "{}", c.why);
+        assert!(!c.why.contains("1.21x"), "{}", c.why);
+        let c = choose_window(&lines(&[(8, 8); 10])).expect("boxes");
+        assert!(c.why.contains("below the 12 px limit") && c.why.contains("0.67 times"), "{}", c.why);
+        let c = choose_window(&lines(&sq)).expect("boxes");
+        assert!(c.why.contains("1.25x smaller so they are found"), "{}", c.why);
+        // Crops: their aspect at 20 px, and the advice to give --window.
+        let c = window_for_crops(&[(40, 100), (30, 80), (50, 120)]).expect("crops");
+        assert_eq!(c.size, (20, 50), "{}", c.why);
+        assert!(c.why.contains("--window") && c.why.contains("3 crops"), "{}", c.why);
+        assert_eq!(window_for_crops(&[(64, 64)]).expect("crops").size, (20, 20));
+        assert!(window_for_crops(&[]).is_none());
         assert!(choose_window(&[]).is_none());
         assert_eq!(window_hint("# rccar-train distort window 20x16\na.png 1 0 0 20 16\n"), Some((20, 16)));
         assert_eq!(window_hint("a.png 1 0 0 20 16\n"), None);

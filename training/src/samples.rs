@@ -103,8 +103,51 @@ pub struct InfoLine {
     pub line: usize,
 }
 
-/// Parses an info.dat (or bg.txt) file. Malformed lines are returned in the skip list.
+/// Every .png/.jpg/.jpeg in `dir` and its subfolders (a car's recording keeps its frames in
+/// `seg_NNNNNN/` folders), sorted by path; at most 8 levels deep.
+pub fn images_under(dir: &Path) -> Vec<PathBuf> {
+    fn walk(d: &Path, depth: u32, out: &mut Vec<PathBuf>) {
+        let Ok(rd) = std::fs::read_dir(d) else { return };
+        let mut entries: Vec<PathBuf> = rd.filter_map(|e| e.ok()).map(|e| e.path()).collect();
+        entries.sort();
+        for p in entries {
+            if p.is_dir() {
+                if depth < 8 {
+                    walk(&p, depth + 1, out);
+                }
+            } else if p
+                .extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "jpg" | "jpeg" | "png"))
+            {
+                out.push(p);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, 0, &mut out);
+    out
+}
+
+/// Parses an info.dat (or bg.txt) file. Malformed lines are returned in the skip list. A
+/// folder is read as a bg.txt listing every .png/.jpg in it and its subfolders (sorted, no
+/// boxes): a
+/// recording of the track (`rccar sim --record DIR`, `rccar drive --record DIR`) or a folder of
+/// room photos can be given as backgrounds or held-out frames without writing a list.
 pub fn read_info(path: &Path) -> Result<(Vec<InfoLine>, Vec<Skipped>), SampleError> {
+    if path.is_dir() {
+        let files = images_under(path);
+        let lines = files
+            .into_iter()
+            .enumerate()
+            .map(|(i, p)| InfoLine {
+                path: p,
+                boxes: Vec::new(),
+                line: i + 1,
+            })
+            .collect();
+        return Ok((lines, Vec::new()));
+    }
     let text = read_list_text(path)?;
     Ok(parse_info(&text, path))
 }
@@ -315,6 +358,28 @@ pub fn load_backgrounds(files: &[PathBuf]) -> Result<(Vec<Background>, Vec<Skipp
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_folder_is_a_list_of_frames_without_the_object() {
+        // A car's recording: frames in seg_ folders, telemetry beside them.
+        let d = tempfile::tempdir().expect("tmp");
+        for f in ["seg_000001/frame_2.jpg", "seg_000000/frame_1.jpg", "a.png"] {
+            let p = d.path().join(f);
+            std::fs::create_dir_all(p.parent().expect("parent")).expect("dir");
+            GrayImage::from_pixel(40, 30, image::Luma([9])).save(&p).expect("img");
+        }
+        std::fs::write(d.path().join("telemetry.jsonl"), "{}\n").expect("jsonl");
+        let (lines, skipped) = read_info(d.path()).expect("folder");
+        assert!(skipped.is_empty());
+        let names: Vec<String> = lines
+            .iter()
+            .map(|l| l.path.strip_prefix(d.path()).expect("inside").display().to_string())
+            .collect();
+        assert_eq!(names, ["a.png", "seg_000000/frame_1.jpg", "seg_000001/frame_2.jpg"]);
+        assert!(lines.iter().all(|l| l.boxes.is_empty()));
+        let (bgs, _) = load_backgrounds(&[d.path().to_path_buf()]).expect("backgrounds");
+        assert_eq!(bgs.len(), 3);
+    }
 
     #[test]
     fn info_lines_parse_and_bad_ones_are_named() {

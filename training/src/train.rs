@@ -131,9 +131,13 @@ pub struct StageLog {
     /// Recall on the held-out frames after this stage (when they have boxes).
     #[serde(default)]
     pub holdout_recall: Option<f64>,
-    /// False positives per held-out frame after this stage.
+    /// False positives per held-out frame after this stage (all frames, those with the object
+    /// too: the early stop's figure).
     #[serde(default)]
     pub holdout_fp_per_frame: Option<f64>,
+    /// False positives per held-out frame without the object after this stage.
+    #[serde(default)]
+    pub holdout_fp_per_negative_frame: Option<f64>,
 }
 
 /// Frames kept out of training, checked after every stage: training stops once their false
@@ -164,8 +168,14 @@ pub const HOLDOUT_FROM: f64 = 2e-3;
 pub struct HoldoutCheck {
     /// Recall (None when the frames have no boxes).
     pub recall: Option<f64>,
-    /// False positives per frame.
+    /// False positives per frame, over all held-out frames (the early stop's figure).
     pub fp_per_frame: f64,
+    /// False positives per held-out frame without the object (None when there are none).
+    pub fp_per_negative_frame: Option<f64>,
+    /// False positives per held-out frame with the object (None when there are none).
+    pub fp_per_sign_frame: Option<f64>,
+    /// Held-out frames without the object, and with it.
+    pub frames: (usize, usize),
 }
 
 /// Runs `cascade` over the held-out frames.
@@ -185,6 +195,9 @@ pub fn check_holdout(cascade: &Cascade, h: &Holdout) -> Result<HoldoutCheck, Tra
     Ok(HoldoutCheck {
         recall: (rep.boxes > 0).then_some(p.recall),
         fp_per_frame: p.fp_per_frame,
+        fp_per_negative_frame: p.fp_per_negative_frame,
+        fp_per_sign_frame: p.fp_per_sign_frame,
+        frames: (rep.negative_frames, rep.sign_frames),
     })
 }
 
@@ -264,6 +277,14 @@ pub fn train(
     train_with_holdout(opts, positives, backgrounds, None, out_dir, resume, progress)
 }
 
+/// Memory `--mem-mb` sets aside for the program itself (code, allocator, threads' buffers,
+/// decoding), bytes. Measured: with 32 MiB the peak resident memory stayed under the budget
+/// (issue 28: 24 MiB, without the held-out frames counted, peaked at 544 MiB of 512).
+pub const PROGRAM_BYTES: usize = 32 << 20;
+
+/// Memory for the detector's pyramid and tables while it checks the held-out frames, bytes.
+pub const HOLDOUT_DETECTOR_BYTES: usize = 4 << 20;
+
 /// Bytes the training data takes besides the feature matrix: backgrounds, positives' and
 /// negatives' integral tables (two `i32` tables of `(w+1)·(h+1)` each) and raw windows.
 pub fn data_bytes(backgrounds: &[Background], positives: usize, num_neg: usize, w: usize, h: usize) -> usize {
@@ -300,8 +321,15 @@ pub fn train_with_holdout(
             return Ok(done);
         }
     }
-    // The feature matrix gets what the data leaves of --mem-mb; 2b. the negative pool.
-    let (budget, pool) = negative_pool(opts, positives.len(), backgrounds, progress)?;
+    // The feature matrix gets what the data leaves of --mem-mb; 2b. the negative pool. Besides
+    // the samples and backgrounds, the data holds the held-out frames (and the detector's
+    // pyramid for them) and the Haar pool twice (as features and compiled for the samples).
+    let holdout_bytes = holdout.map_or(0, |h| {
+        h.frames.iter().map(|f| f.1.as_raw().len() + f.0.len() + 64).sum::<usize>() + HOLDOUT_DETECTOR_BYTES
+    });
+    let pool_bytes = model.pool.len()
+        * (std::mem::size_of::<rccar::detect::cascade::HaarFeature>() + std::mem::size_of::<features::Compiled>());
+    let (budget, pool) = negative_pool(opts, positives.len(), backgrounds, holdout_bytes + pool_bytes, progress)?;
     let mut last_check: Option<HoldoutCheck> = None;
     let mut ran_out = false;
     let reason;
@@ -449,6 +477,7 @@ fn log_holdout(
     let chk = check_holdout(&c, hd)?;
     log.holdout_recall = chk.recall;
     log.holdout_fp_per_frame = Some(chk.fp_per_frame);
+    log.holdout_fp_per_negative_frame = chk.fp_per_negative_frame;
     Ok(Some(chk))
 }
 
@@ -582,6 +611,7 @@ fn stage_log(
         negatives_exhausted: mined.exhausted,
         holdout_recall: None,
         holdout_fp_per_frame: None,
+        holdout_fp_per_negative_frame: None,
     }
 }
 
@@ -645,6 +675,16 @@ fn check_inputs(opts: &TrainOptions, positives: &[Vec<u8>], backgrounds: &[Backg
 
 /// Step 1: the positives' integrals in a seeded order (each stage takes the first accepted
 /// ones); windows the detector would never look at (too flat) are left out, with a note.
+/// How many of `positives` (`w` × `h` windows) the detector would look at (not too flat):
+/// the positives training can use, before any stage drops some.
+pub fn usable_positives(positives: &[Vec<u8>], w: usize, h: usize) -> usize {
+    let mut ii = Integrals::new();
+    positives
+        .iter()
+        .filter(|s| SampleIntegral::new(s, w, h, &mut ii).scannable)
+        .count()
+}
+
 fn positive_pool(
     positives: &[Vec<u8>],
     w: usize,
@@ -734,17 +774,19 @@ fn negative_pool(
     opts: &TrainOptions,
     positives: usize,
     backgrounds: &[Background],
+    other_bytes: usize,
     progress: &mut dyn Progress,
 ) -> Result<(usize, scan::NegativePool), TrainError> {
     let (w, h) = (opts.params.width as usize, opts.params.height as usize);
     let budget_total = opts.mem_mb.saturating_mul(1 << 20);
-    let data = data_bytes(backgrounds, positives, opts.num_neg, w, h) + (24 << 20);
+    let data = data_bytes(backgrounds, positives, opts.num_neg, w, h) + other_bytes + PROGRAM_BYTES;
     if data >= budget_total {
         return Err(TrainError::Invalid(format!(
-            "--mem-mb {}: the backgrounds and samples alone take about {} MiB (plus 24 for the program); \
-             give at least {} MiB, or fewer/smaller backgrounds",
+            "--mem-mb {}: the backgrounds, held-out frames and samples alone take about {} MiB (plus {} for the \
+             program); give at least {} MiB, or fewer/smaller backgrounds",
             opts.mem_mb,
-            data >> 20,
+            (data - PROGRAM_BYTES) >> 20,
+            PROGRAM_BYTES >> 20,
             (data >> 20) + 32
         )));
     }
@@ -789,8 +831,9 @@ fn feature_matrix(
     let (w, h) = (opts.params.width as usize, opts.params.height as usize);
     let neg: Vec<SampleIntegral> = negs.iter().map(|s| SampleIntegral::new(s, w, h, ii)).collect();
     let (np, n) = (pos.len(), pos.len() + neg.len());
-    // Per feature: one bin byte per sample and up to 255 f32 edges.
-    let fit = (budget / (n + 1024)).max(1);
+    // Per feature: one bin byte per sample, up to 255 f32 edges and their Vec (header and the
+    // allocator's own bytes).
+    let fit = (budget / (n + 1024 + 48)).max(1);
     let mut feats: Vec<usize> = (0..model.pool.len()).collect();
     if feats.len() > fit {
         let mut frng = SplitMix64::new(mix(opts.seed ^ 0xFEA7 ^ si as u64));
