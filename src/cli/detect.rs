@@ -106,7 +106,7 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
             }
             annotate::check_options(&params, args.cascades.len(), rccar::imageio::limits::MAX_IMAGE_SIDE)?;
             for path in &args.cascades {
-                detectors.push(Finder::Cascade(Detector::new(Cascade::from_file(path)?)));
+                detectors.push(Finder::Cascade(Box::new(Detector::new(Cascade::from_file(path)?))));
             }
             args.cascades.iter().map(|p| escape_name(p.as_os_str())).collect()
         }
@@ -145,7 +145,7 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
 
 /// One detector of the run.
 enum Finder {
-    Cascade(Detector),
+    Cascade(Box<Detector>),
     Colour(Box<HsvSignDetector>),
 }
 
@@ -188,7 +188,7 @@ fn detect_one(
         }
         _ => {
             let cascades = detectors.iter_mut().filter_map(|f| match f {
-                Finder::Cascade(d) => Some(d),
+                Finder::Cascade(d) => Some(d.as_mut()),
                 Finder::Colour(_) => None,
             });
             annotate::detect_all(cascades, &gray, &rgb, params, args.light)
