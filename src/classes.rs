@@ -141,6 +141,9 @@ pub struct ClassInfo {
     pub reads_arrow: bool,
     /// The colour cue that refines its boxes before ranging.
     pub colour_cue: ColourCue,
+    /// Abdollahi's colour + template detector can find it instead of a cascade
+    /// (`classes.<name>.detect = "colour_template"`): a red octagon with white letters.
+    pub colour_template: bool,
     /// The behaviour that reacts to it.
     pub reaction: Reaction,
     /// How the simulator draws it.
@@ -172,6 +175,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         reads_light: false,
         reads_arrow: false,
         colour_cue: ColourCue::RedFace,
+        colour_template: true,
         reaction: Reaction::StopThenGo,
         shape: SimShape::Octagon,
         sim_size_m: [0.10, 0.0, 0.0],
@@ -194,6 +198,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         reads_light: true,
         reads_arrow: false,
         colour_cue: ColourCue::LitHousing,
+        colour_template: false,
         reaction: Reaction::WaitForGreen,
         shape: SimShape::LightHousing,
         sim_size_m: [0.12, 0.0, 0.0],
@@ -216,6 +221,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         reads_light: false,
         reads_arrow: false,
         colour_cue: ColourCue::None,
+        colour_template: false,
         reaction: Reaction::StopOrPass,
         shape: SimShape::Box,
         sim_size_m: [0.15, 0.12, 0.10],
@@ -238,6 +244,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         reads_light: false,
         reads_arrow: false,
         colour_cue: ColourCue::None,
+        colour_template: false,
         reaction: Reaction::Yield,
         shape: SimShape::Triangle,
         sim_size_m: [0.12, 0.0, 0.0],
@@ -260,6 +267,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         reads_light: false,
         reads_arrow: true,
         colour_cue: ColourCue::BlueFace,
+        colour_template: false,
         reaction: Reaction::TakeTurn,
         shape: SimShape::ArrowDisc,
         sim_size_m: [0.10, 0.0, 0.0],

@@ -22,7 +22,7 @@
 //! the car keeps its lane; the behaviour machine still handles a lost lane.
 
 use crate::classes::{ColourCue, Reaction, TurnArrow};
-use crate::config::Config;
+use crate::config::{Config, DetectMethod};
 use crate::control::behaviour::{Behaviour, DeadReckoning, Decision, LightColor, Mode, Observations, Ranged};
 use crate::control::steering::SteeringInput;
 use crate::control::{Command, Controller};
@@ -37,6 +37,7 @@ use crate::lane::{LaneDetector, LaneMeasurement};
 use crate::ranging::track::{Measurement, Tracker};
 use crate::ranging::{BoxRanging, ObjectClass};
 use crate::source::GivenBox;
+use crate::stereo::hsv_sign::{HsvSignDetector, HsvSignOptions};
 use crate::timing::{StageTimer, StageTimes};
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
@@ -166,10 +167,11 @@ impl std::fmt::Display for MissingCascade {
 }
 
 /// Loads the classes' cascades (`classes.<name>.model`) that exist (paths relative to `base`;
-/// an empty path switches that class off). Returns the stage (`None` when no file exists or
-/// `detect.enabled` is off) and the configured files that were missing, which the binary
-/// refuses (a configured model that is not there is an error, not a silently weaker car).
-/// This is the pipeline's only filesystem access.
+/// an empty path switches that class off), and the colour detector of every class whose
+/// `detect` is `colour_template` (no file: its templates are drawn from geometry). Returns the
+/// stage (`None` when nothing is detected or `detect.enabled` is off) and the configured files
+/// that were missing, which the binary refuses (a configured model that is not there is an
+/// error, not a silently weaker car). This is the pipeline's only filesystem access.
 pub fn load_detector(cfg: &Config, base: &Path) -> Result<(Option<DetectStage>, Vec<MissingCascade>), CascadeError> {
     if !cfg.detect.enabled {
         return Ok((None, Vec::new()));
@@ -177,7 +179,12 @@ pub fn load_detector(cfg: &Config, base: &Path) -> Result<(Option<DetectStage>, 
     let params = DetectParams::from(&cfg.detect);
     let mut specs = Vec::new();
     let mut missing = Vec::new();
+    let mut colour = Vec::new();
     for (class, k) in cfg.classes.iter() {
+        if k.detect == DetectMethod::ColourTemplate {
+            colour.push(class);
+            continue;
+        }
         let file = &k.model;
         if file.is_empty() {
             continue;
@@ -197,10 +204,16 @@ pub fn load_detector(cfg: &Config, base: &Path) -> Result<(Option<DetectStage>, 
             });
         }
     }
-    if specs.is_empty() {
+    if specs.is_empty() && colour.is_empty() {
         return Ok((None, missing));
     }
-    Ok((Some(DetectStage::load(&specs)?), missing))
+    let mut stage = DetectStage::load(&specs)?;
+    for class in colour {
+        let det = HsvSignDetector::with_octagon_model(HsvSignOptions::from(&cfg.colour_template))
+            .expect("the octagon model has red pixels and the default template sizes");
+        stage.add_colour_sign(class.name(), det);
+    }
+    Ok((Some(stage), missing))
 }
 
 /// Where and at which sizes one class is searched (from `[classes.<name>]`, `[detect]` and the
@@ -955,4 +968,39 @@ fn apply(cmd: Command, d: &Decision) -> Command {
     let throttle = d.throttle.unwrap_or(cmd.throttle).min(d.throttle_cap);
     let steer = d.steer.unwrap_or(cmd.steer);
     Command::clamped(steer, throttle)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `classes.stop_sign.detect = "colour_template"` loads the colour detector under the
+    /// stop sign's label and reads no model file for it (a missing one is not an error); the
+    /// other classes keep their cascades.
+    #[test]
+    fn the_colour_template_method_needs_no_model_file() {
+        let mut cfg = Config::default()
+            .with_override("classes.stop_sign.detect=colour_template")
+            .unwrap()
+            .with_override("classes.stop_sign.model=no/such.xml")
+            .unwrap();
+        for class in [
+            ObjectClass::TrafficLight,
+            ObjectClass::Obstacle,
+            ObjectClass::YieldSign,
+            ObjectClass::TurnSign,
+        ] {
+            cfg.classes[class].model.clear();
+        }
+        let (stage, missing) = load_detector(&cfg, Path::new(".")).unwrap();
+        assert!(missing.is_empty(), "{missing:?}");
+        let stage = stage.expect("a stage with the colour detector");
+        assert_eq!(stage.labels().collect::<Vec<_>>(), ["stop_sign"]);
+        // With the cascade method the same file is missing.
+        cfg.classes[ObjectClass::StopSign].detect = DetectMethod::Cascade;
+        let (stage, missing) = load_detector(&cfg, Path::new(".")).unwrap();
+        assert!(stage.is_none());
+        assert_eq!(missing.len(), 1);
+        assert_eq!(missing[0].key, "classes.stop_sign.model");
+    }
 }

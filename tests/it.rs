@@ -44,6 +44,7 @@ mod stereo_sim;
 mod town_sim;
 mod stereo_track;
 mod stop_line;
+mod real_photos;
 
 /// Every tests/*.rs file is compiled: a module here or in tests/car.rs, or its own `[[test]]`
 /// in Cargo.toml (`autotests = false` means cargo no longer finds them by itself).

@@ -3,20 +3,46 @@
 //! and writes an annotated copy of each image (`<file name>.detect.png`, extension kept). A
 //! damaged or unreadable image is named, counted and skipped; the run goes on with the next
 //! one and exits 1 at the end if any failed.
+//!
+//! `rccar detect --method colour-template IMAGE…` runs Abdollahi's stop-sign detector (HSV
+//! threshold + template matching, src/stereo/hsv_sign.rs, with the octagon-model templates the
+//! pipeline uses for `classes.stop_sign.detect = "colour_template"`) instead; its boxes are
+//! printed the same way, with `"cascade": "colour_template"`; its options are the
+//! configuration's `[colour_template]` (`--config`, `--set colour_template.KEY=VALUE`).
 
 use anyhow::{Context, Result};
 use clap::Args;
 use rccar::detect::{annotate, Cascade, DetectParams, Detector};
 use rccar::source::escape_name;
+use rccar::stereo::hsv_sign::{HsvSignDetector, HsvSignOptions, Verdict};
 use std::path::PathBuf;
 use std::process::ExitCode;
+
+/// What finds the objects.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// The `--cascade` files.
+    Cascade,
+    /// Abdollahi's colour + template stop-sign detector (no `--cascade`; the scan flags do not
+    /// apply).
+    ColourTemplate,
+}
 
 /// Flags of `rccar detect`.
 #[derive(Args, Debug)]
 pub struct DetectArgs {
-    /// Cascade XML file (repeatable, at most 16; each runs on every image).
-    #[arg(long = "cascade", required = true)]
+    /// Cascade XML file (repeatable, at most 16; each runs on every image). Needed with
+    /// `--method cascade`.
+    #[arg(long = "cascade")]
     pub cascades: Vec<PathBuf>,
+    /// What finds the objects: the cascades, or Abdollahi's colour + template stop-sign
+    /// detector (as `classes.stop_sign.detect = "colour_template"`).
+    #[arg(long, value_enum, default_value_t = Method::Cascade)]
+    pub method: Method,
+    /// The configuration whose `[colour_template]` options `--method colour-template` uses
+    /// (not read with cascades).
+    #[command(flatten)]
+    pub config: super::common::ConfigArgs,
     /// Images (PNG or JPEG; colour is converted to grey as OpenCV's cvtColor does).
     #[arg(required = true)]
     pub images: Vec<PathBuf>,
@@ -38,6 +64,11 @@ pub struct DetectArgs {
     /// Also read the traffic-light state inside every box.
     #[arg(long)]
     pub light: bool,
+    /// With `--method colour-template`: also print every red candidate and the step that kept
+    /// or rejected it (`too_small`, `not_square`, `dark_rim`, `low_score`, `sign`) with its
+    /// template score, under `"candidates"`.
+    #[arg(long)]
+    pub explain: bool,
     /// Directory for annotated images.
     #[arg(long, default_value = "out/detect")]
     pub out: PathBuf,
@@ -67,12 +98,28 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
         max_size: args.max_size,
         parallel: args.parallel,
     };
-    annotate::check_options(&params, args.cascades.len(), rccar::imageio::limits::MAX_IMAGE_SIDE)?;
-    let names: Vec<String> = args.cascades.iter().map(|p| escape_name(p.as_os_str())).collect();
     let mut detectors = Vec::new();
-    for path in &args.cascades {
-        detectors.push(Detector::new(Cascade::from_file(path)?));
-    }
+    let names: Vec<String> = match args.method {
+        Method::Cascade => {
+            if args.cascades.is_empty() {
+                anyhow::bail!("give at least one --cascade FILE (or --method colour-template)");
+            }
+            annotate::check_options(&params, args.cascades.len(), rccar::imageio::limits::MAX_IMAGE_SIDE)?;
+            for path in &args.cascades {
+                detectors.push(Finder::Cascade(Box::new(Detector::new(Cascade::from_file(path)?))));
+            }
+            args.cascades.iter().map(|p| escape_name(p.as_os_str())).collect()
+        }
+        Method::ColourTemplate => {
+            if !args.cascades.is_empty() {
+                anyhow::bail!("--cascade is not read with --method colour-template: leave it out");
+            }
+            let cfg = args.config.load()?;
+            let det = HsvSignDetector::with_octagon_model(HsvSignOptions::from(&cfg.colour_template))?;
+            detectors.push(Finder::Colour(Box::new(det)));
+            vec!["colour_template".to_string()]
+        }
+    };
     if !args.no_annotate {
         std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create", args.out.display()))?;
     }
@@ -96,6 +143,12 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// One detector of the run.
+enum Finder {
+    Cascade(Box<Detector>),
+    Colour(Box<HsvSignDetector>),
+}
+
 /// A problem with one image (skip it) or with the run (stop: e.g. the output disk is full).
 enum DetectFailure {
     Skip(String),
@@ -105,16 +158,57 @@ enum DetectFailure {
 fn detect_one(
     args: &DetectArgs,
     params: &DetectParams,
-    (names, detectors): (&[String], &mut [Detector]),
+    (names, detectors): (&[String], &mut [Finder]),
     path: &std::path::Path,
     shown: &str,
     used: &mut std::collections::HashSet<String>,
 ) -> Result<(), DetectFailure> {
     let img = rccar::source::read_image(path).map_err(DetectFailure::Skip)?;
     let (rgb, gray) = annotate::rgb_and_gray(&img);
-    let found = annotate::detect_all(detectors.iter_mut(), &gray, &rgb, params, args.light)
-        .map_err(|(ci, e)| DetectFailure::Skip(format!("{}: {e}", names[ci])))?;
-    println!("{}", annotate::image_record(shown, gray.dimensions(), &found, names));
+    let mut candidates = None;
+    let found = match detectors {
+        [Finder::Colour(det)] => {
+            let all = det.candidates(&rgb);
+            let found = all
+                .iter()
+                .filter(|c| c.verdict == Verdict::Sign)
+                .map(|c| annotate::FoundBox {
+                    cascade: 0,
+                    detection: rccar::detect::Detection {
+                        rect: c.face,
+                        neighbors: 0,
+                    },
+                    light: None,
+                })
+                .collect();
+            if args.explain {
+                candidates = Some(all);
+            }
+            found
+        }
+        _ => {
+            let cascades = detectors.iter_mut().filter_map(|f| match f {
+                Finder::Cascade(d) => Some(d.as_mut()),
+                Finder::Colour(_) => None,
+            });
+            annotate::detect_all(cascades, &gray, &rgb, params, args.light)
+                .map_err(|(ci, e)| DetectFailure::Skip(format!("{}: {e}", names[ci])))?
+        }
+    };
+    let mut record = annotate::image_record(shown, gray.dimensions(), &found, names);
+    if let Some(all) = candidates {
+        record["candidates"] = all
+            .iter()
+            .map(|c| {
+                serde_json::json!({
+                    "x": c.red.x, "y": c.red.y, "width": c.red.width, "height": c.red.height,
+                    "verdict": c.verdict,
+                    "score": if c.score.is_finite() { serde_json::json!((c.score * 1000.0).round() / 1000.0) } else { serde_json::Value::Null },
+                })
+            })
+            .collect();
+    }
+    println!("{record}");
     if !args.no_annotate {
         let name = rccar::source::unique_name(path.file_name().map(escape_name).unwrap_or_default(), used);
         let out = args.out.join(format!("{name}.detect.png"));

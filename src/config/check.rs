@@ -88,6 +88,7 @@ impl Config {
         self.manual.check(&mut c);
         self.route.check(&mut c);
         self.gamepad.check(&mut c);
+        self.colour_template.check(&mut c);
         self.stereo.check(&mut c, self.camera.width);
         if c.0.is_empty() {
             // The steering method as built from the sections it reads (checked above).

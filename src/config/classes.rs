@@ -14,10 +14,26 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::fmt;
 use std::ops::{Index, IndexMut};
 
+/// How a class is found in the frames (`classes.<name>.detect`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DetectMethod {
+    /// Its cascade, the `model` file.
+    #[default]
+    Cascade,
+    /// Abdollahi's (2011) HSV threshold + template matching (src/stereo/hsv_sign.rs), with
+    /// templates drawn from the octagon's geometry; `model` is not read. Only for classes whose
+    /// registry entry allows it (`ClassInfo::colour_template`: the stop sign).
+    ColourTemplate,
+}
+
 /// `[classes.<name>]`: the tunables of one object class (docs/detect.md, docs/ranging.md).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ClassConfig {
+    /// How it is found: `cascade` (its `model`) or `colour_template` (Abdollahi's colour +
+    /// template detector, red octagons only).
+    pub detect: DetectMethod,
     /// Its cascade (OpenCV XML); a relative path is relative to the folder of the config file
     /// that names it; "" = the class is not detected. A named file that is missing is an error.
     pub model: String,
@@ -42,6 +58,7 @@ impl ClassConfig {
     pub fn default_for(class: ObjectClass) -> Self {
         let d = class.info().defaults;
         ClassConfig {
+            detect: DetectMethod::Cascade,
             model: d.model.into(),
             region: d.region,
             box_m: d.box_m,
@@ -66,6 +83,13 @@ impl ClassConfig {
     /// an ordered box width, sizes, height and margin in range.
     fn check(&self, class: ObjectClass, c: &mut Checker) {
         let key = |k: &str| format!("classes.{class}.{k}");
+        if self.detect == DetectMethod::ColourTemplate && !class.info().colour_template {
+            c.fail(
+                &key("detect"),
+                "\"colour_template\"".to_string(),
+                "\"cascade\" (the colour + template detector finds red octagons: stop_sign only)",
+            );
+        }
         let r = self.region;
         if !(r.iter().all(|v| (0.0..=1.0).contains(v)) && r[0] < r[2] && r[1] < r[3]) {
             c.fail(
@@ -373,5 +397,33 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("t.toml: `classes.stop_sign.region` = \"right\""), "{e}");
+    }
+
+    /// `detect` picks the colour + template detector for the stop sign; a class it cannot find
+    /// is refused naming the key; an unknown method is refused.
+    #[test]
+    fn detect_method_per_class() {
+        assert_eq!(
+            Config::default().classes[ObjectClass::StopSign].detect,
+            DetectMethod::Cascade
+        );
+        let c = Config::from_toml_str("[classes.stop_sign]\ndetect = \"colour_template\"\n", "t.toml").unwrap();
+        assert_eq!(c.classes[ObjectClass::StopSign].detect, DetectMethod::ColourTemplate);
+        assert_eq!(c.classes[ObjectClass::TrafficLight].detect, DetectMethod::Cascade);
+        let c = Config::default()
+            .with_override("classes.stop_sign.detect=colour_template")
+            .unwrap();
+        assert_eq!(c.classes[ObjectClass::StopSign].detect, DetectMethod::ColourTemplate);
+        let e = Config::from_toml_str("[classes.traffic_light]\ndetect = \"colour_template\"\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("t.toml: classes.traffic_light.detect = \"colour_template\" is out of range"),
+            "{e}"
+        );
+        let e = Config::from_toml_str("[classes.stop_sign]\ndetect = \"hog\"\n", "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("classes.stop_sign.detect"), "{e}");
     }
 }

@@ -22,6 +22,7 @@ mod behaviour;
 mod camera;
 mod check;
 mod classes;
+mod colour_template;
 mod dashboard;
 mod detect;
 mod gamepad;
@@ -43,7 +44,8 @@ mod warp;
 
 pub use behaviour::BehaviourConfig;
 pub use camera::{CameraConfig, LensError};
-pub use classes::{ClassConfig, ClassesConfig};
+pub use classes::{ClassConfig, ClassesConfig, DetectMethod};
+pub use colour_template::ColourTemplateConfig;
 pub use dashboard::DashboardConfig;
 pub use detect::DetectConfig;
 pub use gamepad::{axis_code, GamepadConfig};
@@ -194,6 +196,9 @@ pub struct Config {
     /// `[classes.<name>]`: each object class's model file, search region, box width and what
     /// its box frames (one section per entry of src/classes.rs).
     pub classes: ClassesConfig,
+    /// `[colour_template]`: Abdollahi's colour + template stop-sign detector, for a class whose
+    /// `detect` is `colour_template`.
+    pub colour_template: ColourTemplateConfig,
     /// The behaviour state machine: stop signs, lights, obstacles, lane lost.
     pub behaviour: BehaviourConfig,
     /// The Raspberry Pi's GPIO: start/stop button, status LED, HC-SR04 ultrasonic brake.

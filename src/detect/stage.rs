@@ -6,12 +6,19 @@
 //! and builds one image pyramid for all of them ([`super::pyramid`]): each scale is resized and
 //! integrated once, and every cascade scans it in its own region of the frame
 //! ([`DetectStage::set_region`]). Units: pixels of the frame.
+//!
+//! A class may be found by a colour detector instead of a cascade
+//! ([`DetectStage::add_colour_sign`]: Abdollahi's HSV threshold + template matching,
+//! `stereo::hsv_sign`); it runs on the colour frame inside its region and its boxes join the
+//! cascades' in the same list, with the same label, so ranging and the behaviours take them
+//! as they take a cascade's.
 
 use super::cascade::{Cascade, CascadeError};
 use super::scan::{DetectError, DetectParams, Scanner};
 use super::group::Rect;
 use super::light::{light_state, LightReading};
 use super::pyramid::{Pyramid, RowBand};
+use crate::stereo::hsv_sign::HsvSignDetector;
 use image::{GrayImage, RgbImage};
 use std::ops::Range;
 use std::path::PathBuf;
@@ -57,6 +64,59 @@ pub struct DetectStage {
     bands: Vec<Option<RowBand>>,
     /// Grey copy of the last colour frame (reused).
     gray: GrayImage,
+    /// Colour detectors, run after the cascades (`classes.<name>.detect = "colour_template"`).
+    colour: Vec<ColourSign>,
+}
+
+/// A class found by colour and shape rather than by a cascade.
+#[derive(Debug, Clone)]
+struct ColourSign {
+    label: String,
+    det: HsvSignDetector,
+    /// Where its boxes may lie (`None` = anywhere).
+    region: Option<Rect>,
+    /// Smallest and largest box (width, height; 0 = no limit), as a cascade's window.
+    min_size: (u32, u32),
+    max_size: (u32, u32),
+}
+
+impl ColourSign {
+    /// Its boxes in `rgb`: the detector on the region's pixels, boxes moved back to frame
+    /// pixels and kept when they lie inside the region and within the size limits.
+    fn run(&mut self, rgb: &RgbImage) -> Vec<Rect> {
+        let frame = Rect::new(0, 0, rgb.width() as i32, rgb.height() as i32);
+        let region = self.region.map_or(frame, |r| r.intersect(&frame));
+        if region.area() <= 0 {
+            return Vec::new();
+        }
+        let crop;
+        let img = if region == frame {
+            rgb
+        } else {
+            crop = image::imageops::crop_imm(
+                rgb,
+                region.x as u32,
+                region.y as u32,
+                region.width as u32,
+                region.height as u32,
+            )
+            .to_image();
+            &crop
+        };
+        let within = |v: i32, lo: u32, hi: u32| {
+            let v = v.max(0) as u32;
+            v >= lo && (hi == 0 || v <= hi)
+        };
+        self.det
+            .detect(img)
+            .into_iter()
+            .map(|d| Rect::new(d.rect.x + region.x, d.rect.y + region.y, d.rect.width, d.rect.height))
+            .filter(|r| r.intersect(&region) == *r)
+            .filter(|r| {
+                within(r.width, self.min_size.0, self.max_size.0) && within(r.height, self.min_size.1, self.max_size.1)
+            })
+            .collect()
+    }
 }
 
 /// Grey from RGB as OpenCV's `cvtColor(RGB2GRAY)` computes it for 8-bit images
@@ -91,7 +151,22 @@ impl DetectStage {
             bands: vec![None; n],
             pyramid: Pyramid::new(),
             gray: GrayImage::new(0, 0),
+            colour: Vec::new(),
         }
+    }
+
+    /// Adds a colour detector whose boxes are labelled `label` (run on colour frames only:
+    /// [`DetectStage::run_rgb`], or [`DetectStage::run`] with the colour frame). Its region and
+    /// size limits are set by label like a cascade's ([`DetectStage::set_limits`]); row bands do
+    /// not apply to it (it reads its whole region).
+    pub fn add_colour_sign(&mut self, label: &str, det: HsvSignDetector) {
+        self.colour.push(ColourSign {
+            label: label.into(),
+            det,
+            region: None,
+            min_size: (0, 0),
+            max_size: (0, 0),
+        });
     }
 
     /// Restricts cascade `label` to boxes lying inside `region` (frame pixels; `None` = the
@@ -113,6 +188,12 @@ impl DetectStage {
                 self.params[i].max_size = max_size;
                 found = true;
             }
+        }
+        for c in self.colour.iter_mut().filter(|c| c.label == label) {
+            c.region = region;
+            c.min_size = min_size;
+            c.max_size = max_size;
+            found = true;
         }
         found
     }
@@ -141,6 +222,10 @@ impl DetectStage {
                 found = true;
             }
         }
+        for c in self.colour.iter_mut().filter(|c| c.label == label) {
+            c.region = region;
+            found = true;
+        }
         found
     }
 
@@ -151,13 +236,19 @@ impl DetectStage {
         }
     }
 
-    /// The region, minimum and maximum window of each cascade, in run order.
+    /// The region, minimum and maximum window of each cascade, then of each colour detector,
+    /// in run order.
     pub fn limits(&self) -> impl Iterator<Item = (&str, Option<Rect>, (u32, u32), (u32, u32))> {
         self.specs
             .iter()
             .zip(&self.regions)
             .zip(&self.params)
             .map(|((s, r), p)| (s.label.as_str(), *r, p.min_size, p.max_size))
+            .chain(
+                self.colour
+                    .iter()
+                    .map(|c| (c.label.as_str(), c.region, c.min_size, c.max_size)),
+            )
     }
 
     /// The frame rows a `width` × `height` frame must have filled in for [`DetectStage::run`]
@@ -166,10 +257,34 @@ impl DetectStage {
     /// other row unset.
     pub fn rows_needed(&mut self, width: u32, height: u32) -> Vec<Range<usize>> {
         let (w, h) = (width as usize, height as usize);
-        match self.pyramid.plan(w, h, &self.dets, &self.params, &self.regions) {
-            Ok(()) => self.pyramid.source_rows(),
-            Err(_) => Vec::new(),
+        let mut rows = if self.dets.is_empty() {
+            Vec::new()
+        } else {
+            match self.pyramid.plan(w, h, &self.dets, &self.params, &self.regions) {
+                Ok(()) => self.pyramid.source_rows(),
+                Err(_) => Vec::new(),
+            }
+        };
+        if self.colour.is_empty() {
+            return rows;
         }
+        // A colour detector reads every row of its region.
+        let frame = Rect::new(0, 0, width as i32, height as i32);
+        for c in &self.colour {
+            let r = c.region.map_or(frame, |r| r.intersect(&frame));
+            if r.area() > 0 {
+                rows.push(r.y as usize..(r.y + r.height) as usize);
+            }
+        }
+        rows.sort_by_key(|r| r.start);
+        let mut out: Vec<Range<usize>> = Vec::with_capacity(rows.len());
+        for r in rows {
+            match out.last_mut() {
+                Some(l) if r.start <= l.end => l.end = l.end.max(r.end),
+                _ => out.push(r),
+            }
+        }
+        out
     }
 
     /// Runs every cascade on a colour frame (the pipeline's input): grey conversion of the rows
@@ -190,19 +305,21 @@ impl DetectStage {
     }
 
     /// Runs every cascade on the grey frame; `rgb` (the same frame in colour) enables the
-    /// traffic-light reading.
+    /// traffic-light reading and the colour detectors.
     pub fn run(&mut self, gray: &GrayImage, rgb: Option<&RgbImage>) -> Result<Vec<DetectedObject>, DetectError> {
         let (w, h) = (gray.width() as usize, gray.height() as usize);
         let parallel = self.params.iter().any(|p| p.parallel);
-        self.pyramid.run(
-            gray.as_raw(),
-            w,
-            h,
-            &mut self.dets,
-            &self.params,
-            &self.regions,
-            parallel,
-        )?;
+        if !self.dets.is_empty() {
+            self.pyramid.run(
+                gray.as_raw(),
+                w,
+                h,
+                &mut self.dets,
+                &self.params,
+                &self.regions,
+                parallel,
+            )?;
+        }
         let mut out = Vec::new();
         for ((spec, det), params) in self.specs.iter().zip(&self.dets).zip(&self.params) {
             for d in det.grouped(w, h, params.min_neighbors) {
@@ -217,12 +334,27 @@ impl DetectStage {
                 });
             }
         }
+        if let Some(img) = rgb {
+            for c in &mut self.colour {
+                for rect in c.run(img) {
+                    out.push(DetectedObject {
+                        label: c.label.clone(),
+                        rect,
+                        neighbors: 0,
+                        light: None,
+                    });
+                }
+            }
+        }
         Ok(out)
     }
 
-    /// The labels, in run order.
+    /// The labels, in run order (the cascades', then the colour detectors').
     pub fn labels(&self) -> impl Iterator<Item = &str> {
-        self.specs.iter().map(|s| s.label.as_str())
+        self.specs
+            .iter()
+            .map(|s| s.label.as_str())
+            .chain(self.colour.iter().map(|c| c.label.as_str()))
     }
 }
 
@@ -288,5 +420,70 @@ mod tests {
             edge.iter().all(|o| o.rect.y < 4 && o.rect.y + o.rect.height > 4),
             "{edge:?}"
         );
+    }
+
+    /// A colour detector's boxes come out of the stage with its label, only from colour
+    /// frames, only inside its region and size limits; its region's rows are read.
+    #[test]
+    fn a_colour_detector_joins_the_cascades_boxes() {
+        use crate::stereo::hsv_sign::{octagon_model, HsvSignDetector, HsvSignOptions};
+        let c = Cascade::from_xml_str(BRIGHT_BELOW, "t").unwrap();
+        let spec = CascadeSpec {
+            label: "edge".into(),
+            path: PathBuf::new(),
+            traffic_light: false,
+            params: DetectParams {
+                min_neighbors: 0,
+                max_size: (4, 4),
+                ..Default::default()
+            },
+        };
+        let mut stage = DetectStage::from_cascades(vec![(spec, c)]);
+        let det = HsvSignDetector::with_octagon_model(HsvSignOptions::default()).unwrap();
+        stage.add_colour_sign("stop_sign", det);
+        assert_eq!(stage.labels().collect::<Vec<_>>(), ["edge", "stop_sign"]);
+        let mut rgb = RgbImage::from_pixel(160, 120, image::Rgb([110, 110, 110]));
+        image::imageops::overlay(&mut rgb, &octagon_model(30), 100, 20);
+        let stops = |st: &mut DetectStage, rgb: &RgbImage| -> Vec<Rect> {
+            st.run_rgb(rgb)
+                .unwrap()
+                .into_iter()
+                .filter(|o| o.label == "stop_sign")
+                .map(|o| o.rect)
+                .collect()
+        };
+        let found = stops(&mut stage, &rgb);
+        assert_eq!(found.len(), 1, "{found:?}");
+        let r = found[0];
+        assert!(
+            (r.x - 100).abs() <= 2 && (r.y - 20).abs() <= 2 && (r.width - 30).abs() <= 3,
+            "{r:?}"
+        );
+        // No colour frame: no colour boxes.
+        let mut gray = GrayImage::new(0, 0);
+        gray_from_rgb(&rgb, &mut gray);
+        assert!(stage.run(&gray, None).unwrap().iter().all(|o| o.label != "stop_sign"));
+        // A region that holds the sign keeps it (and its rows are read); one that cuts it does not.
+        assert!(stage.set_limits("stop_sign", Some(Rect::new(80, 0, 80, 60)), (0, 0), (0, 0)));
+        assert_eq!(stops(&mut stage, &rgb), found);
+        assert!(stage.rows_needed(160, 120).iter().any(|r| r.start == 0 && r.end >= 60));
+        stage.set_region("stop_sign", Some(Rect::new(0, 0, 110, 120)));
+        assert!(stops(&mut stage, &rgb).is_empty());
+        // Size limits as a cascade's window.
+        stage.set_limits("stop_sign", None, (0, 0), (20, 20));
+        assert!(stops(&mut stage, &rgb).is_empty());
+        stage.set_limits("stop_sign", None, (20, 20), (0, 0));
+        assert_eq!(stops(&mut stage, &rgb), found);
+        // The pipeline's limits: widths only, no height limit (`u32::MAX`).
+        stage.set_limits("stop_sign", None, (18, 0), (213, u32::MAX));
+        assert_eq!(stops(&mut stage, &rgb), found);
+        // A stage of colour detectors only.
+        let mut only = DetectStage::from_cascades(vec![]);
+        only.add_colour_sign(
+            "stop_sign",
+            HsvSignDetector::with_octagon_model(HsvSignOptions::default()).unwrap(),
+        );
+        assert_eq!(stops(&mut only, &rgb), found);
+        assert_eq!(only.rows_needed(160, 120), vec![0..120]);
     }
 }

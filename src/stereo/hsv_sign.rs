@@ -20,9 +20,19 @@
 //!
 //! The box reported is the candidate's red component grown by `face_per_red` about its
 //! centre: the sign's face with its white rim, as a cascade boxes it. Units: pixels; hue in OpenCV's 0..180.
+//!
+//! The template picture is the caller's ([`HsvSignDetector::new`]); the pipeline uses
+//! [`octagon_model`] ([`HsvSignDetector::with_octagon_model`]): a sign drawn from the
+//! proportions of the standard STOP sign (MUTCD R1-1), not from any photo or from the
+//! simulator's own sign picture, so that a score on photos or renders is not a template
+//! matched against itself.
 
 use crate::detect::Rect;
-use image::{GrayImage, RgbImage};
+use image::{GrayImage, Rgb, RgbImage};
+
+/// Side of the [`octagon_model`] picture the templates are resampled from, pixels (more than
+/// the largest template size).
+pub const OCTAGON_MODEL_PX: u32 = 240;
 
 /// Hue, saturation, value of one 8-bit RGB pixel, exactly as OpenCV's
 /// `cvtColor(COLOR_RGB2HSV)` (its 12-bit fixed-point tables): V = max, S = 255·(V − min)/V,
@@ -116,6 +126,35 @@ pub struct SignDetection {
     /// Box in frame pixels (the red component).
     pub rect: Rect,
     /// Correlation with the best template.
+    pub score: f64,
+}
+
+/// What became of a candidate ([`HsvSignDetector::candidates`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// Narrower or lower than `min_size_px`.
+    TooSmall,
+    /// Longer side over shorter above `max_aspect`.
+    NotSquare,
+    /// The ring around it is darker than `rim_value_ratio` × its red (no white rim).
+    DarkRim,
+    /// Its correlation with the template is below `min_score`.
+    LowScore,
+    /// A stop sign.
+    Sign,
+}
+
+/// One red component and what became of it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Candidate {
+    /// The red component's box, frame pixels.
+    pub red: Rect,
+    /// The face's box it would report (`red` grown by `face_per_red`).
+    pub face: Rect,
+    /// Kept or why not.
+    pub verdict: Verdict,
+    /// Its template correlation (NaN when rejected before the template step).
     pub score: f64,
 }
 
@@ -245,6 +284,11 @@ impl HsvSignDetector {
         })
     }
 
+    /// A detector whose templates are made from [`octagon_model`] (geometry, no picture).
+    pub fn with_octagon_model(opts: HsvSignOptions) -> Result<Self, TemplateError> {
+        Self::new(opts, &octagon_model(OCTAGON_MODEL_PX))
+    }
+
     /// The options.
     pub fn options(&self) -> &HsvSignOptions {
         &self.opts
@@ -252,6 +296,20 @@ impl HsvSignDetector {
 
     /// Stop signs in `img`.
     pub fn detect(&mut self, img: &RgbImage) -> Vec<SignDetection> {
+        self.candidates(img)
+            .into_iter()
+            .filter(|c| c.verdict == Verdict::Sign)
+            .map(|c| SignDetection {
+                rect: c.face,
+                score: c.score,
+            })
+            .collect()
+    }
+
+    /// Every candidate of `img` (red component after merging) with the step that kept or
+    /// rejected it: what [`HsvSignDetector::detect`] decides, for finding out why a sign was
+    /// missed or a red object taken for one.
+    pub fn candidates(&mut self, img: &RgbImage) -> Vec<Candidate> {
         let (w, h) = (img.width() as usize, img.height() as usize);
         // 1. HSV threshold.
         let mut mask = std::mem::take(&mut self.mask);
@@ -264,28 +322,37 @@ impl HsvSignDetector {
         for b in boxes {
             let (bw, bh) = (b[2] - b[0] + 1, b[3] - b[1] + 1);
             let (lo, hi) = (bw.min(bh) as f64, bw.max(bh) as f64);
-            if (lo as u32) < self.opts.min_size_px || hi / lo > self.opts.max_aspect {
-                continue;
-            }
-            if self.opts.rim_value_ratio > 0.0 && !rim_is_bright(img, &mask, b, self.opts.rim_value_ratio) {
-                continue;
-            }
-            let score = self.score(&mask, w, b);
-            if score >= self.opts.min_score {
-                // Grow the red box to the face about its centre (edges at ±0.5 px).
-                let k = self.opts.face_per_red;
-                let (cx, cy) = ((b[0] + b[2]) as f64 / 2.0, (b[1] + b[3]) as f64 / 2.0);
-                let (fw, fh) = ((bw as f64 * k).round() as i32, (bh as f64 * k).round() as i32);
-                out.push(SignDetection {
-                    rect: Rect {
-                        x: (cx - (fw as f64 - 1.0) / 2.0).round() as i32,
-                        y: (cy - (fh as f64 - 1.0) / 2.0).round() as i32,
-                        width: fw,
-                        height: fh,
-                    },
-                    score,
-                });
-            }
+            // Grow the red box to the face about its centre (edges at ±0.5 px).
+            let k = self.opts.face_per_red;
+            let (cx, cy) = ((b[0] + b[2]) as f64 / 2.0, (b[1] + b[3]) as f64 / 2.0);
+            let (fw, fh) = ((bw as f64 * k).round() as i32, (bh as f64 * k).round() as i32);
+            let face = Rect {
+                x: (cx - (fw as f64 - 1.0) / 2.0).round() as i32,
+                y: (cy - (fh as f64 - 1.0) / 2.0).round() as i32,
+                width: fw,
+                height: fh,
+            };
+            let red = Rect::new(b[0], b[1], bw, bh);
+            let (verdict, score) = if (lo as u32) < self.opts.min_size_px {
+                (Verdict::TooSmall, f64::NAN)
+            } else if hi / lo > self.opts.max_aspect {
+                (Verdict::NotSquare, f64::NAN)
+            } else if self.opts.rim_value_ratio > 0.0 && !rim_is_bright(img, &mask, b, self.opts.rim_value_ratio) {
+                (Verdict::DarkRim, f64::NAN)
+            } else {
+                let score = self.score(&mask, w, b);
+                if score >= self.opts.min_score {
+                    (Verdict::Sign, score)
+                } else {
+                    (Verdict::LowScore, score)
+                }
+            };
+            out.push(Candidate {
+                red,
+                face,
+                verdict,
+                score,
+            });
         }
         self.mask = mask;
         out
@@ -444,6 +511,83 @@ fn merge_boxes(boxes: &mut Vec<[i32; 4]>, gap: i32) {
     }
 }
 
+/// A picture of a stop sign made from geometry alone, `n` × `n` pixels: a regular octagon
+/// (flats horizontal and vertical) with a white rim 2.5 % of its width (MUTCD R1-1: a ¾-inch
+/// border on a 30-inch sign), red inside, and the word STOP in white block letters: cap height
+/// ⅓ of the width (10 inches on 30), the word 0.7 of the width, strokes ⅙ of the cap height
+/// (about Series C's). Outside the octagon: mid grey. The letters are drawn from rectangles
+/// (no font), which is all a template of the red mask needs: the white band across the middle
+/// is what tells a sign from a red disc.
+pub fn octagon_model(n: u32) -> RgbImage {
+    const RED: Rgb<u8> = Rgb([200, 20, 30]);
+    const WHITE: Rgb<u8> = Rgb([240, 240, 240]);
+    let mut img = RgbImage::from_pixel(n, n, Rgb([128, 128, 128]));
+    let s = n as f64;
+    let c = s / 2.0;
+    // 1. The octagon and its rim: a pixel centre is inside when its distance from the centre
+    //    along the flats and along the diagonals is within the apothem.
+    let apothem = s / 2.0;
+    let rim = 0.025 * s;
+    for y in 0..n {
+        for x in 0..n {
+            let (dx, dy) = ((x as f64 + 0.5 - c).abs(), (y as f64 + 0.5 - c).abs());
+            let d = dx.max(dy).max((dx + dy) / std::f64::consts::SQRT_2);
+            if d < apothem - rim {
+                img.put_pixel(x, y, RED);
+            } else if d < apothem {
+                img.put_pixel(x, y, WHITE);
+            }
+        }
+    }
+    // 2. The letters: four cells across 0.7 of the width, each 0.16 wide with 0.02 gaps.
+    let cap = s / 3.0;
+    let stroke = cap / 6.0;
+    let (lw, gap) = (0.16 * s, 0.02 * s);
+    let x0 = c - (4.0 * lw + 3.0 * gap) / 2.0;
+    let top = c - cap / 2.0;
+    let mid = c - stroke / 2.0;
+    let bottom = c + cap / 2.0 - stroke;
+    let mut fill = |x: f64, y: f64, w: f64, h: f64| {
+        let (xa, ya) = (x.round().max(0.0) as u32, y.round().max(0.0) as u32);
+        let (xb, yb) = (((x + w).round() as u32).min(n), ((y + h).round() as u32).min(n));
+        for yy in ya..yb {
+            for xx in xa..xb {
+                img.put_pixel(xx, yy, WHITE);
+            }
+        }
+    };
+    for (i, letter) in ['S', 'T', 'O', 'P'].into_iter().enumerate() {
+        let l = x0 + i as f64 * (lw + gap);
+        let r = l + lw - stroke;
+        match letter {
+            'S' => {
+                fill(l, top, lw, stroke);
+                fill(l, mid, lw, stroke);
+                fill(l, bottom, lw, stroke);
+                fill(l, top, stroke, mid - top);
+                fill(r, mid, stroke, bottom - mid);
+            }
+            'T' => {
+                fill(l, top, lw, stroke);
+                fill(l + (lw - stroke) / 2.0, top, stroke, cap);
+            }
+            'O' => {
+                fill(l, top, lw, stroke);
+                fill(l, bottom, lw, stroke);
+                fill(l, top, stroke, cap);
+                fill(r, top, stroke, cap);
+            }
+            _ => {
+                fill(l, top, stroke, cap);
+                fill(l, top, lw, stroke);
+                fill(l, mid, lw, stroke);
+                fill(r, top, stroke, mid - top);
+            }
+        }
+    }
+    img
+}
+
 /// The red mask of `img` as a grey image (255 = red), for plots and debugging.
 pub fn red_mask_image(img: &RgbImage, opts: &HsvSignOptions) -> GrayImage {
     let mut m = vec![];
@@ -455,7 +599,6 @@ pub fn red_mask_image(img: &RgbImage, opts: &HsvSignOptions) -> GrayImage {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use image::Rgb;
 
     #[test]
     fn hsv_matches_opencv_on_hand_values() {
@@ -632,5 +775,69 @@ mod tests {
             HsvSignDetector::new(o, &sign(20, true)),
             Err(TemplateError::BadSizes(_))
         ));
+    }
+
+    /// The geometric model's templates find a sign drawn from the model at another size, and
+    /// `candidates` says what became of every red blob: a disc on a dark ground fails the rim
+    /// check, a bar is not square, a speck too small. Without the rim check the template alone
+    /// scores the disc close to a sign (a red mask's correlation is mostly its outline): the
+    /// real-photo options (`[colour_template]`, no rim check) take a sign-sized red disc for a
+    /// sign (docs/detect.md).
+    #[test]
+    fn the_octagon_model_finds_its_sign_and_candidates_explain_the_rest() {
+        let model = octagon_model(OCTAGON_MODEL_PX);
+        // Red inside, white rim and letters, grey outside; the word crosses the middle.
+        assert_eq!(model.get_pixel(OCTAGON_MODEL_PX / 2, 30).0, [200, 20, 30]);
+        assert_eq!(model.get_pixel(0, 0).0, [128, 128, 128]);
+        let row = OCTAGON_MODEL_PX / 2 - 30;
+        let white = (0..OCTAGON_MODEL_PX)
+            .filter(|&x| model.get_pixel(x, row).0 == [240, 240, 240])
+            .count();
+        assert!(white > 40, "letters across the middle: {white}");
+        let mut det = HsvSignDetector::with_octagon_model(HsvSignOptions::default()).unwrap();
+        let mut img = RgbImage::from_pixel(160, 120, Rgb([60, 60, 60]));
+        image::imageops::overlay(&mut img, &octagon_model(30), 20, 30);
+        let red = Rgb([200, 20, 30]);
+        for y in 0..30i32 {
+            for x in 0..30i32 {
+                if (x - 15).pow(2) + (y - 15).pow(2) < 15 * 15 {
+                    img.put_pixel(100 + x as u32, 40 + y as u32, red);
+                }
+            }
+        }
+        for (x, y, w, h) in [(60, 95, 40, 12), (140, 10, 4, 4)] {
+            for yy in y..y + h {
+                for xx in x..x + w {
+                    img.put_pixel(xx, yy, red);
+                }
+            }
+        }
+        let c = det.candidates(&img);
+        let at = |x: i32| {
+            c.iter()
+                .find(|c| (c.red.x - x).abs() <= 3)
+                .unwrap_or_else(|| panic!("{c:?}"))
+        };
+        assert_eq!(c.len(), 4, "{c:?}");
+        assert_eq!(at(20).verdict, Verdict::Sign, "{c:?}");
+        assert!(at(20).score > 0.85, "{c:?}");
+        assert_eq!(at(100).verdict, Verdict::DarkRim);
+        assert_eq!(at(60).verdict, Verdict::NotSquare);
+        assert_eq!(at(140).verdict, Verdict::TooSmall);
+        assert!(at(100).score.is_nan());
+        let found = det.detect(&img);
+        assert_eq!(found.len(), 1, "{found:?}");
+        assert_eq!(found[0].rect, at(20).face);
+        // No rim check: the disc reaches the template, and scores below the sign but well above
+        // the real-photo threshold of 0.4.
+        let mut det = HsvSignDetector::with_octagon_model(HsvSignOptions {
+            rim_value_ratio: 0.0,
+            ..HsvSignOptions::default()
+        })
+        .unwrap();
+        let c = det.candidates(&img);
+        let disc = c.iter().find(|c| c.red.x >= 100 && c.red.x < 110).unwrap();
+        let sign = c.iter().find(|c| c.red.x < 30).unwrap();
+        assert!(disc.score > 0.4 && disc.score < sign.score, "{c:?}");
     }
 }
