@@ -395,7 +395,7 @@ fn bench_tracking(python: &str, rounds: usize) {
     use rccar::detect::{CascadeSpec, DetectParams, DetectStage, Rect};
     use rccar::sim::scenario_lab::{pose_before_object, stop_sign_picture, straight_with_object};
     use rccar::sim::stereo::sign_face_box;
-    use rccar::stereo::hsv_sign::{HsvSignDetector, HsvSignOptions};
+    use rccar::detect::colour_sign::{HsvSignDetector, HsvSignOptions};
     use rccar::stereo::meanshift::{MeanShiftOptions, MeanShiftTracker};
     let cfg = Config::default();
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));

@@ -37,7 +37,7 @@ use crate::lane::{LaneDetector, LaneMeasurement};
 use crate::ranging::track::{Measurement, Tracker};
 use crate::ranging::{BoxRanging, ObjectClass};
 use crate::source::GivenBox;
-use crate::stereo::hsv_sign::{HsvSignDetector, HsvSignOptions};
+use crate::detect::colour_sign::{HsvSignDetector, HsvSignOptions};
 use crate::timing::{StageTimer, StageTimes};
 use image::RgbImage;
 use serde::{Deserialize, Serialize};

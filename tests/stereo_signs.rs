@@ -1,4 +1,4 @@
-//! Abdollahi's stop-sign detector (HSV threshold + template matching, `stereo::hsv_sign`)
+//! Abdollahi's stop-sign detector (HSV threshold + template matching, `detect::colour_sign`)
 //! against the shipped Haar cascade (config/cascades/stop_sign.xml, or `RCCAR_CASCADES`) on
 //! the same simulated frames (issue 12): the default track with its red-orange obstacle
 //! switched on (a red object that is not a sign) and the traffic light cycling through red,
@@ -10,7 +10,7 @@
 //! is a false positive. Prints the table docs/stereo.md quotes (time per frame is measured
 //! here too, median and minimum over the frames, one thread; benches/stereo.rs has the
 //! careful timing). A third row: the pipeline's `classes.stop_sign.detect = "colour_template"`
-//! (templates from `hsv_sign::octagon_model`, options of `[colour_template]`).
+//! (templates from `colour_sign::octagon_model`, options of `[colour_template]`).
 //!
 //!     cargo test --release --test it stereo_signs:: -- --nocapture
 
@@ -23,7 +23,7 @@ use rccar::sim::scene::Scene;
 use rccar::sim::stereo::sign_face_box;
 use rccar::sim::track::Track;
 use rccar::sim::vehicle::Pose;
-use rccar::stereo::hsv_sign::{HsvSignDetector, HsvSignOptions};
+use rccar::detect::colour_sign::{HsvSignDetector, HsvSignOptions};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;

@@ -23,7 +23,7 @@ use rccar::sim::render::RenderOptions;
 use rccar::sim::scenario_lab::{pose_before_object, stop_sign_picture, straight_with_object};
 use rccar::sim::scene::Scene;
 use rccar::sim::stereo::{sign_face_box, StereoRig};
-use rccar::stereo::hsv_sign::{HsvSignDetector, HsvSignOptions};
+use rccar::detect::colour_sign::{HsvSignDetector, HsvSignOptions};
 use rccar::stereo::matching::Matcher;
 use rccar::stereo::meanshift::{MeanShiftOptions, MeanShiftTracker};
 use rccar::stereo::speed::RelativeSpeed;

@@ -5,7 +5,7 @@
 //! one and exits 1 at the end if any failed.
 //!
 //! `rccar detect --method colour-template IMAGE…` runs Abdollahi's stop-sign detector (HSV
-//! threshold + template matching, src/stereo/hsv_sign.rs, with the octagon-model templates the
+//! threshold + template matching, src/detect/colour_sign.rs, with the octagon-model templates the
 //! pipeline uses for `classes.stop_sign.detect = "colour_template"`) instead; its boxes are
 //! printed the same way, with `"cascade": "colour_template"`; its options are the
 //! configuration's `[colour_template]` (`--config`, `--set colour_template.KEY=VALUE`).
@@ -14,7 +14,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use rccar::detect::{annotate, Cascade, DetectParams, Detector};
 use rccar::source::escape_name;
-use rccar::stereo::hsv_sign::{HsvSignDetector, HsvSignOptions, Verdict};
+use rccar::detect::colour_sign::{HsvSignDetector, HsvSignOptions, Verdict};
 use std::path::PathBuf;
 use std::process::ExitCode;
 

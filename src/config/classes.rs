@@ -21,7 +21,7 @@ pub enum DetectMethod {
     /// Its cascade, the `model` file.
     #[default]
     Cascade,
-    /// Abdollahi's (2011) HSV threshold + template matching (src/stereo/hsv_sign.rs), with
+    /// Abdollahi's (2011) HSV threshold + template matching (src/detect/colour_sign.rs), with
     /// templates drawn from the octagon's geometry; `model` is not read. Only for classes whose
     /// registry entry allows it (`ClassInfo::colour_template`: the stop sign).
     ColourTemplate,

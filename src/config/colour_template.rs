@@ -1,10 +1,10 @@
 //! `[colour_template]`: the options of Abdollahi's colour + template stop-sign detector
-//! (src/stereo/hsv_sign.rs) when a class's `detect` is `colour_template`: the red it keeps
+//! (src/detect/colour_sign.rs) when a class's `detect` is `colour_template`: the red it keeps
 //! (hue, saturation, value on OpenCV's 8-bit scales), the candidates' size and shape (pixels),
 //! the template score it needs and the face box it reports.
 
 use super::check::Checker;
-use crate::stereo::hsv_sign::HsvSignOptions;
+use crate::detect::colour_sign::HsvSignOptions;
 use serde::{Deserialize, Serialize};
 
 /// `[colour_template]` (docs/detect.md, "Colour + template").

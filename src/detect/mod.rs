@@ -19,6 +19,7 @@
 pub mod annotate;
 pub mod arrow;
 pub mod cascade;
+pub mod colour_sign;
 pub mod detector;
 pub mod group;
 pub mod integral;

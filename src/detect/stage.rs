@@ -9,7 +9,7 @@
 //!
 //! A class may be found by a colour detector instead of a cascade
 //! ([`DetectStage::add_colour_sign`]: Abdollahi's HSV threshold + template matching,
-//! `stereo::hsv_sign`); it runs on the colour frame inside its region and its boxes join the
+//! `detect::colour_sign`); it runs on the colour frame inside its region and its boxes join the
 //! cascades' in the same list, with the same label, so ranging and the behaviours take them
 //! as they take a cascade's.
 
@@ -18,7 +18,7 @@ use super::scan::{DetectError, DetectParams, Scanner};
 use super::group::Rect;
 use super::light::{light_state, LightReading};
 use super::pyramid::{Pyramid, RowBand};
-use crate::stereo::hsv_sign::HsvSignDetector;
+use crate::detect::colour_sign::HsvSignDetector;
 use image::{GrayImage, RgbImage};
 use std::ops::Range;
 use std::path::PathBuf;
@@ -426,7 +426,7 @@ mod tests {
     /// frames, only inside its region and size limits; its region's rows are read.
     #[test]
     fn a_colour_detector_joins_the_cascades_boxes() {
-        use crate::stereo::hsv_sign::{octagon_model, HsvSignDetector, HsvSignOptions};
+        use crate::detect::colour_sign::{octagon_model, HsvSignDetector, HsvSignOptions};
         let c = Cascade::from_xml_str(BRIGHT_BELOW, "t").unwrap();
         let spec = CascadeSpec {
             label: "edge".into(),

@@ -214,7 +214,7 @@ pub fn pose_before_object(cfg: &Config, track: &Track, d_m: f64) -> Option<super
 
 /// A frontal picture of the simulator's stop sign, cropped to its face: the camera of `cfg`
 /// 0.35 m before the sign of [`straight_with_object`], rendered without noise or blur. The
-/// template picture of Abdollahi's detector (`stereo::hsv_sign`) in the tests and benches.
+/// template picture of Abdollahi's detector (`detect::colour_sign`) in the tests and benches.
 pub fn stop_sign_picture(cfg: &Config) -> image::RgbImage {
     use super::render::{CameraMount, RenderOptions, Renderer};
     let track = straight_with_object("stop_sign").expect("the built-in road is valid");

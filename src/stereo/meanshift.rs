@@ -28,7 +28,7 @@
 //! each side is converted and back-projected: the window cannot leave that area in
 //! `max_iter` steps of the object's own motion between frames. Units: pixels.
 
-use super::hsv_sign::rgb_to_hsv;
+use crate::detect::colour_sign::rgb_to_hsv;
 use crate::detect::Rect;
 use image::RgbImage;
 

@@ -8,7 +8,7 @@
 //! - (b) the same triangle with exact pinhole angles atan((x − c_x)/f);
 //! - (c) D = b·f/d (Abdollahi's thesis), algebraically identical to (b) for a rectified pair.
 //!
-//! Abdollahi's stop-sign path: [`hsv_sign`] (HSV threshold + template matching),
+//! Abdollahi's stop-sign path: [`crate::detect::colour_sign`] (HSV threshold + template matching),
 //! [`meanshift`] (colour-histogram mean-shift tracking between detections) and [`speed`]
 //! (relative speed from 5-frame averaged disparities).
 //!
@@ -17,7 +17,6 @@
 //! tilted). Units: metres, pixels, radians.
 
 pub mod geometry;
-pub mod hsv_sign;
 pub mod matching;
 pub mod meanshift;
 pub mod ranging;
