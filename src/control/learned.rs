@@ -315,20 +315,24 @@ pub fn input_from_frame(frame: &RgbImage, out: &mut [f32]) -> bool {
     let w = FRAME_W as usize;
     let raw = frame.as_raw();
     let norm = 1.0 / (255.0 * (s * s) as f32);
+    // Channel sums per block in integers (exact), weighted once per block.
+    let mut sums = [[0u32; 3]; IN_W];
     for (oy, row_out) in out.chunks_exact_mut(IN_W).enumerate() {
-        row_out.fill(0.0);
+        sums.iter_mut().for_each(|c| *c = [0; 3]);
         for dy in 0..s {
             let y = INPUT_TOP as usize + oy * s + dy;
             let row = &raw[y * w * 3..(y + 1) * w * 3];
-            for (o, block) in row_out.iter_mut().zip(row.chunks_exact(3 * s)) {
-                let mut acc = 0.0f32;
+            for (acc, block) in sums.iter_mut().zip(row.chunks_exact(3 * s)) {
                 for px in block.chunks_exact(3) {
-                    acc += 0.299 * px[0] as f32 + 0.587 * px[1] as f32 + 0.114 * px[2] as f32;
+                    acc[0] += px[0] as u32;
+                    acc[1] += px[1] as u32;
+                    acc[2] += px[2] as u32;
                 }
-                *o += acc;
             }
         }
-        row_out.iter_mut().for_each(|v| *v *= norm);
+        for (o, c) in row_out.iter_mut().zip(&sums) {
+            *o = (0.299 * c[0] as f32 + 0.587 * c[1] as f32 + 0.114 * c[2] as f32) * norm;
+        }
     }
     true
 }

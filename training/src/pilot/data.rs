@@ -10,6 +10,7 @@
 
 use super::net::INPUT_LEN;
 use rccar::config::Config;
+use rccar::control::behaviour::Mode;
 use rccar::control::learned::{input_from_frame, IN_W};
 use rccar::sim::rng::SplitMix64;
 use rccar::sim::run::Simulation;
@@ -68,7 +69,12 @@ pub fn from_sim(plan: &SimPlan, progress: &mut dyn FnMut(usize, usize)) -> Resul
         };
         let mut input = vec![0.0f32; INPUT_LEN];
         sim.run(|sim, step| {
-            if input_from_frame(sim.image(), &mut input) {
+            // A frame whose lane the pipeline lost has no meaningful label (the controller
+            // holds the wheel); one after the car left the road neither.
+            // A lane change is the behaviour machine's steering, not the controller's.
+            let measured = step.out.lane.lane_center.is_some();
+            let changing = matches!(step.out.mode, Mode::PassOut | Mode::PassBack);
+            if measured && !changing && sim.ended().is_none() && input_from_frame(sim.image(), &mut input) {
                 d.samples.push(Sample {
                     input: input.clone(),
                     steer: step.out.command.steer as f32,
