@@ -80,7 +80,7 @@ pub fn from_sim(plan: &SimPlan, progress: &mut dyn FnMut(usize, usize)) -> Resul
                     steer: step.out.command.steer as f32,
                 });
             }
-            if d.samples.len() % 500 == 0 {
+            if d.samples.len().is_multiple_of(500) {
                 progress(k, d.samples.len());
             }
             Ok::<(), String>(())

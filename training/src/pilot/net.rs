@@ -10,7 +10,12 @@
 //!
 //! Loss per sample: `(y − t)²` (the mean over a batch is the caller's).
 
-use rccar::control::learned::{ConvSpec, PilotWeights, ARCH, IN_H, IN_W};
+// The loops index several tensors with the same indices, as the equations do.
+#![allow(clippy::needless_range_loop)]
+
+use rccar::control::learned::{flush, ConvSpec, PilotWeights, ARCH, IN_H, IN_W};
+#[cfg(doc)]
+use rccar::control::learned::NEGLIGIBLE;
 use rccar::sim::rng::SplitMix64;
 
 /// Every tensor of the network, flat, in [`rccar::control::learned::Arch::tensors`] order.
@@ -52,10 +57,16 @@ impl Params {
         }
     }
 
-    /// As a weights file's tensors (with `metadata`).
+    /// As a weights file's tensors (with `metadata`); [`NEGLIGIBLE`] weights written as zeros
+    /// (no subnormal floats in the file: they would slow every reader down).
     pub fn to_weights(&self, metadata: std::collections::BTreeMap<String, String>) -> PilotWeights {
         PilotWeights {
-            tensors: ARCH.tensors().into_iter().map(|(n, _)| n).zip(self.t.iter().cloned()).collect(),
+            tensors: ARCH
+                .tensors()
+                .into_iter()
+                .map(|(n, _)| n)
+                .zip(self.t.iter().map(|v| v.iter().copied().map(flush).collect()))
+                .collect(),
             metadata,
         }
     }
@@ -168,7 +179,7 @@ pub fn backward(p: &Params, tr: &Trace, y: f32, target: f32, g: &mut Params) {
     let dy = 2.0 * (y - target);
     // fc2
     g.t[9][0] += dy;
-    let mut dh = vec![0.0f32; ARCH.hidden];
+    let mut dh = [0.0f32; ARCH.hidden];
     for j in 0..ARCH.hidden {
         g.t[8][j] += dy * tr.hidden[j];
         dh[j] = if tr.hidden[j] > 0.0 { dy * p.t[8][j] } else { 0.0 };
