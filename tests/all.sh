@@ -45,7 +45,7 @@ if [ -z "${RCCAR_SKIP_INSTALL:-}" ]; then
       || { echo "apt-get install failed"; exit 1; }
   fi
   # ---- 2. the OpenCV 4.x reference, in a virtualenv of its own -------------------------
-  if ! .venv/bin/python -c "import cv2, numpy, skimage" >/dev/null 2>&1; then
+  if ! .venv/bin/python -c "import cv2, numpy, skimage, onnx, onnxruntime" >/dev/null 2>&1; then
     echo "== installing the OpenCV reference into .venv (tests/parity/requirements.txt)"
     python3 -m venv .venv && .venv/bin/pip install -q -r tests/parity/requirements.txt || { echo "pip install failed"; exit 1; }
   fi

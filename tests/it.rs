@@ -26,6 +26,7 @@ mod lane_replay;
 mod lens_sim;
 mod light_sim;
 mod pad;
+mod pilot;
 mod ranging_calibrate_cli;
 mod ranging_sim;
 mod record_replay;

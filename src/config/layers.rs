@@ -11,13 +11,13 @@ use super::{Config, ConfigError};
 use std::path::{Path, PathBuf};
 
 /// The keys whose values are file paths: `sim.track`, `stereo.calibration`,
-/// `camera.calibration` and each class's
+/// `camera.calibration`, `steering.model` and each class's
 /// model (`classes.<name>.model`, from the registry). A relative path written in a file is
 /// resolved against that file's folder; one given on the command line (`--set`) against the
 /// working directory; a default (a key set nowhere) against the base configuration's folder.
 /// Add a new path key here and to [`Config::resolve_paths`] and it is resolved like the others.
 pub fn path_keys() -> impl Iterator<Item = &'static str> {
-    ["sim.track", "stereo.calibration", "camera.calibration"]
+    ["sim.track", "stereo.calibration", "camera.calibration", "steering.model"]
         .into_iter()
         .chain(crate::classes::CLASSES.iter().map(|c| c.model_key))
 }
@@ -93,7 +93,12 @@ impl Config {
     /// the file the defaults stand for). Empty values are left alone.
     pub fn resolve_paths(&mut self, dir: &Path) {
         let models = self.classes.iter_mut().map(|c| &mut c.model);
-        for p in [&mut self.sim.track, &mut self.stereo.calibration, &mut self.camera.calibration]
+        for p in [
+            &mut self.sim.track,
+            &mut self.stereo.calibration,
+            &mut self.camera.calibration,
+            &mut self.steering.model,
+        ]
             .into_iter()
             .chain(models)
         {

@@ -50,6 +50,12 @@ pub struct SimConfig {
     pub light_dusk: f64,
     /// Extra sensor noise, grey levels 0..32; −1 = the level's.
     pub light_noise: f64,
+    /// Noise added to the steering command the simulated car obeys (not to the command the
+    /// controller wrote in telemetry), standard deviation in steer units 0..1 (0 = none, the
+    /// default). A smooth random drift (time constant [`crate::sim::world::STEER_NOISE_TAU_S`]):
+    /// the car wanders off the lane centre and the controller brings it back, the recoveries
+    /// a learned pilot must see in its training data (docs/pilot.md).
+    pub steer_noise: f64,
 }
 
 impl Default for SimConfig {
@@ -73,6 +79,7 @@ impl Default for SimConfig {
             light_glare: -1.0,
             light_dusk: -1.0,
             light_noise: -1.0,
+            steer_noise: 0.0,
         }
     }
 }
@@ -90,6 +97,7 @@ impl SimConfig {
         c.range("sim.seed", m.seed, 0, i64::MAX);
         c.range("sim.noise_sigma", m.noise_sigma, 0.0, 64.0);
         c.range("sim.blur_px", m.blur_px, 0.0, 3.0);
+        c.range("sim.steer_noise", m.steer_noise, 0.0, 1.0);
         c.range("sim.exposure", m.exposure, 0.1, 4.0);
         c.range("sim.light_variation", m.light_variation, 0.0, 0.9);
         c.range("sim.light_period_s", m.light_period_s, 0.1, 3600.0);

@@ -7,6 +7,7 @@
 use super::check::Checker;
 use super::Config;
 use crate::camera::PinholeCamera;
+use crate::control::learned::{self, Learned, LearnedOptions, PilotNet};
 use crate::control::pid::{Pid, PidGains};
 use crate::control::pure_pursuit::{PurePursuit, PurePursuitOptions};
 pub use crate::control::steering::SteeringMethod;
@@ -14,13 +15,19 @@ use crate::control::steering::{Steering, SteeringError};
 use crate::control::Controller;
 use crate::lane::warp::{bird_to_floor, Homography};
 use serde::{Deserialize, Serialize};
+use std::path::Path;
+use std::sync::Arc;
 
 /// `[steering]`: the steering method and its parameters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SteeringConfig {
-    /// Which method steers: `pid` or `pure_pursuit`.
+    /// Which method steers: `pid`, `pure_pursuit` or `learned`.
     pub method: SteeringMethod,
+    /// Learned: the weights file of the network (`rccar-train pilot` writes it); a relative
+    /// path is relative to the folder of the config file that names it (the default,
+    /// `pilot.safetensors`, to the base config's folder: config/pilot.safetensors).
+    pub model: String,
     /// PID: proportional gain, steer per unit of normalised error.
     pub kp: f64,
     /// PID: integral gain, steer per (unit error x second).
@@ -49,6 +56,7 @@ impl Default for SteeringConfig {
     fn default() -> Self {
         Self {
             method: SteeringMethod::Pid,
+            model: "pilot.safetensors".into(),
             kp: 1.0,
             ki: 0.0,
             kd: 0.05,
@@ -91,6 +99,25 @@ impl Config {
         Ok(match self.steering.method {
             SteeringMethod::Pid => Box::new(Pid::new((&self.steering).into())),
             SteeringMethod::PurePursuit => Box::new(PurePursuit::new(self.pure_pursuit_options()?)?),
+            SteeringMethod::Learned => {
+                let net = PilotNet::load(Path::new(&self.steering.model)).map_err(|e| SteeringError::Learned(e.to_string()))?;
+                let (w, h) = (self.camera.width, self.camera.height);
+                if (w, h) != (learned::FRAME_W, learned::FRAME_H) {
+                    return Err(SteeringError::Learned(format!(
+                        "{}: the network reads {}x{} frames and [camera] is {w}x{h}",
+                        self.steering.model,
+                        learned::FRAME_W,
+                        learned::FRAME_H
+                    )));
+                }
+                Box::new(Learned::new(
+                    Arc::new(net),
+                    LearnedOptions {
+                        max_steer: self.steering.max_steer,
+                        slew_rate: self.steering.slew_rate,
+                    },
+                ))
+            }
         })
     }
 
@@ -125,6 +152,14 @@ impl Config {
     /// The chosen steering method must build from the other sections (pure pursuit: its
     /// look-ahead band inside the bird's-eye view).
     pub(super) fn check_steering_method(&self, c: &mut Checker) {
+        // The learned pilot's file is read when the controller is built (a default path is
+        // only resolved after these checks); here only the key itself.
+        if self.steering.method == SteeringMethod::Learned {
+            if self.steering.model.trim().is_empty() {
+                c.fail("steering.model", "\"\"".into(), "the path of a weights file (rccar-train pilot writes one)");
+            }
+            return;
+        }
         match self.steering_method() {
             Ok(_) => {}
             Err(SteeringError::OutsideView {
@@ -154,9 +189,11 @@ mod tests {
     #[test]
     fn every_parameter_round_trips_from_config_to_the_running_part() {
         for method in SteeringMethod::ALL {
-            let base = Config::default()
+            let mut base = Config::default()
                 .with_override(&format!("steering.method={}", method.name()))
                 .unwrap();
+            // the shipped weights of the learned pilot, config/pilot.safetensors
+            base.resolve_paths(&Path::new(env!("CARGO_MANIFEST_DIR")).join("config"));
             let ctl = base.controller().unwrap();
             for p in ctl.params() {
                 assert_eq!(base.number(p.key), ctl.get_param(p.key), "{}", p.key);

@@ -10,6 +10,7 @@
 //! "Adding a steering method").
 
 use super::params::{infos, ParamInfo, Params};
+use super::learned::Learned;
 use super::pid::Pid;
 use super::pure_pursuit::PurePursuit;
 use super::steering::SteeringMethod;
@@ -21,6 +22,7 @@ impl SteeringMethod {
         match self {
             SteeringMethod::Pid => infos(Pid::PARAMS),
             SteeringMethod::PurePursuit => infos(PurePursuit::PARAMS),
+            SteeringMethod::Learned => infos(Learned::PARAMS),
         }
     }
 

@@ -1,7 +1,8 @@
 //! Control: turns the lane measurement into a [`Command`] for the car.
 //!
 //! Steering is a plug-in ([`steering::Steering`], picked by `steering.method`): [`pid`] steers
-//! on the lane error, [`pure_pursuit`] towards a look-ahead point on the lane. [`throttle`]
+//! on the lane error, [`pure_pursuit`] towards a look-ahead point on the lane, [`learned`]
+//! with a small network trained on recordings. [`throttle`]
 //! picks the speed, [`Controller`] combines a steering method and the throttle policy. Every
 //! part takes the time step as an argument and never reads the clock, and publishes its
 //! tunable parameters once ([`params`]; gathered in [`catalog`]). [`behaviour`] is the state machine for stop signs,
@@ -10,6 +11,7 @@
 
 pub mod behaviour;
 pub mod catalog;
+pub mod learned;
 pub mod params;
 pub mod pid;
 pub mod pilot;

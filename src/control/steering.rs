@@ -10,7 +10,8 @@
 //!
 //! Methods: [`super::pid::Pid`] (`pid`, the default: PID on the normalised lane error) and
 //! [`super::pure_pursuit::PurePursuit`] (`pure_pursuit`: a look-ahead point on the lane,
-//! Coulter 1992). This file stands below them (they implement its trait and share its limits
+//! Coulter 1992) and [`super::learned::Learned`] (`learned`: a small network trained by
+//! `rccar-train pilot` steers from the camera frame). This file stands below them (they implement its trait and share its limits
 //! [`MAX_STEER`] and [`SLEW_RATE`]); the table of which method has which parameters stands
 //! above them, in [`super::catalog`]. Adding one: docs/control.md, "Adding a steering method".
 
@@ -61,17 +62,20 @@ pub enum SteeringMethod {
     Pid,
     /// Pure pursuit of a look-ahead point on the lane ([`super::pure_pursuit`]).
     PurePursuit,
+    /// A network trained on recordings steers from the camera frame ([`super::learned`]).
+    Learned,
 }
 
 impl SteeringMethod {
     /// Every method, in the order the docs list them.
-    pub const ALL: [SteeringMethod; 2] = [SteeringMethod::Pid, SteeringMethod::PurePursuit];
+    pub const ALL: [SteeringMethod; 3] = [SteeringMethod::Pid, SteeringMethod::PurePursuit, SteeringMethod::Learned];
 
     /// The config value, e.g. `pure_pursuit`.
     pub fn name(self) -> &'static str {
         match self {
             SteeringMethod::Pid => "pid",
             SteeringMethod::PurePursuit => "pure_pursuit",
+            SteeringMethod::Learned => "learned",
         }
     }
 }
@@ -100,6 +104,9 @@ pub enum SteeringError {
     /// Pure pursuit needs the bird's-eye image on the floor (camera model + ROI).
     #[error("steering.method = pure_pursuit: {0}")]
     PurePursuit(String),
+    /// The learned pilot's weights file cannot be used (the message names the file).
+    #[error("steering.method = learned: steering.model = {0}")]
+    Learned(String),
     /// Pure pursuit's look-ahead band lies (partly) outside the bird's-eye view.
     #[error(
         "steering.method = pure_pursuit: steering.lookahead_m = {lookahead_m} ± steering.lookahead_band_m = \

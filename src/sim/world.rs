@@ -195,6 +195,48 @@ pub struct World {
     fps: f64,
     sc: Score,
     last_truth: Option<FrameTruth>,
+    /// The drift added to the steering the car obeys (`sim.steer_noise`).
+    steer_noise: SteerNoise,
+}
+
+/// Time constant of the steering noise's drift (`sim.steer_noise`), seconds.
+pub const STEER_NOISE_TAU_S: f64 = 0.4;
+
+/// A first-order Gauss-Markov drift on the steering command (`sim.steer_noise`): per frame
+/// `n ← a·n + σ·√(1−a²)·ξ`, `a = exp(−dt/τ)`, ξ standard normal (Box–Muller on the seeded
+/// SplitMix64), so its standard deviation is σ at any frame rate. σ = 0: the command passes
+/// untouched and no random number is drawn.
+#[derive(Debug, Clone)]
+struct SteerNoise {
+    sigma: f64,
+    a: f64,
+    value: f64,
+    rng: super::rng::SplitMix64,
+}
+
+impl SteerNoise {
+    fn new(sigma: f64, fps: f64, seed: i64) -> Self {
+        Self {
+            sigma,
+            a: (-1.0 / (fps * STEER_NOISE_TAU_S)).exp(),
+            value: 0.0,
+            rng: super::rng::SplitMix64::new(super::rng::mix(seed as u64 ^ 0x5EE7_0015E)),
+        }
+    }
+
+    /// The command the car obeys this frame.
+    fn apply(&mut self, cmd: Command) -> Command {
+        if self.sigma <= 0.0 {
+            return cmd;
+        }
+        let (u1, u2) = (self.rng.next_f64().max(1e-300), self.rng.next_f64());
+        let xi = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+        self.value = self.a * self.value + self.sigma * (1.0 - self.a * self.a).sqrt() * xi;
+        Command {
+            steer: (cmd.steer + self.value).clamp(-1.0, 1.0),
+            ..cmd
+        }
+    }
 }
 
 /// The world behind a lock, shared by its camera, vehicle and score (and a dashboard).
@@ -235,6 +277,7 @@ impl World {
             fps: cfg.camera.fps,
             sc: Score::default(),
             last_truth: None,
+            steer_noise: SteerNoise::new(cfg.sim.steer_noise, cfg.camera.fps, cfg.sim.seed),
         };
         w.place_at(0.0);
         Ok(w)
@@ -349,7 +392,9 @@ impl World {
     }
 
     /// One frame period under `cmd` (`substeps` fixed steps): the lock-step vehicle.
+    /// With `sim.steer_noise` the car obeys the command plus the noise's drift.
     pub fn step_frame(&mut self, cmd: Command) {
+        let cmd = self.steer_noise.apply(cmd);
         for _ in 0..self.cfg.sim.substeps {
             self.vehicle.step(cmd);
         }

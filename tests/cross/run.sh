@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Cross-build check for the Raspberry Pi (issue 10): builds `rccar` for aarch64-unknown-linux-gnu
 # with Debian's own Rust (rustc-web 1.96 + libstd-rust-web-dev:arm64) and linker
-# (gcc-aarch64-linux-gnu), runs `rccar replay` of the shipped sample and a short lane-only
-# `rccar sim` under qemu-aarch64, and checks that every decision is the one the native build
-# makes (tests/cross/compare.py); then reads a camera program's frames through a pipe (the
+# (gcc-aarch64-linux-gnu), runs `rccar replay` of the shipped sample, a short lane-only
+# `rccar sim` and the same with the learned pilot steering (issue 29) under qemu-aarch64,
+# and checks that every decision is the one the native build makes (tests/cross/compare.py);
+# then reads a camera program's frames through a pipe (the
 # native simulator as the camera). Closes with "N passed, N failed".
 #
 #   bash tests/cross/run.sh                     the check (tests/all.sh runs it)
@@ -157,6 +158,24 @@ elif out=$(python3 tests/cross/compare.py sim "$OUT/native/sim/telemetry.jsonl" 
             --summary "$OUT/native/sim/summary.json" "$OUT/aarch64/sim/summary.json"); then
   PASSED=$((PASSED + 1)); echo "$out"
   grep -E 'laps completed|cross-track|departures' "$OUT/aarch64/sim.log" | sed 's/^/     aarch64 /'
+else
+  FAILED=$((FAILED + 1)); echo "$out"
+fi
+
+# ---- 2b. the learned pilot (issue 29): the network's own kernels, built for aarch64 --------
+# steering.method = learned with the shipped weights (config/pilot.safetensors): the same frames
+# must give the same steering bit for bit (f32 sums in a fixed order, no fused multiply-add).
+LSIM=(sim --laps 1 --seconds "$SIM_SECONDS" --set detect.enabled=false --set steering.method=learned --no-timing)
+echo "== sim ${LSIM[*]:1} (native, then aarch64 under qemu)"
+run native "$OUT/native/learned" "$NATIVE" "${LSIM[@]}" --out "$OUT/native/learned"; rn=$?
+run aarch64 "$OUT/aarch64/learned" "${QEMU[@]}" "$BIN" "${LSIM[@]}" --out "$OUT/aarch64/learned"; ra=$?
+if [ $rn -ne $ra ] || [ $rn -gt 1 ]; then
+  fail "learned sim exit codes: native $rn, aarch64 $ra (logs $OUT/*/learned.log)"
+  tail -3 "$OUT/aarch64/learned.log"
+elif out=$(python3 tests/cross/compare.py learned "$OUT/native/learned/telemetry.jsonl" "$OUT/aarch64/learned/telemetry.jsonl" \
+            --summary "$OUT/native/learned/summary.json" "$OUT/aarch64/learned/summary.json"); then
+  PASSED=$((PASSED + 1)); echo "$out"
+  grep -E 'cross-track|departures' "$OUT/aarch64/learned.log" | sed 's/^/     aarch64 /'
 else
   FAILED=$((FAILED + 1)); echo "$out"
 fi

@@ -12,6 +12,7 @@
 //! boxes     a boxes CSV to info.dat, with previews                              (annotate.rs)
 //! plan      window and sample counts chosen from the data                       (plan.rs)
 //! photoset  photo-like labelled frames: the sim's sign on system photos         (photogen.rs)
+//! pilot     the learned pilot: data from the simulator or recordings, training  (pilot/)
 //! ```
 //!
 //! Usage: `training/README.md`, `docs/training.md`.
@@ -23,6 +24,7 @@ pub mod evaluate;
 pub mod features;
 pub mod model;
 pub mod photogen;
+pub mod pilot;
 pub mod plan;
 pub mod samples;
 pub mod scan;

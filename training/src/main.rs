@@ -35,6 +35,9 @@ enum Cmd {
     Boxes(BoxesArgs),
     /// Photo-like labelled frames: the simulator's stop sign pasted on photographs.
     Photoset(PhotosetArgs),
+    /// Train the learned pilot (`steering.method = "learned"`) on simulator drives of the
+    /// classical controller and/or recordings; writes its weights file (docs/pilot.md).
+    Pilot(PilotArgs),
 }
 
 #[derive(clap::Args)]
@@ -1212,6 +1215,181 @@ fn run_train(a: TrainArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+#[derive(clap::Args)]
+struct PilotArgs {
+    /// The weights file to write (safetensors; `steering.model` reads it). loss.png and
+    /// loss.csv go beside it, named after it.
+    #[arg(long)]
+    out: PathBuf,
+    /// Simulator drives labelled by the classical controller: one drive per value, the value
+    /// being the drive's `sim.steer_noise` (steer units; noise makes the car wander so the
+    /// data shows recoveries), e.g. `0.05,0.15,0.25`.
+    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    sim_noise: Vec<f64>,
+    /// Laps per simulator drive.
+    #[arg(long, default_value_t = 1)]
+    sim_laps: u32,
+    /// Recordings to train on (a folder with telemetry.jsonl and its frames: a car's
+    /// `--record` folder, or `rccar sim --record DIR` with the run's telemetry.jsonl copied
+    /// into DIR); repeat for several.
+    #[arg(long)]
+    recording: Vec<PathBuf>,
+    /// The configuration (camera, controller, track of the simulator drives). Default: the
+    /// source tree's config/car.toml.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// The later part of each drive held out for validation (split by time), 0.05..0.5.
+    #[arg(long, default_value_t = 0.2)]
+    val_fraction: f64,
+    /// Most epochs.
+    #[arg(long, default_value_t = 40)]
+    epochs: usize,
+    /// Early stopping: epochs without a lower validation loss before stopping.
+    #[arg(long, default_value_t = 6)]
+    patience: usize,
+    /// Examples per Adam step.
+    #[arg(long, default_value_t = 32)]
+    batch: usize,
+    /// Adam's learning rate.
+    #[arg(long, default_value_t = 1e-3)]
+    lr: f32,
+    /// Seed (initial weights, shuffling, augmentation, simulator drives).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// No mirror-and-negate augmentation.
+    #[arg(long)]
+    no_mirror: bool,
+    /// No light augmentation (gain, offset, ramp).
+    #[arg(long)]
+    no_light: bool,
+    /// Threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+fn run_pilot(a: PilotArgs) -> anyhow::Result<ExitCode> {
+    use rccar_train::pilot::{self, data};
+    if a.sim_noise.is_empty() && a.recording.is_empty() {
+        bail!("no data: give --sim-noise (simulator drives) and/or --recording DIR");
+    }
+    if !(0.05..=0.5).contains(&a.val_fraction) {
+        bail!("--val-fraction {}: must be 0.05..=0.5", a.val_fraction);
+    }
+    if let Some(n) = a.threads {
+        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().context("--threads")?;
+    }
+    let t0 = std::time::Instant::now();
+    let mut drives = Vec::new();
+    let mut said = Vec::new();
+    if !a.sim_noise.is_empty() {
+        let path = match &a.config {
+            Some(p) => p.clone(),
+            None => rccar::config::source_tree_config().context("no config/car.toml in the source tree: give --config")?,
+        };
+        let cfg = rccar::config::Config::load(&path, &[], &[]).with_context(|| path.display().to_string())?;
+        let track = rccar::sim::track::Track::load(std::path::Path::new(&cfg.sim.track))
+            .with_context(|| format!("sim.track = {}", cfg.sim.track))?;
+        let plan = data::SimPlan {
+            cfg,
+            track,
+            noise: a.sim_noise.clone(),
+            laps: a.sim_laps,
+            seed: a.seed as i64,
+        };
+        let bar = indicatif::ProgressBar::new_spinner();
+        let d = data::from_sim(&plan, &mut |k, n| bar.set_message(format!("simulator drive {}/{}: {n} frames", k + 1, plan.noise.len())))
+            .map_err(anyhow::Error::msg)?;
+        bar.finish_and_clear();
+        let n: usize = d.iter().map(|d| d.samples.len()).sum();
+        println!(
+            "simulator: {} drive(s) of {} lap(s), steer noise {:?}: {n} frames in {:.0} s",
+            d.len(),
+            a.sim_laps,
+            a.sim_noise,
+            t0.elapsed().as_secs_f64()
+        );
+        said.push(format!("simulator: {} drive(s) x {} lap(s), steer noise {:?}, {n} frames", d.len(), a.sim_laps, a.sim_noise));
+        drives.extend(d);
+    }
+    for r in &a.recording {
+        let d = data::from_recording(r).map_err(anyhow::Error::msg)?;
+        println!("{}: {} frames", r.display(), d.samples.len());
+        said.push(format!("recording {}: {} frames", r.display(), d.samples.len()));
+        drives.push(d);
+    }
+    let (train, val) = data::split_by_time(drives, a.val_fraction);
+    let h = data::histogram(&train);
+    let top = h.iter().max().copied().unwrap_or(0);
+    println!("steering labels (training), bins of 0.1 from -1 to 1:");
+    for (i, c) in h.iter().enumerate().filter(|(_, c)| **c > 0) {
+        let lo = -1.0 + 0.1 * i as f64;
+        println!("  {lo:+.1}..{:+.1} {c:>7} {}", lo + 0.1, "#".repeat((40 * c).div_ceil(top.max(1))));
+    }
+    let o = pilot::TrainOptions {
+        max_epochs: a.epochs,
+        patience: a.patience,
+        batch: a.batch,
+        lr: a.lr,
+        seed: a.seed,
+        mirror: !a.no_mirror,
+        light: !a.no_light,
+    };
+    println!("training on {} examples, validating on {} (later frames of each drive)", train.len(), val.len());
+    let bar = indicatif::ProgressBar::new(train.len() as u64);
+    let t1 = std::time::Instant::now();
+    let mut best = f64::INFINITY;
+    let trained = pilot::train(
+        &train,
+        &val,
+        &o,
+        &mut |e| {
+            let mark = if e.val < best { " (best)" } else { "" };
+            best = best.min(e.val);
+            bar.suspend(|| {
+                println!(
+                    "epoch {:>3}/{}: train MSE {:.5}, validation MSE {:.5}{mark}, {:.0} s",
+                    e.epoch, o.max_epochs, e.train, e.val, e.seconds
+                )
+            });
+        },
+        &mut |done, n| {
+            bar.set_length(n as u64);
+            bar.set_position(done.min(n) as u64);
+        },
+    );
+    bar.finish_and_clear();
+    let meta = pilot::metadata(&trained, train.len(), val.len(), &o, &said.join("; "));
+    let weights = trained.params.to_weights(meta);
+    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
+    }
+    weights.save(&a.out)?;
+    let stem = a.out.with_extension("");
+    let csv = std::path::PathBuf::from(format!("{}.loss.csv", stem.display()));
+    std::fs::write(&csv, pilot::loss_csv(&trained.log)).with_context(|| csv.display().to_string())?;
+    let png = std::path::PathBuf::from(format!("{}.loss.png", stem.display()));
+    if let Some(f) = rccar::sim::plot::system_font() {
+        rccar::sim::plot::register_font(f);
+        let img = pilot::loss_plot(&trained.log).map_err(anyhow::Error::msg)?;
+        img.save(&png).with_context(|| png.display().to_string())?;
+    } else {
+        eprintln!("note: no {} (fonts-dejavu-core): no loss plot", rccar::sim::plot::SYSTEM_FONT);
+    }
+    let b = trained.log.iter().find(|e| e.epoch == trained.best_epoch);
+    println!(
+        "{}: epoch {} of {} kept (validation MSE {:.5}, RMS {:.4} steer); training {:.0} s, all {:.0} s",
+        a.out.display(),
+        trained.best_epoch,
+        trained.log.len(),
+        b.map_or(f64::NAN, |b| b.val),
+        b.map_or(f64::NAN, |b| b.val.sqrt()),
+        t1.elapsed().as_secs_f64(),
+        t0.elapsed().as_secs_f64()
+    );
+    println!("loss curve: {} {}", png.display(), csv.display());
+    Ok(ExitCode::SUCCESS)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let r = match cli.cmd {
@@ -1221,6 +1399,7 @@ fn main() -> ExitCode {
         Cmd::Distort(a) => run_distort(a),
         Cmd::Boxes(a) => run_boxes(a),
         Cmd::Photoset(a) => run_photoset(a),
+        Cmd::Pilot(a) => run_pilot(a),
     };
     match r {
         Ok(c) => c,
