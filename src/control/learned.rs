@@ -33,7 +33,7 @@
 //! passed in (`dt`, seconds).
 
 use super::params::{Param, Params};
-use super::steering::{Steering, SteeringInput, SteeringMethod, MAX_STEER, SLEW_RATE};
+use super::steering::{limit, Steering, SteeringInput, SteeringMethod, MAX_STEER, SLEW_RATE};
 use image::RgbImage;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -538,9 +538,7 @@ impl Steering for Learned {
         if !(dt.is_finite() && dt > 0.0) {
             return self.output;
         }
-        let target = raw.clamp(-self.opts.max_steer, self.opts.max_steer);
-        let step = self.opts.slew_rate * dt;
-        self.output = target.clamp(self.output - step, self.output + step);
+        self.output = limit(raw, self.output, self.opts.max_steer, self.opts.slew_rate, dt);
         self.output
     }
 

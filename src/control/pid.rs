@@ -12,7 +12,7 @@
 //! Time is passed in (`dt`, seconds): the controller never reads a clock.
 
 use super::params::{Param, ParamInfo, Params};
-use super::steering::{Steering, SteeringInput, SteeringMethod, MAX_STEER, SLEW_RATE};
+use super::steering::{limit, Steering, SteeringInput, SteeringMethod, MAX_STEER, SLEW_RATE};
 
 /// PID gains and limits (units: steer per unit of normalised error, seconds); `[steering]` of
 /// car.toml converts into them.
@@ -85,9 +85,8 @@ impl Pid {
             self.integral = (self.integral + g.ki * e * dt).clamp(-g.integral_limit, g.integral_limit);
         }
         // 3. Clamp, 4. slew-rate limit.
-        let target = (g.kp * e + self.integral + g.kd * self.derivative).clamp(-g.max_out, g.max_out);
-        let step = g.slew_rate * dt;
-        self.output = target.clamp(self.output - step, self.output + step);
+        let wanted = g.kp * e + self.integral + g.kd * self.derivative;
+        self.output = limit(wanted, self.output, g.max_out, g.slew_rate, dt);
         self.output
     }
 

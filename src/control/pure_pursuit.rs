@@ -31,7 +31,7 @@
 //! leaves the view first, so far look-aheads measure one line and estimate the other.
 
 use super::params::{Param, ParamInfo, Params};
-use super::steering::{Steering, SteeringError, SteeringInput, SteeringMethod, MAX_STEER, SLEW_RATE};
+use super::steering::{limit, Steering, SteeringError, SteeringInput, SteeringMethod, MAX_STEER, SLEW_RATE};
 use crate::lane::lines::{column_histogram_rows, measure_in, LineOptions};
 use crate::lane::warp::Homography;
 
@@ -189,9 +189,7 @@ impl Steering for PurePursuit {
         let o = &self.opts;
         // 5. Wheel angle of the bicycle, 6. normalised, clamped and rate-limited.
         let delta = (goal.curvature * o.wheelbase_m).atan();
-        let target = (-delta / o.max_wheel_rad).clamp(-o.max_steer, o.max_steer);
-        let step = o.slew_rate * dt;
-        self.output = target.clamp(self.output - step, self.output + step);
+        self.output = limit(-delta / o.max_wheel_rad, self.output, o.max_steer, o.slew_rate, dt);
         self.output
     }
 

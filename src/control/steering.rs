@@ -98,6 +98,14 @@ pub const SLEW_RATE: ParamInfo = ParamInfo {
     doc: "largest change of the steering command per second; protects the servo, too low is late into curves",
 };
 
+/// The limits every shipped method applies to its wanted command `target`: clamped to
+/// ±`max_steer` ([`MAX_STEER`]), then moved at most `slew_rate · dt` from the previous output
+/// ([`SLEW_RATE`]). Returns the new output.
+pub fn limit(target: f64, previous: f64, max_steer: f64, slew_rate: f64, dt: f64) -> f64 {
+    let step = slew_rate * dt;
+    target.clamp(-max_steer, max_steer).clamp(previous - step, previous + step)
+}
+
 /// Why a steering method cannot be built from a configuration.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SteeringError {
