@@ -53,9 +53,12 @@ fn json_lines(p: &Path) -> Vec<Value> {
         .collect()
 }
 
-/// The held-out table of NAME.report.txt: (row name, frames, RMSE, MAE), and the classical
-/// row's "not run: why" if it was not run.
-fn report(p: &Path) -> (Vec<(String, usize, f64, f64)>, Option<String>) {
+/// One row of the held-out table: (name, frames, RMSE, MAE).
+type Row = (String, usize, f64, f64);
+
+/// The held-out table of NAME.report.txt, and the classical row's "not run: why" if it was
+/// not run.
+fn report(p: &Path) -> (Vec<Row>, Option<String>) {
     let t = std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
     let mut rows = Vec::new();
     let mut not_run = None;
