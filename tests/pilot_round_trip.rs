@@ -13,19 +13,23 @@ fn bin_dir() -> PathBuf {
     Path::new(env!("CARGO_BIN_EXE_rccar")).parent().unwrap().to_path_buf()
 }
 
-/// Runs `rccar` or `rccar-train` (built once if missing, as tests/labs.rs does).
+/// Runs `rccar` or `rccar-train`. `rccar-train` is another workspace member: cargo builds it
+/// for `cargo test --workspace` only, so it is brought up to date here once per test run (a
+/// no-op when it is; a stale binary would test old code).
 fn run(bin: &str, args: &[&str], paths: &[&Path]) -> Output {
     static ONCE: std::sync::OnceLock<()> = std::sync::OnceLock::new();
     if bin == "rccar-train" {
         ONCE.get_or_init(|| {
-            if !bin_dir().join("rccar-train").exists() {
-                let st = Command::new(env!("CARGO"))
-                    .args(["build", "--release", "-p", "rccar-train", "--bin", "rccar-train"])
-                    .current_dir(env!("CARGO_MANIFEST_DIR"))
-                    .status()
-                    .expect("cargo build -p rccar-train");
-                assert!(st.success(), "cargo build --release -p rccar-train failed");
+            let mut c = Command::new(env!("CARGO"));
+            c.args(["build", "-p", "rccar-train", "--bin", "rccar-train"]);
+            if bin_dir().ends_with("release") {
+                c.arg("--release");
             }
+            let st = c
+                .current_dir(env!("CARGO_MANIFEST_DIR"))
+                .status()
+                .expect("cargo build -p rccar-train");
+            assert!(st.success(), "cargo build -p rccar-train failed");
         });
     }
     let mut c = Command::new(bin_dir().join(bin));
