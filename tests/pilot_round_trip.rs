@@ -135,7 +135,16 @@ fn sim_recording_cut_trained_driven_and_exported() {
     let model = t("pilot.safetensors");
     let o = run(
         "rccar-train",
-        &["pilot", "--epochs", "3", "--patience", "3", "--threads", "2", "--recording"],
+        &[
+            "pilot",
+            "--epochs",
+            "3",
+            "--patience",
+            "3",
+            "--threads",
+            "2",
+            "--recording",
+        ],
         &[&t("cut"), Path::new("--out"), &model],
     );
     assert!(o.status.success(), "{}", text(&o));
@@ -145,10 +154,16 @@ fn sim_recording_cut_trained_driven_and_exported() {
     let (rows, not_run) = report(&t("pilot.report.txt"));
     assert_eq!(not_run, None, "the classical pipeline ran on the held-out frames");
     assert_eq!(rows.len(), 3, "{rows:?}");
-    assert!(rows[0].0 == "learned pilot" && rows[1].0.starts_with("training mean"), "{rows:?}");
+    assert!(
+        rows[0].0 == "learned pilot" && rows[1].0.starts_with("training mean"),
+        "{rows:?}"
+    );
     assert!(rows[2].0.starts_with("classical pipeline"), "{rows:?}");
     for r in &rows {
-        assert!(r.1 == 60 && r.2.is_finite() && r.3.is_finite() && r.3 <= r.2 + 1e-9, "{r:?}");
+        assert!(
+            r.1 == 60 && r.2.is_finite() && r.3.is_finite() && r.3 <= r.2 + 1e-9,
+            "{r:?}"
+        );
     }
     // The labels are the classical controller's clean commands (the noise is the car's,
     // not the label's): the pipeline run again over the same frames gives them back, up to
@@ -163,15 +178,35 @@ fn sim_recording_cut_trained_driven_and_exported() {
     let o = run(
         "rccar-train",
         &["pilot", "--epochs", "1", "--threads", "2", "--telemetry"],
-        &[&run_tel, Path::new("--recording"), &t("frames"), Path::new("--out"), &t("p2.safetensors")],
+        &[
+            &run_tel,
+            Path::new("--recording"),
+            &t("frames"),
+            Path::new("--out"),
+            &t("p2.safetensors"),
+        ],
     );
     assert!(o.status.success(), "{}", text(&o));
-    assert!(String::from_utf8_lossy(&o.stdout).contains("(frames + telemetry): "), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("(frames + telemetry): "),
+        "{}",
+        text(&o)
+    );
 
     // 4. The weights drive the simulator for 3 s.
     let o = run(
         "rccar",
-        &["sim", "--seconds", "3", "--no-timing", "--set", "detect.enabled=false", "--set", "steering.method=learned", "--set"],
+        &[
+            "sim",
+            "--seconds",
+            "3",
+            "--no-timing",
+            "--set",
+            "detect.enabled=false",
+            "--set",
+            "steering.method=learned",
+            "--set",
+        ],
         &[
             Path::new(&format!("steering.model={}", model.display())),
             Path::new("-o"),
@@ -249,7 +284,17 @@ fn a_tub_made_here_trains_a_pilot_that_beats_the_mean() {
     let model = tmp.path().join("col.safetensors");
     let o = run(
         "rccar-train",
-        &["pilot", "--epochs", "12", "--patience", "12", "--threads", "2", "--no-light", "--recording"],
+        &[
+            "pilot",
+            "--epochs",
+            "12",
+            "--patience",
+            "12",
+            "--threads",
+            "2",
+            "--no-light",
+            "--recording",
+        ],
         &[&tub, Path::new("--out"), &model],
     );
     assert!(o.status.success(), "{}", text(&o));
@@ -260,11 +305,19 @@ fn a_tub_made_here_trains_a_pilot_that_beats_the_mean() {
     eprintln!("{rows:?} {not_run:?}");
     assert!(rows.len() >= 2, "{rows:?}");
     let (learned, mean) = (&rows[0], &rows[1]);
-    assert!(learned.0 == "learned pilot" && mean.0.starts_with("training mean"), "{rows:?}");
+    assert!(
+        learned.0 == "learned pilot" && mean.0.starts_with("training mean"),
+        "{rows:?}"
+    );
     for r in &rows {
         assert!(r.1 == 50 && r.2.is_finite() && r.3.is_finite(), "{r:?}");
     }
-    assert!(learned.2 < 0.5 * mean.2, "learned RMSE {} vs the mean's {}", learned.2, mean.2);
+    assert!(
+        learned.2 < 0.5 * mean.2,
+        "learned RMSE {} vs the mean's {}",
+        learned.2,
+        mean.2
+    );
     // The table on stdout is the file's.
     let file = std::fs::read_to_string(tmp.path().join("col.report.txt")).unwrap();
     assert!(out.contains(&file), "{out}");
