@@ -69,7 +69,7 @@ fn mean_abs_diff(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
 /// A tub v2 read as Donkey's datastore_v2 does, in a few lines: the manifest's five JSON lines,
 /// the catalogs in its order, each `.catalog_manifest` checked against its catalog, records
 /// at deleted positions left out. Returns (position, record) pairs.
-fn read_tub_independently(tub: &Path) -> Vec<(u64, Value)> {
+pub(crate) fn read_tub_independently(tub: &Path) -> Vec<(u64, Value)> {
     let m = lines(&tub.join("manifest.json"));
     assert_eq!(m.len(), 5, "manifest.json has 5 lines: {m:?}");
     let inputs: Value = serde_json::from_str(&m[0]).unwrap();

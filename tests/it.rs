@@ -27,6 +27,7 @@ mod lens_sim;
 mod light_sim;
 mod pad;
 mod pilot;
+mod pilot_round_trip;
 mod ranging_calibrate_cli;
 mod ranging_sim;
 mod record_replay;

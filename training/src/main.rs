@@ -1229,11 +1229,15 @@ struct PilotArgs {
     /// Laps per simulator drive.
     #[arg(long, default_value_t = 1)]
     sim_laps: u32,
-    /// Recordings to train on (a folder with telemetry.jsonl and its frames: a car's
-    /// `--record` folder, or `rccar sim --record DIR` with the run's telemetry.jsonl copied
-    /// into DIR); repeat for several.
+    /// Recordings to train on, read as datasets (docs/data.md): a car's `--record` folder,
+    /// a Donkey tub v2, or a `rccar sim --record DIR` frames folder with `--telemetry`;
+    /// repeat for several.
     #[arg(long)]
     recording: Vec<PathBuf>,
+    /// The run's telemetry.jsonl for a `rccar sim --record DIR` frames folder given as the
+    /// (one) --recording.
+    #[arg(long)]
+    telemetry: Option<PathBuf>,
     /// The configuration (camera, controller, track of the simulator drives). Default: the
     /// source tree's config/car.toml.
     #[arg(long)]
@@ -1311,10 +1315,13 @@ fn run_pilot(a: PilotArgs) -> anyhow::Result<ExitCode> {
         said.push(format!("simulator: {} drive(s) x {} lap(s), steer noise {:?}, {n} frames", d.len(), a.sim_laps, a.sim_noise));
         drives.extend(d);
     }
+    if a.telemetry.is_some() && a.recording.len() != 1 {
+        bail!("--telemetry goes with exactly one --recording (a frames folder)");
+    }
     for r in &a.recording {
-        let d = data::from_recording(r).map_err(anyhow::Error::msg)?;
-        println!("{}: {} frames", r.display(), d.samples.len());
-        said.push(format!("recording {}: {} frames", r.display(), d.samples.len()));
+        let d = data::from_recording(r, a.telemetry.as_deref()).map_err(anyhow::Error::msg)?;
+        println!("{}: {} frames", d.name, d.samples.len());
+        said.push(format!("recording {}: {} frames", d.name, d.samples.len()));
         drives.push(d);
     }
     let (train, val) = data::split_by_time(drives, a.val_fraction);
@@ -1387,6 +1394,16 @@ fn run_pilot(a: PilotArgs) -> anyhow::Result<ExitCode> {
         t0.elapsed().as_secs_f64()
     );
     println!("loss curve: {} {}", png.display(), csv.display());
+    let cfg = match a.config.clone().or_else(rccar::config::source_tree_config) {
+        Some(p) => rccar::config::Config::load(&p, &[], &[]).with_context(|| p.display().to_string())?,
+        None => rccar::config::Config::default(),
+    };
+    let (rows, classical) = pilot::held_out_report(&trained.params, &train, &val, &cfg);
+    let table = pilot::report_table(&rows, &classical);
+    print!("{table}");
+    let rep = std::path::PathBuf::from(format!("{}.report.txt", stem.display()));
+    std::fs::write(&rep, &table).with_context(|| rep.display().to_string())?;
+    println!("held-out report: {}", rep.display());
     Ok(ExitCode::SUCCESS)
 }
 

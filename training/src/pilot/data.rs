@@ -24,6 +24,9 @@ pub struct Sample {
     pub input: Vec<f32>,
     /// The steering label, −1..=1.
     pub steer: f32,
+    /// The frame's file and time (s) when it came from disk (the held-out report runs the
+    /// classical pipeline on it); `None` for simulator drives.
+    pub image: Option<(PathBuf, f64)>,
 }
 
 /// Examples of one drive, in time order (the unit of the split by time).
@@ -78,6 +81,7 @@ pub fn from_sim(plan: &SimPlan, progress: &mut dyn FnMut(usize, usize)) -> Resul
                 d.samples.push(Sample {
                     input: input.clone(),
                     steer: step.out.command.steer as f32,
+                    image: None,
                 });
             }
             if d.samples.len().is_multiple_of(500) {
@@ -90,64 +94,55 @@ pub fn from_sim(plan: &SimPlan, progress: &mut dyn FnMut(usize, usize)) -> Resul
     Ok(drives)
 }
 
-/// A recording: `DIR/telemetry.jsonl` (one line per frame with `steer` and `file` or
-/// `frame`) and its frames, looked up as `DIR/<file>` (what `rccar sim --record` names
-/// them; copy the run's telemetry.jsonl beside them) or `DIR/seg_*/frame_<frame>.jpg` (a
-/// car's recording, src/record). Frames must be the pilot's 320×240.
-pub fn from_recording(dir: &Path) -> Result<Drive, String> {
-    let tel = dir.join("telemetry.jsonl");
-    let text = std::fs::read_to_string(&tel).map_err(|e| format!("{}: {e}", tel.display()))?;
-    // frame index → file of a car's recording
-    let mut segs: std::collections::HashMap<u64, PathBuf> = std::collections::HashMap::new();
-    if let Ok(rd) = std::fs::read_dir(dir) {
-        for e in rd.flatten() {
-            let p = e.path();
-            if p.is_dir() && e.file_name().to_string_lossy().starts_with(rccar::record::SEGMENT_PREFIX) {
-                for f in std::fs::read_dir(&p).into_iter().flatten().flatten() {
-                    if let Some(i) = rccar::record::frame_index(&f.file_name().to_string_lossy()) {
-                        segs.insert(i, f.path());
-                    }
-                }
-            }
-        }
+/// A recording read through [`rccar::dataset::Dataset`]: a car's `--record` folder
+/// (telemetry.jsonl + seg_*/frame_*.jpg), a Donkey tub v2 (manifest.json), or, with
+/// `telemetry`, a `rccar sim --record DIR` frames folder and its run's telemetry.jsonl.
+/// The label is the dataset's (`sent` when the gate changed the command, else the command:
+/// with `sim.steer_noise` that is the classical controller's clean command, as in
+/// [`from_sim`]). Like [`from_sim`], frames whose telemetry says the lane was lost
+/// (`lane_center` null) or the behaviour machine was changing lanes are left out (a tub has
+/// no such fields: all its records are kept). Frames must be the pilot's 320×240.
+pub fn from_recording(dir: &Path, telemetry: Option<&Path>) -> Result<Drive, String> {
+    use rccar::dataset::Dataset;
+    let ds = match telemetry {
+        Some(t) => Dataset::open_frames(dir, t),
+        None => Dataset::open(dir),
     }
+    .map_err(|e| e.to_string())?;
     let mut d = Drive {
-        name: dir.display().to_string(),
+        name: format!("{} ({})", dir.display(), ds.kind.name()),
         samples: Vec::new(),
     };
     let mut input = vec![0.0f32; INPUT_LEN];
-    for (n, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
-        let v: serde_json::Value =
-            serde_json::from_str(line).map_err(|e| format!("{} line {}: {e}", tel.display(), n + 1))?;
-        let Some(steer) = v.get("steer").and_then(|s| s.as_f64()) else {
-            continue;
-        };
-        let file = v.get("file").and_then(|f| f.as_str()).filter(|f| !f.is_empty()).map(|f| dir.join(f));
-        let path = match file.filter(|p| p.exists()) {
-            Some(p) => p,
-            None => match v.get("frame").and_then(|f| f.as_u64()).and_then(|i| segs.get(&i)) {
-                Some(p) => p.clone(),
-                None => continue, // a frame the recorder dropped (over budget)
-            },
-        };
-        let img = image::open(&path).map_err(|e| format!("{}: {e}", path.display()))?.to_rgb8();
+    for s in &ds.samples {
+        if let Some(v) = s.telemetry.as_deref().and_then(|l| serde_json::from_str::<serde_json::Value>(l).ok()) {
+            let lost = v.get("lane_center").is_some_and(|c| c.is_null());
+            let changing = matches!(v.get("behaviour").and_then(|b| b.as_str()), Some("pass_out" | "pass_back"));
+            if lost || changing {
+                continue;
+            }
+        }
+        let img = s.load_image().map_err(|e| e.to_string())?;
         if !input_from_frame(&img, &mut input) {
             return Err(format!(
-                "{}: {}x{} frames; the pilot reads {}x{}",
-                path.display(),
+                "{}: {}x{} frames; the pilot reads {}x{} (`rccar data import --size {}x{}` makes a tub's frames that size)",
+                s.image.display(),
                 img.width(),
                 img.height(),
+                rccar::control::learned::FRAME_W,
+                rccar::control::learned::FRAME_H,
                 rccar::control::learned::FRAME_W,
                 rccar::control::learned::FRAME_H
             ));
         }
         d.samples.push(Sample {
             input: input.clone(),
-            steer: steer as f32,
+            steer: s.steer as f32,
+            image: Some((s.image.clone(), s.time_s)),
         });
     }
     if d.samples.is_empty() {
-        return Err(format!("{}: no frame with a steering label", tel.display()));
+        return Err(format!("{}: no frame with a steering label", dir.display()));
     }
     Ok(d)
 }
@@ -209,6 +204,7 @@ mod tests {
                 .map(|i| Sample {
                     input: vec![],
                     steer: base + i as f32,
+                    image: None,
                 })
                 .collect(),
         };

@@ -229,6 +229,95 @@ pub fn loss_plot(log: &[EpochLog]) -> Result<image::RgbImage, String> {
     .map_err(|e| e.to_string())
 }
 
+/// One row of the held-out report: a predictor's steering error against the labels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeldOutRow {
+    /// What predicted.
+    pub name: String,
+    /// Frames it was scored on.
+    pub frames: usize,
+    /// Root mean squared error, steer units.
+    pub rmse: f64,
+    /// Mean absolute error, steer units.
+    pub mae: f64,
+}
+
+fn row(name: &str, pairs: impl Iterator<Item = (f64, f64)>) -> HeldOutRow {
+    let (mut n, mut se, mut ae) = (0usize, 0.0f64, 0.0f64);
+    for (y, t) in pairs {
+        n += 1;
+        se += (y - t).powi(2);
+        ae += (y - t).abs();
+    }
+    HeldOutRow {
+        name: name.into(),
+        frames: n,
+        rmse: (se / n as f64).sqrt(),
+        mae: ae / n as f64,
+    }
+}
+
+/// The held-out (later) frames scored three ways: the learned pilot, the training labels'
+/// mean (a net that learned nothing from the image), and the classical pipeline (`cfg`,
+/// run in time order over the held-out frames read from disk, so its filters and PID see
+/// a sequence). The classical row is `Err(why)` when it cannot be run (simulator drives
+/// keep no frames on disk).
+pub fn held_out_report(
+    p: &Params,
+    train: &[Sample],
+    val: &[Sample],
+    cfg: &rccar::config::Config,
+) -> (Vec<HeldOutRow>, Result<HeldOutRow, String>) {
+    let mean = train.iter().map(|s| s.steer as f64).sum::<f64>() / train.len().max(1) as f64;
+    let learned = row(
+        "learned pilot",
+        val.iter().map(|s| (net::forward(p, &s.input).0 as f64, s.steer as f64)),
+    );
+    let base = row(
+        &format!("training mean ({mean:+.3})"),
+        val.iter().map(|s| (mean, s.steer as f64)),
+    );
+    let classical = (|| {
+        if val.is_empty() {
+            return Err("no held-out frames".to_string());
+        }
+        if val.iter().any(|s| s.image.is_none()) {
+            return Err("simulator drives keep no frames on disk (train from a recording to compare)".into());
+        }
+        let mut pipe = rccar::pipeline::Pipeline::new(cfg).map_err(|e| e.to_string())?;
+        let mut pairs = Vec::with_capacity(val.len());
+        let mut prev: Option<f64> = None;
+        let mut lost = 0usize;
+        for s in val {
+            let (path, t) = s.image.as_ref().expect("checked");
+            let img = image::open(path).map_err(|e| format!("{}: {e}", path.display()))?.to_rgb8();
+            let dt = prev.map_or(1.0 / cfg.camera.fps, |p| (t - p).clamp(1e-3, 1.0));
+            prev = Some(*t);
+            let out = pipe.step(&img, dt, &mut rccar::timing::NoTimer);
+            lost += usize::from(out.lane.lane_center.is_none());
+            pairs.push((out.command.steer, s.steer as f64));
+        }
+        let mut r = row("classical pipeline (default config)", pairs.into_iter());
+        if lost > 0 {
+            r.name = format!("{} [lane lost on {lost}]", r.name);
+        }
+        Ok(r)
+    })();
+    (vec![learned, base], classical)
+}
+
+/// The held-out report as a text table (also written to NAME.report.txt).
+pub fn report_table(rows: &[HeldOutRow], classical: &Result<HeldOutRow, String>) -> String {
+    let mut s = format!("{:<52} {:>7} {:>8} {:>8}\n", "held-out (later) frames, steering vs label", "frames", "RMSE", "MAE");
+    let mut line = |r: &HeldOutRow| s += &format!("{:<52} {:>7} {:>8.4} {:>8.4}\n", r.name, r.frames, r.rmse, r.mae);
+    rows.iter().for_each(&mut line);
+    match classical {
+        Ok(r) => line(r),
+        Err(why) => s += &format!("{:<52} not run: {why}\n", "classical pipeline (default config)"),
+    }
+    s
+}
+
 /// Input length (re-exported for the binary).
 pub const INPUT: usize = INPUT_LEN;
 
@@ -252,6 +341,7 @@ mod tests {
             Sample {
                 input: x,
                 steer: (pos - 0.5) * 1.2,
+                image: None,
             }
         };
         let tr: Vec<Sample> = (0..600).map(|_| make(&mut r)).collect();
