@@ -209,8 +209,12 @@ pub fn load_detector(cfg: &Config, base: &Path) -> Result<(Option<DetectStage>, 
     }
     let mut stage = DetectStage::load(&specs)?;
     for class in colour {
-        let det = HsvSignDetector::with_octagon_model(HsvSignOptions::from(&cfg.colour_template))
-            .expect("the octagon model has red pixels and the default template sizes");
+        let det = HsvSignDetector::with_octagon_model(HsvSignOptions::from(&cfg.colour_template)).map_err(|err| {
+            CascadeError::ColourTemplate {
+                class: class.name().into(),
+                err,
+            }
+        })?;
         stage.add_colour_sign(class.name(), det);
     }
     Ok((Some(stage), missing))
@@ -973,6 +977,19 @@ fn apply(cmd: Command, d: &Decision) -> Command {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `[colour_template]` thresholds that leave the model sign without red are an error naming
+    /// the class and the section, not a panic (the options are the user's).
+    #[test]
+    fn colour_template_options_without_red_are_an_error() {
+        let cfg = Config::default()
+            .with_override("classes.stop_sign.detect=colour_template")
+            .unwrap()
+            .with_override("colour_template.sat_min=255")
+            .unwrap();
+        let err = load_detector(&cfg, Path::new(".")).expect_err("an error").to_string();
+        assert!(err.contains("classes.stop_sign.detect") && err.contains("no red pixels"), "{err}");
+    }
 
     /// `classes.stop_sign.detect = "colour_template"` loads the colour detector under the
     /// stop sign's label and reads no model file for it (a missing one is not an error); the

@@ -70,6 +70,16 @@ pub enum CascadeError {
         /// What was wrong with it.
         message: String,
     },
+    /// A class detected by colour + template (`classes.<name>.detect = "colour_template"`)
+    /// cannot make its templates with the `[colour_template]` options (e.g. thresholds that
+    /// leave the model sign without a red pixel). Loaded beside the cascades, so reported here.
+    #[error("classes.{class}.detect = \"colour_template\" with these [colour_template] options: {err}")]
+    ColourTemplate {
+        /// The class.
+        class: String,
+        /// Why the templates could not be made.
+        err: crate::detect::colour_sign::TemplateError,
+    },
 }
 
 /// What a cascade's weak classifiers look at.
