@@ -18,7 +18,8 @@ fn rccar(args: &[&str], paths: &[&Path]) -> Output {
     c.output().expect("rccar runs")
 }
 
-fn text(o: &Output) -> String {
+/// A command's exit code, stdout and stderr, for assertion messages.
+pub(crate) fn text(o: &Output) -> String {
     format!(
         "exit {:?}\n--- stdout\n{}--- stderr\n{}",
         o.status.code(),

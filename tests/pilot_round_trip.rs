@@ -4,6 +4,7 @@
 //! tests/data_cmd.rs's own reader reads back; a tub made here (a bright column whose x is
 //! the steering) is trained on and the held-out table beats the training-mean predictor.
 
+use crate::data_cmd::text;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -38,15 +39,6 @@ fn run(bin: &str, args: &[&str], paths: &[&Path]) -> Output {
         c.arg(p);
     }
     c.output().expect("runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "exit {:?}\n--- stdout\n{}--- stderr\n{}",
-        o.status.code(),
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
 }
 
 fn json_lines(p: &Path) -> Vec<Value> {
