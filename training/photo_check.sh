@@ -14,14 +14,19 @@ cargo build --release -p rccar-train
 B=$PWD/target/release/rccar-train
 W=${1:-out/photo_check}
 THREADS=${THREADS:-2}
+# The photos: OpenCV's samples (opencv-doc) and scikit-image's data photos (the figures in
+# docs/training.md were measured on both; photoset's default is the opencv-doc samples alone).
+PY=${RCCAR_PYTHON:-$PWD/.venv/bin/python}
+SKI=$("$PY" -c 'import os, skimage; print(os.path.join(os.path.dirname(skimage.__file__), "data"))' 2>/dev/null || true)
+PHOTOS=(/usr/share/doc/opencv-doc/examples/data ${SKI:+"$SKI"})
 rm -rf "$W"; mkdir -p "$W"; cd "$W"
 # 1. Frames: 42 with a sign + 300 without to train on (like the set); a validation set
 #    for the early stop and a larger one for comparing settings, both from photos the training
 #    never sees; the test set: the other half of the photos, other seeds.
-$B photoset --half 0-train --seed 1 --with-sign 42 --without 300 --out train
-$B photoset --half 0-val --seed 2 --with-sign 48 --without 300 --out val
-$B photoset --half 0-val --seed 4 --with-sign 200 --without 200 --out valbig
-$B photoset --half 1 --seed 3 --with-sign 48 --without 350 --out test
+$B photoset --half 0-train --seed 1 --with-sign 42 --without 300 --out train --photos "${PHOTOS[@]}"
+$B photoset --half 0-val --seed 2 --with-sign 48 --without 300 --out val --photos "${PHOTOS[@]}"
+$B photoset --half 0-val --seed 4 --with-sign 200 --without 200 --out valbig --photos "${PHOTOS[@]}"
+$B photoset --half 1 --seed 3 --with-sign 48 --without 350 --out test --photos "${PHOTOS[@]}"
 # 2. Boxes (the CSV a student would type) -> info.dat + previews.
 $B boxes --csv train/boxes.csv --out train/pos.dat --preview train/preview
 $B boxes --csv val/boxes.csv --out val/pos.dat

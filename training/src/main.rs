@@ -463,8 +463,9 @@ fn run_boxes(a: BoxesArgs) -> anyhow::Result<ExitCode> {
 
 #[derive(clap::Args)]
 struct PhotosetArgs {
-    /// Photo folders or files (.jpg/.png). Default: the system's (opencv-doc samples,
-    /// scikit-image data).
+    /// Photo folders or files (.jpg/.png). Default: OpenCV's sample pictures
+    /// (/usr/share/doc/opencv-doc/examples/data, Debian's opencv-doc), the same on every
+    /// machine with that package.
     #[arg(long = "photos", num_args = 1..)]
     photos: Vec<PathBuf>,
     /// Which photos of the sorted list: `0` or `1` (every other photo: train on one half, test

@@ -2,8 +2,8 @@
 //! generalises, without anyone's photo set: the simulator's stop sign (its face painted by
 //! `rccar::sim::scene` — red octagon, white rim, STOP — rendered head-on with 4 × 4
 //! supersampling into an RGBA template) pasted into crops of photographs that are on the
-//! system anyway (OpenCV's sample pictures from Debian's opencv-doc, scikit-image's data
-//! photos), then passed through a camera model.
+//! system anyway (by default OpenCV's sample pictures from Debian's opencv-doc; any folder
+//! with `--photos`, e.g. scikit-image's data photos), then passed through a camera model.
 //!
 //! Per frame (320 × 240, seeded):
 //! 1. background: a photo, a random crop of 40–100% of the largest 4:3 region, resized to the
@@ -93,29 +93,16 @@ pub fn list_photos(dirs: &[PathBuf]) -> Vec<PathBuf> {
     out
 }
 
-/// The photo directories on this system: opencv-doc's samples and scikit-image's data (in
-/// `RCCAR_PYTHON`'s or /work/main/.venv's site-packages), those that exist.
+/// Where Debian's opencv-doc puts OpenCV's sample pictures: the default photos of `photoset`.
+pub const OPENCV_SAMPLES: &str = "/usr/share/doc/opencv-doc/examples/data";
+
+/// The default photo directories: OpenCV's sample pictures ([`OPENCV_SAMPLES`], Debian's
+/// opencv-doc), if installed. Only these: a fixed Debian package gives every machine the same
+/// photos, so the same seed gives the same frames (a Python package's data folder, found or not
+/// and of whatever version, made a seeded run differ between machines). Other photos, such as
+/// scikit-image's data folder, are named with `--photos`.
 pub fn system_photo_dirs() -> Vec<PathBuf> {
-    let mut v = vec![PathBuf::from("/usr/share/doc/opencv-doc/examples/data")];
-    let mut roots = vec![PathBuf::from("/work/main/.venv/lib"), PathBuf::from("/usr/lib")];
-    if let Ok(py) = std::env::var("RCCAR_PYTHON") {
-        if let Some(venv) = Path::new(&py).parent().and_then(|p| p.parent()) {
-            roots.insert(0, venv.join("lib"));
-        }
-    }
-    for r in roots {
-        if let Ok(rd) = std::fs::read_dir(&r) {
-            for e in rd.filter_map(|e| e.ok()) {
-                for sp in ["site-packages", "dist-packages"] {
-                    let d = e.path().join(sp).join("skimage/data");
-                    if d.is_dir() && !v.contains(&d) {
-                        v.push(d);
-                    }
-                }
-            }
-        }
-    }
-    v.into_iter().filter(|d| d.is_dir()).collect()
+    [PathBuf::from(OPENCV_SAMPLES)].into_iter().filter(|d| d.is_dir()).collect()
 }
 
 /// Photos split in two disjoint halves by position in the sorted list (`part` 0 or 1).
