@@ -316,6 +316,7 @@ labs! {
     lab13 => "13-pure-pursuit.md",
     lab14 => "14-routes.md",
     lab15 => "15-data-balance.md",
+    lab16 => "16-learned-pilot.md",
 }
 
 /// Issue 28, must-show 2: docs/training.md's real-photo recipe runs as written (its `sh`

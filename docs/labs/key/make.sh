@@ -6,6 +6,7 @@
 #
 #   bash docs/labs/key/make.sh [OUT]      OUT defaults to docs/labs/key (the committed key)
 #   LABS=01,11 bash docs/labs/key/make.sh /tmp/k    only those labs (to work on a page)
+#   KEY_JOBS=1 bash docs/labs/key/make.sh          one lab at a time (default: two at a time)
 #
 # Needs: rccar built with the serial link (cargo build --release --features serial; lab 11
 # talks to the firmware) and rccar-train (cargo build --release -p rccar-train) on PATH or in
@@ -30,6 +31,7 @@
 # line in a report), with a generous deadline.
 set -euo pipefail
 REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/../../.." && pwd)
+SELF=$REPO/docs/labs/key/make.sh
 OUT=$(mkdir -p "${1:-$REPO/docs/labs/key}" && cd "${1:-$REPO/docs/labs/key}" && pwd)
 export PATH="$REPO/target/release:$PATH"
 export RCCAR_CONFIG=$REPO/config/car.toml
@@ -90,6 +92,34 @@ num() { grep -oE "$2 *-?[0-9.]+" <<< "$1" | head -1 | grep -oE -- '-?[0-9.]+$'; 
 # until_ok COMMAND... — retry COMMAND every 0.1 s until it succeeds (at most 60 s)
 until_ok() { for _ in $(seq 600); do "$@" 2>/dev/null && return 0; sleep 0.1; done; echo "make.sh: timed out: $*" >&2; return 1; }
 SIM="rccar sim --no-local --no-timing --set detect.enabled=false"
+
+# Whole key, KEY_JOBS labs at a time (default 2; 1 = one after the other): each lab runs as its
+# own `LABS=NN make.sh` in a folder of its own (the labs share no files), the longest first, and
+# the figures are put together in lab order, so the key is the same as a serial run's. Lab 11
+# runs alone, first: its emulator keeps the firmware's clock on the wall clock.
+LAB_LIST="11 13 02 15 07 16 01 08 03 04 14 12 06 10 05 09"
+if [ -z "${LABS:-}" ] && [ "${KEY_JOBS:-2}" -gt 1 ]; then
+  part() { local rc=0; LABS=$1 KEY_JOBS=1 bash "$SELF" "$W/p$1" > "$W/p$1.log" 2>&1 || rc=$?; echo $rc > "$W/p$1.rc"; }
+  first=1
+  for l in $LAB_LIST; do
+    [ -n "$(sed -n "/^if want $l; then/p" "$SELF")" ] || continue
+    if [ "$first" = 1 ]; then part "$l"; first=0; continue; fi
+    while [ "$(jobs -rp | wc -l)" -ge "${KEY_JOBS:-2}" ]; do wait -n || true; done
+    part "$l" &
+  done
+  wait
+  failed=
+  for l in $(tr ' ' '\n' <<< "$LAB_LIST" | sort); do
+    [ -f "$W/p$l.rc" ] || continue
+    cat "$W/p$l.log"
+    [ "$(cat "$W/p$l.rc")" = 0 ] || failed="$failed $l"
+  done
+  [ -z "$failed" ] || { echo "make.sh: lab(s)$failed failed (their output above)" >&2; exit 1; }
+  for l in $(tr ' ' '\n' <<< "$LAB_LIST" | sort); do
+    [ -f "$W/p$l/key.json" ] && jq -c '.figures[]' "$W/p$l/key.json"
+  done > "$FIGS"
+  LABS=none   # every figure is in; the sections below are skipped
+fi
 
 # ---- lab 1: P steering ---------------------------------------------------------------------
 if want 01; then
@@ -456,6 +486,33 @@ if want 15; then
   fig 15 "lap/straight_pct" "$(share '.stats.steer_left_straight_right[1]')" 0.5 % "$C; -0.05 <= steer < 0.05"
   fig 15 "lap/right_pct" "$(share '.stats.steer_left_straight_right[2]')" 0.5 % "$C; steer >= 0.05"
   fig 15 "lap/turning_left_pct" "$(jq '.stats.steer_left_straight_right as $s | 100 * $s[0] / ($s[0] + $s[2])' l15_ls.json)" 0.5 % "$C; of the turning frames"
+fi
+
+# ---- lab 16: the learned pilot against the classical one ----------------------------------------------------
+if want 16; then
+  CHAT='[.[].steer] as $s | [range(1; $s | length) | ($s[.] - $s[. - 1]) | . * .] | (add / length) | sqrt'
+  for m in pid learned; do
+    C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set steering.method=$m"
+    $SIM --laps 1 --set steering.method=$m -o l16_$m >/dev/null
+    fig 16 "cmp/$m/laps" "$(jq .laps l16_$m/summary.json)" 0 laps "$C"
+    fig 16 "cmp/$m/departures" "$(jq .lane_departures l16_$m/summary.json)" 0 departures "$C"
+    fig 16 "cmp/$m/rms_m" "$(jq .xte_rms_m l16_$m/summary.json)" 0.0005 m "$C"
+    fig 16 "cmp/$m/max_m" "$(jq .xte_max_m l16_$m/summary.json)" 0.002 m "$C"
+    fig 16 "cmp/$m/chatter" "$(jq -s "$CHAT" l16_$m/telemetry.jsonl)" 0.001 "steer/frame" "$C; RMS of the frame-to-frame steer change"
+    fig 16 "cmp/$m/lap_time_s" "$(jq '.lap_times_s[0]' l16_$m/summary.json)" 0.2 s "$C"
+  done
+  for m in pid learned; do
+    C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set lane.threshold_mode=adaptive --set steering.method=$m --sweep sim.light_level=0:3:4"
+    $SIM --laps 1 --set lane.threshold_mode=adaptive --set steering.method=$m --sweep sim.light_level=0:3:4 \
+      -o l16_light_$m >/dev/null || [ $? -eq 1 ]
+    # sweep.csv: light level, laps, lap time, RMS, max, departures, ...
+    while IFS=, read -r level laps _ rms _ dep _; do
+      level=$(printf '%.0f' "$level")
+      fig 16 "light/$level/${m}_laps" "$laps" 0 laps "$C"
+      fig 16 "light/$level/${m}_rms_m" "$rms" 0.001 m "$C"
+      fig 16 "light/$level/${m}_departures" "$dep" 0 departures "$C"
+    done < <(tail -n +2 l16_light_$m/sweep.csv)
+  done
 fi
 
 # ---- write the key ------------------------------------------------------------------------------------------------
