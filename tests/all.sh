@@ -101,7 +101,9 @@ if [ "${RCCAR_CROSS:-1}" = 1 ]; then
   trap 'kill -- -$CROSS_BG 2>/dev/null' EXIT   # an interrupted suite leaves no compiler behind
 fi
 stage build cargo build --release --workspace --all-targets
-stage cargo-test cargo test --release --workspace --no-fail-fast
+# drive_cli:: needs no feature but runs in the car's feature set below (stage drive-fil, the
+# binary the car uses), so not here as well.
+stage cargo-test cargo test --release --workspace --no-fail-fast -- --skip drive_cli::
 stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 # JPEG as cv2.imread decodes it, in the default build (libjpeg-turbo's C code via mozjpeg, a
@@ -120,8 +122,9 @@ FEAT=serial,camera,gpio,dashboard,jpeg-turbo,gamepad
 # then only run, and the machine is quiet for the wall-clock ones.
 stage feature-build bash -c "cargo test --release --features $FEAT --no-run --lib --test car && cargo build --release --features $FEAT --bins --example decode"
 # the link to the firmware in simavr, one test at a time (each waits on the emulator's clock;
-# two emulators side by side on a machine whose cores are busy fell behind it)
-stage link-hil cargo test --release --features $FEAT --test car -- --test-threads 1 link_hil::
+# two emulators side by side on a machine whose cores are busy fell behind it), and the
+# library's session driving the firmware in-process (session_fil)
+stage link-hil cargo test --release --features $FEAT --test car -- --test-threads 1 link_hil:: session_fil::
 # lab 11 and the labs' key (it reruns every figure the lab pages quote, lab 11's with the firmware)
 stage labs-link cargo test --release --features $FEAT --test car -- labs::lab11 labs::key_matches_committed
 # the firmware in the loop: rccar drive + the simulator as camera + the real firmware in simavr,
