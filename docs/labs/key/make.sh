@@ -11,7 +11,7 @@
 # Needs: rccar built with the serial link (cargo build --release --features serial; lab 11
 # talks to the firmware) and rccar-train (cargo build --release -p rccar-train) on PATH or in
 # target/release; jq; the firmware toolchain and simavr (make -C firmware all sim); opencv-doc's
-# stereo photos (lab 10). About 4 min of CPU on 2 cores.
+# stereo photos (lab 10). About 6 min of CPU; two labs at a time, about 3.5 min on 2 cores.
 #
 # Every run is seeded; the simulator runs use --no-timing. Figures are the same on every
 # machine up to floating point, and the tolerances allow for that. Figures marked "timing" are
