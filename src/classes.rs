@@ -73,6 +73,9 @@ pub enum ColourCue {
     LitHousing,
     /// A blue disc inside a thin white rim (a turn sign): the blue pixels' outline.
     BlueFace,
+    /// A red-bordered inverted triangle (a yield sign): the top edge and its width from the
+    /// red rows, the lower vertex where the red rows' width runs out (extrapolated).
+    RedTriangle,
     /// No colour cue (obstacles differ): the box is ranged as it is.
     None,
 }
@@ -243,7 +246,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         },
         reads_light: false,
         reads_arrow: false,
-        colour_cue: ColourCue::None,
+        colour_cue: ColourCue::RedTriangle,
         colour_template: false,
         reaction: Reaction::Yield,
         shape: SimShape::Triangle,

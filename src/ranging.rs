@@ -589,14 +589,17 @@ impl BoxRanging {
         };
         let (hh, zc) = (cb.height_m * k, cb.bottom_m + cb.height_m / 2.0);
         let (zb, zt) = (zc - hh / 2.0, zc + hh / 2.0);
+        // The height the measured width belongs to: a sign's red area and a disc are widest at
+        // the face's centre; a yield sign's triangle at its top edge.
+        let zw = if cue == ColourCue::RedTriangle { zt } else { zc };
         let (s, c) = self.tilt.alpha.sin_cos();
         let f = self.camera.f_px;
         let mut cues: [Option<(f64, f64)>; 3] = [None; 3];
         let sw = SIGMA_EDGE * std::f64::consts::SQRT_2;
         // 1. Width.
-        if matches!(cue, ColourCue::RedFace | ColourCue::BlueFace) && cb.width_m > 0.0 {
+        if matches!(cue, ColourCue::RedFace | ColourCue::BlueFace | ColourCue::RedTriangle) && cb.width_m > 0.0 {
             let z = f * cb.width_m * k / w_px;
-            let d = (z - (self.tilt.h - zc) * s) / c;
+            let d = (z - (self.tilt.h - zw) * s) / c;
             if d > 0.0 {
                 cues[0] = Some((d, z / w_px / c * sw));
             }

@@ -1,5 +1,6 @@
 //! Tight outlines inside a cascade's box, from the object's own colour: a stop sign's red
-//! area, a traffic light's dark housing.
+//! area, a traffic light's dark housing, a turn sign's blue disc, a yield sign's red triangle
+//! (its own rule, `triangle`: the lower vertex extrapolated from the sides).
 //!
 //! A cascade's box is only as tight as its scale steps and grouping make it (±10% in size,
 //! with a bias that changes with distance); the object's colour edge is a pixel sharp. The
@@ -35,7 +36,7 @@ pub const MIN_COLOUR_FRACTION: f64 = 0.05;
 /// [`MIN_COLOUR_FRACTION`] of its pixels); classes without a face colour always do.
 pub fn shows_colour(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> bool {
     let test: fn([u8; 3]) -> bool = match class.info().colour_cue {
-        ColourCue::RedFace => red,
+        ColourCue::RedFace | ColourCue::RedTriangle => red,
         ColourCue::BlueFace => blue,
         ColourCue::LitHousing | ColourCue::None => return true,
     };
@@ -107,6 +108,7 @@ pub fn outline(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<[f6
             Box::new(move |p: [u8; 3]| luma(p) <= t)
         }
         ColourCue::BlueFace => Box::new(blue),
+        ColourCue::RedTriangle => return triangle(img, [x0, y0, x1, y1]),
         ColourCue::None => return None,
     };
     // 2. Profiles.
@@ -143,6 +145,78 @@ pub fn outline(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> Option<[f6
         (y0 + r0 as i64) as f64 - 0.5,
         (x0 + c1 as i64) as f64 + 0.5,
         (y0 + r1 as i64) as f64 + 0.5,
+    ])
+}
+
+/// A yield sign's outline inside the region `[x0, y0, x1, y1)` (pixels): the red border of an
+/// inverted triangle. Per row the red pixels' extent (rightmost − leftmost + 1); the top edge
+/// is the first row whose extent reaches half the widest, its width the widest extent of the
+/// rows at the top edge; below it the extent shrinks linearly to the lower vertex, which is
+/// where a straight line fitted to the rows at 20–80% of the widest reaches 0 (the vertex's
+/// own rows hold a pixel or two of red, or none: counting them, as the stop sign's outline
+/// does, cut the vertex off). `[left, top, right, vertex]` in pixel-centre coordinates.
+fn triangle(img: &RgbImage, [x0, y0, x1, y1]: [i64; 4]) -> Option<[f64; 4]> {
+    let ny = (y1 - y0) as usize;
+    // (leftmost, rightmost) red column of each row, if any.
+    let mut ext: Vec<Option<(i64, i64)>> = vec![None; ny];
+    let mut n = 0u32;
+    for (r, e) in ext.iter_mut().enumerate() {
+        let y = y0 + r as i64;
+        for x in x0..x1 {
+            if red(img.get_pixel(x as u32, y as u32).0) {
+                *e = Some(e.map_or((x, x), |(a, _)| (a, x)));
+                n += 1;
+            }
+        }
+    }
+    if n < 12 {
+        return None;
+    }
+    let width = |e: &Option<(i64, i64)>| e.map_or(0.0, |(a, b)| (b - a + 1) as f64);
+    let widest = ext.iter().map(width).fold(0.0, f64::max);
+    let top = ext.iter().position(|e| width(e) >= 0.5 * widest)?;
+    // The top edge: its rows are the widest (the border runs along it).
+    let (mut left, mut right) = (i64::MAX, i64::MIN);
+    for e in ext[top..].iter().take_while(|e| width(e) >= 0.9 * widest).flatten() {
+        left = left.min(e.0);
+        right = right.max(e.1);
+    }
+    if left > right {
+        let (a, b) = ext[top]?;
+        (left, right) = (a, b);
+    }
+    // The sides: least squares of width against row over the rows at 20–80% of the widest,
+    // below the top edge.
+    let pts: Vec<(f64, f64)> = ext
+        .iter()
+        .enumerate()
+        .skip(top)
+        .map(|(r, e)| (r as f64, width(e)))
+        .filter(|&(_, wd)| wd >= 0.2 * widest && wd <= 0.8 * widest)
+        .collect();
+    let last = ext.iter().rposition(|e| width(e) >= 0.2 * widest)? as f64 + 0.5;
+    let vertex = if pts.len() >= 3 {
+        let m = pts.len() as f64;
+        let (sx, sy) = pts.iter().fold((0.0, 0.0), |(a, b), &(x, y)| (a + x, b + y));
+        let (mx, my) = (sx / m, sy / m);
+        let (sxy, sxx) = pts.iter().fold((0.0, 0.0), |(a, b), &(x, y)| {
+            (a + (x - mx) * (y - my), b + (x - mx) * (x - mx))
+        });
+        let slope = sxy / sxx.max(1e-12);
+        if slope < 0.0 {
+            // width = my + slope·(row − mx) = 0
+            mx - my / slope
+        } else {
+            last
+        }
+    } else {
+        last
+    };
+    Some([
+        left as f64 - 0.5,
+        (y0 + top as i64) as f64 - 0.5,
+        right as f64 + 0.5,
+        y0 as f64 + vertex,
     ])
 }
 
@@ -186,5 +260,54 @@ mod tests {
         let img = RgbImage::from_pixel(40, 40, Rgb([120, 120, 120]));
         assert!(outline(&img, ObjectClass::StopSign, [10.5, 10.5, 30.5, 30.5]).is_none());
         assert!(outline(&img, ObjectClass::Obstacle, [10.5, 10.5, 30.5, 30.5]).is_none());
+    }
+    /// An inverted triangle (top edge 40 px at y = 10, vertex at y = 44.64, so √3/2 of the
+    /// width) with a red border 4 px thick, supersampled 4×4 as a camera blurs it: the top edge
+    /// and width to half a pixel, the vertex to a pixel, where counting the red rows (the stop
+    /// sign's rule) stops 3 px short of it.
+    #[test]
+    fn a_yield_triangle_is_outlined_down_to_its_vertex() {
+        let (left, top, w) = (20.0f64, 10.0f64, 40.0f64);
+        let h = w * 0.75f64.sqrt();
+        let mut img = RgbImage::from_pixel(80, 70, Rgb([150, 150, 150]));
+        for y in 0..70u32 {
+            for x in 0..80u32 {
+                let (mut red_n, mut white_n) = (0, 0);
+                for sy in 0..4 {
+                    for sx in 0..4 {
+                        // pixel centres at integers: the pixel covers [x - 0.5, x + 0.5)
+                        let (px, py) = (
+                            x as f64 - 0.5 + (sx as f64 + 0.5) / 4.0,
+                            y as f64 - 0.5 + (sy as f64 + 0.5) / 4.0,
+                        );
+                        let yy = py - top;
+                        let half = (h - yy) / h * w / 2.0;
+                        let dx = (px - (left + w / 2.0)).abs();
+                        if yy < 0.0 || yy > h || dx > half {
+                            continue;
+                        }
+                        // distance inside the nearest edge
+                        let m = yy.min((half - dx) * 0.75f64.sqrt());
+                        if m < 4.0 {
+                            red_n += 1
+                        } else {
+                            white_n += 1
+                        }
+                    }
+                }
+                let grey = 16 - red_n - white_n;
+                let c = |r: u32, wv: u32, g: u32| ((r * red_n + wv * white_n + g * grey) / 16) as u8;
+                img.put_pixel(x, y, Rgb([c(200, 235, 150), c(25, 235, 150), c(30, 232, 150)]));
+            }
+        }
+        let o = outline(&img, ObjectClass::YieldSign, [17.5, 7.5, 62.5, 47.5]).unwrap();
+        let truth = [left, top, left + w, top + h];
+        for k in 0..3 {
+            assert!((o[k] - truth[k]).abs() <= 0.5, "edge {k}: {o:?} against {truth:?}");
+        }
+        assert!((o[3] - truth[3]).abs() <= 1.0, "vertex: {o:?} against {truth:?}");
+        // The stop sign's rule on the same picture: the vertex's rows are cut off.
+        let square = outline(&img, ObjectClass::StopSign, [17.5, 7.5, 62.5, 47.5]).unwrap();
+        assert!(square[3] < truth[3] - 2.0, "{square:?}");
     }
 }
