@@ -113,7 +113,7 @@ if [ ! -f "$OUT/opencv/cascade.xml" ]; then
     -numPos "$NPOS" -numNeg "$NNEG" -numStages 20 -minHitRate 0.995 -maxFalseAlarmRate 0.5 \
     -w "$W" -h "$H" -featureType HAAR -mode BASIC -numThreads 1 > "$OUT/opencv.log" 2>&1)
 fi
-grep -E '^Training until now|^NEG count|^END>|Required leaf|cascade|stages' "$OUT/opencv.log" | tail -4
+tr '\r' '\n' < "$OUT/opencv.log" | grep -E '^Training until now|^Required leaf' | tail -1
 
 echo "== evaluate (scale factor 1.1, no size limit, IoU 0.5)"
 for t in rccar opencv; do
