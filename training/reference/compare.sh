@@ -1,0 +1,124 @@
+#!/usr/bin/env bash
+# rccar-train against opencv_traincascade on the same real photos (issue 28): both trainers get
+# the same positives (the same pixels) and the same backgrounds, each with the settings its own
+# documentation recommends, and both cascades are scored by the same evaluator with the same
+# detection parameters on the same unseen frames. Prints a table (docs/training.md, "Against
+# opencv_traincascade, measured").
+#
+#   bash training/reference/compare.sh OUT SETS TRAINCASCADE
+#
+# OUT           a working folder (outside the repository); a step whose output is already
+#               there is not run again (delete OUT to start over)
+# SETS          DeepPiCar's lists, `OUT/sets` of training/realsets/deeppicar.sh
+# TRAINCASCADE  an opencv_traincascade binary (OpenCV 3.4's apps/traincascade, or 4.x's copy of
+#               it; not built or shipped by this repository)
+# Env: RCCAR_TRAIN (default target/release/rccar-train), RCCAR_PYTHON (default .venv/bin/python,
+# needs cv2 for the .vec), PHOTOS (default /usr/share/doc/opencv-doc/examples/data, Debian's
+# opencv-doc), NICE (default 10).
+#
+# The material (the stop sign at the car's 320x240, `SETS/320`):
+#   the 91 DeepPiCar photos sorted by name, every other one: even places train, odd ones test;
+#   positives: the stop-sign boxes of the training photos; `rccar-train distort` (its defaults:
+#     3000 samples, window from the boxes) makes more from them; the distorted samples and the
+#     boxes themselves are the positives of both trainers (rccar-train reads the info.dat files,
+#     opencv_traincascade a .vec of the same crops: vec.py);
+#   backgrounds (training): the first half of DeepPiCar's 219 track frames without signs, every
+#     other one of OpenCV's sample photos (PHOTOS, from the first), the training photos without
+#     a stop sign;
+#   test: the test photos (with their stop signs; those without count as negative frames), the
+#     second half of the track frames, the other OpenCV sample photos.
+# rccar-train: `train` with its defaults (min hit rate 0.998, 2000 negatives per stage,
+# mirrored negatives, 20 stages), --threads 1, no --holdout (no sign frames to spare for the
+# early stop: it runs the 20 stages, as opencv_traincascade does).
+# opencv_traincascade: OpenCV's usual -numStages 20 -minHitRate 0.995 -maxFalseAlarmRate 0.5,
+# HAAR BASIC, GAB, stumps, -numPos 0.9 x the samples in the .vec, -numNeg 2 x numPos,
+# -w/-h the same window, -numThreads 1.
+# Both: `rccar-train evaluate` (scale factor 1.1, minNeighbors 0-10, no size limit, IoU 0.5).
+# Each training takes up to about 10 minutes at one thread; /usr/bin/time -v gives time and
+# peak memory. Not run by the test suite or CI (it needs the fetched photos and an OpenCV
+# binary this repository does not build).
+set -euo pipefail
+OUT=${1:?usage: compare.sh OUT SETS TRAINCASCADE}
+SETS=$(realpath "${2:?usage: compare.sh OUT SETS TRAINCASCADE}")
+TC=$(realpath "${3:?usage: compare.sh OUT SETS TRAINCASCADE}")
+HERE=$(cd "$(dirname "$0")" && pwd)
+ROOT=$(cd "$HERE/../.." && pwd)
+RT=$(realpath "${RCCAR_TRAIN:-$ROOT/target/release/rccar-train}")
+PY=${RCCAR_PYTHON:-$ROOT/.venv/bin/python}
+[ -x "$PY" ] || PY=python3
+PHOTOS=${PHOTOS:-/usr/share/doc/opencv-doc/examples/data}
+NICE=${NICE:-10}
+S320="$SETS/320"
+[ -f "$S320/stop_sign.info.dat" ] || { echo "$S320: no photo lists; run training/realsets/deeppicar.sh first" >&2; exit 2; }
+[ -x "$TC" ] || { echo "$TC: not an executable" >&2; exit 2; }
+mkdir -p "$OUT"
+OUT=$(realpath "$OUT")
+L="$OUT/lists"
+mkdir -p "$L"
+
+echo "== lists ($L)"
+# Absolute paths everywhere: rccar-train reads paths relative to the list, opencv_traincascade
+# relative to its working folder.
+sort "$S320/stop_sign.info.dat" | awk -v d="$S320" -v L="$L" '{ $1 = d "/" $1;
+  if ((NR - 1) % 2 == 0) { if ($2 > 0) print > (L "/train_pos.dat"); else print $1 > (L "/train_nosign.txt") }
+  else print > (L "/test_photos.dat") }'
+touch "$L/train_nosign.txt"
+sort "$S320/track.bg.txt" | awk -v d="$S320" '{ print d "/" $1 }' > "$L/track_all.txt"
+n=$(wc -l < "$L/track_all.txt")
+head -n $(( (n + 1) / 2 )) "$L/track_all.txt" > "$L/train_track.txt"
+tail -n +$(( (n + 1) / 2 + 1 )) "$L/track_all.txt" > "$L/test_track.txt"
+find "$PHOTOS" -maxdepth 1 -type f \( -iname '*.jpg' -o -iname '*.jpeg' -o -iname '*.png' \) | LC_ALL=C sort > "$L/photos_all.txt"
+awk 'NR % 2 == 1' "$L/photos_all.txt" > "$L/train_photos.txt"
+# evaluate takes frames of at most 8 megapixels: that leaves out chessboard.png (13 MP).
+awk 'NR % 2 == 0' "$L/photos_all.txt" | "$PY" -c '
+import sys, cv2
+for l in sys.stdin:
+    im = cv2.imread(l.strip(), cv2.IMREAD_GRAYSCALE)
+    if im is not None and im.size <= 8_000_000:
+        print(l.strip())
+    else:
+        print("test photos: left out (over 8 megapixels or unreadable):", l.strip(), file=sys.stderr)
+' > "$L/test_photos_bg.txt"
+cat "$L/train_track.txt" "$L/train_photos.txt" "$L/train_nosign.txt" > "$L/train_bg.txt"
+printf '%-34s %s\n' \
+  "training photos with stop signs" "$(wc -l < "$L/train_pos.dat") ($(awk '{n+=$2} END{print n}' "$L/train_pos.dat") signs)" \
+  "training backgrounds" "$(wc -l < "$L/train_bg.txt") ($(wc -l < "$L/train_track.txt") track, $(wc -l < "$L/train_photos.txt") OpenCV photos, $(wc -l < "$L/train_nosign.txt") DeepPiCar photos without a stop sign)" \
+  "test photos" "$(wc -l < "$L/test_photos.dat") ($(awk '$2>0' "$L/test_photos.dat" | wc -l) with $(awk '{n+=$2} END{print n}' "$L/test_photos.dat") signs)" \
+  "test frames without the sign" "$(( $(awk '$2==0' "$L/test_photos.dat" | wc -l) + $(wc -l < "$L/test_track.txt") + $(wc -l < "$L/test_photos_bg.txt") )) ($(wc -l < "$L/test_track.txt") track, $(wc -l < "$L/test_photos_bg.txt") OpenCV photos, the rest DeepPiCar photos)"
+
+echo "== positives: rccar-train distort (its defaults)"
+if [ ! -f "$OUT/distorted/info.dat" ]; then
+  nice -n "$NICE" "$RT" distort --templates-from-info "$L/train_pos.dat" --bg "$L/train_bg.txt" --out "$OUT/distorted" > "$OUT/distort.log"
+fi
+WIN=$(grep -o -m1 '[0-9]\+x[0-9]\+' "$OUT/distort.log" || true)
+[ -n "$WIN" ] || { echo "no window in $OUT/distort.log" >&2; exit 1; }
+W=${WIN%x*} H=${WIN#*x}
+echo "window ${W}x${H}"
+[ -f "$OUT/pos.vec" ] || "$PY" "$HERE/vec.py" "$OUT/pos.vec" "${W}x${H}" "$OUT/distorted/info.dat" "$L/train_pos.dat" | tee "$OUT/vec.log"
+NVEC=$("$PY" -c "import struct,sys; print(struct.unpack('<i', open(sys.argv[1],'rb').read(4))[0])" "$OUT/pos.vec")
+
+echo "== rccar-train train (--threads 1)"
+if [ ! -f "$OUT/rccar/cascade.xml" ]; then
+  nice -n "$NICE" /usr/bin/time -v -o "$OUT/rccar.time" "$RT" train --pos "$OUT/distorted/info.dat" "$L/train_pos.dat" \
+    --bg "$L/train_bg.txt" --threads 1 --out "$OUT/rccar" > "$OUT/rccar.log" 2> "$OUT/rccar.err"
+fi
+cat "$OUT/rccar.log"
+
+echo "== opencv_traincascade (-numThreads 1)"
+NPOS=$(( NVEC * 9 / 10 ))
+NNEG=$(( 2 * NPOS ))
+if [ ! -f "$OUT/opencv/cascade.xml" ]; then
+  mkdir -p "$OUT/opencv"
+  (cd "$OUT" && nice -n "$NICE" /usr/bin/time -v -o "$OUT/opencv.time" "$TC" -data opencv -vec pos.vec -bg "$L/train_bg.txt" \
+    -numPos "$NPOS" -numNeg "$NNEG" -numStages 20 -minHitRate 0.995 -maxFalseAlarmRate 0.5 \
+    -w "$W" -h "$H" -featureType HAAR -mode BASIC -numThreads 1 > "$OUT/opencv.log" 2>&1)
+fi
+tr '\r' '\n' < "$OUT/opencv.log" | grep -E '^Training until now|^Required leaf' | tail -1
+
+echo "== evaluate (scale factor 1.1, no size limit, IoU 0.5)"
+for t in rccar opencv; do
+  "$RT" evaluate --cascade "$OUT/$t/cascade.xml" --out "$OUT/eval-$t" \
+    --info "$L/test_photos.dat" "$L/test_track.txt" "$L/test_photos_bg.txt" > "$OUT/eval-$t.log"
+done
+
+"$PY" "$HERE/table.py" "$OUT" "$W" "$H" "$NVEC" "$NPOS" "$NNEG"
