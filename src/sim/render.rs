@@ -146,6 +146,11 @@ pub struct ObjectBox {
     pub clipped: bool,
 }
 
+/// Image rows per task when step 2 of [`Renderer::render_rows`] is spread over threads: a
+/// few rows, so two cores share a frame's 240 rows evenly without a task per row.
+#[cfg(feature = "parallel")]
+const ROWS_PER_TASK: usize = 8;
+
 /// Where one frame is seen from, shared by the steps of [`Renderer::render_rows`].
 struct View {
     /// The camera's optical centre, world metres.
@@ -176,10 +181,6 @@ pub struct Renderer {
     prim_rects: Vec<[f64; 4]>,
     /// Scratch: the solids a pixel is cast against.
     active: Vec<Prim>,
-    /// Scratch: one row's lighting, per pixel.
-    light: Vec<f32>,
-    /// Scratch: one row's texture (faded), per pixel.
-    tex: Vec<f32>,
     /// (sin, cos) of the camera's tilt.
     tilt_sc: (f64, f64),
     /// Shadows and bright patches on the floor, and dusk's colour (none at light level 0).
@@ -270,8 +271,6 @@ impl Renderer {
             prims: Vec::new(),
             prim_rects: Vec::new(),
             active: Vec::new(),
-            light: Vec::new(),
-            tex: Vec::new(),
             tilt_sc: cam.tilt_rad.sin_cos(),
             light_map,
             tint,
@@ -318,9 +317,31 @@ impl Renderer {
             gain,
             room_gain: gain * self.opts.light.dim(),
         };
-        // 2. Floor, walls, ceiling, row by row.
-        for v in rows.clone() {
-            self.render_row(&view, v, img);
+        // 2. Floor, walls, ceiling, row by row: each row depends only on the view, so the
+        // rows are spread over threads (feature `parallel`) with a scratch pair per thread;
+        // every pixel comes out the same as on one thread.
+        let w = cam.width as usize;
+        let band = &mut img.as_mut()[3 * w * rows.start..3 * w * rows.end];
+        let first = rows.start;
+        let this = &*self;
+        #[cfg(feature = "parallel")]
+        {
+            use rayon::prelude::*;
+            band.par_chunks_mut(3 * w * ROWS_PER_TASK).enumerate().for_each_init(
+                || (vec![0f32; w], vec![0f32; w]),
+                |(light, tex), (i, chunk)| {
+                    for (j, out) in chunk.chunks_exact_mut(3 * w).enumerate() {
+                        this.render_row(&view, first + i * ROWS_PER_TASK + j, out, light, tex);
+                    }
+                },
+            );
+        }
+        #[cfg(not(feature = "parallel"))]
+        {
+            let (mut light, mut tex) = (vec![0f32; w], vec![0f32; w]);
+            for (j, out) in band.chunks_exact_mut(3 * w).enumerate() {
+                this.render_row(&view, first + j, out, &mut light, &mut tex);
+            }
         }
         if let Some(t) = &self.tint {
             let w = cam.width as usize;
@@ -334,15 +355,14 @@ impl Renderer {
 
     /// Step 2 of [`Renderer::render_rows`] for image row `v`: floor, walls or ceiling. The
     /// floor point and its footprint move by a fixed step per column.
-    fn render_row(&mut self, view: &View, v: usize, img: &mut RgbImage) {
+    /// `out` is the row's pixels (RGB); `light_buf` and `tex_buf` are scratch.
+    fn render_row(&self, view: &View, v: usize, out: &mut [u8], light_buf: &mut Vec<f32>, tex_buf: &mut Vec<f32>) {
         let w = self.mount.camera.width as usize;
         let scene = &*self.scene;
         let (o, (sy, cy), lens, gain) = (view.o, view.yaw, view.lens, view.room_gain);
-        let buf: &mut [u8] = img.as_mut();
         let rot = |x: f64, y: f64| -> [f64; 2] { [cy * x - sy * y, sy * x + cy * y] };
         let row = self.rows[v];
         let vig = &self.vig[v * w..(v + 1) * w];
-        let out = &mut buf[3 * v * w..3 * (v + 1) * w];
         let g0 = rot(row.g0[0], row.g0[1]);
         let dg = rot(row.dg[0], row.dg[1]);
         let ju = dg;
@@ -362,13 +382,13 @@ impl Renderer {
             // Samples, then per-pixel values by linear interpolation (simple loops the
             // compiler vectorises; no division per pixel).
             match &self.light_map {
-                None => lerp_fill(&mut self.light, w, LIGHT_STEP, |u| scene.illumination(at(u))),
-                Some(m) => lerp_fill(&mut self.light, w, LIGHT_STEP, |u| {
+                None => lerp_fill(light_buf, w, LIGHT_STEP, |u| scene.illumination(at(u))),
+                Some(m) => lerp_fill(light_buf, w, LIGHT_STEP, |u| {
                     scene.illumination(at(u)) * m.at(at(u))
                 }),
             }
             if textured {
-                lerp_fill(&mut self.tex, w, tstep, |u| scene.texture_at(at(u)) * row.fade);
+                lerp_fill(tex_buf, w, tstep, |u| scene.texture_at(at(u)) * row.fade);
             }
         }
         // Columns before `probe_from` are known to be clear of every line (see
@@ -382,7 +402,7 @@ impl Renderer {
                 // A run of pixels known to be clear of every line: bare floor only (the
                 // same arithmetic as `floor_color` without a probe), no positions needed.
                 let end = probe_from.min(w);
-                let (light, tex) = (&self.light[u..end], &self.tex[..]);
+                let (light, tex) = (&light_buf[u..end], &tex_buf[..]);
                 for (j, ((px, &vg), &l)) in out[3 * u..3 * end]
                     .chunks_exact_mut(3)
                     .zip(&vig[u..end])
@@ -409,8 +429,8 @@ impl Renderer {
                     size: row.size,
                     fade: row.fade,
                 };
-                let light = self.light[u];
-                let tex = if textured { self.tex[u] } else { 0.0 };
+                let light = light_buf[u];
+                let tex = if textured { tex_buf[u] } else { 0.0 };
                 let probe = u >= probe_from;
                 let (c, clear) = scene.floor_color(p, &fp, light, tex, probe);
                 if probe && clear > row.size {
