@@ -146,10 +146,13 @@ pub struct ObjectBox {
     pub clipped: bool,
 }
 
-/// Image rows per task when step 2 of [`Renderer::render_rows`] is spread over threads: a
-/// few rows, so two cores share a frame's 240 rows evenly without a task per row.
-#[cfg(feature = "parallel")]
+/// Image rows per task of step 2 of [`Renderer::render_rows`] (spread over threads with
+/// feature `parallel`): a few rows, so two cores share a frame's 240 rows evenly without a task
+/// per row.
 const ROWS_PER_TASK: usize = 8;
+
+/// One task's scratch of step 2: a row's lighting and texture, per pixel.
+type RowScratch = (Vec<f32>, Vec<f32>);
 
 /// Where one frame is seen from, shared by the steps of [`Renderer::render_rows`].
 struct View {
@@ -177,6 +180,9 @@ pub struct Renderer {
     /// Camera noise, one signed value per channel, reused at a random offset per frame.
     noise: Vec<i8>,
     prims: Vec<Prim>,
+    /// Scratch of step 2, one (lighting, texture) pair of row buffers per task of
+    /// [`ROWS_PER_TASK`] rows, kept between frames.
+    scratch: Vec<RowScratch>,
     /// Scratch: each solid's pixel rectangle [u0, v0, u1, v1] (see the object pass).
     prim_rects: Vec<[f64; 4]>,
     /// Scratch: the solids a pixel is cast against.
@@ -269,6 +275,7 @@ impl Renderer {
             vig,
             noise,
             prims: Vec::new(),
+            scratch: Vec::new(),
             prim_rects: Vec::new(),
             active: Vec::new(),
             tilt_sc: cam.tilt_rad.sin_cos(),
@@ -318,31 +325,37 @@ impl Renderer {
             room_gain: gain * self.opts.light.dim(),
         };
         // 2. Floor, walls, ceiling, row by row: each row depends only on the view, so the
-        // rows are spread over threads (feature `parallel`) with a scratch pair per thread;
+        // rows go in tasks of ROWS_PER_TASK, spread over threads with feature `parallel`, each
+        // task with its own scratch pair, kept between frames (no allocation per frame);
         // every pixel comes out the same as on one thread.
         let w = cam.width as usize;
         let band = &mut img.as_mut()[3 * w * rows.start..3 * w * rows.end];
         let first = rows.start;
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let tasks = rows.len().div_ceil(ROWS_PER_TASK);
+        if scratch.len() < tasks {
+            scratch.resize_with(tasks, Default::default);
+        }
         let this = &*self;
+        let task = |(i, (chunk, (light, tex))): (usize, (&mut [u8], &mut RowScratch))| {
+            for (j, out) in chunk.chunks_exact_mut(3 * w).enumerate() {
+                this.render_row(&view, first + i * ROWS_PER_TASK + j, out, light, tex);
+            }
+        };
         #[cfg(feature = "parallel")]
         {
             use rayon::prelude::*;
-            band.par_chunks_mut(3 * w * ROWS_PER_TASK).enumerate().for_each_init(
-                || (vec![0f32; w], vec![0f32; w]),
-                |(light, tex), (i, chunk)| {
-                    for (j, out) in chunk.chunks_exact_mut(3 * w).enumerate() {
-                        this.render_row(&view, first + i * ROWS_PER_TASK + j, out, light, tex);
-                    }
-                },
-            );
+            band.par_chunks_mut(3 * w * ROWS_PER_TASK)
+                .zip(scratch.par_iter_mut())
+                .enumerate()
+                .for_each(task);
         }
         #[cfg(not(feature = "parallel"))]
-        {
-            let (mut light, mut tex) = (vec![0f32; w], vec![0f32; w]);
-            for (j, out) in band.chunks_exact_mut(3 * w).enumerate() {
-                this.render_row(&view, first + j, out, &mut light, &mut tex);
-            }
-        }
+        band.chunks_mut(3 * w * ROWS_PER_TASK)
+            .zip(scratch.iter_mut())
+            .enumerate()
+            .for_each(task);
+        self.scratch = scratch;
         if let Some(t) = &self.tint {
             let w = cam.width as usize;
             t.apply(&mut img.as_mut()[3 * w * rows.start..3 * w * rows.end]);
@@ -383,9 +396,7 @@ impl Renderer {
             // compiler vectorises; no division per pixel).
             match &self.light_map {
                 None => lerp_fill(light_buf, w, LIGHT_STEP, |u| scene.illumination(at(u))),
-                Some(m) => lerp_fill(light_buf, w, LIGHT_STEP, |u| {
-                    scene.illumination(at(u)) * m.at(at(u))
-                }),
+                Some(m) => lerp_fill(light_buf, w, LIGHT_STEP, |u| scene.illumination(at(u)) * m.at(at(u))),
             }
             if textured {
                 lerp_fill(tex_buf, w, tstep, |u| scene.texture_at(at(u)) * row.fade);
