@@ -92,6 +92,8 @@ num() { grep -oE "$2 *-?[0-9.]+" <<< "$1" | head -1 | grep -oE -- '-?[0-9.]+$'; 
 # until_ok COMMAND... — retry COMMAND every 0.1 s until it succeeds (at most 60 s)
 until_ok() { for _ in $(seq 600); do "$@" 2>/dev/null && return 0; sleep 0.1; done; echo "make.sh: timed out: $*" >&2; return 1; }
 SIM="rccar sim --no-local --no-timing --set detect.enabled=false"
+# chatter (labs 13, 16): RMS of the frame-to-frame change of the steering command of a telemetry.jsonl
+CHAT='[.[].steer] as $s | [range(1; $s | length) | ($s[.] - $s[. - 1]) | . * .] | (add / length) | sqrt'
 
 # Whole key, KEY_JOBS labs at a time (default 2; 1 = one after the other): each lab runs as its
 # own `LABS=NN make.sh` in a folder of its own (the labs share no files), the longest first, and
@@ -446,7 +448,6 @@ fi
 # chatter: RMS of the frame-to-frame change of the steering command (steer units per frame),
 # the same measure as sweep.csv's steer_diff_rms
 if want 13; then
-  CHAT='[.[].steer] as $s | [range(1; $s | length) | ($s[.] - $s[. - 1]) | . * .] | (add / length) | sqrt'
   for m in pid pure_pursuit; do
     C="rccar sim --laps 3 --no-timing --set steering.method=$m"
     rccar sim --no-local --laps 3 --no-timing --set steering.method=$m -o l13_$m >/dev/null
@@ -490,7 +491,6 @@ fi
 
 # ---- lab 16: the learned pilot against the classical one ----------------------------------------------------
 if want 16; then
-  CHAT='[.[].steer] as $s | [range(1; $s | length) | ($s[.] - $s[. - 1]) | . * .] | (add / length) | sqrt'
   for m in pid learned; do
     C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set steering.method=$m"
     $SIM --laps 1 --set steering.method=$m -o l16_$m >/dev/null
