@@ -2,7 +2,7 @@
 //! added or replaced; every other line, comment and table of the student's file is kept
 //! (toml_edit keeps the document's formatting). Only keys of the parameter tables
 //! ([`crate::control::catalog::all`]) and the set-up page's keys ([`SETUP_KEYS`]: the ROI's
-//! four corners, the lane threshold and its mode) are written; a key new to the file gets its
+//! four corners, the lane threshold, its mode and the adaptive threshold's C) are written; a key new to the file gets its
 //! unit and allowed range as a comment on its line.
 
 use serde::Serialize;
@@ -15,7 +15,8 @@ use toml_edit::{value, Array, DocumentMut, Item, Table};
 pub enum Saved {
     /// A number (the tuning tables' keys).
     Number(f64),
-    /// A whole number (`lane.threshold`, a grey level the loader reads as an integer).
+    /// A whole number (`lane.threshold`, `lane.adaptive_c`: grey levels the loader reads as
+    /// integers).
     Int(i64),
     /// Four corners, pixels (`warp.src`).
     Points([[f64; 2]; 4]),
@@ -42,13 +43,17 @@ impl std::fmt::Display for Saved {
 
 /// The set-up page's keys (issue 26, "set-up by clicking"), with the comment a key new to the
 /// file gets.
-pub const SETUP_KEYS: [(&str, &str); 3] = [
+pub const SETUP_KEYS: [(&str, &str); 4] = [
     (
         "warp.src",
         "ROI corners, camera pixels: top-left, top-right, bottom-right, bottom-left (clicked on the dashboard's /setup page)",
     ),
     ("lane.threshold", "grey level, allowed 0 ..= 255"),
-    ("lane.threshold_mode", "\"fixed\" or \"otsu\""),
+    ("lane.threshold_mode", "\"adaptive\", \"fixed\" or \"otsu\""),
+    (
+        "lane.adaptive_c",
+        "grey levels, allowed -255 ..= 255: line = brighter than the local mean minus this",
+    ),
 ];
 
 /// The TOML value of `v`, or why `key` cannot take it.
@@ -61,7 +66,7 @@ fn toml_value(key: &str, v: &Saved) -> Result<(toml_edit::Value, String), String
         return Ok((toml_edit::Value::from(*n), format!("{}, allowed {range}", info.unit)));
     }
     let Some((_, comment)) = SETUP_KEYS.iter().find(|(k, _)| *k == key) else {
-        return Err("not a tunable parameter (src/control/params.rs) nor a set-up key (warp.src, lane.threshold, lane.threshold_mode)".into());
+        return Err("not a tunable parameter (src/control/params.rs) nor a set-up key (warp.src, lane.threshold, lane.threshold_mode, lane.adaptive_c)".into());
     };
     let value = match (key, v) {
         ("warp.src", Saved::Points(p)) => {
@@ -71,7 +76,7 @@ fn toml_value(key: &str, v: &Saved) -> Result<(toml_edit::Value, String), String
             }
             toml_edit::Value::Array(a)
         }
-        ("lane.threshold", Saved::Int(n)) => toml_edit::Value::from(*n),
+        ("lane.threshold" | "lane.adaptive_c", Saved::Int(n)) => toml_edit::Value::from(*n),
         ("lane.threshold_mode", Saved::Text(t)) => toml_edit::Value::from(t.as_str()),
         _ => return Err(format!("the value {v} is not of this key's kind")),
     };
@@ -222,8 +227,8 @@ mod tests {
         }
     }
 
-    /// The set-up page's keys: the ROI as an array of four [x, y] pairs, the threshold as a
-    /// whole number, the mode as a string; the loader reads the file back to the same values,
+    /// The set-up page's keys: the ROI as an array of four [x, y] pairs, the threshold and
+    /// the adaptive C as whole numbers, the mode as a string; the loader reads the file back to the same values,
     /// and a comment on an existing line stays.
     #[test]
     fn the_setup_keys_are_written_so_that_the_loader_reads_them_back() {
@@ -232,6 +237,7 @@ mod tests {
             ("warp.src".to_string(), Saved::Points(src)),
             ("lane.threshold".to_string(), Saved::Int(150)),
             ("lane.threshold_mode".to_string(), Saved::Text("otsu".into())),
+            ("lane.adaptive_c".to_string(), Saved::Int(-8)),
             ("steering.kp".to_string(), 1.2.into()),
         ];
         let text = "# mine\n[lane]\nthreshold = 170 # my tape\n";
@@ -250,6 +256,7 @@ mod tests {
         assert_eq!(cfg.warp.src, src);
         assert_eq!(cfg.lane.threshold, 150);
         assert_eq!(cfg.lane.threshold_mode, crate::config::ThresholdMode::Otsu);
+        assert_eq!(cfg.lane.adaptive_c, -8);
         assert_eq!(cfg.steering.kp, 1.2);
         // Written again (a second save), the line is replaced, not doubled.
         let again = set_keys(&out, &keys[..1], "l.toml").unwrap();

@@ -110,7 +110,7 @@ pub const CORNERS: [&str; 4] = ["top-left", "top-right", "bottom-right", "bottom
 
 /// `POST /api/setup/preview` and `/api/setup/apply` body (issue 26, set-up by clicking): the
 /// ROI's four corners in frame pixels, in `warp.src` order ([`CORNERS`]), and optionally the
-/// lane threshold and its mode (absent: the values in force).
+/// lane threshold, its mode and the adaptive threshold's C (absent: the values in force).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SetupRequest {
@@ -119,17 +119,21 @@ pub struct SetupRequest {
     /// `lane.threshold`, a grey level 0..=255.
     #[serde(default)]
     pub threshold: Option<f64>,
-    /// `lane.threshold_mode`: `fixed` or `otsu`.
+    /// `lane.threshold_mode`: `fixed`, `otsu` or `adaptive`.
     #[serde(default)]
     pub threshold_mode: Option<String>,
+    /// `lane.adaptive_c`, whole grey levels −255..=255 (the adaptive threshold's C: a pixel
+    /// is line when brighter than its square's mean minus C).
+    #[serde(default)]
+    pub adaptive_c: Option<f64>,
 }
 
 /// Checks a set-up request against the frame (every corner inside it, pixel centres
 /// `0 ..= width − 1`, `0 ..= height − 1`), the homography (it must exist: no three corners on
 /// one line, a convex quadrilateral in order) and the configuration's own checks (far edge
 /// above the near edge, not mirrored, the steering method still builds). Corners are kept to
-/// 1/100 pixel. Returns the configuration with `warp.src`, `lane.threshold` and
-/// `lane.threshold_mode` set; the error names the corner or the key and what is wrong.
+/// 1/100 pixel. Returns the configuration with `warp.src`, `lane.threshold`,
+/// `lane.threshold_mode` and `lane.adaptive_c` set; the error names the corner or the key and what is wrong.
 pub fn validate_setup(cfg: &Config, req: &SetupRequest) -> Result<Config, ControlError> {
     let (w, h) = (cfg.camera.width, cfg.camera.height);
     let mut src = req.src;
@@ -164,6 +168,14 @@ pub fn validate_setup(cfg: &Config, req: &SetupRequest) -> Result<Config, Contro
             )));
         }
         new.lane.threshold = t as u8;
+    }
+    if let Some(c) = req.adaptive_c {
+        if !(c.is_finite() && c.fract() == 0.0 && (-255.0..=255.0).contains(&c)) {
+            return Err(ControlError::OutOfRange(format!(
+                "lane.adaptive_c = {c} is out of range (allowed: whole grey levels -255 ..= 255)"
+            )));
+        }
+        new.lane.adaptive_c = c as i32;
     }
     if let Some(m) = &req.threshold_mode {
         new.lane.threshold_mode = match m.as_str() {
@@ -458,9 +470,11 @@ mod tests {
             src: cfg.warp.src,
             threshold: Some(150.0),
             threshold_mode: Some("fixed".into()),
+            adaptive_c: Some(-8.0),
         };
         let new = validate_setup(&cfg, &ok).unwrap();
         assert_eq!((new.warp.src, new.lane.threshold), (cfg.warp.src, 150));
+        assert_eq!(new.lane.adaptive_c, -8);
         // Corners kept to 1/100 pixel.
         let mut r = ok.clone();
         r.src[0] = [93.7249, 78.955];
@@ -497,6 +511,11 @@ mod tests {
         assert!(err(&r).contains("lane.threshold = 300"));
         r.threshold = Some(12.5);
         assert!(err(&r).contains("whole grey level"));
+        let mut r = ok.clone();
+        r.adaptive_c = Some(-300.0);
+        assert!(err(&r).contains("lane.adaptive_c = -300"), "{}", err(&r));
+        r.adaptive_c = Some(-2.5);
+        assert!(err(&r).contains("whole grey levels"), "{}", err(&r));
         let mut r = ok;
         r.threshold_mode = Some("auto".into());
         assert!(err(&r).contains("not one of fixed, otsu"));

@@ -292,7 +292,8 @@ mod tests {
             let req = SetupRequest {
                 src: [[90.0, 82.0], [230.0, 82.0], [312.0, 155.0], [6.0, 155.0]],
                 threshold: Some(140.0),
-                threshold_mode: None,
+                threshold_mode: Some("fixed".into()),
+                adaptive_c: None,
             };
             let new = validate_setup(&cfg, &req).unwrap();
             let mut p = Pipeline::new(&cfg).unwrap();

@@ -30,7 +30,9 @@ package), and checks what a student would see and do:
    shipped sample frame frozen; four mouse clicks at config/car.toml's warp.src corners
    (positions from the canvas's rect and the frame size) give the page those corners within
    1 px; dragging a corner changes the bird's-eye preview and dragging it back restores it
-   byte for byte; the threshold slider (arrow keys) changes the binary image; "Apply" sets the
+   byte for byte; the threshold slider (arrow keys; the adaptive C slider off) changes the
+   binary image, and so does the C slider once the mode select is switched to adaptive with
+   the keyboard; "Apply" sets the
    server's warp.src (within 1 px of car.toml's) and threshold, noted in the telemetry of a
    later frame; "Save" writes them into local.toml (its comment kept) and `rccar config check`
    reads them back; on a 390x844 phone with device pixel ratio 3 (mobile emulation, touch
@@ -665,7 +667,9 @@ def _setup_suite(a, wd, dport, cfgdir, tmp, procs):
           bool(back) and _max_err(again, before) < 1e-9 and back[2] == bird0 and back[3] == binary0,
           f"bottom-left {[round(v, 2) for v in again[3]]}")
 
-    # 3. The threshold slider (arrow keys on the focused slider): the binary image changes.
+    # 3a. The shipped fixed threshold's slider (arrow keys on the focused slider): the binary
+    # image changes; the adaptive threshold's C slider is off in this mode.
+    mode0 = wd.js("return [document.getElementById('mode').value, document.getElementById('threshold').disabled, document.getElementById('adc').disabled]")
     wd.js("document.getElementById('threshold').focus()")
     n = wd.js("return window.setup.previews")
     for _ in range(20):
@@ -673,7 +677,27 @@ def _setup_suite(a, wd, dport, cfgdir, tmp, procs):
     thr = int(wd.js("return document.getElementById('threshold').value"))
     pv = wait(lambda: (lambda v: v if v and "level 150" in v[4] else None)(_preview_after(wd, n, 2)), 10, 0.1)
     check("[setup] the threshold slider changes the binary image live",
-          thr == 150 and bool(pv) and pv[3] != binary0, (pv[4] if pv else f"slider at {thr}, no preview at level 150"))
+          mode0 == ["fixed", False, True] and thr == 150 and bool(pv) and pv[3] != binary0,
+          f"mode, threshold slider off, C slider off: {mode0}; " + (pv[4] if pv else f"slider at {thr}, no preview at level 150"))
+    binary150 = pv[3] if pv else binary0
+    # 3b. Mode "adaptive" (keyboard on the select), then its C slider; back to "fixed".
+    wd.js("document.getElementById('mode').focus()")
+    wd.press("\ue015")  # ArrowDown: fixed -> adaptive
+    mode1 = wait(lambda: (lambda m: m if m[0] == "adaptive" else None)(wd.js("return [document.getElementById('mode').value, document.getElementById('threshold').disabled, document.getElementById('adc').disabled]")), 5, 0.1)
+    wd.js("document.getElementById('adc').focus()")
+    n = wd.js("return window.setup.previews")
+    for _ in range(3):
+        wd.press("\ue014")  # ArrowRight
+    adc = int(wd.js("return document.getElementById('adc').value"))
+    pv = wait(lambda: (lambda v: v if v and "level 0" in v[4] and v[3] not in (binary0, binary150) else None)(_preview_after(wd, n, 1)), 10, 0.1)
+    check("[setup] adaptive (chosen with the keyboard): only C's slider is live; C -5 -> -2 changes the binary image",
+          mode1 == ["adaptive", True, False] and adc == -2 and bool(pv),
+          f"mode, threshold slider off, C slider off: {mode1}; C {adc}; " + (pv[4] if pv else "no new preview"))
+    n = wd.js("return window.setup.previews")
+    wd.js("document.getElementById('mode').focus()")
+    wd.press("\ue013")  # ArrowUp: adaptive -> fixed
+    pv = wait(lambda: (lambda v: v if v and "level 150" in v[4] else None)(_preview_after(wd, n, 1)), 10, 0.1)
+    check("[setup] back to fixed: its slider's level 150 again", bool(pv) and pv[3] == binary150, pv[4] if pv else "no preview")
     wd.screenshot(os.path.join(tmp, "setup_3_threshold.png"))
     ms = sorted(wd.js("return window.setup.ms"))
     check("[setup] preview round trip (page -> server's lane stage -> two PNGs -> page)",
@@ -703,7 +727,8 @@ def _setup_suite(a, wd, dport, cfgdir, tmp, procs):
     src_saved = data.get("warp", {}).get("src")
     check("[setup] Save writes warp.src and the threshold into local.toml, its comment kept",
           bool(saved) and text.startswith("# set-up overrides") and src_saved == st["src"]
-          and data.get("lane", {}).get("threshold") == 150 and data.get("lane", {}).get("threshold_mode") == "fixed",
+          and data.get("lane", {}).get("threshold") == 150 and data.get("lane", {}).get("threshold_mode") == "fixed"
+          and data.get("lane", {}).get("adaptive_c") == -2,
           repr(text))
     cc = subprocess.run([a.rccar, "config", "check", "--config", car_toml, "--local", local],
                         cwd=ROOT, capture_output=True, text=True, timeout=60)

@@ -196,6 +196,7 @@ pub async fn state(State(sh): State<Arc<Shared>>, Extension(c): Extension<Caller
             "src": cfg.warp.src,
             "threshold": cfg.lane.threshold,
             "threshold_mode": mode_name(cfg.lane.threshold_mode),
+            "adaptive_c": cfg.lane.adaptive_c,
             "frozen": frozen,
             "file_given": sh.setup_given.as_ref().map(|(_, n)| n.clone()),
             "changed": changed,
@@ -278,13 +279,15 @@ pub async fn apply(
     let mut cfg = sh.cfg.lock().unwrap_or_else(|e| e.into_inner());
     let (old_w, old_l) = (&cfg.warp, &cfg.lane);
     let what = format!(
-        "set-up: warp.src={:?} lane.threshold={} lane.threshold_mode={} (was {:?}, {}, {})",
+        "set-up: warp.src={:?} lane.threshold={} lane.threshold_mode={} lane.adaptive_c={} (was {:?}, {}, {}, {})",
         new.warp.src,
         new.lane.threshold,
         mode_name(new.lane.threshold_mode),
+        new.lane.adaptive_c,
         old_w.src,
         old_l.threshold,
-        mode_name(old_l.threshold_mode)
+        mode_name(old_l.threshold_mode),
+        old_l.adaptive_c
     );
     let queued = sh.tx.send(Control::Lane {
         cfg: Box::new(new.clone()),
@@ -310,6 +313,9 @@ pub async fn apply(
                 Saved::Text(mode_name(new.lane.threshold_mode).into()),
             );
         }
+        if req.adaptive_c.is_some() {
+            ch.insert("lane.adaptive_c".into(), Saved::Int(i64::from(new.lane.adaptive_c)));
+        }
     }
     reply(
         StatusCode::OK,
@@ -317,6 +323,7 @@ pub async fn apply(
             "src": new.warp.src,
             "threshold": new.lane.threshold,
             "threshold_mode": mode_name(new.lane.threshold_mode),
+            "adaptive_c": new.lane.adaptive_c,
         }),
     )
 }
