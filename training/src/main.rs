@@ -728,6 +728,10 @@ struct GenArgs {
     /// random phase per frame, on top of the random exposure (0 = off).
     #[arg(long, default_value_t = 0.0)]
     light_variation: f64,
+    /// Shadows, sun patches and dusk (`[sim] light_level`, docs/light.md): each frame takes
+    /// a level from 0 to this at random (0 = none, 3 = the strongest).
+    #[arg(long, default_value_t = 0)]
+    light_level: u32,
 }
 
 fn parse_wh(s: &str) -> anyhow::Result<(u32, u32)> {
@@ -768,6 +772,7 @@ fn run_gen(a: GenArgs) -> anyhow::Result<ExitCode> {
         window,
         scenes: a.scenes,
         light_variation: a.light_variation,
+        light_level: a.light_level,
     };
     let t = std::time::Instant::now();
     let bar = indicatif::ProgressBar::new(a.count as u64);

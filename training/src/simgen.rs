@@ -190,6 +190,10 @@ pub struct GenOptions {
     /// Peak relative change of the scene's lighting (`[sim] light_variation`), drawn per
     /// frame at a random phase on top of the exposure; 0 = off (the shipped three kinds).
     pub light_variation: f64,
+    /// Strongest `sim.light_level` drawn (docs/light.md: shadows, sun patches, dusk, noise):
+    /// each frame takes a level 0..=this at random, its shadows and patches placed by a
+    /// seed of its own; 0 = off (no random number drawn: the data as before).
+    pub light_level: u32,
 }
 
 impl GenOptions {
@@ -214,6 +218,9 @@ impl GenOptions {
         }
         if !(self.light_variation.is_finite() && (0.0..=0.9).contains(&self.light_variation)) {
             return bad(format!("--light-variation {}: must be 0..=0.9", self.light_variation));
+        }
+        if self.light_level > 3 {
+            return bad(format!("--light-level {}: must be 0..=3", self.light_level));
         }
         if !(1..=MAX_SCENES).contains(&self.scenes) {
             return bad(format!("--scenes {}: must be 1..={MAX_SCENES}", self.scenes));
@@ -380,8 +387,14 @@ impl SimGen {
             light_variation: o.light_variation,
             light_period_s: 10.0,
             seed: rng.next_u64(),
-            // No shadows or dusk (`sim.light_level` 0): the shipped models' data as before.
-            light: rccar::sim::light::LightOptions::off(),
+            // Shadows, patches and dusk of a random level (none at `light_level` 0: then
+            // no number is drawn, and the data is the same as before the option existed).
+            light: if o.light_level > 0 {
+                let level = (rng.next_u64() % u64::from(o.light_level + 1)) as u32;
+                rccar::sim::light::LightOptions::from_level(level, [-1.0; 4], rng.next_u64())
+            } else {
+                rccar::sim::light::LightOptions::off()
+            },
         }
     }
 

@@ -58,7 +58,8 @@ fn gen_refuses_every_size_out_of_bounds() {
         "--track",
         &t,
     ];
-    let cases: [(&[&str], &str); 12] = [
+    let cases: [(&[&str], &str); 13] = [
+        (&["--light-level", "4"], "--light-level 4: must be 0..=3"),
         (&["--window", "257x16"], "--window 257x16: each side must be 3..=256 px"),
         (&["--count", "1000001"], "--count 1000001: must be 1..=1000000"),
         (&["--window", "0x0"], "--window 0x0: each side must be 3..=256 px"),

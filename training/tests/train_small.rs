@@ -16,6 +16,11 @@ fn root() -> PathBuf {
 }
 
 fn gen(dir: &Path, split: Split, count: usize, seed: u64) -> PathBuf {
+    gen_lit(dir, split, count, seed, 0)
+}
+
+/// As [`gen`], each frame at a light level 0..=`light` (docs/light.md).
+fn gen_lit(dir: &Path, split: Split, count: usize, seed: u64, light: u32) -> PathBuf {
     let g = SimGen::new(
         &root().join("config/tracks/default.toml"),
         rccar::config::Config::default(),
@@ -31,8 +36,9 @@ fn gen(dir: &Path, split: Split, count: usize, seed: u64) -> PathBuf {
             window: (16, 16),
             scenes: 4,
             light_variation: 0.0,
+            light_level: light,
         },
-        &dir.join(format!("{split:?}")),
+        &dir.join(format!("{split:?}-{light}")),
         &mut |_| {},
     )
     .expect("generate")
@@ -246,3 +252,44 @@ fn bad_input_is_named_skipped_or_refused() {
     let e = train::train(&opts(2), &pos20, &[bg], &m5, true, &mut NoProgress).unwrap_err();
     assert!(e.to_string().contains("not a stages.json"), "{e}");
 }
+
+/// `gen --light-level 3`: the frames take light levels 0..=3 at random — dusk dims most of
+/// them (at levels 2 and 3 the floor and walls get 70 % and 45 % of the light), so the frames
+/// are darker on the whole than the same seed's frames in steady light, and the level-0 run is
+/// the same as before the option existed (no random number drawn for it).
+#[test]
+fn gen_light_level_darkens_the_frames_and_level_0_draws_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let mean = |list: &Path| {
+        let text = std::fs::read_to_string(list).unwrap();
+        let (mut sum, mut n) = (0.0, 0.0);
+        for line in text.lines() {
+            let path = list.parent().unwrap().join(line.split_whitespace().next().unwrap());
+            let img = image::open(&path).unwrap().to_luma8();
+            sum += img.as_raw().iter().map(|&p| p as f64).sum::<f64>();
+            n += img.as_raw().len() as f64;
+        }
+        sum / n
+    };
+    let steady = gen(dir.path(), Split::Negatives, 12, 7);
+    let lit = gen_lit(dir.path(), Split::Negatives, 12, 7, 3);
+    let (a, b) = (mean(&steady), mean(&lit));
+    eprintln!("mean grey of 12 frames: steady light {a:.1}, light levels 0..=3 {b:.1}");
+    assert!(
+        b < 0.8 * a,
+        "light levels 0..=3: mean grey {b:.1} against {a:.1} in steady light"
+    );
+    // Level 0: the pixels `gen` wrote before the option existed (main at 83e7d19; the renderer
+    // is deterministic): FNV-1a over the last frame's grey pixels. A random number drawn for
+    // the light when it is off would move every later frame's pose.
+    let list = std::fs::read_to_string(&steady).unwrap();
+    let last = list.lines().last().unwrap().split_whitespace().next().unwrap();
+    let img = image::open(steady.parent().unwrap().join(last)).unwrap().to_luma8();
+    let fnv = img.as_raw().iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &p| {
+        (h ^ p as u64).wrapping_mul(0x100_0000_01b3)
+    });
+    assert_eq!(fnv, FNV_LAST_STEADY, "{fnv:#x}");
+}
+
+/// [`gen_light_level_darkens_the_frames_and_level_0_draws_nothing`]'s level-0 frame hash.
+const FNV_LAST_STEADY: u64 = 0xb85f_438b_767c_c9e4;
