@@ -488,6 +488,14 @@ struct PhotosetArgs {
     /// Track file whose scene paints the sign.
     #[arg(long, default_value = "config/tracks/default.toml")]
     track: PathBuf,
+    /// Signs that look printed rather than rendered: colours jittered and washed towards white,
+    /// posts of any grey and width (the shipped stop-sign cascade's photo-like positives).
+    #[arg(long)]
+    printed: bool,
+    /// Traffic lights instead of stop signs: a housing like the simulator's, of a toy's varied
+    /// width, greys and lamp sizes (`--sign-px` is then the housing's height).
+    #[arg(long)]
+    traffic_light: bool,
     /// Output folder (frames/, info.dat, bg.txt, boxes.csv).
     #[arg(long)]
     out: PathBuf,
@@ -527,6 +535,8 @@ fn run_photoset(a: PhotosetArgs) -> anyhow::Result<ExitCode> {
         without: a.without,
         seed: a.seed,
         sign_px: (lo as f64, hi as f64),
+        printed: a.printed,
+        traffic_light: a.traffic_light,
     };
     let set = photogen::generate(&photos, &t, &o, &a.out).map_err(anyhow::Error::msg)?;
     println!(
