@@ -16,6 +16,11 @@
 //! 3. camera: exposure gain 0.6–1.4 and gamma 0.8–1.25, Gaussian blur σ 0.3–1.3 px on half of
 //!    the frames, noise σ 1–6 grey levels, saved as JPEG at quality 60–95.
 //!
+//! With `printed` (`photoset --printed`) the sign looks like a printed or toy sign rather than
+//! the simulator's ([`printed_style`]: a light frame, washed and jittered colours, posts of any
+//! grey and width); with `traffic_light` (`photoset --traffic-light`) the object is a traffic
+//! light ([`traffic_light_style`]). Neither changes the default frames.
+//!
 //! Written: `frames/NNNNNN.jpg`, `info.dat` (frames with a sign), `bg.txt` (frames without),
 //! and `boxes.csv` (both, in the CSV form `rccar-train boxes` reads). Units: pixels.
 
