@@ -253,9 +253,9 @@ fn printed_style(template: &RgbaImage, rng: &mut SplitMix64) -> (RgbaImage, Rgba
         image::Rgba([c(0), c(1), c(2), a])
     });
     for p in t.pixels_mut() {
-        for c in 0..3 {
-            let v = p.0[c] as f64 * gain[c];
-            p.0[c] = (v + (255.0 - v) * wash).round().clamp(0.0, 255.0) as u8;
+        for (ch, g) in p.0.iter_mut().zip(gain) {
+            let v = *ch as f64 * g;
+            *ch = (v + (255.0 - v) * wash).round().clamp(0.0, 255.0) as u8;
         }
     }
     let g = u(rng, 80.0, 240.0) as u8;
