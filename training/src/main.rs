@@ -488,12 +488,14 @@ struct PhotosetArgs {
     /// Track file whose scene paints the sign.
     #[arg(long, default_value = "config/tracks/default.toml")]
     track: PathBuf,
-    /// Signs that look printed rather than rendered: colours jittered and washed towards white,
-    /// posts of any grey and width (the shipped stop-sign cascade's photo-like positives).
+    /// Signs that look printed rather than rendered: a light frame round the face, colours
+    /// jittered and washed towards white, posts of any grey and width
+    /// (training/realsets/photolike.sh's stop-sign candidates).
     #[arg(long)]
     printed: bool,
-    /// Traffic lights instead of stop signs: a housing like the simulator's, of a toy's varied
-    /// width, greys and lamp sizes (`--sign-px` is then the housing's height).
+    /// Traffic lights instead of stop signs: the simulator's three-lamp housing or a toy's
+    /// one-lamp block, of varied width, grey and lamp size (`--sign-px` is then the housing's
+    /// height).
     #[arg(long)]
     traffic_light: bool,
     /// Output folder (frames/, info.dat, bg.txt, boxes.csv).
