@@ -13,7 +13,7 @@
 # OUT   DeepPiCar's set as made by deeppicar.sh (optional)
 # The photos: OpenCV's samples (Debian's opencv-doc) and scikit-image's data photos (the .venv
 # of tests/all.sh's setup), as training/photo_check.sh. About 12-20 min with one thread.
-# Env: THREADS (default 1), PHOTOS_STYLE (photoset's style flag; default --printed for the stop
+# Env: THREADS (default 1), MIN_HIT_RATE (default 0.998, as train_all.sh), PHOTOS_STYLE (photoset's style flag; default --printed for the stop
 # sign, --traffic-light for the light).
 set -euo pipefail
 KIND=${1:?usage: photolike.sh KIND WORK [OUT]}
@@ -41,7 +41,7 @@ $B gen --kind "$KIND" --split eval --count 300 --seed 1001 --light-variation 0 -
 $B photoset $STYLE --half all --seed $PSEED --with-sign 3000 --without 1000 --sign-px $PX --out "$W/ps" --photos "${PHOTOS[@]}"
 # 2. Train: train_all.sh's stage settings, 5000 positives per stage.
 /usr/bin/time -v $B train --out "$W/model" --pos "$W/pos/info.dat" "$W/ps/info.dat" --bg "$W/neg/bg.txt" "$W/ps/bg.txt" \
-  "${WIN[@]}" --num-stages 22 --num-pos 5000 --num-neg 2000 --min-hit-rate 0.998 --max-false-alarm 0.5 \
+  "${WIN[@]}" --num-stages 22 --num-pos 5000 --num-neg 2000 --min-hit-rate "${MIN_HIT_RATE:-0.998}" --max-false-alarm 0.5 \
   --mode basic --boost gentle --mem-mb 400 --seed 1 --threads "${THREADS:-1}" > "$W/train.out" 2> "$W/train.log"
 grep -E "Elapsed|User time|Maximum resident" "$W/train.log"
 # 3. Held-out renders; DeepPiCar's photos.
