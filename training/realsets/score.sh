@@ -14,7 +14,9 @@
 #    (42 with stop signs, 61 signs) that neither detector was built or tuned on (the colour
 #    options were chosen on the `test` and `ver1` folders: tune_colour.py), and on 219 frames of
 #    the track without signs.
-# Env: RCCAR (default target/release/rccar), RCCAR_PYTHON (default .venv/bin/python).
+# Env: RCCAR (default target/release/rccar), RCCAR_PYTHON (default .venv/bin/python),
+# CASCADES (folder of stop_sign.xml / traffic_light.xml; default config/cascades), CLASSES (part 1's
+# classes; default "stop_sign traffic_light"), PART1_ONLY=1 (skip part 2), NO_OPENCV=1 (rccar only).
 # Not run by the test suite or CI (the photos are fetched, never committed).
 set -euo pipefail
 OUT=${1:?usage: score.sh OUT}
@@ -27,7 +29,7 @@ CONF="--config $ROOT/config/car.toml --no-local"
 SETS="$OUT/sets"
 [ -f "$SETS/full/stop_sign.info.dat" ] || { echo "$SETS: no photo lists; run training/realsets/deeppicar.sh $OUT first" >&2; exit 2; }
 OPENCV=()
-"$PY" -c "import cv2" 2>/dev/null && OPENCV=(--opencv) || echo "(no cv2 for $PY: rccar's boxes only)"
+[ -z "${NO_OPENCV:-}" ] && "$PY" -c "import cv2" 2>/dev/null && OPENCV=(--opencv) || echo "(no cv2 for $PY: rccar's boxes only)"
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 # run NAME DIR LIST DETECTOR-FLAGS...: rccar detect on the paths of LIST, from DIR.
@@ -37,8 +39,9 @@ run() {
   (cd "$dir" && awk '{print $1}' "$list" | xargs "$RCCAR" detect --no-annotate "$@") > "$TMP/$name.jsonl"
 }
 echo "== 1. shipped cascades, all 91 photos (IoU >= 0.5)"
-for cls in stop_sign traffic_light; do
-  cas="$ROOT/config/cascades/$cls.xml"
+CAS=$(realpath "${CASCADES:-$ROOT/config/cascades}")
+for cls in ${CLASSES:-stop_sign traffic_light}; do
+  cas="$CAS/$cls.xml"
   for res in full 320; do
     run "$res-$cls" "$SETS/$res" "$cls.info.dat" --cascade "$cas"
     bg=() rc=()
@@ -52,10 +55,11 @@ for cls in stop_sign traffic_light; do
       --rccar "$TMP/$res-$cls.jsonl" "${rc[@]}" "${opencv[@]}"
   done
 done
+[ -n "${PART1_ONLY:-}" ] && exit 0
 echo "== 2. stop sign, cascade vs colour + template, held-out photos (DeepPiCar's train folder)"
 for res in full 320; do
   grep '^train/' "$SETS/$res/stop_sign.info.dat" > "$SETS/$res/heldout.info.dat"
-  run "h-$res-cas" "$SETS/$res" heldout.info.dat --cascade "$ROOT/config/cascades/stop_sign.xml"
+  run "h-$res-cas" "$SETS/$res" heldout.info.dat --cascade "$CAS/stop_sign.xml"
   run "h-$res-ct" "$SETS/$res" heldout.info.dat --method colour-template $CONF
   bg=() rcas=() rct=()
   if [ "$res" = 320 ]; then

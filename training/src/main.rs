@@ -488,6 +488,16 @@ struct PhotosetArgs {
     /// Track file whose scene paints the sign.
     #[arg(long, default_value = "config/tracks/default.toml")]
     track: PathBuf,
+    /// Signs that look printed rather than rendered: a light frame round the face, colours
+    /// jittered and washed towards white, posts of any grey and width
+    /// (training/realsets/photolike.sh's stop-sign candidates).
+    #[arg(long)]
+    printed: bool,
+    /// Traffic lights instead of stop signs: the simulator's three-lamp housing or a toy's
+    /// one-lamp block, of varied width, grey and lamp size (`--sign-px` is then the housing's
+    /// height).
+    #[arg(long)]
+    traffic_light: bool,
     /// Output folder (frames/, info.dat, bg.txt, boxes.csv).
     #[arg(long)]
     out: PathBuf,
@@ -527,6 +537,8 @@ fn run_photoset(a: PhotosetArgs) -> anyhow::Result<ExitCode> {
         without: a.without,
         seed: a.seed,
         sign_px: (lo as f64, hi as f64),
+        printed: a.printed,
+        traffic_light: a.traffic_light,
     };
     let set = photogen::generate(&photos, &t, &o, &a.out).map_err(anyhow::Error::msg)?;
     println!(

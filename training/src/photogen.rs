@@ -16,6 +16,11 @@
 //! 3. camera: exposure gain 0.6–1.4 and gamma 0.8–1.25, Gaussian blur σ 0.3–1.3 px on half of
 //!    the frames, noise σ 1–6 grey levels, saved as JPEG at quality 60–95.
 //!
+//! With `printed` (`photoset --printed`) the sign looks like a printed or toy sign rather than
+//! the simulator's ([`printed_style`]: a light frame, washed and jittered colours, posts of any
+//! grey and width); with `traffic_light` (`photoset --traffic-light`) the object is a traffic
+//! light ([`traffic_light_style`]). Neither changes the default frames.
+//!
 //! Written: `frames/NNNNNN.jpg`, `info.dat` (frames with a sign), `bg.txt` (frames without),
 //! and `boxes.csv` (both, in the CSV form `rccar-train boxes` reads). Units: pixels.
 
@@ -138,6 +143,12 @@ pub struct PhotoSetOptions {
     pub seed: u64,
     /// Sign face size range, pixels.
     pub sign_px: (f64, f64),
+    /// Signs made to look like printed or toy signs rather than the simulator's own
+    /// ([`printed_style`]: a light frame around the face, colours jittered and washed towards
+    /// white, a post of any grey and width). Off: the frames of earlier rounds, byte for byte.
+    pub printed: bool,
+    /// Traffic lights instead of stop signs ([`traffic_light_style`]).
+    pub traffic_light: bool,
 }
 
 impl Default for PhotoSetOptions {
@@ -147,6 +158,8 @@ impl Default for PhotoSetOptions {
             without: 350,
             seed: 1,
             sign_px: (16.0, 64.0),
+            printed: false,
+            traffic_light: false,
         }
     }
 }
@@ -169,14 +182,17 @@ fn paste_sign(
     canvas: &mut [f32],
     template: &RgbaImage,
     post: &RgbaImage,
+    post_width: f64,
     o: &PhotoSetOptions,
     rng: &mut SplitMix64,
 ) -> [i64; 4] {
     let (fw, fh) = FRAME;
     let u = |r: &mut SplitMix64, lo: f64, hi: f64| lo + (hi - lo) * r.next_f64();
     let s = (o.sign_px.0.ln() + (o.sign_px.1.ln() - o.sign_px.0.ln()) * rng.next_f64()).exp();
-    // Seen up to 40° off its axis: narrower by cos.
-    let sx = s * u(rng, 0.0, 40f64.to_radians()).cos();
+    // Seen up to 40° off its axis: narrower by cos (`s` is the height; the width as the
+    // template's).
+    let aspect = template.width() as f64 / template.height() as f64;
+    let sx = s * aspect * u(rng, 0.0, 40f64.to_radians()).cos();
     let margin = 4.0;
     let ccx = u(rng, margin + sx / 2.0 + 3.0, fw as f64 - margin - sx / 2.0 - 3.0);
     let ccy = u(rng, margin + s / 2.0 + 3.0, fh as f64 - margin - s / 2.0 - 3.0);
@@ -190,7 +206,7 @@ fn paste_sign(
     let contrast = u(rng, 0.7, 1.2);
     let bright = u(rng, -30.0, 30.0);
     // The post: from under the face down 1-3 face sizes.
-    let (pw2, pl) = (s * 0.06, s * u(rng, 1.0, 3.0));
+    let (pw2, pl) = (s * post_width, s * u(rng, 1.0, 3.0));
     let (bx, by) = (ccx - sa * s * 0.45, ccy + ca * s * 0.45);
     let post_dst = [
         [bx - pw2 / 2.0, by],
@@ -207,6 +223,101 @@ fn paste_sign(
     let (x0, y0) = (x0.max(0.0), y0.max(0.0));
     let (x1, y1) = (x1.min(fw as f64), y1.min(fh as f64));
     [x0 as i64, y0 as i64, (x1 - x0) as i64, (y1 - y0) as i64]
+}
+
+/// One printed-looking sign (`PhotoSetOptions::printed`): the template with a light frame
+/// (grey 150–255) 0–12 % of the width wide around a shrunk face, its colours
+/// jittered (each channel × 0.8–1.2) and washed towards white by 0–50 % (a printed or toy sign's
+/// pale red is far lighter in grey than the simulator's), and a post of grey 80–240 whose width
+/// (0.05–0.2 of the face) is returned with it.
+fn printed_style(template: &RgbaImage, rng: &mut SplitMix64) -> (RgbaImage, RgbaImage, f64) {
+    let u = |r: &mut SplitMix64, lo: f64, hi: f64| lo + (hi - lo) * r.next_f64();
+    let gain = [u(rng, 0.8, 1.2), u(rng, 0.8, 1.2), u(rng, 0.8, 1.2)];
+    let wash = u(rng, 0.0, 0.5);
+    // A toy or printed sign's light frame around the red: the face shrunk by 0-24 % inside the
+    // template's octagon, the ring left filled with a light grey.
+    let k = 1.0 - u(rng, 0.0, 0.24);
+    let rim = u(rng, 150.0, 255.0) as u8;
+    let (w, h) = template.dimensions();
+    let (cx, cy) = (w as f64 / 2.0, h as f64 / 2.0);
+    let mut t = RgbaImage::from_fn(w, h, |x, y| {
+        let a = template.get_pixel(x, y).0[3];
+        let (sx, sy) = (cx + (x as f64 + 0.5 - cx) / k, cy + (y as f64 + 0.5 - cy) / k);
+        let inner = if sx >= 0.0 && sy >= 0.0 && sx < w as f64 && sy < h as f64 {
+            template.get_pixel(sx as u32, sy as u32).0
+        } else {
+            [0; 4]
+        };
+        let ia = inner[3] as f64 / 255.0;
+        let c = |i: usize| (inner[i] as f64 * ia + rim as f64 * (1.0 - ia)).round() as u8;
+        image::Rgba([c(0), c(1), c(2), a])
+    });
+    for p in t.pixels_mut() {
+        for (ch, g) in p.0.iter_mut().zip(gain) {
+            let v = *ch as f64 * g;
+            *ch = (v + (255.0 - v) * wash).round().clamp(0.0, 255.0) as u8;
+        }
+    }
+    let g = u(rng, 80.0, 240.0) as u8;
+    let post = RgbaImage::from_pixel(4, 4, image::Rgba([g, g, g, 255]));
+    (t, post, u(rng, 0.05, 0.2))
+}
+
+/// One traffic light (`PhotoSetOptions::traffic_light`): half of them drawn as the simulator
+/// draws its housing (`rccar::sim::scene`: a box, three round lamps 0.3 of its height apart,
+/// radius 0.12 of it, one lit or none), half as a toy's block with a single lit lamp anywhere
+/// between 0.2 and 0.8 of its height; in both the housing 0.38–0.65 of its height wide and of any
+/// grey (10–250: black plastic to a light wooden block), a dark cap on the top 8–15 % of half of
+/// them, lamps a little larger or smaller, unlit lamps dim, the lit one bright with a whitish
+/// centre; and a post of grey 40–230, 0.1–0.3 of the housing's width wide.
+pub fn traffic_light_style(rng: &mut SplitMix64) -> (RgbaImage, RgbaImage, f64) {
+    let u = |r: &mut SplitMix64, lo: f64, hi: f64| lo + (hi - lo) * r.next_f64();
+    let h = 100u32;
+    let w = (h as f64 * u(rng, 0.38, 0.65)).round() as u32;
+    let house = u(rng, 10.0, 250.0);
+    let cap = if rng.next_f64() < 0.5 { u(rng, 0.08, 0.15) * h as f64 } else { 0.0 };
+    let cap_grey = u(rng, 10.0, 60.0);
+    let r = h as f64 * u(rng, 0.10, 0.15);
+    let rgb = [[255.0, 40.0, 30.0], [255.0, 170.0, 20.0], [40.0, 255.0, 110.0]];
+    // (centre's offset from the middle, colour, lit) per lamp.
+    let lamps: Vec<(f64, [f64; 3], bool)> = if rng.next_f64() < 0.5 {
+        let lit = (rng.next_u64() % 4) as usize; // 3: none lit
+        (0..3).map(|k| ((k as f64 - 1.0) * 0.3 * h as f64, rgb[k], k == lit)).collect()
+    } else {
+        let k = (rng.next_u64() % 3) as usize;
+        vec![((u(rng, 0.2, 0.8) - 0.5) * h as f64, rgb[k], true)]
+    };
+    let ss = 4;
+    let t = RgbaImage::from_fn(w, h, |i, j| {
+        let mut acc = [0f64; 3];
+        for sj in 0..ss {
+            for si in 0..ss {
+                let x = i as f64 + (si as f64 + 0.5) / ss as f64 - w as f64 / 2.0;
+                let y = j as f64 + (sj as f64 + 0.5) / ss as f64 - h as f64 / 2.0;
+                let mut c = if y + h as f64 / 2.0 < cap { [cap_grey; 3] } else { [house; 3] };
+                for &(cy, col, lit) in &lamps {
+                    let dy = y - cy;
+                    let r2 = (x * x + dy * dy) / (r * r);
+                    if r2 <= 1.0 {
+                        c = if lit {
+                            let q = (1.0 - r2) * (1.0 - r2) * 0.7;
+                            [0, 1, 2].map(|m| col[m] + (255.0 - col[m]) * q)
+                        } else {
+                            [0, 1, 2].map(|m| col[m] * 0.16 + 8.0)
+                        };
+                    }
+                }
+                for m in 0..3 {
+                    acc[m] += c[m];
+                }
+            }
+        }
+        let c = |m: usize| (acc[m] / (ss * ss) as f64).round().clamp(0.0, 255.0) as u8;
+        image::Rgba([c(0), c(1), c(2), 255])
+    });
+    let g = u(rng, 40.0, 230.0) as u8;
+    let post = RgbaImage::from_pixel(4, 4, image::Rgba([g, g, g, 255]));
+    (t, post, u(rng, 0.1, 0.3) * w as f64 / h as f64)
 }
 
 /// Makes a photo-like set from `photos` (at least one readable, at least 64 × 48) into `dir`.
@@ -266,7 +377,15 @@ pub fn generate(photos: &[PathBuf], template: &RgbaImage, o: &PhotoSetOptions, d
         // 2. The sign.
         let mut label = None;
         if n < o.with_sign {
-            label = Some(paste_sign(&mut canvas, template, &post, o, &mut rng));
+            label = Some(if o.traffic_light {
+                let (t, p, pw) = traffic_light_style(&mut rng);
+                paste_sign(&mut canvas, &t, &p, pw, o, &mut rng)
+            } else if o.printed {
+                let (t, p, pw) = printed_style(template, &mut rng);
+                paste_sign(&mut canvas, &t, &p, pw, o, &mut rng)
+            } else {
+                paste_sign(&mut canvas, template, &post, 0.06, o, &mut rng)
+            });
         }
         // 3. Camera: exposure, gamma, blur, noise, JPEG.
         let gain = u(&mut rng, 0.6, 1.4);
@@ -341,5 +460,46 @@ mod tests {
         assert!(c[0] > 2 * c[1] && c[0] > 120, "{c:?}");
         let rim = t.get_pixel(32, 1).0; // white rim
         assert!(rim[1] > 150, "{rim:?}");
+    }
+
+    #[test]
+    fn printed_signs_keep_the_octagon_and_vary_the_red_and_the_frame() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/tracks/default.toml");
+        let t = stop_sign_template(&root, 64).expect("template");
+        let grey = |p: [u8; 4]| 0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64;
+        let (mut reds, mut edges) = (Vec::new(), Vec::new());
+        for seed in 0..40 {
+            let mut rng = SplitMix64::new(seed);
+            let (p, post, pw) = printed_style(&t, &mut rng);
+            assert!(p.pixels().zip(t.pixels()).all(|(a, b)| a.0[3] == b.0[3]), "the octagon's outline");
+            assert!((0.05..=0.2).contains(&pw) && post.get_pixel(0, 0).0[3] == 255);
+            reds.push(grey(p.get_pixel(32, 20).0)); // the red between rim and letters
+            edges.push(grey(p.get_pixel(32, 1).0)); // the rim, or the frame around a shrunk face
+        }
+        let span = |v: &[f64]| v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min);
+        assert!(span(&reds) > 60.0, "the red's grey varies: {reds:?}");
+        assert!(edges.iter().all(|&e| e > 100.0), "a light frame: {edges:?}");
+    }
+
+    #[test]
+    fn traffic_lights_are_opaque_upright_housings_with_a_lit_lamp_most_of_the_time() {
+        let mut lit = 0;
+        for seed in 0..40 {
+            let mut rng = SplitMix64::new(seed);
+            let (t, _, pw) = traffic_light_style(&mut rng);
+            assert_eq!(t.height(), 100);
+            assert!((38..=65).contains(&t.width()), "{}", t.width());
+            assert!(t.pixels().all(|p| p.0[3] == 255));
+            assert!(pw > 0.0 && pw < 0.3);
+            // A lit lamp: a strongly coloured pixel on the housing's middle column.
+            let x = t.width() / 2;
+            if (0..100).any(|y| {
+                let p = t.get_pixel(x, y).0;
+                p.iter().max().unwrap() - p.iter().min().unwrap() > 100
+            }) {
+                lit += 1;
+            }
+        }
+        assert!(lit >= 25, "{lit} of 40 lit (1 in 8 should have none)");
     }
 }
