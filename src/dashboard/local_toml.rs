@@ -2,8 +2,8 @@
 //! added or replaced; every other line, comment and table of the student's file is kept
 //! (toml_edit keeps the document's formatting). Only keys of the parameter tables
 //! ([`crate::control::catalog::all`]) and the set-up page's keys ([`SETUP_KEYS`]: the ROI's
-//! four corners, the lane threshold, its mode and the adaptive threshold's C) are written; a key new to the file gets its
-//! unit and allowed range as a comment on its line.
+//! four corners, the lane threshold, its mode and the adaptive threshold's C) are written; a
+//! key new to the file gets its unit and allowed range as a comment on its line.
 
 use serde::Serialize;
 use std::path::Path;
@@ -228,8 +228,8 @@ mod tests {
     }
 
     /// The set-up page's keys: the ROI as an array of four [x, y] pairs, the threshold and
-    /// the adaptive C as whole numbers, the mode as a string; the loader reads the file back to the same values,
-    /// and a comment on an existing line stays.
+    /// the adaptive C as whole numbers, the mode as a string; the loader reads the file back
+    /// to the same values, and a comment on an existing line stays.
     #[test]
     fn the_setup_keys_are_written_so_that_the_loader_reads_them_back() {
         let src = [[93.5, 79.25], [225.0, 78.96], [308.75, 150.02], [10.25, 150.0]];

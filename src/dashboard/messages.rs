@@ -133,7 +133,8 @@ pub struct SetupRequest {
 /// one line, a convex quadrilateral in order) and the configuration's own checks (far edge
 /// above the near edge, not mirrored, the steering method still builds). Corners are kept to
 /// 1/100 pixel. Returns the configuration with `warp.src`, `lane.threshold`,
-/// `lane.threshold_mode` and `lane.adaptive_c` set; the error names the corner or the key and what is wrong.
+/// `lane.threshold_mode` and `lane.adaptive_c` set; the error names the corner or the key and
+/// what is wrong.
 pub fn validate_setup(cfg: &Config, req: &SetupRequest) -> Result<Config, ControlError> {
     let (w, h) = (cfg.camera.width, cfg.camera.height);
     let mut src = req.src;
