@@ -126,10 +126,24 @@ if [ "${RCCAR_CROSS:-1}" = 1 ]; then
   CROSS_BG=$!
   trap 'kill -- -$CROSS_BG 2>/dev/null; [ -z "$BG_PID" ] || kill "$BG_PID" 2>/dev/null' EXIT   # an interrupted suite leaves no compiler behind
 fi
-stage build cargo build --release --workspace --all-targets
-# drive_cli:: needs no feature but runs in the car's feature set below (stage drive-fil, the
-# binary the car uses), so not here as well.
-stage cargo-test cargo test --release --workspace --no-fail-fast -- --skip drive_cli::
+# Everything is built and tested in ONE feature set, the car's and the dashboard's (libjpeg-turbo
+# decoding and `parallel` are default features): the library, its unit tests and every test
+# binary are compiled once. (Compiling them once without and once with the features took 379 s +
+# 249 s of wall time from a clean clone, 2026-11-29.) The stages below then only run, and the
+# machine is quiet for the wall-clock ones.
+FEAT=serial,camera,gpio,dashboard,jpeg-turbo,gamepad
+stage build cargo build --release --workspace --all-targets --features $FEAT
+# rccar-train is built: the tests that run it need not call cargo themselves (tests/pilot_round_trip.rs)
+export RCCAR_TRAINER_BUILT=1
+# The main job's build (`cargo run --release -- sim`: default features) still compiles, with the
+# code that only exists without a feature (the "built without the serial link" answers): checked,
+# not built (a fraction of the CPU).
+stage default-check cargo check --workspace --all-targets
+# The tests that run on the wall clock or drive the firmware in simavr get stages of their own
+# below, one at a time; drive_cli:: runs with them (stage drive-fil).
+ALONE=(--skip drive_cli:: --skip drive_fil:: --skip link_hil:: --skip session_fil:: --skip dashboard_security::
+  --skip labs::lab11 --skip labs::key_matches_committed)
+stage cargo-test cargo test --release --workspace --features $FEAT --no-fail-fast -- "${ALONE[@]}"
 stage lane-parity "$RCCAR_PYTHON" tests/parity/lane_parity.py
 stage detect-parity "$RCCAR_PYTHON" tests/parity/detect_parity.py --quick
 # JPEG as cv2.imread decodes it, in the default build (libjpeg-turbo's C code via mozjpeg, a
@@ -140,13 +154,7 @@ stage calib-parity "$RCCAR_PYTHON" tests/parity/calib_parity.py
 stage firmware make -C firmware all sim
 stage protocol-c make -C firmware test
 stage protocol-c-fuzz make -C firmware fuzz FUZZ_ITERS=200000
-stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --lib decoder_survives_arbitrary_bytes
-# Everything behind a cargo feature is tested in ONE feature set (the car's and the dashboard;
-# libjpeg-turbo decoding is a default feature), so the library is compiled once more, not once per feature.
-FEAT=serial,camera,gpio,dashboard,jpeg-turbo,gamepad
-# Build every feature-set test binary, the binary and the JPEG example first: the stages below
-# then only run, and the machine is quiet for the wall-clock ones.
-stage feature-build bash -c "cargo test --release --features $FEAT --no-run --lib --test car && cargo build --release --features $FEAT --bins --example decode"
+stage link-decoder-fuzz env RCCAR_FUZZ_CASES=1000000 cargo test --release --features $FEAT --lib decoder_survives_arbitrary_bytes
 # the link to the firmware in simavr, one test at a time (each waits on the emulator's clock;
 # two emulators side by side on a machine whose cores are busy fell behind it), and the
 # library's session driving the firmware in-process (session_fil)
@@ -171,12 +179,9 @@ stage drive-fil-laps cargo test --release --features $FEAT --test car -- --test-
   drive_fil::firmware_in_the_loop_drives_a_lap drive_fil::bit_errors_at_1e_3_for_a_lap
 stage drive-fil cargo test --release --features $FEAT --test car -- --test-threads 1 drive_fil:: drive_cli:: \
   --skip firmware_in_the_loop_drives_a_lap --skip bit_errors_at_1e_3_for_a_lap
-stage camera-gpio cargo test --release --features $FEAT --lib -- camera_source capture gpio pad::
 stage dashboard-security cargo test --release --features $FEAT --test car -- --test-threads 1 dashboard_security::
-# the browser test runs target/release/rccar, built here with the dashboard
-# (the same target selection as feature-build: a build without a dev target resolves the
-# dependencies' features differently and compiles the library again)
-stage dashboard-browser bash -c "cargo build --release --features $FEAT --bins --example decode && \"\$RCCAR_PYTHON\" tests/dashboard/browser_test.py"
+# the browser test runs target/release/rccar, built by the build stage with the dashboard
+stage dashboard-browser "$RCCAR_PYTHON" tests/dashboard/browser_test.py
 [ -z "$BG_PID" ] || bg_wait
 # The Pi cross-build check: aarch64 build (Debian's rustc-web), replay and a 20 s sim under
 # qemu-aarch64, decisions compared with the native run (see the top for the switches).
@@ -191,7 +196,7 @@ if [ "${RCCAR_CROSS:-1}" = 1 ]; then
     kill -- -"$CROSS_BG" 2>/dev/null; wait "$CROSS_BG" 2>/dev/null
   fi
   TIMES+=("$(printf '%5d s  %s' $((SECONDS - t0)) "cross (stopping the background build, log: $LOG_DIR/cross-build.log)")")
-  stage cross env RCCAR_CROSS_CAMERA="${RCCAR_CROSS_CAMERA:-0}" bash tests/cross/run.sh
+  stage cross env RCCAR_CROSS_CAMERA="${RCCAR_CROSS_CAMERA:-0}" RCCAR_NATIVE_FEATURES=$FEAT bash tests/cross/run.sh
 else
   echo; echo "== cross: skipped (RCCAR_CROSS=0)"
 fi

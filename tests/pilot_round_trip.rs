@@ -16,10 +16,14 @@ fn bin_dir() -> PathBuf {
 
 /// Runs `rccar` or `rccar-train`. `rccar-train` is another workspace member: cargo builds it
 /// for `cargo test --workspace` only, so it is brought up to date here once per test run (a
-/// no-op when it is; a stale binary would test old code).
+/// stale binary would test old code). Not when `RCCAR_TRAINER_BUILT=1`: tests/all.sh sets it,
+/// having built the whole workspace beside this binary; a `cargo build -p rccar-train` of its
+/// own resolves the dependencies' features differently and compiled rccar again mid-suite
+/// (~2 min of CPU).
 fn run(bin: &str, args: &[&str], paths: &[&Path]) -> Output {
     static ONCE: std::sync::OnceLock<()> = std::sync::OnceLock::new();
-    if bin == "rccar-train" {
+    let built = std::env::var("RCCAR_TRAINER_BUILT").is_ok_and(|v| v == "1");
+    if bin == "rccar-train" && !built {
         ONCE.get_or_init(|| {
             let mut c = Command::new(env!("CARGO"));
             c.args(["build", "-p", "rccar-train", "--bin", "rccar-train"]);

@@ -10,6 +10,7 @@
 #   bash tests/cross/run.sh                     the check (tests/all.sh runs it)
 #   RCCAR_CROSS_SIM_SECONDS=60 bash ...         a longer simulated drive (default 20 s)
 #   RCCAR_CROSS_CAMERA=0 bash ...               skip the library build with `--features camera`
+#   RCCAR_NATIVE_FEATURES=serial,... bash ...   the native build's features (default: none)
 #   RCCAR_CROSS_BUILD_ONLY=1 bash ...           only the aarch64 build (tests/all.sh runs it in the
 #                                               background at nice 19 while the FIL laps run on the
 #                                               wall clock, then this whole check on a warm build)
@@ -94,8 +95,11 @@ fi
 # ---- the native reference -------------------------------------------------------------
 # The build of tests/all.sh's first stage, so nothing is compiled again there (`-p rccar --bin
 # rccar` alone resolves the dependencies' features differently and recompiles the library).
-echo "== native build: cargo build --release --workspace --all-targets"
-if cargo build --release --workspace --all-targets 2>&1 | grep -vE '^\s+(Compiling|Downloaded|Downloading) '; [ "${PIPESTATUS[0]}" -eq 0 ]; then
+# The native build to compare with: the suite's own (tests/all.sh sets RCCAR_NATIVE_FEATURES to
+# its feature set, so nothing is compiled again here).
+NATIVE_FEATURES=${RCCAR_NATIVE_FEATURES:-}
+echo "== native build: cargo build --release --workspace --all-targets ${NATIVE_FEATURES:+--features $NATIVE_FEATURES}"
+if cargo build --release --workspace --all-targets ${NATIVE_FEATURES:+--features "$NATIVE_FEATURES"} 2>&1 | grep -vE '^\s+(Compiling|Downloaded|Downloading) '; [ "${PIPESTATUS[0]}" -eq 0 ]; then
   NATIVE=$ROOT/target/release/rccar
 else
   fail "native build"

@@ -490,8 +490,9 @@ struct PhotosetArgs {
     track: PathBuf,
     /// Signs that look printed rather than rendered: a light frame round the face, colours
     /// jittered and washed towards white, posts of any grey and width
-    /// (training/realsets/photolike.sh's stop-sign candidates).
-    #[arg(long)]
+    /// (training/realsets/photolike.sh's stop-sign candidates). Stop signs only: refused with
+    /// `--traffic-light`.
+    #[arg(long, conflicts_with = "traffic_light")]
     printed: bool,
     /// Traffic lights instead of stop signs: the simulator's three-lamp housing or a toy's
     /// one-lamp block, of varied width, grey and lamp size (`--sign-px` is then the housing's

@@ -170,6 +170,29 @@ fn every_flag_bound_is_accepted_and_one_past_it_refused() {
     }
 }
 
+/// `photoset --printed` styles stop signs only: with `--traffic-light` as well it is refused by
+/// name (it made traffic lights and silently dropped `--printed`).
+#[test]
+fn photoset_refuses_printed_traffic_lights() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "photoset",
+        "--photos",
+        "none",
+        "--out",
+        "p",
+        "--printed",
+        "--traffic-light",
+    ];
+    let (code, err) = run(dir.path(), &args, 30);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("--printed") && err.contains("--traffic-light") && err.contains("cannot be used with"),
+        "{err}"
+    );
+    assert!(!dir.path().join("p").exists(), "a refused photoset wrote its folder");
+}
+
 /// The training inputs' bounds through the command: a list above 64 MiB and an image above
 /// 40 megapixels are refused naming the file (the bounds themselves: samples.rs unit tests).
 #[test]
