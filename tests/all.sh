@@ -167,7 +167,7 @@ stage link-hil cargo test --release --features $FEAT --test car -- --test-thread
 CAR_TESTS=$(cargo test --release --features $FEAT --test car --no-run --message-format=json 2>/dev/null |
   jq -r 'select(.executable != null and .target.name == "car") | .executable' | tail -1)
 if [ -x "$CAR_TESTS" ]; then
-  bg_stage labs-link "$CAR_TESTS" labs::lab11 labs::key_matches_committed
+  bg_stage labs-link "$CAR_TESTS" --nocapture labs::lab11 labs::key_matches_committed
 else
   stage labs-link cargo test --release --features $FEAT --test car -- labs::lab11 labs::key_matches_committed
 fi

@@ -1104,6 +1104,10 @@ fn key_matches_committed() {
         .output()
         .unwrap();
     eprintln!("key regenerated in {:.1} s", t.elapsed().as_secs_f64());
+    // what each lab's figures cost (make.sh: "lab NN took N s, N s of CPU")
+    for l in String::from_utf8_lossy(&out.stderr).lines().filter(|l| l.contains(" took ")) {
+        eprintln!("{l}");
+    }
     assert!(
         out.status.success(),
         "make.sh failed\n{}\n{}",
@@ -1129,16 +1133,6 @@ fn key_matches_committed() {
                     (Val::Word(a), Val::Word(b)) => a == b,
                     _ => false,
                 };
-                eprintln!(
-                    "{}: committed {} {}, now {} (tol ±{}){} {}",
-                    c.id,
-                    c.value,
-                    c.unit,
-                    n.value,
-                    c.tol,
-                    if c.timing { " timing" } else { "" },
-                    if ok { "ok" } else { "DIFFERS" }
-                );
                 if !ok {
                     bad.push(format!(
                         "{}: committed {} {}, regenerated {}, tolerance ±{}",
@@ -1160,5 +1154,10 @@ fn key_matches_committed() {
     // pages_quote_the_committed_key)
     let (_, page_bad) = check_pages(&fresh, true);
     bad.extend(page_bad);
+    eprintln!(
+        "{} figures of the committed key compared, {} differ",
+        committed.len(),
+        bad.len()
+    );
     assert!(bad.is_empty(), "the key changed:\n{}", bad.join("\n"));
 }

@@ -101,7 +101,14 @@ CHAT='[.[].steer] as $s | [range(1; $s | length) | ($s[.] - $s[. - 1]) | . * .] 
 # runs alone, first: its emulator keeps the firmware's clock on the wall clock.
 LAB_LIST="11 16 13 02 15 07 01 08 03 04 14 12 06 10 05 09"
 if [ -z "${LABS:-}" ] && [ "${KEY_JOBS:-2}" -gt 1 ]; then
-  part() { local rc=0; LABS=$1 KEY_JOBS=1 bash "$SELF" "$W/p$1" > "$W/p$1.log" 2>&1 || rc=$?; echo $rc > "$W/p$1.rc"; }
+  # (each lab's wall and CPU seconds go to stderr: what the key costs, lab by lab)
+  part() {
+    local rc=0 t0=$SECONDS c0 c1
+    c0=$(awk '{print $14 + $15 + $16 + $17}' /proc/$BASHPID/stat 2>/dev/null || echo 0)
+    LABS=$1 KEY_JOBS=1 bash "$SELF" "$W/p$1" > "$W/p$1.log" 2>&1 || rc=$?; echo $rc > "$W/p$1.rc"
+    c1=$(awk '{print $14 + $15 + $16 + $17}' /proc/$BASHPID/stat 2>/dev/null || echo 0)
+    echo "make.sh: lab $1 took $((SECONDS - t0)) s, $(( (c1 - c0) / $(getconf CLK_TCK) )) s of CPU" >&2
+  }
   first=1
   for l in $LAB_LIST; do
     [ -n "$(sed -n "/^if want $l; then/p" "$SELF")" ] || continue
