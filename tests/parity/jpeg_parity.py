@@ -9,13 +9,16 @@ plus a grey JPEG.
 Checks per file: (1) the decoded pixels are identical to cv2.imread(IMREAD_COLOR) (grey files:
 IMREAD_GRAYSCALE); (2) `rccar detect` on the JPEG gives the boxes cv2.CascadeClassifier gives on
 cv2's decoding (stock frontalface_default and the shipped stop-sign cascade, (1.1, 3)).
-The Rust side is rccar's default build (issue 28: `jpeg-turbo`, libjpeg-turbo's code via the
-mozjpeg crate, is a default feature), built with the selection of tests/all.sh's first stage so
-nothing is compiled again; RCCAR_JPEG_CARGO adds cargo flags: with
+The Rust side is rccar's default features (issue 28: `jpeg-turbo`, libjpeg-turbo's code via the
+mozjpeg crate, is a default feature), built with the target selection of tests/all.sh's first
+stage so nothing is compiled again; RCCAR_JPEG_CARGO adds cargo flags. tests/all.sh sets it to
+its `--features` (the car's hardware features on top of the defaults: they touch no decoding,
+and the decode example reports that JPEG goes through libjpeg-turbo). With
 RCCAR_JPEG_CARGO="--no-default-features --features parallel" (the build without a C compiler:
-JPEG through the pure-Rust decoder) it reports how far that decoder is from OpenCV. The decode
-example must say whether JPEG goes through libjpeg-turbo: in the default build it must. Prints
-"N passed, N failed" and exits non-zero on a failure.
+JPEG through the pure-Rust decoder; only the binaries and the example are built) it reports how
+far that decoder is from OpenCV. The decode example must say whether JPEG goes through
+libjpeg-turbo: with the default features it must. Prints "N passed, N failed" and exits
+non-zero on a failure.
 
     RCCAR_PYTHON=... python3 tests/parity/jpeg_parity.py
 """
@@ -47,9 +50,10 @@ def main():
     if not files:
         print("opencv-doc sample JPEGs not installed (apt-get install opencv-doc)")
     # The project's own frames, written as JPEG at several qualities and subsamplings.
-    # The default build: the target selection of tests/all.sh's first stage (nothing recompiled);
-    # other flags: the binaries and the example only.
-    b = cargo("build", *(["--bins", "--example", "decode"] if CARGO_FLAGS else ["--workspace", "--all-targets"]))
+    # With the default features: the target selection of tests/all.sh's first stage (nothing
+    # recompiled); without them: the binaries and the example only.
+    no_defaults = "--no-default-features" in CARGO_FLAGS
+    b = cargo("build", *(["--bins", "--example", "decode"] if no_defaults else ["--workspace", "--all-targets"]))
     if b.returncode != 0:
         print("FAIL build:", b.stderr[-2000:])
         print("0 passed, 1 failed")
@@ -76,8 +80,8 @@ def main():
     head = r.stdout.strip().splitlines()[0] if r.stdout.strip() else "decode printed nothing"
     print(head, r.stderr.strip()[-500:])
     passed = failed = 0
-    # The default build decodes JPEG with libjpeg-turbo (issue 28).
-    if not CARGO_FLAGS:
+    # The default features decode JPEG with libjpeg-turbo (issue 28).
+    if not no_defaults:
         if head == "jpeg_like_opencv true":
             passed += 1
         else:

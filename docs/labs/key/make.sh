@@ -103,10 +103,10 @@ LAB_LIST="11 16 13 02 15 07 01 08 03 04 14 12 06 10 05 09"
 if [ -z "${LABS:-}" ] && [ "${KEY_JOBS:-2}" -gt 1 ]; then
   # (each lab's wall and CPU seconds go to stderr: what the key costs, lab by lab)
   part() {
-    local rc=0 t0=$SECONDS c0 c1
-    c0=$(awk '{print $14 + $15 + $16 + $17}' /proc/$BASHPID/stat 2>/dev/null || echo 0)
+    local rc=0 t0=$SECONDS me=$BASHPID c0 c1   # (this shell's pid: $BASHPID inside $(...) is not)
+    c0=$(awk '{print $14 + $15 + $16 + $17}' /proc/$me/stat 2>/dev/null || echo 0)
     LABS=$1 KEY_JOBS=1 bash "$SELF" "$W/p$1" > "$W/p$1.log" 2>&1 || rc=$?; echo $rc > "$W/p$1.rc"
-    c1=$(awk '{print $14 + $15 + $16 + $17}' /proc/$BASHPID/stat 2>/dev/null || echo 0)
+    c1=$(awk '{print $14 + $15 + $16 + $17}' /proc/$me/stat 2>/dev/null || echo 0)
     echo "make.sh: lab $1 took $((SECONDS - t0)) s, $(( (c1 - c0) / $(getconf CLK_TCK) )) s of CPU" >&2
   }
   first=1
