@@ -1155,7 +1155,7 @@ fn key_matches_committed() {
     let (_, page_bad) = check_pages(&fresh, true);
     bad.extend(page_bad);
     eprintln!(
-        "{} figures of the committed key compared, {} differ",
+        "{} figures of the committed key compared; {} problems (figures or pages)",
         committed.len(),
         bad.len()
     );

@@ -93,10 +93,9 @@ fi
 [ "${RCCAR_CROSS_BUILD_ONLY:-0}" = 1 ] && finish
 
 # ---- the native reference -------------------------------------------------------------
-# The build of tests/all.sh's first stage, so nothing is compiled again there (`-p rccar --bin
-# rccar` alone resolves the dependencies' features differently and recompiles the library).
-# The native build to compare with: the suite's own (tests/all.sh sets RCCAR_NATIVE_FEATURES to
-# its feature set, so nothing is compiled again here).
+# The build of tests/all.sh's first stage, with its features (it sets RCCAR_NATIVE_FEATURES), so
+# nothing is compiled again here (`-p rccar --bin rccar` alone resolves the dependencies'
+# features differently and recompiles the library).
 NATIVE_FEATURES=${RCCAR_NATIVE_FEATURES:-}
 echo "== native build: cargo build --release --workspace --all-targets ${NATIVE_FEATURES:+--features $NATIVE_FEATURES}"
 if cargo build --release --workspace --all-targets ${NATIVE_FEATURES:+--features "$NATIVE_FEATURES"} 2>&1 | grep -vE '^\s+(Compiling|Downloaded|Downloading) '; [ "${PIPESTATUS[0]}" -eq 0 ]; then
