@@ -9,10 +9,11 @@
 //! steers the car into the gore between the roads. The rule, frame by frame:
 //!
 //! 1. On the road, the raw peaks P_L, P_R (each half of the histogram, as in Eq. 3) are
-//!    remembered while they are a lane apart.
-//! 2. When they are more than `fork_width` lane widths apart, the line that moved away from
-//!    where it was is the odd one. If it moved by more than `jump` lane widths since the last
-//!    frame it jumped, or if it leans in (its column in the upper half of the band is nearer
+//!    remembered while they are a lane apart (within 10 % of the lane width).
+//! 2. When they are more than `fork_width` lane widths apart, the line that moved further from
+//!    where it was then is the odd one (not the one that moved more since the last frame: by
+//!    then the car may be following the odd line, and the steady one moves in the image). If
+//!    a line moved by more than `jump` lane widths since the last frame it jumped, or if it leans in (its column in the upper half of the band is nearer
 //!    the lane than in the lower half: a road coming in), it is a **merge** (the car keeps the
 //!    other, steady line). If it leans out by more than `lean` lane widths it is bending away:
 //!    a **fork**, and the car chooses — a turn sign seen at most `sign_reach_m` before the fork first, else the
@@ -26,9 +27,13 @@
 //! the order the car reaches them. Units: bird's-eye pixels, frames.
 
 use super::lines::{column_histogram_rows, peak_with, LaneMeasurement, LaneStatus, LineOptions};
-use image::GrayImage;
 use crate::route::{Step, Why};
+use image::GrayImage;
 use serde::{Deserialize, Serialize};
+
+/// Lines whose distance is within this fraction of the lane width of it are "a lane apart":
+/// where the rule remembers them, and what ends a junction.
+const SETTLED: f64 = 0.1;
 
 /// A side of the lane.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -129,6 +134,8 @@ pub struct JunctionRule {
     next: usize,
     forks: u32,
     last: [Option<f64>; 2],
+    /// Where the lines were when last seen a lane apart.
+    apart: [Option<f64>; 2],
     at: Option<At>,
     /// A turn sign's way, until the odometry passes this (metres).
     sign: Option<(Step, f64)>,
@@ -145,6 +152,7 @@ impl JunctionRule {
             next: 0,
             forks: 0,
             last: [None, None],
+            apart: [None, None],
             at: None,
             sign: None,
             half: Vec::new(),
@@ -190,11 +198,16 @@ impl JunctionRule {
             // 1–2. On the road: remember the lines; meet a junction when they part.
             if let [Some(l), Some(r)] = raw {
                 if r - l > self.opts.fork_width * lane {
-                    let moved = |i: usize, p: f64| self.last[i].map_or(0.0, |q: f64| (p - q).abs());
-                    let (dl, dr) = (moved(0, l), moved(1, r));
-                    let odd = if dl >= dr { Side::Left } else { Side::Right };
+                    let moved = |from: &[Option<f64>; 2], i: usize, p: f64| from[i].map_or(0.0, |q: f64| (p - q).abs());
+                    // The odd line: the one further from where it was while the lines were a lane apart.
+                    let odd = if moved(&self.apart, 0, l) >= moved(&self.apart, 1, r) {
+                        Side::Left
+                    } else {
+                        Side::Right
+                    };
                     let outward = self.lean_out(binary, band_rows, lines, odd);
-                    let jumped = dl.max(dr) > self.opts.jump * lane;
+                    // A jump: a line moved that far since the frame before.
+                    let jumped = moved(&self.last, 0, l).max(moved(&self.last, 1, r)) > self.opts.jump * lane;
                     let lean = self.opts.lean * lane;
                     if !jumped && outward.is_none_or(|o| o.abs() <= lean) {
                         // Undecided: keep the steady line this frame, decide on a later one.
@@ -207,9 +220,9 @@ impl JunctionRule {
                             forks: self.forks,
                             new: false,
                         };
-                        let saved = self.last;
+                        let saved = (self.last, self.apart);
                         let (m, _) = self.keep(raw, lines, m, report);
-                        self.last = saved;
+                        (self.last, self.apart) = saved;
                         return (m, None);
                     }
                     let report = if jumped || outward.is_some_and(|o| o < 0.0) {
@@ -233,10 +246,21 @@ impl JunctionRule {
                     return self.keep(raw, lines, m, report);
                 }
             }
+            // Remember where the lines are while they are a lane apart (or where the one line
+            // seen is): the odd line at a fork is the one that moved away from there. Updating
+            // on every frame would compare a frame with the one before, where both lines have
+            // moved a pixel and noise decides (a fork in a shadow taken the wrong way).
+            let a_lane_apart = match (m.status, m.p_left, m.p_right) {
+                (LaneStatus::Both, Some(l), Some(r)) => ((r - l) - lane).abs() < SETTLED * lane,
+                _ => true,
+            };
             for (i, p) in [m.p_left, m.p_right].into_iter().enumerate() {
                 let estimated = if i == 0 { m.left_estimated } else { m.right_estimated };
                 if let (Some(p), false) = (p, estimated) {
                     self.last[i] = Some(p);
+                    if a_lane_apart {
+                        self.apart[i] = Some(p);
+                    }
                 }
             }
             return (m, None);
@@ -245,7 +269,7 @@ impl JunctionRule {
         at.frames += 1;
         at.report.new = false;
         let apart = match raw {
-            [Some(l), Some(r)] => ((r - l) - lane).abs() < 0.1 * lane,
+            [Some(l), Some(r)] => ((r - l) - lane).abs() < SETTLED * lane,
             _ => false,
         };
         at.settled = if apart { at.settled + 1 } else { 0 };
@@ -351,6 +375,9 @@ impl JunctionRule {
             _ => (kept + sign * lane, kept, LaneStatus::RightOnly),
         };
         self.last = [Some(pl), Some(pr)];
+        if ((pr - pl) - lane).abs() < SETTLED * lane {
+            self.apart = self.last;
+        }
         let lane_center = (pr - pl) / 2.0 + pl;
         let error_px = lane_center - m.frame_center;
         // The image is 2·(L_F − offset) + 1 columns wide; the error is normalised by half of it.
@@ -391,12 +418,17 @@ mod tests {
     /// A binary bird's-eye image with a right line at 254.5 and a left line whose column is
     /// `left + lean · (rows above the bottom) / band` (4 px wide).
     fn frame(left: f64, lean: f64) -> GrayImage {
+        frame_with_right(left, lean, 254.5)
+    }
+
+    /// As [`frame`], with the right line (straight) at column `right`.
+    fn frame_with_right(left: f64, lean: f64, right: f64) -> GrayImage {
         let band = band_rows(H, LINES.band) as f64;
         GrayImage::from_fn(W, H, |x, y| {
             let up = (H - 1 - y) as f64;
             let l = left + lean * up / band;
             let on = |c: f64| (x as f64 - c).abs() < 6.0;
-            image::Luma([if on(l) || on(254.5) { 255 } else { 0 }])
+            image::Luma([if on(l) || on(right) { 255 } else { 0 }])
         })
     }
 
@@ -422,7 +454,10 @@ mod tests {
                 }
             }
             let (_, r, m) = met.expect("a fork was met");
-            assert_eq!((r.kind, r.way, r.why, r.keep), (JunctionKind::Fork, Some(step), Some(Why::Route), keep));
+            assert_eq!(
+                (r.kind, r.way, r.why, r.keep),
+                (JunctionKind::Fork, Some(step), Some(Why::Route), keep)
+            );
             assert_eq!(r.step, Some(0));
             // Keeping the right line: the left is estimated a lane width away.
             if keep == Side::Right {
@@ -431,6 +466,42 @@ mod tests {
             }
             assert!(rule.steps_left().is_empty());
         }
+    }
+
+    #[test]
+    fn the_odd_line_is_the_one_that_left_where_it_was_not_the_one_that_moved_last() {
+        // The left line bends away at a fork; near the point where the lines are far enough
+        // apart to call it a junction the car has begun to follow it, so in the image the left
+        // line hardly moves any more and the straight right line moves faster (the town's
+        // first fork in dusk and shadow, where the right line had been lost for a frame). The
+        // left line is the odd one: it is far from where it was while the lines were a lane
+        // apart. Judged from the last frame's movement alone it is the right one, which does
+        // not lean out, and the fork is never taken the way the route says.
+        let mut rule = JunctionRule::new(vec![Step::Straight], JunctionOptions::default());
+        let (mut left, mut right) = (64.5, 254.5);
+        let mut met = None;
+        for i in 0..60 {
+            // Drawn leaning out by 16 px over the band, the left line's peak is 8 px left of
+            // `left`: the lines are measured 228 px apart (1.2 lane widths) when drawn 220.
+            if i >= 5 && right - left < 217.0 {
+                left -= 3.0;
+            } else if i >= 5 {
+                left -= 0.3;
+                right += 1.0;
+            }
+            let lean = if i >= 5 { -16.0 } else { 0.0 };
+            if let (m, Some(r)) = run(&mut rule, &frame_with_right(left, lean, right)) {
+                met = Some((i, m, r));
+                break;
+            }
+        }
+        let (i, m, r) = met.expect("a fork was met");
+        assert_eq!(
+            (r.kind, r.way, r.keep),
+            (JunctionKind::Fork, Some(Step::Straight), Side::Right),
+            "frame {i}"
+        );
+        assert_eq!(m.status, LaneStatus::RightOnly);
     }
 
     #[test]
@@ -444,7 +515,11 @@ mod tests {
             // lane ahead (a road coming in).
             let mut met = None;
             for i in 1..40 {
-                let (left, lean) = if jump { (10.0, 0.0) } else { (64.5 - 2.0 * i as f64, 30.0) };
+                let (left, lean) = if jump {
+                    (10.0, 0.0)
+                } else {
+                    (64.5 - 2.0 * i as f64, 30.0)
+                };
                 if let (m, Some(r)) = run(&mut rule, &frame(left, lean)) {
                     met = Some((m, r));
                     break;
