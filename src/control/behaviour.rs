@@ -333,6 +333,10 @@ struct LineStop {
 /// A line belongs to a stop sign when it lies at most this far beyond the sign, metres.
 pub const LINE_PAST_SIGN_M: f64 = 0.3;
 
+/// Two sightings of a line across the lane are the same line when they place it within this
+/// distance of each other on the floor, metres (a frame's ranging error is ~1 cm).
+const LINE_SAME_M: f64 = 0.1;
+
 impl Behaviour {
     /// A machine in `Cruise` at time 0.
     pub fn new(cfg: BehaviourOptions) -> Self {
@@ -433,7 +437,14 @@ impl Behaviour {
         self.line.prev_s = Some(now);
         self.line.speed = obs.speed_mps;
         if let Some(l) = obs.stop_line {
-            self.line.at = Some((odo + l.distance_m - self.line.front_m, l.dashed));
+            let seen = odo + l.distance_m - self.line.front_m;
+            // The nearest line ahead is the one to stop at: once it has left the view (about
+            // 0.4 m before the car reaches it), a line further on (the edge of the road being
+            // crossed, seen as the car creeps up) does not replace it until it is passed.
+            let nearer_ahead = self.line.at.is_some_and(|(at, _)| at - odo > -0.1 && seen > at + LINE_SAME_M);
+            if !nearer_ahead {
+                self.line.at = Some((seen, l.dashed));
+            }
         } else if self.line.at.is_some_and(|(at, _)| odo > at + 0.5) {
             self.line.at = None;
         }
@@ -934,6 +945,40 @@ mod tests {
             r.frame(obs);
         }
         assert!(r.car.odometry_m + front < line - 0.5, "{}", r.car.odometry_m);
+    }
+
+    /// Creeping up to a give-way line, the line leaves the view and the far edge of the road
+    /// being crossed comes into it: the car still stops at the first line (it kept the line
+    /// 0.25 m further and, that one lying beyond the sign's reach, stopped 10 cm short of
+    /// the give-way line in the town).
+    #[test]
+    fn a_further_line_does_not_replace_the_nearer_one_ahead() {
+        let (front, line, far) = (0.02, 1.9, 2.15);
+        let seen = |odo: f64, at: f64| {
+            (0.4..1.0).contains(&(at - odo)).then_some(crate::lane::stop_line::StopLineSeen {
+                distance_m: at - odo,
+                dashed: false,
+                row: 0.0,
+            })
+        };
+        let obs = |odo: f64| Observations {
+            stop_sign: (2.0 - odo > 0.3).then(|| at(2.0 - odo)),
+            // The first line while in view, then the road beyond it.
+            stop_line: seen(odo, line).or_else(|| seen(odo, far)),
+            ..lane()
+        };
+        let mut r = Rig::new(defaults());
+        r.b.set_car(front, car());
+        let mut rest = None;
+        for _ in 0..(20.0 / DT) as usize {
+            let before = r.b.mode();
+            let d = r.frame(obs);
+            if before == Mode::StopSign && d.mode == Mode::Cruise {
+                rest = Some(r.car.odometry_m);
+            }
+        }
+        let rest = rest.expect("stopped and went on");
+        assert!((rest + front - line).abs() < 0.002, "front at {} m", rest + front);
     }
 
     #[test]
