@@ -18,7 +18,8 @@
 //!    eye, fullbody) on both sides: the work per window is similar, the boxes are not meaningful.
 //! 3. Ours: `Pipeline::step` on one thread (the detector's `parallel` off).
 //!    OpenCV (`$RCCAR_PYTHON`, else `python3`; `cv2.setNumThreads(1)`): warpPerspective → grey →
-//!    GaussianBlur → Canny → threshold | edges → column histogram, then grey of the frame and
+//!    GaussianBlur → Canny → the configured threshold (threshold, or adaptiveThreshold; then
+//!    morphologyEx MORPH_OPEN with `lane.opening`) | edges → column histogram, then grey of the frame and
 //!    one `detectMultiScale(gray, scale_factor, min_neighbors, minSize)` per cascade (ranging and the
 //!    behaviour machine are a few µs and have no OpenCV counterpart).
 //! 4. Prints median and min per frame of both, and the ratios (ours / OpenCV).
@@ -49,13 +50,21 @@ frames = [cv2.cvtColor(cv2.imread(p, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB) for p
 ccs = [cv2.CascadeClassifier(p) for p in a["cascades"]]
 ms = a["min_size"]
 flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+open_k = np.ones((max(1, a["opening"]),) * 2, np.uint8)
 lane_t, total_t, cpu_t = [], [], []
 def frame(rgb):
     c0 = time.thread_time()
     t0 = time.perf_counter()
     bird = cv2.cvtColor(cv2.warpPerspective(rgb, M, (W, H), flags=flags), cv2.COLOR_RGB2GRAY)
     edges = cv2.Canny(cv2.GaussianBlur(bird, (5, 5), 0), a["canny_low"], a["canny_high"], L2gradient=False)
-    _, thr = cv2.threshold(bird, a["threshold"], 255, cv2.THRESH_BINARY)
+    if a["mode"] == "adaptive":
+        thr = cv2.adaptiveThreshold(bird, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY, a["block"], a["c"])
+    elif a["mode"] == "otsu":
+        _, thr = cv2.threshold(bird, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
+    else:
+        _, thr = cv2.threshold(bird, a["threshold"], 255, cv2.THRESH_BINARY)
+    if a["opening"] > 1:
+        thr = cv2.morphologyEx(thr, cv2.MORPH_OPEN, open_k)
     binary = cv2.bitwise_or(thr, edges)
     hist = cv2.reduce((binary[H - band:] > 0).view(np.uint8), 0, cv2.REDUCE_SUM, dtype=cv2.CV_32S)
     t1 = time.perf_counter()
@@ -194,6 +203,12 @@ fn main() {
         "out_w": cfg.warp.out_width, "out_h": cfg.warp.out_height,
         "band_rows": pipe.lane().images().band_rows, "reps": reps,
         "canny_low": cfg.lane.canny_low, "canny_high": cfg.lane.canny_high, "threshold": cfg.lane.threshold,
+        "mode": match cfg.lane.threshold_mode {
+            rccar::config::ThresholdMode::Adaptive => "adaptive",
+            rccar::config::ThresholdMode::Otsu => "otsu",
+            rccar::config::ThresholdMode::Fixed => "fixed",
+        },
+        "block": cfg.lane.adaptive_block, "c": cfg.lane.adaptive_c, "opening": cfg.lane.opening,
         "scale_factor": cfg.detect.scale_factor, "min_neighbors": cfg.detect.min_neighbors,
         "min_size": cfg.detect.min_size_px,
     });

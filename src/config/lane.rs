@@ -25,6 +25,11 @@ pub struct LaneConfig {
     /// `adaptive`: a pixel is "line" when brighter than that mean − C (OpenCV's C), grey
     /// levels −255..=255; negative = brighter than the mean by that much.
     pub adaptive_c: i32,
+    /// Side of the square the threshold image is opened with (eroded, then dilated) before
+    /// the edges are added, pixels: 0 or 1 = not opened, else odd 3..=15. Removes white specks
+    /// narrower than the square (a mottled floor passing the adaptive threshold); the tape is
+    /// wider and stays.
+    pub opening: u32,
     /// Canny hysteresis low threshold (L1 gradient magnitude of the 3x3 Sobel).
     pub canny_low: u16,
     /// Canny hysteresis high threshold.
@@ -55,6 +60,7 @@ impl Default for LaneConfig {
             threshold: 170,
             adaptive_block: 41,
             adaptive_c: -5,
+            opening: 0,
             canny_low: 100,
             canny_high: 200,
             blur: true,
@@ -81,6 +87,9 @@ impl LaneConfig {
             );
         }
         c.range("lane.adaptive_c", l.adaptive_c, -255, 255);
+        if l.opening > 1 && (l.opening.is_multiple_of(2) || l.opening > 15) {
+            c.fail("lane.opening", l.opening.to_string(), "0, 1 or an odd number 3 ..= 15");
+        }
         c.range("lane.canny_low", l.canny_low, 0, 2040);
         c.range("lane.canny_high", l.canny_high, 0, 2040);
         if l.canny_low > l.canny_high {
@@ -106,6 +115,7 @@ impl From<&LaneConfig> for LaneOptions {
             threshold_mode: l.threshold_mode,
             threshold: l.threshold,
             adaptive: (l.adaptive_block, l.adaptive_c),
+            opening: l.opening,
             canny: CannyOptions {
                 low: l.canny_low,
                 high: l.canny_high,

@@ -53,6 +53,9 @@ pub struct LaneOptions {
     /// Adaptive threshold: side of the square the mean is taken over (odd), pixels, and C (a
     /// pixel is line when brighter than the mean − C), grey levels.
     pub adaptive: (u32, i32),
+    /// Side of the square the threshold image is opened with before the edges are added
+    /// (odd; 0 or 1: not opened): white specks narrower than this are removed.
+    pub opening: u32,
     /// Canny thresholds and blur.
     pub canny: CannyOptions,
     /// Histogram band and line finding.
@@ -106,6 +109,7 @@ pub struct LaneDetector {
     exact_warp: bool,
     images: LaneImages,
     box_scratch: threshold::BoxScratch,
+    open_scratch: Vec<u8>,
 }
 
 impl LaneDetector {
@@ -130,6 +134,7 @@ impl LaneDetector {
                 level: 0,
             },
             box_scratch: threshold::BoxScratch::default(),
+            open_scratch: Vec::new(),
         })
     }
 
@@ -156,13 +161,25 @@ impl LaneDetector {
             ThresholdMode::Otsu => threshold::otsu_level(&im.bird),
             ThresholdMode::Adaptive => 0,
         };
-        match self.opts.threshold_mode {
-            ThresholdMode::Fixed | ThresholdMode::Otsu => {
+        let open = self.opts.opening > 1;
+        match (self.opts.threshold_mode, open) {
+            (ThresholdMode::Fixed | ThresholdMode::Otsu, false) => {
                 threshold::threshold_or_edges(&im.bird, im.level, &im.edges, &mut im.binary)
             }
-            ThresholdMode::Adaptive => {
+            (ThresholdMode::Adaptive, false) => {
                 threshold::adaptive_or_edges(&im.bird, block, c, &im.edges, &mut self.box_scratch, &mut im.binary)
             }
+            (ThresholdMode::Fixed | ThresholdMode::Otsu, true) => {
+                threshold::threshold(&im.bird, im.level, &mut im.binary)
+            }
+            (ThresholdMode::Adaptive, true) => {
+                threshold::adaptive(&im.bird, block, c, &mut self.box_scratch, &mut im.binary)
+            }
+        }
+        if open {
+            // Specks out of the threshold image, then the edges in.
+            threshold::open_square(&mut im.binary, self.opts.opening, &mut self.open_scratch);
+            threshold::or_edges(&mut im.binary, &im.edges);
         }
         times.threshold_us = timer.lap_us();
         // 4. Column histogram of the band nearest the car.

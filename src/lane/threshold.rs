@@ -116,21 +116,94 @@ pub fn adaptive_or_edges(
     scratch: &mut BoxScratch,
     out: &mut GrayImage,
 ) {
-    assert_eq!(src.dimensions(), out.dimensions());
     assert_eq!(edges.dimensions(), out.dimensions());
+    adaptive_else(src, block, c, Some(edges.as_raw()), scratch, out);
+}
+
+/// OpenCV's `adaptiveThreshold(src, 255, ADAPTIVE_THRESH_MEAN_C, THRESH_BINARY, block, c)`
+/// alone (as [`adaptive_or_edges`] without the edges).
+pub fn adaptive(src: &GrayImage, block: u32, c: i32, scratch: &mut BoxScratch, out: &mut GrayImage) {
+    adaptive_else(src, block, c, None, scratch, out);
+}
+
+/// The adaptive threshold; where a pixel does not pass, `other`'s pixel (or 0).
+fn adaptive_else(
+    src: &GrayImage,
+    block: u32,
+    c: i32,
+    other: Option<&[u8]>,
+    scratch: &mut BoxScratch,
+    out: &mut GrayImage,
+) {
+    assert_eq!(src.dimensions(), out.dimensions());
     assert!(block <= 127, "block must be at most 127");
     let w = src.width() as usize;
     let area = (block * block) as i32;
-    let (s_all, e_all) = (src.as_raw(), edges.as_raw());
+    let s_all = src.as_raw();
     let o: &mut [u8] = out;
     box_sums(src, block, scratch, |y, sums| {
         let span = y * w..(y + 1) * w;
-        let (o, s, e) = (&mut o[span.clone()], &s_all[span.clone()], &e_all[span]);
-        for (((o, &s), &e), &sum) in o.iter_mut().zip(s).zip(e).zip(sums) {
-            let pass = 2 * (sum as i32) < (2 * (s as i32 + c) - 1) * area;
-            *o = if pass { 255 } else { e };
+        let (o, s) = (&mut o[span.clone()], &s_all[span.clone()]);
+        let pass = |s: u8, sum: u32| 2 * (sum as i32) < (2 * (s as i32 + c) - 1) * area;
+        match other {
+            Some(e_all) => {
+                for (((o, &s), &e), &sum) in o.iter_mut().zip(s).zip(&e_all[span]).zip(sums) {
+                    *o = if pass(s, sum) { 255 } else { e };
+                }
+            }
+            None => {
+                for ((o, &s), &sum) in o.iter_mut().zip(s).zip(sums) {
+                    *o = if pass(s, sum) { 255 } else { 0 };
+                }
+            }
         }
     });
+}
+
+/// Morphological opening of `img` in place with a `side × side` square (odd `side`): erosion
+/// (the minimum of the square round each pixel), then dilation (the maximum). On the binary
+/// threshold image it removes every white speck the square does not fit in — a mottled
+/// floor's, sensor noise — and leaves wider marks such as the tape (about 10 px in the
+/// bird's-eye image) as they were. OpenCV's `morphologyEx(img, MORPH_OPEN, ones(side, side))`
+/// with its default border (pixels outside the image take no part). Min and max over a
+/// rectangle are separable: each is a pass along the rows, then one down the columns.
+pub fn open_square(img: &mut GrayImage, side: u32, tmp: &mut Vec<u8>) {
+    assert!(side % 2 == 1, "side must be odd");
+    if side <= 1 {
+        return;
+    }
+    let r = (side / 2) as usize;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    tmp.resize(w * h, 0);
+    let px: &mut [u8] = img;
+    for pick in [u8::min, u8::max] {
+        // Along each row into `tmp`, then down each column back into the image.
+        for (src, dst) in px.chunks_exact(w).zip(tmp.chunks_exact_mut(w)) {
+            for (x, d) in dst.iter_mut().enumerate() {
+                *d = src[x.saturating_sub(r)..(x + r + 1).min(w)].iter().copied().reduce(pick).unwrap_or(0);
+            }
+        }
+        for y in 0..h {
+            let rows = y.saturating_sub(r)..(y + r + 1).min(h);
+            let (first, rest) = (rows.start, rows.end);
+            let dst = &mut px[y * w..(y + 1) * w];
+            dst.copy_from_slice(&tmp[first * w..(first + 1) * w]);
+            for yy in first + 1..rest {
+                for (d, &s) in dst.iter_mut().zip(&tmp[yy * w..(yy + 1) * w]) {
+                    *d = pick(*d, s);
+                }
+            }
+        }
+    }
+}
+
+/// `out |= edges`: the edges united with a threshold image.
+pub fn or_edges(out: &mut GrayImage, edges: &GrayImage) {
+    assert_eq!(edges.dimensions(), out.dimensions());
+    let o: &mut [u8] = out;
+    for (o, &e) in o.iter_mut().zip(edges.as_raw()) {
+        *o |= e;
+    }
 }
 
 /// Otsu's threshold level for `img` (0..=255).
@@ -342,6 +415,55 @@ mod tests {
             })
             .count();
         assert_eq!(floor_on, 0, "{floor_on} floor pixels pass");
+    }
+
+    /// The opening against its definition (each pixel: the max over the squares containing
+    /// it of the square's min, pixels outside the image taking no part), on random images.
+    #[test]
+    fn opening_is_the_max_of_the_mins_of_the_squares_round_each_pixel() {
+        let mut seed = 7u64;
+        let mut next = move || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 33) as u32
+        };
+        for (w, h, side) in [(17u32, 11u32, 3u32), (9, 23, 5), (4, 4, 7), (30, 2, 3)] {
+            let img = GrayImage::from_fn(w, h, |_, _| image::Luma([if next() % 3 == 0 { 255 } else { (next() % 256) as u8 }]));
+            let mut got = img.clone();
+            open_square(&mut got, side, &mut Vec::new());
+            let r = (side / 2) as i64;
+            let inside = |x: i64, y: i64| x >= 0 && y >= 0 && x < w as i64 && y < h as i64;
+            let at = |im: &GrayImage, x: i64, y: i64| im.get_pixel(x as u32, y as u32)[0];
+            let fold = |im: &GrayImage, x: i64, y: i64, min: bool| {
+                let mut acc: Option<u8> = None;
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        if inside(x + dx, y + dy) {
+                            let v = at(im, x + dx, y + dy);
+                            acc = Some(acc.map_or(v, |a| if min { a.min(v) } else { a.max(v) }));
+                        }
+                    }
+                }
+                acc.unwrap()
+            };
+            let eroded = GrayImage::from_fn(w, h, |x, y| image::Luma([fold(&img, x as i64, y as i64, true)]));
+            let want = GrayImage::from_fn(w, h, |x, y| image::Luma([fold(&eroded, x as i64, y as i64, false)]));
+            assert_eq!(got, want, "{w}x{h}, side {side}");
+        }
+    }
+
+    /// Specks narrower than the square go; a 10 px stripe (the tape) stays pixel for pixel.
+    #[test]
+    fn opening_removes_specks_and_keeps_the_tape() {
+        let img = GrayImage::from_fn(60, 40, |x, y| {
+            let tape = (30..40).contains(&x);
+            let speck = (x % 7 == 1 && y % 5 == 2) || (x == 10 && (10..12).contains(&y));
+            image::Luma([if tape || speck { 255 } else { 0 }])
+        });
+        let mut out = img.clone();
+        open_square(&mut out, 3, &mut Vec::new());
+        for (x, y, p) in out.enumerate_pixels() {
+            assert_eq!(p[0] == 255, (30..40).contains(&x), "pixel ({x},{y})");
+        }
     }
 
     #[test]
