@@ -6,7 +6,7 @@ import os
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 total = 0.0
-for kind in ["stop_sign", "traffic_light", "obstacle", "yield_sign", "turn_sign"]:
+for kind in ["stop_sign", "traffic_light", "obstacle", "yield_sign", "turn_sign", "obstacle_light"]:
     d = os.path.join(HERE, kind)
     s = json.load(open(os.path.join(d, "stages.json")))
     r = json.load(open(os.path.join(d, "report.json")))
