@@ -1,9 +1,10 @@
 //! Changing light (issue 27): the simulator's shadows, bright patches and dusk
-//! (src/sim/light.rs, `sim.light_level`) and the adaptive lane threshold that drives through
-//! them (`lane.threshold_mode = "adaptive"`). docs/light.md has the sweep these bound.
+//! (src/sim/light.rs, `sim.light_level`) and the lane threshold that drives through them
+//! (`lane.threshold_mode = "adaptive"`, opened with `lane.opening = 3`). docs/light.md has the
+//! sweep these bound; tests/town_sim.rs drives the town's route in the same light.
 //!
-//! The shipped configuration keeps `threshold_mode = "fixed"` (changing it would change the
-//! default run's telemetry); these runs set the adaptive threshold on top of it.
+//! The shipped configuration keeps the paper's fixed level (making the adaptive threshold the
+//! default changes five labs' figures and lessons: docs/light.md); these runs set it on top.
 
 use rccar::camera::PinholeCamera;
 use rccar::config::Config;
@@ -26,33 +27,41 @@ fn run(cfg: &Config) -> Summary {
     sim.run(|_, _| Ok::<(), ()>(())).unwrap()
 }
 
-fn strongest(mode: &str) -> Config {
-    Config::default()
+/// The shipped configuration, 3 laps at the strongest light level, with `sets` on top.
+fn strongest(sets: &[&str]) -> Config {
+    let mut cfg = Config::default()
         .with_override("sim.laps=3")
         .unwrap()
         .with_override("sim.light_level=3")
-        .unwrap()
-        .with_override(&format!("lane.threshold_mode={mode}"))
-        .unwrap()
+        .unwrap();
+    for set in sets {
+        cfg = cfg.with_override(set).unwrap();
+    }
+    cfg
 }
 
-/// Must show 3: at the strongest light level, 3 laps of the default track with no departure
-/// and the lane never lost (measured: 0 lost frames, RMS 8.2 mm).
+/// The settings docs/light.md gives for changing light: the adaptive threshold, opened.
+const LIGHT: [&str; 2] = ["lane.threshold_mode=adaptive", "lane.opening=3"];
+
+/// Must show 3: at the strongest light level, the adaptive threshold (opened) drives 3 laps of
+/// the default track with no departure and the lane (almost) never lost (measured: 4 lost
+/// frames, RMS 8.2 mm).
 #[test]
-fn adaptive_threshold_drives_three_laps_at_the_strongest_light() {
-    let s = run(&strongest("adaptive"));
-    eprintln!("adaptive, light level 3: {s:?}");
+fn the_adaptive_threshold_drives_three_laps_at_the_strongest_light() {
+    let cfg = strongest(&LIGHT);
+    let s = run(&cfg);
+    eprintln!("adaptive, opened, light level 3: {s:?}");
     assert_eq!(s.end, EndReason::LapsDone, "{s:?}");
     assert!(s.laps >= 3 && s.lane_departures == 0, "{s:?}");
-    assert!(s.lane_lost_frames <= 10, "{s:?}");
+    assert!(s.lane_lost_frames <= 20, "{s:?}");
     assert!(s.xte_rms_m <= 0.05 * s.lane_width_m, "RMS {} m", s.xte_rms_m);
 }
 
-/// The light is a real test: the shipped fixed level does not get round at the strongest
-/// level (dusk takes the tape below 170 grey levels; the car stands, its lane lost).
+/// The light is a real test: the fixed level does not get round at the strongest level (dusk
+/// takes the tape below 170 grey levels; the car stands, its lane lost).
 #[test]
 fn the_fixed_level_fails_at_the_strongest_light() {
-    let s = run(&strongest("fixed"));
+    let s = run(&strongest(&["lane.threshold_mode=fixed"]));
     eprintln!("fixed, light level 3: {s:?}");
     assert_ne!(s.end, EndReason::LapsDone, "{s:?}");
     assert!(s.lane_lost_frames > 100, "{s:?}");
@@ -167,6 +176,8 @@ fn bad_light_and_threshold_values_name_the_key() {
         ("lane.adaptive_block=1", "lane.adaptive_block"),
         ("lane.adaptive_block=129", "lane.adaptive_block"),
         ("lane.adaptive_c=300", "lane.adaptive_c"),
+        ("lane.opening=4", "lane.opening"),
+        ("lane.opening=17", "lane.opening"),
     ] {
         let e = Config::default().with_override(set).expect_err(set);
         let mut msg = e.to_string();
@@ -183,6 +194,9 @@ fn bad_light_and_threshold_values_name_the_key() {
         "sim.light_glare=3",
         "lane.adaptive_block=127",
         "lane.adaptive_c=-255",
+        "lane.opening=0",
+        "lane.opening=1",
+        "lane.opening=15",
     ] {
         Config::default().with_override(set).expect(set);
     }
