@@ -100,7 +100,13 @@ fn the_adaptive_threshold_needs_the_opening_on_a_mottled_floor() {
         let out = tempfile::tempdir().unwrap();
         let (code, ..) = run(rccar()
             .args(["replay", "tests/data/lane_sample", "--no-timing", "--no-annotate"])
-            .args(["--set", "lane.threshold_mode=adaptive", "--set", &format!("lane.opening={opening}"), "--out"])
+            .args([
+                "--set",
+                "lane.threshold_mode=adaptive",
+                "--set",
+                &format!("lane.opening={opening}"),
+                "--out",
+            ])
             .arg(out.path()));
         assert_eq!(code, 0);
         let got = read_jsonl(&out.path().join("telemetry.jsonl"));

@@ -441,7 +441,10 @@ impl Behaviour {
             // The nearest line ahead is the one to stop at: once it has left the view (about
             // 0.4 m before the car reaches it), a line further on (the edge of the road being
             // crossed, seen as the car creeps up) does not replace it until it is passed.
-            let nearer_ahead = self.line.at.is_some_and(|(at, _)| at - odo > -0.1 && seen > at + LINE_SAME_M);
+            let nearer_ahead = self
+                .line
+                .at
+                .is_some_and(|(at, _)| at - odo > -0.1 && seen > at + LINE_SAME_M);
             if !nearer_ahead {
                 self.line.at = Some((seen, l.dashed));
             }
@@ -955,11 +958,13 @@ mod tests {
     fn a_further_line_does_not_replace_the_nearer_one_ahead() {
         let (front, line, far) = (0.02, 1.9, 2.15);
         let seen = |odo: f64, at: f64| {
-            (0.4..1.0).contains(&(at - odo)).then_some(crate::lane::stop_line::StopLineSeen {
-                distance_m: at - odo,
-                dashed: false,
-                row: 0.0,
-            })
+            (0.4..1.0)
+                .contains(&(at - odo))
+                .then_some(crate::lane::stop_line::StopLineSeen {
+                    distance_m: at - odo,
+                    dashed: false,
+                    row: 0.0,
+                })
         };
         let obs = |odo: f64| Observations {
             stop_sign: (2.0 - odo > 0.3).then(|| at(2.0 - odo)),

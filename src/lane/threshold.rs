@@ -180,7 +180,11 @@ pub fn open_square(img: &mut GrayImage, side: u32, tmp: &mut Vec<u8>) {
         // Along each row into `tmp`, then down each column back into the image.
         for (src, dst) in px.chunks_exact(w).zip(tmp.chunks_exact_mut(w)) {
             for (x, d) in dst.iter_mut().enumerate() {
-                *d = src[x.saturating_sub(r)..(x + r + 1).min(w)].iter().copied().reduce(pick).unwrap_or(0);
+                *d = src[x.saturating_sub(r)..(x + r + 1).min(w)]
+                    .iter()
+                    .copied()
+                    .reduce(pick)
+                    .unwrap_or(0);
             }
         }
         for y in 0..h {
@@ -427,7 +431,9 @@ mod tests {
             (seed >> 33) as u32
         };
         for (w, h, side) in [(17u32, 11u32, 3u32), (9, 23, 5), (4, 4, 7), (30, 2, 3)] {
-            let img = GrayImage::from_fn(w, h, |_, _| image::Luma([if next() % 3 == 0 { 255 } else { (next() % 256) as u8 }]));
+            let img = GrayImage::from_fn(w, h, |_, _| {
+                image::Luma([if next() % 3 == 0 { 255 } else { (next() % 256) as u8 }])
+            });
             let mut got = img.clone();
             open_square(&mut got, side, &mut Vec::new());
             let r = (side / 2) as i64;
