@@ -90,6 +90,17 @@ fn sample_replay_matches_golden_telemetry() {
     }
 }
 
+/// Median and largest |L_c − truth| over the frames of a replay of the sample, pixels.
+fn centre_errors(got: &[Value], truth: &[Value]) -> (f64, f64) {
+    let mut errs: Vec<f64> = got
+        .iter()
+        .zip(truth)
+        .map(|(g, t)| (g["lane_center"].as_f64().unwrap() - t["truth_center"].as_f64().unwrap()).abs())
+        .collect();
+    errs.sort_by(f64::total_cmp);
+    (errs[errs.len() / 2], errs[errs.len() - 1])
+}
+
 /// Why the adaptive threshold's image is opened (`lane.opening = 3`): without it the mottled
 /// floor's bright flecks pass, and on a frame drawn with no left line they add up to one
 /// (frame 29: L_c 11.4 px off the truth, measured); opened, the sample's lane centres are as
@@ -117,13 +128,7 @@ fn the_adaptive_threshold_needs_the_opening_on_a_mottled_floor() {
             .filter(|(g, t)| t["left_visible"] == false && g["status"] != "right_only")
             .map(|(g, _)| g["file"].as_str().unwrap_or("?").to_string())
             .collect();
-        let mut errs: Vec<f64> = got
-            .iter()
-            .zip(&truth)
-            .map(|(g, t)| (g["lane_center"].as_f64().unwrap() - t["truth_center"].as_f64().unwrap()).abs())
-            .collect();
-        errs.sort_by(f64::total_cmp);
-        let (median, max) = (errs[errs.len() / 2], errs[errs.len() - 1]);
+        let (median, max) = centre_errors(&got, &truth);
         eprintln!("opening {opening}: median {median:.3} px, max {max:.3} px; false left line in {false_lines:?}");
         if opening == 0 {
             assert!(!false_lines.is_empty() && max > 3.0, "opening 0: max {max}");
@@ -149,13 +154,7 @@ fn sample_lane_centres_match_the_truth_they_were_drawn_with() {
     assert_eq!(code, 0);
     let got = read_jsonl(&out.path().join("telemetry.jsonl"));
     let truth = read_jsonl(&data("lane_sample/truth.jsonl"));
-    let mut errs: Vec<f64> = got
-        .iter()
-        .zip(&truth)
-        .map(|(g, t)| (g["lane_center"].as_f64().unwrap() - t["truth_center"].as_f64().unwrap()).abs())
-        .collect();
-    errs.sort_by(f64::total_cmp);
-    let (median, max) = (errs[errs.len() / 2], errs[errs.len() - 1]);
+    let (median, max) = centre_errors(&got, &truth);
     eprintln!("sample: median |L_c - truth| = {median:.3} px, max = {max:.3} px");
     assert!(median <= 1.0 && max <= 3.0, "median {median}, max {max}");
     // The frames drawn without a left line are reported as such, with the left line estimated.

@@ -925,23 +925,10 @@ mod tests {
                 }),
             ..lane()
         };
-        let mut r = Rig::new(defaults());
-        r.b.set_car(front, car());
-        let mut rest = None;
-        for _ in 0..(20.0 / DT) as usize {
-            let before = r.b.mode();
-            let d = r.frame(obs);
-            if before == Mode::StopSign && d.mode == Mode::Cruise {
-                rest = Some(r.car.odometry_m);
-            }
-            if before == Mode::Cruise && d.mode == Mode::StopSign {
-                assert!(r.b.last_transition().unwrap().reason.contains("line"));
-            }
-        }
         // The front at rest at the line (within 2 mm), then on past it.
-        let rest = rest.expect("stopped and went on");
+        let (rest, odo) = stop_and_go(front, obs);
         assert!((rest + front - line).abs() < 0.002, "front at {} m", rest + front);
-        assert!(r.car.odometry_m > line + 1.0);
+        assert!(odo > line + 1.0);
         // Without `set_car` no line is used: the ranged stop, well before the line.
         let mut r = Rig::new(defaults());
         for _ in 0..(3.0 / DT) as usize {
@@ -972,18 +959,27 @@ mod tests {
             stop_line: seen(odo, line).or_else(|| seen(odo, far)),
             ..lane()
         };
+        let (rest, _) = stop_and_go(front, obs);
+        assert!((rest + front - line).abs() < 0.002, "front at {} m", rest + front);
+    }
+
+    /// 20 s of a car whose front is `front` m ahead of the lens through the scene `obs`: the
+    /// odometry where it went on after its stop-sign stop (entered for a line), and at the end.
+    fn stop_and_go(front: f64, obs: impl Fn(f64) -> Observations) -> (f64, f64) {
         let mut r = Rig::new(defaults());
         r.b.set_car(front, car());
         let mut rest = None;
         for _ in 0..(20.0 / DT) as usize {
             let before = r.b.mode();
-            let d = r.frame(obs);
+            let d = r.frame(&obs);
             if before == Mode::StopSign && d.mode == Mode::Cruise {
                 rest = Some(r.car.odometry_m);
             }
+            if before == Mode::Cruise && d.mode == Mode::StopSign {
+                assert!(r.b.last_transition().unwrap().reason.contains("line"));
+            }
         }
-        let rest = rest.expect("stopped and went on");
-        assert!((rest + front - line).abs() < 0.002, "front at {} m", rest + front);
+        (rest.expect("stopped and went on"), r.car.odometry_m)
     }
 
     #[test]
