@@ -147,6 +147,10 @@ pub struct ClassInfo {
     /// Abdollahi's colour + template detector can find it instead of a cascade
     /// (`classes.<name>.detect = "colour_template"`): a red octagon with white letters.
     pub colour_template: bool,
+    /// It stands on the floor in a colour of its own: a box whose middle has the colour of the
+    /// floor in front of it, only darker or brighter, is a shadow or a sun patch and is dropped
+    /// (`detect.shadow_tolerance`, src/ranging/refine.rs `floor_coloured`).
+    pub not_floor_colour: bool,
     /// The behaviour that reacts to it.
     pub reaction: Reaction,
     /// How the simulator draws it.
@@ -179,6 +183,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         reads_arrow: false,
         colour_cue: ColourCue::RedFace,
         colour_template: true,
+        not_floor_colour: false,
         reaction: Reaction::StopThenGo,
         shape: SimShape::Octagon,
         sim_size_m: [0.10, 0.0, 0.0],
@@ -202,6 +207,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         reads_arrow: false,
         colour_cue: ColourCue::LitHousing,
         colour_template: false,
+        not_floor_colour: false,
         reaction: Reaction::WaitForGreen,
         shape: SimShape::LightHousing,
         sim_size_m: [0.12, 0.0, 0.0],
@@ -225,6 +231,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         reads_arrow: false,
         colour_cue: ColourCue::None,
         colour_template: false,
+        not_floor_colour: true,
         reaction: Reaction::StopOrPass,
         shape: SimShape::Box,
         sim_size_m: [0.15, 0.12, 0.10],
@@ -248,6 +255,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         reads_arrow: false,
         colour_cue: ColourCue::RedTriangle,
         colour_template: false,
+        not_floor_colour: false,
         reaction: Reaction::Yield,
         shape: SimShape::Triangle,
         sim_size_m: [0.12, 0.0, 0.0],
@@ -271,6 +279,7 @@ pub const CLASSES: [ClassInfo; ObjectClass::COUNT] = [
         reads_arrow: true,
         colour_cue: ColourCue::BlueFace,
         colour_template: false,
+        not_floor_colour: false,
         reaction: Reaction::TakeTurn,
         shape: SimShape::ArrowDisc,
         sim_size_m: [0.10, 0.0, 0.0],

@@ -370,6 +370,8 @@ pub struct Pipeline {
     behaviour: Behaviour,
     dead: DeadReckoning,
     obstacle_lane_half_m: f64,
+    /// `detect.shadow_tolerance`: obstacle boxes the floor's colour are dropped.
+    shadow_tolerance: f64,
     time_s: f64,
     last_throttle: f64,
     objects: Vec<RangedObject>,
@@ -435,6 +437,7 @@ impl Pipeline {
             behaviour,
             dead: (&cfg.vehicle).into(),
             obstacle_lane_half_m: cfg.behaviour.obstacle_lane_half_m,
+            shadow_tolerance: cfg.detect.shadow_tolerance,
             time_s: 0.0,
             last_throttle: 0.0,
             objects: Vec::with_capacity(16),
@@ -538,6 +541,15 @@ impl Pipeline {
         let mut spans = vec![lane];
         if self.detects_on(frame_index) {
             spans.extend(self.detect_rows.iter().cloned());
+            // The shadow check (`refine::floor_coloured`) reads the floor strip under each box
+            // of a class standing on the floor: up to a quarter of the box's height below it.
+            if self.shadow_tolerance > 0.0 {
+                let h = self.height as usize;
+                let below = self.detect_limits.iter().filter(|l| l.class.info().not_floor_colour);
+                if let Some(b) = below.map(|l| l.max_size.1 as usize / 4 + 2).max() {
+                    spans.extend(self.detect_rows.iter().map(|r| r.end.min(h)..(r.end + b).min(h)));
+                }
+            }
             // The light reading looks inside boxes, which lie inside the regions; the colour
             // refinement of ranging (src/ranging/refine.rs) inside sign and light boxes grown
             // by `refine::GROW` of their height, so up to that share of the region beyond it.
@@ -730,6 +742,10 @@ impl Pipeline {
                             let face = [r.x as f64 - 0.5, r.y as f64 - 0.5, (r.x + r.width) as f64 - 0.5, (r.y + r.height) as f64 - 0.5];
                             // A box without its class's face colour is the cascade's mistake.
                             if !crate::ranging::refine::shows_colour(frame, class, face) {
+                                continue;
+                            }
+                            // An obstacle box the floor's colour is a shadow or a sun patch.
+                            if crate::ranging::refine::floor_coloured(frame, class, face, self.shadow_tolerance) {
                                 continue;
                             }
                             let bbox = [

@@ -30,6 +30,12 @@ pub struct DetectConfig {
     /// its width allows (`classes.<name>.box_m`), give or take `pipeline::BAND_SLACK` of the
     /// window height.
     pub ground_band: bool,
+    /// Drop a box of a class standing on the floor in its own colour (obstacles) whose middle
+    /// has the chromaticity of the floor just in front of it, only darker or brighter: a
+    /// shadow or a sun patch (src/ranging/refine.rs `floor_coloured`). The largest difference
+    /// of any channel's chromaticity `c / (r + g + b)` that counts as the same colour, 0..0.2;
+    /// 0 = off.
+    pub shadow_tolerance: f64,
 }
 
 impl Default for DetectConfig {
@@ -42,6 +48,7 @@ impl Default for DetectConfig {
             range_m: [0.2, 1.6],
             every_n_frames: 2,
             ground_band: true,
+            shadow_tolerance: 0.02,
         }
     }
 }
@@ -53,6 +60,7 @@ impl DetectConfig {
         c.range("detect.scale_factor", d.scale_factor, 1.01, 2.0);
         c.range("detect.min_neighbors", d.min_neighbors, 0, 100);
         c.range("detect.min_size_px", d.min_size_px, 0, 4096);
+        c.range("detect.shadow_tolerance", d.shadow_tolerance, 0.0, 0.2);
         if !(d.range_m[0] >= 0.05 && d.range_m[0] < d.range_m[1] && d.range_m[1] <= 20.0) {
             c.fail(
                 "detect.range_m",

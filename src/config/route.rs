@@ -31,6 +31,9 @@ pub struct RouteConfig {
     pub max_frames: u32,
     /// A turn sign decides a fork met at most this far past the sign, metres (0.5..20).
     pub sign_reach_m: f64,
+    /// Lines parting again within this distance after a junction ended are the same junction:
+    /// its line is kept again, no step used, metres (0..10; 0 = off).
+    pub rejoin_m: f64,
 }
 
 impl Default for RouteConfig {
@@ -45,6 +48,7 @@ impl Default for RouteConfig {
             settle_frames: o.settle_frames,
             max_frames: o.max_frames,
             sign_reach_m: o.sign_reach_m,
+            rejoin_m: o.rejoin_m,
         }
     }
 }
@@ -79,6 +83,7 @@ impl RouteConfig {
         c.range("route.settle_frames", self.settle_frames, 1, 100);
         c.range("route.max_frames", self.max_frames, 10, 3000);
         c.range("route.sign_reach_m", self.sign_reach_m, 0.5, 20.0);
+        c.range("route.rejoin_m", self.rejoin_m, 0.0, 10.0);
         if self.steps.len() > crate::route::MAX_STEPS {
             c.range("route.steps (count)", self.steps.len(), 0, crate::route::MAX_STEPS);
         }
@@ -93,6 +98,7 @@ impl RouteConfig {
             settle_frames: self.settle_frames,
             max_frames: self.max_frames,
             sign_reach_m: self.sign_reach_m,
+            rejoin_m: self.rejoin_m,
         }
     }
 }

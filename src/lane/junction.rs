@@ -71,6 +71,10 @@ pub struct JunctionOptions {
     /// A turn sign decides a fork the car meets at most this far (odometry, metres) past the
     /// sign.
     pub sign_reach_m: f64,
+    /// Lines parting again within this distance (odometry, metres) after a junction ended are
+    /// the same junction seen again (its far line back in view after a shadow or a bump hid
+    /// it): its line is kept again and no route step is used.
+    pub rejoin_m: f64,
 }
 
 impl Default for JunctionOptions {
@@ -82,6 +86,7 @@ impl Default for JunctionOptions {
             settle_frames: 8,
             max_frames: 300,
             sign_reach_m: 3.0,
+            rejoin_m: 1.0,
         }
     }
 }
@@ -139,6 +144,8 @@ pub struct JunctionRule {
     at: Option<At>,
     /// A turn sign's way, until the odometry passes this (metres).
     sign: Option<(Step, f64)>,
+    /// The last junction and the odometry (metres) until which lines parting again are it.
+    ended: Option<(JunctionReport, f64)>,
     /// Scratch: a column histogram of half the band.
     half: Vec<u16>,
 }
@@ -155,6 +162,7 @@ impl JunctionRule {
             apart: [None, None],
             at: None,
             sign: None,
+            ended: None,
             half: Vec::new(),
         }
     }
@@ -198,6 +206,17 @@ impl JunctionRule {
             // 1–2. On the road: remember the lines; meet a junction when they part.
             if let [Some(l), Some(r)] = raw {
                 if r - l > self.opts.fork_width * lane {
+                    if let Some((last, _)) = self.ended.filter(|&(_, until)| odometry_m <= until) {
+                        // The same junction seen again, just after it ended: keep its line
+                        // again and use no route step.
+                        let report = JunctionReport { new: false, ..last };
+                        self.at = Some(At {
+                            report,
+                            frames: 0,
+                            settled: 0,
+                        });
+                        return self.keep(raw, lines, m, report);
+                    }
                     let moved = |from: &[Option<f64>; 2], i: usize, p: f64| from[i].map_or(0.0, |q: f64| (p - q).abs());
                     // The odd line: the one further from where it was while the lines were a lane apart.
                     let odd = if moved(&self.apart, 0, l) >= moved(&self.apart, 1, r) {
@@ -276,6 +295,7 @@ impl JunctionRule {
         let report = at.report;
         if at.settled >= self.opts.settle_frames || at.frames >= self.opts.max_frames {
             self.at = None;
+            self.ended = Some((report, odometry_m + self.opts.rejoin_m));
         } else {
             self.at = Some(at);
         }
@@ -438,6 +458,55 @@ mod tests {
         column_histogram(img, rows, &mut hist);
         let m = measure(&hist, rows, &LINES);
         rule.step(img, &hist, rows, &LINES, m, 0.0)
+    }
+
+    /// As [`run`], at odometry `odometry_m`.
+    fn run_at(rule: &mut JunctionRule, img: &GrayImage, odometry_m: f64) -> Option<JunctionReport> {
+        let rows = band_rows(H, LINES.band);
+        let mut hist = vec![0; W as usize];
+        column_histogram(img, rows, &mut hist);
+        let m = measure(&hist, rows, &LINES);
+        rule.step(img, &hist, rows, &LINES, m, odometry_m).1
+    }
+
+    /// The left line bends away over 40 frames (1 cm of odometry each), then the lines are a
+    /// lane apart for 10 frames; the junctions met on the way (`new` reports).
+    fn part_and_settle(rule: &mut JunctionRule, odometry_m: &mut f64) -> Vec<JunctionReport> {
+        let mut met = Vec::new();
+        for i in 0..50 {
+            let drift = if i < 40 { (i as f64 - 5.0).max(0.0) * 2.0 } else { 0.0 };
+            *odometry_m += 0.01;
+            met.extend(run_at(rule, &frame(64.5 - drift, -drift), *odometry_m).filter(|r| r.new));
+        }
+        met
+    }
+
+    #[test]
+    fn lines_parting_again_just_after_a_junction_are_the_same_junction() {
+        let mut rule = JunctionRule::new(vec![Step::Left, Step::Right], JunctionOptions::default());
+        let mut odo = 0.0;
+        let first = part_and_settle(&mut rule, &mut odo);
+        assert_eq!(first.len(), 1);
+        assert_eq!(
+            (first[0].kind, first[0].way, first[0].step),
+            (JunctionKind::Fork, Some(Step::Left), Some(0))
+        );
+        // The lines part again 0.3 m after the junction ended (within rejoin_m = 1 m): the same
+        // fork, its left line kept, the route's next step not used.
+        let again = part_and_settle(&mut rule, &mut odo);
+        assert!(again.is_empty(), "{again:?}");
+        assert_eq!(rule.steps_left(), &[Step::Right]);
+        // 1 m of road later the lines part: a new fork, and the next step decides it.
+        for _ in 0..100 {
+            odo += 0.01;
+            run_at(&mut rule, &frame(64.5, 0.0), odo);
+        }
+        let next = part_and_settle(&mut rule, &mut odo);
+        assert_eq!(next.len(), 1);
+        assert_eq!(
+            (next[0].way, next[0].step, next[0].forks),
+            (Some(Step::Right), Some(1), 2)
+        );
     }
 
     #[test]

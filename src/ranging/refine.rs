@@ -58,6 +58,79 @@ pub fn shows_colour(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> bool 
     n as f64 >= MIN_COLOUR_FRACTION * total
 }
 
+/// Whether a detector box of `class` is the floor in a shadow or a sun patch rather than an
+/// object: the class stands on the floor in a colour of its own
+/// ([`crate::classes::ClassInfo::not_floor_colour`]), and the middle of the box has the
+/// colour of the floor just in front of it, only darker or brighter. A shadow or a patch of
+/// light scales the light falling on the floor, so it changes the floor's brightness and not
+/// its chromaticity, `(r, g, b) / (r + g + b)` (the brightness/chromaticity split of
+/// Horprasert et al., 1999, used for shadows by Cucchiara et al., 2003). Compared: the median
+/// chromaticity of the middle half of the box (in width and height) against that of the
+/// floor strip under the box (its columns, a quarter of its height, at least 2 rows); "the
+/// same" when no channel differs by more than `tolerance` (0 = never). `false` when the strip
+/// or the middle has fewer than [`MIN_FLOOR_PIXELS`] usable pixels (a box at the frame's
+/// bottom edge: nothing to compare with, the box is kept). Pixels darker than 8 grey levels
+/// per channel on average or with a clipped channel say nothing of colour and are left out.
+pub fn floor_coloured(img: &RgbImage, class: ObjectClass, bbox: [f64; 4], tolerance: f64) -> bool {
+    if !class.info().not_floor_colour || tolerance <= 0.0 {
+        return false;
+    }
+    let (w, h) = (img.width() as i64, img.height() as i64);
+    let x0 = ((bbox[0] + 0.5).floor() as i64).clamp(0, w);
+    let x1 = ((bbox[2] + 0.5).ceil() as i64).clamp(0, w);
+    let y0 = ((bbox[1] + 0.5).floor() as i64).clamp(0, h);
+    let y1 = ((bbox[3] + 0.5).ceil() as i64).clamp(0, h);
+    let (bw, bh) = (x1 - x0, y1 - y0);
+    let middle = [x0 + bw / 4, y0 + bh / 4, x1 - bw / 4, y1 - bh / 4];
+    let strip = [x0, y1, x1, (y1 + (bh / 4).max(2)).min(h)];
+    match (median_chromaticity(img, middle), median_chromaticity(img, strip)) {
+        (Some(a), Some(b)) => a.iter().zip(&b).all(|(a, b)| (a - b).abs() <= tolerance),
+        _ => false,
+    }
+}
+
+/// Fewest usable pixels for a median chromaticity ([`floor_coloured`]).
+pub const MIN_FLOOR_PIXELS: usize = 20;
+
+/// Bins of the chromaticity histograms (resolution 1/1023).
+const CHROMA_BINS: usize = 1024;
+
+/// The median of each channel's chromaticity `c / (r + g + b)` over the pixels of
+/// `[x0, y0, x1, y1)` that are neither too dark (`r + g + b < 24`) nor clipped (a channel at
+/// 255); `None` with fewer than [`MIN_FLOOR_PIXELS`] of them.
+fn median_chromaticity(img: &RgbImage, [x0, y0, x1, y1]: [i64; 4]) -> Option<[f64; 3]> {
+    let mut hist = vec![[0u32; 3]; CHROMA_BINS];
+    let mut n = 0usize;
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let p = img.get_pixel(x as u32, y as u32).0;
+            let sum: u32 = p.iter().map(|&v| v as u32).sum();
+            if sum < 24 || p.contains(&255) {
+                continue;
+            }
+            for (c, &v) in p.iter().enumerate() {
+                hist[(CHROMA_BINS as u32 - 1) as usize * v as usize / sum as usize][c] += 1;
+            }
+            n += 1;
+        }
+    }
+    if n < MIN_FLOOR_PIXELS {
+        return None;
+    }
+    let mut out = [0.0; 3];
+    for (c, o) in out.iter_mut().enumerate() {
+        let mut seen = 0usize;
+        for (bin, counts) in hist.iter().enumerate() {
+            seen += counts[c] as usize;
+            if 2 * seen >= n {
+                *o = bin as f64 / (CHROMA_BINS - 1) as f64;
+                break;
+            }
+        }
+    }
+    Some(out)
+}
+
 /// A red face's pixel (stop and yield signs).
 fn red(p: [u8; 3]) -> bool {
     let (r, g, b) = (p[0] as u32, p[1] as u32, p[2] as u32);
@@ -253,6 +326,58 @@ mod tests {
         }
         let o = outline(&img, ObjectClass::TrafficLight, [13.5, 8.5, 25.5, 34.5]).unwrap();
         assert_eq!(o, [14.5, 9.5, 23.5, 29.5]);
+    }
+
+    /// A 60×40 px box standing on a warm grey floor ([112, 104, 96]) with floor in front of it,
+    /// its middle filled with `inside`.
+    fn box_on_floor(inside: [u8; 3]) -> (RgbImage, [f64; 4]) {
+        let mut img = RgbImage::from_pixel(120, 100, Rgb([112, 104, 96]));
+        for y in 20..60 {
+            for x in 30..90 {
+                img.put_pixel(x, y, Rgb(inside));
+            }
+        }
+        (img, [29.5, 19.5, 89.5, 59.5])
+    }
+
+    #[test]
+    fn a_shadow_or_a_sun_patch_on_the_floor_is_floor_coloured_an_object_is_not() {
+        let tol = 0.02;
+        // The floor at 45 % and at 180 % of its light (a deep shadow, a sun patch): the same
+        // chromaticity, only darker or brighter.
+        for inside in [[50, 47, 43], [202, 187, 173]] {
+            let (img, b) = box_on_floor(inside);
+            assert!(floor_coloured(&img, ObjectClass::Obstacle, b, tol), "{inside:?}");
+        }
+        // Obstacles: the simulator's blue and red-brown boxes, and a neutral grey one (0.035
+        // from the warm floor in blue's chromaticity), brighter or darker than the floor.
+        for inside in [[60, 90, 160], [170, 70, 40], [150, 150, 150], [60, 60, 60]] {
+            let (img, b) = box_on_floor(inside);
+            assert!(!floor_coloured(&img, ObjectClass::Obstacle, b, tol), "{inside:?}");
+        }
+        // Off (0), and classes that do not stand on the floor in their own colour: never.
+        let (img, b) = box_on_floor([50, 47, 43]);
+        assert!(!floor_coloured(&img, ObjectClass::Obstacle, b, 0.0));
+        assert!(!floor_coloured(&img, ObjectClass::StopSign, b, tol));
+        // A box at the frame's bottom edge has no floor in front of it: kept.
+        assert!(!floor_coloured(
+            &img,
+            ObjectClass::Obstacle,
+            [29.5, 59.5, 89.5, 99.5],
+            tol
+        ));
+    }
+
+    #[test]
+    fn the_floor_colour_is_the_median_so_tape_in_front_does_not_change_it() {
+        // A shadow box with a white tape line (a third of the strip's columns) in front of it.
+        let (mut img, b) = box_on_floor([50, 47, 43]);
+        for y in 60..100 {
+            for x in 40..60 {
+                img.put_pixel(x, y, Rgb([235, 235, 228]));
+            }
+        }
+        assert!(floor_coloured(&img, ObjectClass::Obstacle, b, 0.02));
     }
 
     #[test]
