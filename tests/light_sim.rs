@@ -40,15 +40,14 @@ fn strongest(sets: &[&str]) -> Config {
     cfg
 }
 
-/// The settings docs/light.md gives for changing light: the adaptive threshold, opened.
-const LIGHT: [&str; 2] = ["lane.threshold_mode=adaptive", "lane.opening=3"];
-
-/// Must show 3: at the strongest light level, the adaptive threshold (opened) drives 3 laps of
-/// the default track with no departure and the lane (almost) never lost (measured: 4 lost
-/// frames, RMS 8.2 mm).
+/// Must show 3: at the strongest light level, the shipped configuration (the adaptive
+/// threshold, opened) drives 3 laps of the default track with no departure and the lane
+/// (almost) never lost (measured: 4 lost frames, RMS 8.2 mm).
 #[test]
-fn the_adaptive_threshold_drives_three_laps_at_the_strongest_light() {
-    let cfg = strongest(&LIGHT);
+fn the_shipped_threshold_drives_three_laps_at_the_strongest_light() {
+    let cfg = strongest(&[]);
+    assert_eq!(cfg.lane.threshold_mode, rccar::config::ThresholdMode::Adaptive);
+    assert_eq!(cfg.lane.opening, 3);
     let s = run(&cfg);
     eprintln!("adaptive, opened, light level 3: {s:?}");
     assert_eq!(s.end, EndReason::LapsDone, "{s:?}");
@@ -61,7 +60,7 @@ fn the_adaptive_threshold_drives_three_laps_at_the_strongest_light() {
 /// takes the tape below 170 grey levels; the car stands, its lane lost).
 #[test]
 fn the_fixed_level_fails_at_the_strongest_light() {
-    let s = run(&strongest(&["lane.threshold_mode=fixed"]));
+    let s = run(&strongest(&["lane.threshold_mode=fixed", "lane.opening=0"]));
     eprintln!("fixed, light level 3: {s:?}");
     assert_ne!(s.end, EndReason::LapsDone, "{s:?}");
     assert!(s.lane_lost_frames > 100, "{s:?}");

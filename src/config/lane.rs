@@ -56,11 +56,11 @@ pub struct LaneConfig {
 impl Default for LaneConfig {
     fn default() -> Self {
         Self {
-            threshold_mode: ThresholdMode::Fixed,
+            threshold_mode: ThresholdMode::Adaptive,
             threshold: 170,
             adaptive_block: 41,
             adaptive_c: -5,
-            opening: 0,
+            opening: 3,
             canny_low: 100,
             canny_high: 200,
             blur: true,

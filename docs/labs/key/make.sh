@@ -228,11 +228,11 @@ fi
 
 # ---- lab 7: vision under changing light -----------------------------------------------------------------
 if want 07; then
-  C="rccar sim --seconds 8 --laps 0 --set detect.enabled=false --set sim.light_variation=0.6 --record frames; rccar stages frames/frame_000075.png frames/frame_000225.png [--set lane.threshold_mode=otsu | --set lane.threshold_mode=adaptive --set lane.opening=3]"
+  C="rccar sim --seconds 8 --laps 0 --set detect.enabled=false --set sim.light_variation=0.6 --record frames; rccar stages frames/frame_000075.png frames/frame_000225.png [--set lane.threshold_mode=fixed|otsu --set lane.opening=0]"
   rccar sim --no-local --seconds 8 --laps 0 --set detect.enabled=false --set sim.light_variation=0.6 --record l07f -o l07r >/dev/null
-  rccar stages --no-local l07f/frame_000075.png l07f/frame_000225.png -o l07fixed >/dev/null
-  rccar stages --no-local l07f/frame_000075.png l07f/frame_000225.png -o l07otsu --set lane.threshold_mode=otsu >/dev/null
-  rccar stages --no-local l07f/frame_000075.png l07f/frame_000225.png -o l07adaptive --set lane.threshold_mode=adaptive --set lane.opening=3 >/dev/null
+  rccar stages --no-local l07f/frame_000075.png l07f/frame_000225.png -o l07fixed --set lane.threshold_mode=fixed --set lane.opening=0 >/dev/null
+  rccar stages --no-local l07f/frame_000075.png l07f/frame_000225.png -o l07otsu --set lane.threshold_mode=otsu --set lane.opening=0 >/dev/null
+  rccar stages --no-local l07f/frame_000075.png l07f/frame_000225.png -o l07adaptive >/dev/null
   for m in fixed otsu; do
     fig 07 "${m}_level_bright" "$(sed -n 1p l07$m/stages.jsonl | jq .level)" 2 grey "$C"
     fig 07 "${m}_level_dark" "$(sed -n 2p l07$m/stages.jsonl | jq .level)" 2 grey "$C"
@@ -252,17 +252,17 @@ if want 07; then
   done
   fig 07 drive_otsu_rms_m "$(jq .xte_rms_m l07otsu-lap/summary.json)" 0.0005 m "$C"
   fig 07 drive_adaptive_rms_m "$(jq .xte_rms_m l07adaptive-lap/summary.json)" 0.0005 m "$C"
-  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --sweep sim.exposure=0.4:1.8:8"
-  $SIM --laps 1 --sweep sim.exposure=0.4:1.8:8 -o l07_exposure >/dev/null
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --set lane.threshold_mode=fixed --set lane.opening=0 --sweep sim.exposure=0.4:1.8:8"
+  $SIM --laps 1 --set lane.threshold_mode=fixed --set lane.opening=0 --sweep sim.exposure=0.4:1.8:8 -o l07_exposure >/dev/null
   sweep 07 exposure l07_exposure "$C"
-  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --sweep sim.light_level=0:3:4 [--set lane.threshold_mode=adaptive --set lane.opening=3]"
-  $SIM --laps 1 --set lane.threshold_mode=adaptive --set lane.opening=3 --sweep sim.light_level=0:3:4 -o l07_light >/dev/null
+  C="rccar sim --laps 1 --no-timing --set detect.enabled=false --sweep sim.light_level=0:3:4 [--set lane.threshold_mode=fixed --set lane.opening=0]"
+  $SIM --laps 1 --sweep sim.light_level=0:3:4 -o l07_light >/dev/null
   sweep 07 light l07_light "$C"
-  $SIM --laps 1 --sweep sim.light_level=0:3:4 -o l07_light_fixed >/dev/null
+  $SIM --laps 1 --set lane.threshold_mode=fixed --set lane.opening=0 --sweep sim.light_level=0:3:4 -o l07_light_fixed >/dev/null
   sweep 07 light_fixed l07_light_fixed "$C"
-  C="rccar stages \$RCCAR/tests/data/lane_sample/frame_029.png --set lane.threshold_mode=adaptive [--set lane.opening=3]"
-  rccar stages --no-local "$REPO/tests/data/lane_sample/frame_029.png" -o l07open0 --set lane.threshold_mode=adaptive >/dev/null
-  rccar stages --no-local "$REPO/tests/data/lane_sample/frame_029.png" -o l07open3 --set lane.threshold_mode=adaptive --set lane.opening=3 >/dev/null
+  C="rccar stages \$RCCAR/tests/data/lane_sample/frame_029.png [--set lane.opening=0]"
+  rccar stages --no-local "$REPO/tests/data/lane_sample/frame_029.png" -o l07open0 --set lane.opening=0 >/dev/null
+  rccar stages --no-local "$REPO/tests/data/lane_sample/frame_029.png" -o l07open3 >/dev/null
   word 07 open0_status "$(jq -r .lane.status l07open0/stages.jsonl)" "$C"
   word 07 open3_status "$(jq -r .lane.status l07open3/stages.jsonl)" "$C"
   truth=$(jq -r 'select(.file == "frame_029.png") | .truth_center' "$REPO/tests/data/lane_sample/truth.jsonl")

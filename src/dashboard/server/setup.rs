@@ -352,7 +352,10 @@ mod tests {
         );
         let want = format!("data:image/png;base64,{}", base64(&png(&det.images().binary)));
         assert_eq!(v["binary"].as_str().unwrap(), want);
-        assert_eq!(v["level"], 170);
+        // The shipped adaptive threshold has no one level (0); a fixed one reports its own.
+        assert_eq!(v["level"], 0);
         assert!(v["lane"]["p_left"].as_f64().is_some());
+        let fixed = cfg.with_override("lane.threshold_mode=fixed").unwrap();
+        assert_eq!(preview_images(&fixed, &frame).unwrap()["level"], 170);
     }
 }
