@@ -158,7 +158,7 @@ impl std::fmt::Display for MissingCascade {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} = {:?}: no such cascade file; give the cascade's path (a relative path is read from the config file's folder), set {} = \"\" to run without that detector, or detect.enabled = false for lane keeping only",
+            "{} = {:?}: no such cascade file; give the cascade's path (a relative path written in a file is read from that file's folder, one given with --set from the working directory), set {} = \"\" to run without that detector, or detect.enabled = false for lane keeping only",
             self.key,
             self.path.display().to_string(),
             self.key

@@ -667,37 +667,38 @@ def _setup_suite(a, wd, dport, cfgdir, tmp, procs):
           bool(back) and _max_err(again, before) < 1e-9 and back[2] == bird0 and back[3] == binary0,
           f"bottom-left {[round(v, 2) for v in again[3]]}")
 
-    # 3a. The shipped fixed threshold's slider (arrow keys on the focused slider): the binary
-    # image changes; the adaptive threshold's C slider is off in this mode.
-    mode0 = wd.js("return [document.getElementById('mode').value, document.getElementById('threshold').disabled, document.getElementById('adc').disabled]")
-    wd.js("document.getElementById('threshold').focus()")
-    n = wd.js("return window.setup.previews")
-    for _ in range(20):
-        wd.press("\ue012")  # ArrowLeft
-    thr = int(wd.js("return document.getElementById('threshold').value"))
-    pv = wait(lambda: (lambda v: v if v and "level 150" in v[4] else None)(_preview_after(wd, n, 2)), 10, 0.1)
-    check("[setup] the threshold slider changes the binary image live",
-          mode0 == ["fixed", False, True] and thr == 150 and bool(pv) and pv[3] != binary0,
-          f"mode, threshold slider off, C slider off: {mode0}; " + (pv[4] if pv else f"slider at {thr}, no preview at level 150"))
-    binary150 = pv[3] if pv else binary0
-    # 3b. Mode "adaptive" (keyboard on the select), then its C slider; back to "fixed".
-    wd.js("document.getElementById('mode').focus()")
-    wd.press("\ue015")  # ArrowDown: fixed -> adaptive
-    mode1 = wait(lambda: (lambda m: m if m[0] == "adaptive" else None)(wd.js("return [document.getElementById('mode').value, document.getElementById('threshold').disabled, document.getElementById('adc').disabled]")), 5, 0.1)
+    # 3a. The shipped adaptive threshold's C slider (arrow keys on the focused slider): the
+    # binary image changes; the fixed level's slider is off in this mode.
+    mode_js = "return [document.getElementById('mode').value, document.getElementById('threshold').disabled, document.getElementById('adc').disabled]"
+    mode0 = wd.js(mode_js)
     wd.js("document.getElementById('adc').focus()")
     n = wd.js("return window.setup.previews")
     for _ in range(3):
         wd.press("\ue014")  # ArrowRight
     adc = int(wd.js("return document.getElementById('adc').value"))
-    pv = wait(lambda: (lambda v: v if v and "level 0" in v[4] and v[3] not in (binary0, binary150) else None)(_preview_after(wd, n, 1)), 10, 0.1)
-    check("[setup] adaptive (chosen with the keyboard): only C's slider is live; C -5 -> -2 changes the binary image",
-          mode1 == ["adaptive", True, False] and adc == -2 and bool(pv),
-          f"mode, threshold slider off, C slider off: {mode1}; C {adc}; " + (pv[4] if pv else "no new preview"))
-    n = wd.js("return window.setup.previews")
+    pv = wait(lambda: (lambda v: v if v and "level 0" in v[4] and v[3] != binary0 else None)(_preview_after(wd, n, 1)), 10, 0.1)
+    check("[setup] the shipped adaptive threshold: only C's slider is live; C -5 -> -2 changes the binary image live",
+          mode0 == ["adaptive", True, False] and adc == -2 and bool(pv),
+          f"mode, threshold slider off, C slider off: {mode0}; C {adc}; " + (pv[4] if pv else "no new preview"))
+    binary_c2 = pv[3] if pv else binary0
+    # 3b. Mode "fixed" (keyboard on the select), then its level's slider; back to "adaptive".
     wd.js("document.getElementById('mode').focus()")
     wd.press("\ue013")  # ArrowUp: adaptive -> fixed
-    pv = wait(lambda: (lambda v: v if v and "level 150" in v[4] else None)(_preview_after(wd, n, 1)), 10, 0.1)
-    check("[setup] back to fixed: its slider's level 150 again", bool(pv) and pv[3] == binary150, pv[4] if pv else "no preview")
+    mode1 = wait(lambda: (lambda m: m if m[0] == "fixed" else None)(wd.js(mode_js)), 5, 0.1)
+    wd.js("document.getElementById('threshold').focus()")
+    n = wd.js("return window.setup.previews")
+    for _ in range(20):
+        wd.press("\ue012")  # ArrowLeft
+    thr = int(wd.js("return document.getElementById('threshold').value"))
+    pv = wait(lambda: (lambda v: v if v and "level 150" in v[4] and v[3] not in (binary0, binary_c2) else None)(_preview_after(wd, n, 2)), 10, 0.1)
+    check("[setup] fixed (chosen with the keyboard): only its slider is live; 170 -> 150 changes the binary image",
+          mode1 == ["fixed", False, True] and thr == 150 and bool(pv),
+          f"mode, threshold slider off, C slider off: {mode1}; " + (pv[4] if pv else f"slider at {thr}, no preview at level 150"))
+    n = wd.js("return window.setup.previews")
+    wd.js("document.getElementById('mode').focus()")
+    wd.press("\ue015")  # ArrowDown: fixed -> adaptive
+    pv = wait(lambda: (lambda v: v if v and "level 0" in v[4] else None)(_preview_after(wd, n, 1)), 10, 0.1)
+    check("[setup] back to adaptive: its C of -2 again", bool(pv) and pv[3] == binary_c2, pv[4] if pv else "no preview")
     wd.screenshot(os.path.join(tmp, "setup_3_threshold.png"))
     ms = sorted(wd.js("return window.setup.ms"))
     check("[setup] preview round trip (page -> server's lane stage -> two PNGs -> page)",
@@ -712,8 +713,8 @@ def _setup_suite(a, wd, dport, cfgdir, tmp, procs):
     applied = wait(lambda: wd.js("return window.setup.applied"), 10, 0.1)
     st = http("GET", base + "/api/setup/state")[1]
     err = _max_err(st["src"], want)
-    check("[setup] Apply: the server's warp.src equals car.toml's within 1 px, threshold 150",
-          bool(applied) and err <= 1.0 and st["threshold"] == 150,
+    check("[setup] Apply: the server's warp.src equals car.toml's within 1 px, adaptive at C -2 (the fixed level 150 kept)",
+          bool(applied) and err <= 1.0 and st["threshold"] == 150 and st["threshold_mode"] == "adaptive" and st.get("adaptive_c") == -2,
           f"server warp.src {st['src']} vs car.toml {want}: max error {err:.3f} px; threshold {st['threshold']} ({st['threshold_mode']})")
     rec = wait(lambda: _find_event(os.path.join(out, "telemetry.jsonl"), "set-up: warp.src=", frame_before), 10)
     check("[setup] the loop takes it from a later frame (telemetry event)", rec is not None and rec["frame"] > frame_before,
@@ -727,7 +728,7 @@ def _setup_suite(a, wd, dport, cfgdir, tmp, procs):
     src_saved = data.get("warp", {}).get("src")
     check("[setup] Save writes warp.src and the threshold into local.toml, its comment kept",
           bool(saved) and text.startswith("# set-up overrides") and src_saved == st["src"]
-          and data.get("lane", {}).get("threshold") == 150 and data.get("lane", {}).get("threshold_mode") == "fixed"
+          and data.get("lane", {}).get("threshold") == 150 and data.get("lane", {}).get("threshold_mode") == "adaptive"
           and data.get("lane", {}).get("adaptive_c") == -2,
           repr(text))
     cc = subprocess.run([a.rccar, "config", "check", "--config", car_toml, "--local", local],
