@@ -176,26 +176,33 @@ pub fn open_square(img: &mut GrayImage, side: u32, tmp: &mut Vec<u8>) {
     let (w, h) = (img.width() as usize, img.height() as usize);
     tmp.resize(w * h, 0);
     let px: &mut [u8] = img;
-    for pick in [u8::min, u8::max] {
-        // Along each row into `tmp`, then down each column back into the image.
-        for (src, dst) in px.chunks_exact(w).zip(tmp.chunks_exact_mut(w)) {
-            for (x, d) in dst.iter_mut().enumerate() {
-                *d = src[x.saturating_sub(r)..(x + r + 1).min(w)]
-                    .iter()
-                    .copied()
-                    .reduce(pick)
-                    .unwrap_or(0);
+    min_max_pass(px, tmp, w, h, r, u8::min);
+    min_max_pass(px, tmp, w, h, r, u8::max);
+}
+
+/// `pick` (min or max: a generic, so each is inlined and the loops vectorise) over the
+/// `(2r+1) × (2r+1)` square round each pixel of the `w × h` image `px`, in place: along each
+/// row into `tmp` (the window shifted by ±1..=r, clipped at the row's ends), then down each
+/// column back into `px`.
+fn min_max_pass(px: &mut [u8], tmp: &mut [u8], w: usize, h: usize, r: usize, pick: impl Fn(u8, u8) -> u8 + Copy) {
+    for (src, dst) in px.chunks_exact(w).zip(tmp.chunks_exact_mut(w)) {
+        dst.copy_from_slice(src);
+        for k in 1..=r.min(w.saturating_sub(1)) {
+            for (d, &s) in dst[..w - k].iter_mut().zip(&src[k..]) {
+                *d = pick(*d, s);
+            }
+            for (d, &s) in dst[k..].iter_mut().zip(&src[..w - k]) {
+                *d = pick(*d, s);
             }
         }
-        for y in 0..h {
-            let rows = y.saturating_sub(r)..(y + r + 1).min(h);
-            let (first, rest) = (rows.start, rows.end);
-            let dst = &mut px[y * w..(y + 1) * w];
-            dst.copy_from_slice(&tmp[first * w..(first + 1) * w]);
-            for yy in first + 1..rest {
-                for (d, &s) in dst.iter_mut().zip(&tmp[yy * w..(yy + 1) * w]) {
-                    *d = pick(*d, s);
-                }
+    }
+    for y in 0..h {
+        let (first, end) = (y.saturating_sub(r), (y + r + 1).min(h));
+        let dst = &mut px[y * w..(y + 1) * w];
+        dst.copy_from_slice(&tmp[first * w..(first + 1) * w]);
+        for yy in first + 1..end {
+            for (d, &s) in dst.iter_mut().zip(&tmp[yy * w..(yy + 1) * w]) {
+                *d = pick(*d, s);
             }
         }
     }
