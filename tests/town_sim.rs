@@ -274,13 +274,15 @@ fn a_shadow_across_the_lane_is_not_an_obstacle() {
             y: 8.1004,
             yaw: 10.62126,
         };
+        // One pipeline with its cascades loaded once; each frame runs on a fresh copy of it.
+        let mut fresh = Pipeline::new(&cfg).unwrap();
+        let (det, missing) = load_detector(&cfg, &Path::new(ROOT).join("config")).unwrap();
+        assert!(missing.is_empty(), "{missing:?}");
+        fresh.set_detector(det);
         (4760..4768)
             .filter(|&frame| {
                 let img = renderer.render_new(&pose, frame as f64 / 30.0, frame);
-                let mut pipe = Pipeline::new(&cfg).unwrap();
-                let (det, missing) = load_detector(&cfg, &Path::new(ROOT).join("config")).unwrap();
-                assert!(missing.is_empty(), "{missing:?}");
-                pipe.set_detector(det);
+                let mut pipe = fresh.clone();
                 pipe.step(&img, 1.0 / 30.0, &mut rccar::timing::NoTimer);
                 pipe.objects()
                     .iter()

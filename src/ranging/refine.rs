@@ -99,7 +99,8 @@ const CHROMA_BINS: usize = 1024;
 /// `[x0, y0, x1, y1)` that are neither too dark (`r + g + b < 24`) nor clipped (a channel at
 /// 255); `None` with fewer than [`MIN_FLOOR_PIXELS`] of them.
 fn median_chromaticity(img: &RgbImage, [x0, y0, x1, y1]: [i64; 4]) -> Option<[f64; 3]> {
-    let mut hist = vec![[0u32; 3]; CHROMA_BINS];
+    // 12 KB on the stack: no allocation per box in the per-frame path.
+    let mut hist = [[0u32; 3]; CHROMA_BINS];
     let mut n = 0usize;
     for y in y0..y1 {
         for x in x0..x1 {
