@@ -27,6 +27,18 @@ use image::RgbImage;
 /// How much the search region exceeds the box on each side, as a fraction of its size.
 pub const GROW: f64 = 0.15;
 
+/// The pixels `[x0, y0, x1, y1)` a box in pixel-centre coordinates (`[x0, y0, x1, y1]`, a
+/// pixel's centre at its index) covers at least in part, clipped to the image.
+fn pixel_box(img: &RgbImage, bbox: [f64; 4]) -> [i64; 4] {
+    let (w, h) = (img.width() as i64, img.height() as i64);
+    [
+        ((bbox[0] + 0.5).floor() as i64).clamp(0, w),
+        ((bbox[1] + 0.5).floor() as i64).clamp(0, h),
+        ((bbox[2] + 0.5).ceil() as i64).clamp(0, w),
+        ((bbox[3] + 0.5).ceil() as i64).clamp(0, h),
+    ]
+}
+
 /// Smallest fraction of a detector box's pixels in its class's face colour (red for a stop or
 /// yield sign, blue for a turn sign) for the box to count: a box without its colour is a false
 /// positive of the cascade (a stop sign's cascade firing on a blue turn sign, say).
@@ -40,11 +52,7 @@ pub fn shows_colour(img: &RgbImage, class: ObjectClass, bbox: [f64; 4]) -> bool 
         ColourCue::BlueFace => blue,
         ColourCue::LitHousing | ColourCue::None => return true,
     };
-    let (w, h) = (img.width() as i64, img.height() as i64);
-    let x0 = ((bbox[0] + 0.5).floor() as i64).clamp(0, w);
-    let x1 = ((bbox[2] + 0.5).ceil() as i64).clamp(0, w);
-    let y0 = ((bbox[1] + 0.5).floor() as i64).clamp(0, h);
-    let y1 = ((bbox[3] + 0.5).ceil() as i64).clamp(0, h);
+    let [x0, y0, x1, y1] = pixel_box(img, bbox);
     let total = ((x1 - x0) * (y1 - y0)).max(0) as f64;
     if total == 0.0 {
         return false;
@@ -75,11 +83,8 @@ pub fn floor_coloured(img: &RgbImage, class: ObjectClass, bbox: [f64; 4], tolera
     if !class.info().not_floor_colour || tolerance <= 0.0 {
         return false;
     }
-    let (w, h) = (img.width() as i64, img.height() as i64);
-    let x0 = ((bbox[0] + 0.5).floor() as i64).clamp(0, w);
-    let x1 = ((bbox[2] + 0.5).ceil() as i64).clamp(0, w);
-    let y0 = ((bbox[1] + 0.5).floor() as i64).clamp(0, h);
-    let y1 = ((bbox[3] + 0.5).ceil() as i64).clamp(0, h);
+    let h = img.height() as i64;
+    let [x0, y0, x1, y1] = pixel_box(img, bbox);
     let (bw, bh) = (x1 - x0, y1 - y0);
     let middle = [x0 + bw / 4, y0 + bh / 4, x1 - bw / 4, y1 - bh / 4];
     let strip = [x0, y1, x1, (y1 + (bh / 4).max(2)).min(h)];
