@@ -144,6 +144,20 @@ fn grid_step_plot_and_report() {
     );
     assert!(o.status.success(), "{}", text(&o));
     assert_eq!(png_size(&d.join("cmp/plot.png")), (1000, 40 + 3 * 260));
+    // A run folder stands for its telemetry.jsonl (labelled by the folder); a folder without
+    // one is named in the error.
+    let o = rccar(d, &["plot", "step", "--y", "steer", "--out", "cmp/folder.png"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("plot: step/telemetry.jsonl ("), "{}", text(&o));
+    assert_eq!(png_size(&d.join("cmp/folder.png")), (1000, 40 + 260));
+    std::fs::create_dir_all(d.join("runs")).unwrap();
+    std::os::unix::fs::symlink("../step", d.join("runs/latest")).unwrap();
+    let o = rccar(d, &["plot", "runs", "--y", "steer", "--out", "cmp/latest.png"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("plot: runs/latest/telemetry.jsonl ("), "{}", text(&o));
+    let o = rccar(d, &["plot", "cmp", "--y", "steer"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("cmp: a folder without telemetry.jsonl"), "{}", text(&o));
     let o = rccar(d, &["plot", "step/telemetry.jsonl", "--y", "stear"]);
     let err = String::from_utf8_lossy(&o.stderr).to_string();
     assert_eq!(o.status.code(), Some(2));

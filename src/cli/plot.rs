@@ -1,4 +1,4 @@
-//! `rccar plot FILE.jsonl [FILE2.jsonl ...] --y error,steer [--x t] [--out plot.png]
+//! `rccar plot FILE.jsonl|RUN [FILE2.jsonl|RUN2 ...] --y error,steer [--x t] [--out plot.png]
 //! [--label NAME ...]`: any numeric telemetry fields (dotted paths into the nested JSON, e.g.
 //! `truth.offset_m`) of one or more runs against time, one panel per field, one colour per
 //! run. Labs compare runs this way (e.g. `steering.kd` 0 vs 0.1).
@@ -15,15 +15,16 @@ use anyhow::{Context, Result};
 use clap::Args;
 use rccar::fields::{default_label, panels, plot_fields, resolve, shown};
 use rccar::sim::plot::{self, Trace};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// Flags of `rccar plot`.
 #[derive(Args, Debug)]
 pub struct PlotArgs {
-    /// Telemetry files (JSONL, one record per frame), e.g. out/sim/telemetry.jsonl; at most 8
-    /// (one colour each).
-    #[arg(required = true, value_name = "FILE.jsonl")]
+    /// Telemetry files (JSONL, one record per frame), or run folders holding one
+    /// (`telemetry.jsonl` inside, e.g. out/sim/20261129-140311; `out/sim` = its latest run);
+    /// at most 8 (one colour each).
+    #[arg(required = true, value_name = "FILE.jsonl|RUN")]
     pub files: Vec<PathBuf>,
     /// Fields to plot, comma-separated; dotted paths reach into nested records
     /// (`truth.offset_m`). One panel each, at most 16.
@@ -40,13 +41,36 @@ pub struct PlotArgs {
     pub label: Vec<String>,
 }
 
+/// The telemetry file a `rccar plot` argument names: the file itself, a run folder's
+/// `telemetry.jsonl` (what `rccar sim`, `replay` and `drive` write into their run folders), or
+/// for a command's output folder (`out/sim`) that of its `latest` run.
+fn telemetry_of(given: &Path) -> Result<PathBuf> {
+    if !given.is_dir() {
+        return Ok(given.to_path_buf());
+    }
+    // A run folder, or a command's output folder (`out/sim`): its latest run, as `rccar report`.
+    let file = given.join("telemetry.jsonl");
+    let latest = given.join("latest").join("telemetry.jsonl");
+    if file.is_file() {
+        Ok(file)
+    } else if latest.is_file() {
+        Ok(latest)
+    } else {
+        anyhow::bail!(
+            "{}: a folder without telemetry.jsonl; give a run's folder (e.g. out/sim/latest) or a telemetry file",
+            given.display()
+        )
+    }
+}
+
 /// Runs `rccar plot`.
 pub fn run(a: PlotArgs) -> Result<ExitCode> {
     let fields = plot_fields(&a.y, a.files.len(), a.label.len())?;
     let x = resolve(a.x.trim()).to_string();
     let mut traces = Vec::new();
     let mut points = 0usize;
-    for (k, file) in a.files.iter().enumerate() {
+    for (k, given) in a.files.iter().enumerate() {
+        let file = &telemetry_of(given)?;
         let read = panels(file, &a.x, &fields, &mut points)?;
         let (records, panels) = (read.records, read.panels);
         let label = a.label.get(k).cloned().unwrap_or_else(|| default_label(file));
