@@ -826,8 +826,9 @@ fn a_missing_cascade_is_an_error_naming_the_key_and_the_fix() {
     let set = "classes.stop_sign.model=/nonexistent.xml";
     std::fs::create_dir_all(d.join("frames")).unwrap();
     std::fs::copy(sample_png(0), d.join("frames/a.png")).unwrap();
-    let runs: [&[&str]; 4] = [
+    let runs: [&[&str]; 5] = [
         &["sim", "--seconds", "1", "--no-timing", "-o", "out/sim", "--set", set],
+        &["detect", "frames/a.png", "--out", "out/det0", "--set", set],
         &["replay", "frames", "-o", "out/replay", "--no-timing", "--set", set],
         &["drive", "--camera", "sim", "--dry-run", "--seconds", "1", "-o", "out/drive", "--set", set],
         &["stereo", "frames/a.png", "frames/a.png", "--set", set],
@@ -847,6 +848,16 @@ fn a_missing_cascade_is_an_error_naming_the_key_and_the_fix() {
     let o = rccar(d, &["detect", "--cascade", "/nonexistent.xml", "frames/a.png", "--out", "out/det"]);
     assert_eq!(o.code, Some(2), "{}", o.all());
     assert!(o.stderr.contains("/nonexistent.xml"), "{}", o.stderr);
+    // Without --cascade, rccar detect runs the configured classes' cascades (one switched off
+    // on purpose is left out).
+    let o = rccar(d, &["detect", "frames/a.png", "--out", "out/det1", "--set", "classes.obstacle.model="]);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    let line = o.stderr.lines().find(|l| l.starts_with("detect: the configuration's cascades: ")).unwrap_or_default();
+    for kind in ["stop_sign", "traffic_light", "yield_sign", "turn_sign"] {
+        assert!(line.contains(&format!("config/cascades/{kind}.xml")), "{kind}: {}", o.all());
+    }
+    assert!(!line.contains("obstacle"), "{}", o.all());
+    assert!(o.stdout.contains("\"image\""), "{}", o.all());
     // The shipped cascades, and one class switched off on purpose: the run goes on.
     for (extra, out) in [(None, "out/sim2"), (Some("classes.stop_sign.model="), "out/sim3")] {
         let mut args = vec!["sim", "--seconds", "1", "--no-timing", "-o", out];

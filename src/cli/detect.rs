@@ -1,5 +1,5 @@
-//! `rccar detect --cascade FILE [--cascade FILE…] IMAGE…`: runs OpenCV cascades (Haar or
-//! LBP, current or old XML format) on images; prints one JSON line per image with the boxes
+//! `rccar detect [--cascade FILE…] IMAGE…`: runs OpenCV cascades (Haar or LBP, current or old
+//! XML format; without `--cascade` the configured classes' own, what the car runs) on images; prints one JSON line per image with the boxes
 //! and writes an annotated copy of each image (`<file name>.detect.png`, extension kept). A
 //! damaged or unreadable image is named, counted and skipped; the run goes on with the next
 //! one and exits 1 at the end if any failed.
@@ -31,16 +31,17 @@ pub enum Method {
 /// Flags of `rccar detect`.
 #[derive(Args, Debug)]
 pub struct DetectArgs {
-    /// Cascade XML file (repeatable, at most 16; each runs on every image). Needed with
-    /// `--method cascade`.
+    /// Cascade XML file (repeatable, at most 16; each runs on every image). Without it, the
+    /// configuration's: every class's `classes.<name>.model` whose `detect` is `cascade`.
+    /// The scan options are this command's flags (`--scale-factor` …), not `[detect]`'s.
     #[arg(long = "cascade")]
     pub cascades: Vec<PathBuf>,
     /// What finds the objects: the cascades, or Abdollahi's colour + template stop-sign
     /// detector (as `classes.stop_sign.detect = "colour_template"`).
     #[arg(long, value_enum, default_value_t = Method::Cascade)]
     pub method: Method,
-    /// The configuration whose `[colour_template]` options `--method colour-template` uses
-    /// (not read with cascades).
+    /// The configuration whose `[colour_template]` options `--method colour-template` uses,
+    /// and whose classes' cascades run when no `--cascade` is given.
     #[command(flatten)]
     pub config: super::common::ConfigArgs,
     /// Images (PNG or JPEG; colour is converted to grey as OpenCV's cvtColor does).
@@ -89,6 +90,34 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((p(w)?, p(h)?))
 }
 
+/// Without `--cascade`: the cascade of every class of the configuration that is found by one
+/// (`classes.<name>.model`, `detect = "cascade"`), what the car runs; a configured file that is
+/// missing is an error naming its key.
+fn configured_cascades(config: &super::common::ConfigArgs) -> Result<Vec<PathBuf>> {
+    let cfg = config.load()?;
+    let mut files = Vec::new();
+    for (class, k) in cfg.classes.iter() {
+        if k.detect != rccar::config::DetectMethod::Cascade || k.model.is_empty() {
+            continue;
+        }
+        let path = PathBuf::from(&k.model);
+        if !path.is_file() {
+            let missing = rccar::pipeline::MissingCascade {
+                key: class.info().model_key,
+                path,
+            };
+            anyhow::bail!("{missing}; or give --cascade FILE");
+        }
+        files.push(path);
+    }
+    if files.is_empty() {
+        anyhow::bail!("no class of the configuration is found by a cascade: give --cascade FILE (or --method colour-template)");
+    }
+    let shown: Vec<String> = files.iter().map(|p| escape_name(p.as_os_str())).collect();
+    eprintln!("detect: the configuration's cascades: {}", shown.join(", "));
+    Ok(files)
+}
+
 /// Runs the detectors and reports.
 pub fn run(args: DetectArgs) -> Result<ExitCode> {
     let params = DetectParams {
@@ -101,14 +130,16 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
     let mut detectors = Vec::new();
     let names: Vec<String> = match args.method {
         Method::Cascade => {
-            if args.cascades.is_empty() {
-                anyhow::bail!("give at least one --cascade FILE (or --method colour-template)");
-            }
-            annotate::check_options(&params, args.cascades.len(), rccar::imageio::limits::MAX_IMAGE_SIDE)?;
-            for path in &args.cascades {
+            let files = if args.cascades.is_empty() {
+                configured_cascades(&args.config)?
+            } else {
+                args.cascades.clone()
+            };
+            annotate::check_options(&params, files.len(), rccar::imageio::limits::MAX_IMAGE_SIDE)?;
+            for path in &files {
                 detectors.push(Finder::Cascade(Box::new(Detector::new(Cascade::from_file(path)?))));
             }
-            args.cascades.iter().map(|p| escape_name(p.as_os_str())).collect()
+            files.iter().map(|p| escape_name(p.as_os_str())).collect()
         }
         Method::ColourTemplate => {
             if !args.cascades.is_empty() {
