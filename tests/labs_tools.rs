@@ -154,7 +154,8 @@ fn grid_step_plot_and_report() {
     std::os::unix::fs::symlink("../step", d.join("runs/latest")).unwrap();
     let o = rccar(d, &["plot", "runs", "--y", "steer", "--out", "cmp/latest.png"]);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(String::from_utf8_lossy(&o.stdout).contains("plot: runs/latest/telemetry.jsonl ("), "{}", text(&o));
+    let said = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(said.contains("plot: runs/../step/telemetry.jsonl (") && said.contains("as `step`"), "{}", text(&o));
     let o = rccar(d, &["plot", "cmp", "--y", "steer"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("cmp: a folder without telemetry.jsonl"), "{}", text(&o));

@@ -54,7 +54,11 @@ fn telemetry_of(given: &Path) -> Result<PathBuf> {
     if file.is_file() {
         Ok(file)
     } else if latest.is_file() {
-        Ok(latest)
+        // Named by the run it points at (`out/sim/20261129-140311`), as the legend shows it.
+        match std::fs::read_link(given.join("latest")) {
+            Ok(run) if given.join(&run).join("telemetry.jsonl").is_file() => Ok(given.join(run).join("telemetry.jsonl")),
+            _ => Ok(latest),
+        }
     } else {
         anyhow::bail!(
             "{}: a folder without telemetry.jsonl; give a run's folder (e.g. out/sim/latest) or a telemetry file",
