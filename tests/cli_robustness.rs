@@ -873,6 +873,29 @@ fn a_missing_cascade_is_an_error_naming_the_key_and_the_fix() {
 /// Issue 24: `rccar plot` bounds its fields (16 panels), files (8, one colour each), points
 /// (10 million over all of them) and line length (1 MiB). Before: 5,600 fields panicked
 /// (exit 101) and 1,500 aborted under a memory cap (a 1000 × 390,040 px image).
+/// `rccar sim`'s speed line says what the run cost beside the real-time factor: its CPU time
+/// and how many of the cores it may use it had on average (on a shared machine the factor
+/// falls while the CPU time stays).
+#[test]
+fn the_sim_speed_line_says_its_cpu_time_and_cores() {
+    let p = project();
+    let o = rccar(p.path(), &["sim", "--seconds", "2", "--no-timing", "-o", "out/s"]);
+    assert_eq!(o.code, Some(0), "{}", o.all());
+    let speed = o.all().lines().find(|l| l.contains("x real time")).map(str::to_string).unwrap_or_default();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    assert!(
+        speed.starts_with("  2.0 s simulated in ") && speed.ends_with(&format!(" of {cores} cores)")),
+        "{speed}"
+    );
+    let cpu: f64 = speed
+        .split(" (")
+        .nth(1)
+        .and_then(|r| r.split(" s CPU: ").next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(-1.0);
+    assert!(cpu > 0.0 && cpu < 60.0, "{speed}");
+}
+
 #[test]
 fn plot_bounds_its_fields_files_points_and_lines() {
     let dir = tempfile::tempdir().unwrap();

@@ -137,6 +137,31 @@ fn check_flags(a: &SimArgs, cfg: &Config, step: Option<StepRequest>) -> Result<b
     Ok(stereo)
 }
 
+/// CPU time of this process so far (all its threads), seconds; `None` where the clock is not
+/// available.
+fn process_cpu_s() -> Option<f64> {
+    #[cfg(unix)]
+    {
+        let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+        // SAFETY: `ts` is a valid, writable timespec for the duration of the call.
+        let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+        (rc == 0).then_some(ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9)
+    }
+    #[cfg(not(unix))]
+    None
+}
+
+/// What the speed figure cost: the run's CPU time and how many of the machine's cores it had
+/// on average (CPU / wall), e.g. ` (62.1 s CPU: 1.4 of 2 cores)`. On a machine shared with other
+/// work the real-time factor drops while the CPU time stays: this says which happened.
+fn cpu_share(cpu_started: Option<f64>, wall_s: f64) -> String {
+    let (Some(a), Some(b)) = (cpu_started, process_cpu_s()) else {
+        return String::new();
+    };
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    format!(" ({:.1} s CPU: {:.1} of {cores} cores)", b - a, (b - a) / wall_s.max(1e-9))
+}
+
 /// The simulated car, built by the library's session builder.
 fn session(a: &SimArgs, cfg: &Config, track: &Track, run: &RunDir, env: SessionEnv) -> Result<Session> {
     let live = a.dash.dashboard || a.pad.pad.is_some();
@@ -249,6 +274,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     report.reference_left = cfg.stereo.reference != StereoReference::Right;
     report.kick = step.filter(|s| s.kick).map(|s| (s.t, s.dy));
     let started = std::time::Instant::now();
+    let cpu_started = process_cpu_s();
     super::outdir::started(&mut run);
     let end = {
         let mut obs: [&mut dyn Observer; 4] = [&mut report, &mut dash, &mut frames, &mut pad];
@@ -277,10 +303,11 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         say(&report.stereo.line());
     }
     say(&format!(
-        "  {:.1} s simulated in {:.1} s wall: {:.1}x real time",
+        "  {:.1} s simulated in {:.1} s wall: {:.1}x real time{}",
         summary.seconds,
         wall_s,
-        summary.seconds / wall_s.max(1e-9)
+        summary.seconds / wall_s.max(1e-9),
+        cpu_share(cpu_started, wall_s)
     ));
     let step_fig = write_summary(&mut run, &cfg, &report, &summary, step, &outcome)?;
     write_plots(&mut run, font, &report, &summary, &scene, step_fig.as_ref())?;
