@@ -1,8 +1,8 @@
 //! `rccar detect [--cascade FILE…] IMAGE…`: runs OpenCV cascades (Haar or LBP, current or old
-//! XML format; without `--cascade` the configured classes' own, what the car runs) on images; prints one JSON line per image with the boxes
-//! and writes an annotated copy of each image (`<file name>.detect.png`, extension kept). A
-//! damaged or unreadable image is named, counted and skipped; the run goes on with the next
-//! one and exits 1 at the end if any failed.
+//! XML format; without `--cascade` the configured classes' own, what the car runs) on images;
+//! prints one JSON line per image with the boxes and writes an annotated copy of each image
+//! (`<file name>.detect.png`, extension kept). A damaged or unreadable image is named, counted
+//! and skipped; the run goes on with the next one and exits 1 at the end if any failed.
 //!
 //! `rccar detect --method colour-template IMAGE…` runs Abdollahi's stop-sign detector (HSV
 //! threshold + template matching, src/detect/colour_sign.rs, with the octagon-model templates the
@@ -111,7 +111,9 @@ fn configured_cascades(config: &super::common::ConfigArgs) -> Result<Vec<PathBuf
         files.push(path);
     }
     if files.is_empty() {
-        anyhow::bail!("no class of the configuration is found by a cascade: give --cascade FILE (or --method colour-template)");
+        anyhow::bail!(
+            "no class of the configuration is found by a cascade: give --cascade FILE (or --method colour-template)"
+        );
     }
     let shown: Vec<String> = files.iter().map(|p| escape_name(p.as_os_str())).collect();
     eprintln!("detect: the configuration's cascades: {}", shown.join(", "));

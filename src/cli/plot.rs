@@ -56,7 +56,9 @@ fn telemetry_of(given: &Path) -> Result<PathBuf> {
     } else if latest.is_file() {
         // Named by the run it points at (`out/sim/20261129-140311`), as the legend shows it.
         match std::fs::read_link(given.join("latest")) {
-            Ok(run) if given.join(&run).join("telemetry.jsonl").is_file() => Ok(given.join(run).join("telemetry.jsonl")),
+            Ok(run) if given.join(&run).join("telemetry.jsonl").is_file() => {
+                Ok(given.join(run).join("telemetry.jsonl"))
+            }
             _ => Ok(latest),
         }
     } else {
