@@ -166,6 +166,29 @@ impl std::fmt::Display for MissingCascade {
     }
 }
 
+/// The cascade file of every class found by one (`detect = "cascade"` and a non-empty
+/// `classes.<name>.model`, relative to `base`), in the registry's order: those that exist, and
+/// those configured but missing. Shared by [`load_detector`] and `rccar detect`'s default.
+pub fn cascade_files(cfg: &Config, base: &Path) -> (Vec<(ObjectClass, PathBuf)>, Vec<MissingCascade>) {
+    let mut found = Vec::new();
+    let mut missing = Vec::new();
+    for (class, k) in cfg.classes.iter() {
+        if k.detect == DetectMethod::ColourTemplate || k.model.is_empty() {
+            continue;
+        }
+        let path = base.join(&k.model);
+        if path.is_file() {
+            found.push((class, path));
+        } else {
+            missing.push(MissingCascade {
+                key: class.info().model_key,
+                path,
+            });
+        }
+    }
+    (found, missing)
+}
+
 /// Loads the classes' cascades (`classes.<name>.model`) that exist (paths relative to `base`;
 /// an empty path switches that class off), and the colour detector of every class whose
 /// `detect` is `colour_template` (no file: its templates are drawn from geometry). Returns the
@@ -177,33 +200,22 @@ pub fn load_detector(cfg: &Config, base: &Path) -> Result<(Option<DetectStage>, 
         return Ok((None, Vec::new()));
     }
     let params = DetectParams::from(&cfg.detect);
-    let mut specs = Vec::new();
-    let mut missing = Vec::new();
-    let mut colour = Vec::new();
-    for (class, k) in cfg.classes.iter() {
-        if k.detect == DetectMethod::ColourTemplate {
-            colour.push(class);
-            continue;
-        }
-        let file = &k.model;
-        if file.is_empty() {
-            continue;
-        }
-        let path = base.join(file);
-        if path.is_file() {
-            specs.push(CascadeSpec {
-                label: class.name().into(),
-                path,
-                traffic_light: class.info().reads_light,
-                params,
-            });
-        } else {
-            missing.push(MissingCascade {
-                key: class.info().model_key,
-                path,
-            });
-        }
-    }
+    let (found, missing) = cascade_files(cfg, base);
+    let specs: Vec<CascadeSpec> = found
+        .into_iter()
+        .map(|(class, path)| CascadeSpec {
+            label: class.name().into(),
+            path,
+            traffic_light: class.info().reads_light,
+            params,
+        })
+        .collect();
+    let colour: Vec<ObjectClass> = cfg
+        .classes
+        .iter()
+        .filter(|(_, k)| k.detect == DetectMethod::ColourTemplate)
+        .map(|(class, _)| class)
+        .collect();
     if specs.is_empty() && colour.is_empty() {
         return Ok((None, missing));
     }

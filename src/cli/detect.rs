@@ -15,7 +15,7 @@ use clap::Args;
 use rccar::detect::{annotate, Cascade, DetectParams, Detector};
 use rccar::source::escape_name;
 use rccar::detect::colour_sign::{HsvSignDetector, HsvSignOptions, Verdict};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// What finds the objects.
@@ -95,26 +95,16 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 /// missing is an error naming its key.
 fn configured_cascades(config: &super::common::ConfigArgs) -> Result<Vec<PathBuf>> {
     let cfg = config.load()?;
-    let mut files = Vec::new();
-    for (class, k) in cfg.classes.iter() {
-        if k.detect != rccar::config::DetectMethod::Cascade || k.model.is_empty() {
-            continue;
-        }
-        let path = PathBuf::from(&k.model);
-        if !path.is_file() {
-            let missing = rccar::pipeline::MissingCascade {
-                key: class.info().model_key,
-                path,
-            };
-            anyhow::bail!("{missing}; or give --cascade FILE");
-        }
-        files.push(path);
+    let (found, missing) = rccar::pipeline::cascade_files(&cfg, Path::new("."));
+    if let Some(m) = missing.first() {
+        anyhow::bail!("{m}; or give --cascade FILE");
     }
-    if files.is_empty() {
+    if found.is_empty() {
         anyhow::bail!(
             "no class of the configuration is found by a cascade: give --cascade FILE (or --method colour-template)"
         );
     }
+    let files: Vec<PathBuf> = found.into_iter().map(|(_, path)| path).collect();
     let shown: Vec<String> = files.iter().map(|p| escape_name(p.as_os_str())).collect();
     eprintln!("detect: the configuration's cascades: {}", shown.join(", "));
     Ok(files)

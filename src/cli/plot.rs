@@ -48,25 +48,17 @@ fn telemetry_of(given: &Path) -> Result<PathBuf> {
     if !given.is_dir() {
         return Ok(given.to_path_buf());
     }
-    // A run folder, or a command's output folder (`out/sim`): its latest run, as `rccar report`.
-    let file = given.join("telemetry.jsonl");
-    let latest = given.join("latest").join("telemetry.jsonl");
-    if file.is_file() {
-        Ok(file)
-    } else if latest.is_file() {
-        // Named by the run it points at (`out/sim/20261129-140311`), as the legend shows it.
-        match std::fs::read_link(given.join("latest")) {
-            Ok(run) if given.join(&run).join("telemetry.jsonl").is_file() => {
-                Ok(given.join(run).join("telemetry.jsonl"))
-            }
-            _ => Ok(latest),
-        }
-    } else {
+    // A folder of runs (`out/sim`) stands for its newest run (named by the folder `latest`
+    // points at), as for `rccar report`.
+    let run = rccar::run_dir::newest_run(given)?.unwrap_or_else(|| given.to_path_buf());
+    let file = run.join("telemetry.jsonl");
+    if !file.is_file() {
         anyhow::bail!(
             "{}: a folder without telemetry.jsonl; give a run's folder (e.g. out/sim/latest) or a telemetry file",
             given.display()
-        )
+        );
     }
+    Ok(file)
 }
 
 /// Runs `rccar plot`.
