@@ -586,6 +586,18 @@ def _preview_after(wd, n0, timeout=10):
     return wait(done, timeout, 0.05)
 
 
+def _preview_sent(wd, n0, mode, key, value, timeout=10):
+    """Waits for a preview newer than count n0 whose request had threshold mode `mode` and
+    `key` = `value` (the page sends the newest values once the request in flight is back, so
+    the first new preview after three key presses may answer the first press only)."""
+    def done():
+        v = wd.js("const s=window.setup;return [s.previews, JSON.stringify(s.last||null)==JSON.stringify(s.pts.map(p=>[Math.round(p[0]*100)/100,Math.round(p[1]*100)/100])),"
+                  "document.getElementById('bird').src, document.getElementById('binary').src, document.getElementById('lane').textContent, document.getElementById('msg').textContent, s.sent||null]")
+        sent = v[6]
+        return v if v[0] > n0 and v[1] and sent and sent["threshold_mode"] == mode and sent[key] == value else None
+    return wait(done, timeout, 0.05)
+
+
 def _setup_suite(a, wd, dport, cfgdir, tmp, procs):
     """Issue 26, set-up by clicking, on `rccar drive --camera sim --dry-run --dashboard` with the
     shipped sample frame given as the set-up frame."""
@@ -676,9 +688,9 @@ def _setup_suite(a, wd, dport, cfgdir, tmp, procs):
     for _ in range(3):
         wd.press("\ue014")  # ArrowRight
     adc = int(wd.js("return document.getElementById('adc').value"))
-    pv = wait(lambda: (lambda v: v if v and "level 0" in v[4] and v[3] != binary0 else None)(_preview_after(wd, n, 1)), 10, 0.1)
+    pv = _preview_sent(wd, n, "adaptive", "adaptive_c", -2)
     check("[setup] the shipped adaptive threshold: only C's slider is live; C -5 -> -2 changes the binary image live",
-          mode0 == ["adaptive", True, False] and adc == -2 and bool(pv),
+          mode0 == ["adaptive", True, False] and adc == -2 and bool(pv) and "level 0" in pv[4] and pv[3] != binary0,
           f"mode, threshold slider off, C slider off: {mode0}; C {adc}; " + (pv[4] if pv else "no new preview"))
     binary_c2 = pv[3] if pv else binary0
     # 3b. Mode "fixed" (keyboard on the select), then its level's slider; back to "adaptive".
@@ -690,15 +702,16 @@ def _setup_suite(a, wd, dport, cfgdir, tmp, procs):
     for _ in range(20):
         wd.press("\ue012")  # ArrowLeft
     thr = int(wd.js("return document.getElementById('threshold').value"))
-    pv = wait(lambda: (lambda v: v if v and "level 150" in v[4] and v[3] not in (binary0, binary_c2) else None)(_preview_after(wd, n, 2)), 10, 0.1)
+    pv = _preview_sent(wd, n, "fixed", "threshold", 150)
     check("[setup] fixed (chosen with the keyboard): only its slider is live; 170 -> 150 changes the binary image",
-          mode1 == ["fixed", False, True] and thr == 150 and bool(pv),
+          mode1 == ["fixed", False, True] and thr == 150 and bool(pv) and "level 150" in pv[4] and pv[3] not in (binary0, binary_c2),
           f"mode, threshold slider off, C slider off: {mode1}; " + (pv[4] if pv else f"slider at {thr}, no preview at level 150"))
     n = wd.js("return window.setup.previews")
     wd.js("document.getElementById('mode').focus()")
     wd.press("\ue015")  # ArrowDown: fixed -> adaptive
-    pv = wait(lambda: (lambda v: v if v and "level 0" in v[4] else None)(_preview_after(wd, n, 1)), 10, 0.1)
-    check("[setup] back to adaptive: its C of -2 again", bool(pv) and pv[3] == binary_c2, pv[4] if pv else "no preview")
+    pv = _preview_sent(wd, n, "adaptive", "adaptive_c", -2)
+    check("[setup] back to adaptive: its C of -2 again, the same binary image byte for byte",
+          bool(pv) and "level 0" in pv[4] and pv[3] == binary_c2, pv[4] if pv else "no preview")
     wd.screenshot(os.path.join(tmp, "setup_3_threshold.png"))
     ms = sorted(wd.js("return window.setup.ms"))
     check("[setup] preview round trip (page -> server's lane stage -> two PNGs -> page)",
