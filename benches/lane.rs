@@ -32,6 +32,9 @@ impl StageTimer for Warm {
     fn lap_us(&mut self) -> u32 {
         0
     }
+    fn beside(&self) -> Box<dyn StageTimer> {
+        Box::new(Warm)
+    }
 }
 
 fn median_min(v: &mut [f64]) -> (f64, f64) {
@@ -70,6 +73,9 @@ fn main() {
             let d = n.duration_since(self.0).as_nanos() as u32;
             self.0 = n;
             d // nanoseconds, despite the name: the bench wants finer than µs
+        }
+        fn beside(&self) -> Box<dyn StageTimer> {
+            Box::new(Clock(Instant::now()))
         }
     }
     let names = [

@@ -6,7 +6,10 @@
 //! 1. lane: bird's-eye warp, edges, histogram → `LaneMeasurement` (src/lane); a line across
 //!    the lane in the same bird's-eye images (src/lane/stop_line.rs);
 //! 2. detect: the classes' cascades on the frame (src/detect), or boxes handed in
-//!    ([`Pipeline::step_with`], the simulator's ground-truth switch), light state per light box;
+//!    ([`Pipeline::step_with`], the simulator's ground-truth switch), light state per light box.
+//!    The cascades run beside step 1 (with feature `parallel`, on rayon's threads: the two
+//!    read the same frame and nothing of each other; whichever ends first helps the
+//!    detector's scales), so a frame costs about the detector's time, not the sum;
 //! 3. dead reckoning: speed and distance from the previous command through `[vehicle]`;
 //! 4. ranging and tracking: each detector box's distance from its size and row, fused, with a
 //!    σ (`BoxRanging::range_detector`, src/ranging.rs; a true box: Eq. 5 on its bottom row);
@@ -102,7 +105,8 @@ pub struct FrameOutput {
     pub command: Command,
     /// Microseconds per stage (zeros with `NoTimer`).
     pub stage_us: StageTimes,
-    /// Detection + ranging + behaviour, microseconds (0 with `NoTimer`).
+    /// The detector's own time (it runs beside the lane stage) + ranging + behaviour,
+    /// microseconds (0 with `NoTimer`).
     pub detect_us: u32,
     /// The behaviour state after this frame.
     pub mode: Mode,
@@ -410,6 +414,15 @@ pub struct Pipeline {
 /// it before the car is at the fork, near enough not to take a sign at the fork after.
 pub const TURN_SIGN_NEAR_M: f64 = 2.0;
 
+/// Runs `a` and `b` side by side (both on rayon's threads with feature `parallel`, the
+/// caller waiting; one after the other without) and returns both results.
+fn side_by_side<A: Send, B: Send>(a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + Send) -> (A, B) {
+    #[cfg(feature = "parallel")]
+    return rayon::join(a, b);
+    #[cfg(not(feature = "parallel"))]
+    (a(), b())
+}
+
 /// The stop-line detector of `cfg`'s `[camera]`, `[warp]` and `lane.lane_width_px`.
 fn stop_line_detector(cfg: &Config) -> Option<StopLineDetector> {
     let cam = crate::camera::PinholeCamera::from(&cfg.camera);
@@ -660,8 +673,25 @@ impl Pipeline {
             &resized
         };
         timer.lap_us();
-        // 1. Lane.
-        let lane = self.lane.measure(frame, timer, &mut stage_us);
+        // 1. Lane, and beside it (on another core with feature `parallel`) the detector on
+        // detection frames: the two read the same frame and nothing of each other.
+        let detect_now = given.is_some() || self.frame_index.is_multiple_of(self.every_n);
+        self.frame_index += 1;
+        let run_detector = given.is_none() && detect_now;
+        let mut side = timer.beside();
+        let (lane_stage, detector) = (&mut self.lane, &mut self.detect);
+        let (lane, (found, found_us)) = side_by_side(
+            || lane_stage.measure(frame, timer, &mut stage_us),
+            || {
+                let found = match detector {
+                    Some(d) if run_detector => d.run_rgb(frame).ok(),
+                    _ => None,
+                };
+                (found, side.lap_us())
+            },
+        );
+        // The wait for the slower of the two is neither's time.
+        timer.lap_us();
         // 1b. At a junction, the line of the chosen way (src/lane/junction.rs).
         let (lane, junction) = match &mut self.junction {
             Some(rule) => {
@@ -676,9 +706,7 @@ impl Pipeline {
             .as_mut()
             .and_then(|d| d.find(&im.binary, &im.bird, &lane));
         // 2. Detections (on every n-th frame; given boxes on every frame), ranged.
-        let detect_now = given.is_some() || self.frame_index.is_multiple_of(self.every_n);
-        self.frame_index += 1;
-        self.measure_objects(frame, other, given, detect_now);
+        self.measure_objects(frame, other, given, found);
         self.track_objects(dt_s, detect_now);
         // 5. Behaviour.
         let obs = self.observations(lane.error.is_some());
@@ -693,7 +721,7 @@ impl Pipeline {
             }
         }
         let decision = self.behaviour.step(&obs, self.time_s);
-        let detect_us = timer.lap_us();
+        let detect_us = found_us.saturating_add(timer.lap_us());
         // 6. Control, then the behaviour's overrides.
         let input = SteeringInput {
             lane: &lane,
@@ -721,69 +749,71 @@ impl Pipeline {
     }
 
     /// Step 2: this frame's measured objects (`given` boxes, or on detection frames the
-    /// detector's, ranged by stereo when `other` is there, else by the tilt).
-    fn measure_objects(&mut self, frame: &RgbImage, other: Option<&RgbImage>, given: Option<&[GivenBox]>, detect_now: bool) {
+    /// detector's boxes `found`, ranged by stereo when `other` is there, else by the tilt).
+    fn measure_objects(
+        &mut self,
+        frame: &RgbImage,
+        other: Option<&RgbImage>,
+        given: Option<&[GivenBox]>,
+        found: Option<Vec<crate::detect::stage::DetectedObject>>,
+    ) {
         self.objects.clear();
         self.measurements.clear();
-        match given {
-            Some(boxes) => {
+        match (given, found) {
+            (Some(boxes), _) => {
                 for b in boxes {
                     let r = self.ranging.range_outline(b.class, b.bbox);
                     let cues = (b.light, b.arrow);
                     push_measured(&mut self.measurements, &mut self.objects, b.class, b.bbox, r, cues);
                 }
             }
-            None if detect_now => {
-                if let Some(det) = &mut self.detect {
-                    if let Ok(found) = det.run_rgb(frame) {
-                        // Stereo ranging needs the other image at the pipeline's size too;
-                        // only the rows of this frame's boxes are rectified and converted.
-                        let mut stereo = match (&mut self.stereo, other) {
-                            (Some(st), Some(o)) if o.dimensions() == frame.dimensions() => {
-                                let ranged = found.iter().filter(|d| ObjectClass::from_label(&d.label).is_some());
-                                st.set_pair_for(frame, o, ranged.map(|d| d.rect));
-                                Some(st)
-                            }
-                            _ => None,
-                        };
-                        for d in &found {
-                            let Some(class) = ObjectClass::from_label(&d.label) else {
-                                continue;
-                            };
-                            let r = d.rect;
-                            let face = [r.x as f64 - 0.5, r.y as f64 - 0.5, (r.x + r.width) as f64 - 0.5, (r.y + r.height) as f64 - 0.5];
-                            // A box without its class's face colour is the cascade's mistake.
-                            if !crate::ranging::refine::shows_colour(frame, class, face) {
-                                continue;
-                            }
-                            // An obstacle box the floor's colour is a shadow or a sun patch.
-                            if crate::ranging::refine::floor_coloured(frame, class, face, self.shadow_tolerance) {
-                                continue;
-                            }
-                            let bbox = [
-                                r.x as f64 - 0.5,
-                                r.y as f64 - 0.5,
-                                (r.x + r.width) as f64 - 0.5,
-                                (r.y + r.height) as f64 - 0.5,
-                            ];
-                            let light = d.light.as_ref().map(|l| light_color(l, frame, r));
-                            let arrow = if class.info().reads_arrow {
-                                crate::detect::arrow::read_arrow(frame, r)
-                            } else {
-                                None
-                            };
-                            let range = match stereo {
-                                Some(ref mut st) => st.range(class, r),
-                                None => None,
-                            }
-                            .or_else(|| self.ranging.range_in_image(frame, class, bbox));
-                            let cues = (light, arrow);
-                            push_measured(&mut self.measurements, &mut self.objects, class, bbox, range, cues);
-                        }
+            (None, Some(found)) => {
+                // Stereo ranging needs the other image at the pipeline's size too;
+                // only the rows of this frame's boxes are rectified and converted.
+                let mut stereo = match (&mut self.stereo, other) {
+                    (Some(st), Some(o)) if o.dimensions() == frame.dimensions() => {
+                        let ranged = found.iter().filter(|d| ObjectClass::from_label(&d.label).is_some());
+                        st.set_pair_for(frame, o, ranged.map(|d| d.rect));
+                        Some(st)
                     }
+                    _ => None,
+                };
+                for d in &found {
+                    let Some(class) = ObjectClass::from_label(&d.label) else {
+                        continue;
+                    };
+                    let r = d.rect;
+                    let face = [r.x as f64 - 0.5, r.y as f64 - 0.5, (r.x + r.width) as f64 - 0.5, (r.y + r.height) as f64 - 0.5];
+                    // A box without its class's face colour is the cascade's mistake.
+                    if !crate::ranging::refine::shows_colour(frame, class, face) {
+                        continue;
+                    }
+                    // An obstacle box the floor's colour is a shadow or a sun patch.
+                    if crate::ranging::refine::floor_coloured(frame, class, face, self.shadow_tolerance) {
+                        continue;
+                    }
+                    let bbox = [
+                        r.x as f64 - 0.5,
+                        r.y as f64 - 0.5,
+                        (r.x + r.width) as f64 - 0.5,
+                        (r.y + r.height) as f64 - 0.5,
+                    ];
+                    let light = d.light.as_ref().map(|l| light_color(l, frame, r));
+                    let arrow = if class.info().reads_arrow {
+                        crate::detect::arrow::read_arrow(frame, r)
+                    } else {
+                        None
+                    };
+                    let range = match stereo {
+                        Some(ref mut st) => st.range(class, r),
+                        None => None,
+                    }
+                    .or_else(|| self.ranging.range_in_image(frame, class, bbox));
+                    let cues = (light, arrow);
+                    push_measured(&mut self.measurements, &mut self.objects, class, bbox, range, cues);
                 }
             }
-            None => {}
+            (None, None) => {}
         }
     }
 

@@ -6,9 +6,13 @@
 use serde::{Deserialize, Serialize};
 
 /// Something that measures the time since it was last asked, in microseconds.
-pub trait StageTimer {
+pub trait StageTimer: Send {
     /// Microseconds since the previous lap (or since creation).
     fn lap_us(&mut self) -> u32;
+
+    /// A second timer of the same kind, started now, for a stage that runs beside the ones
+    /// this timer laps (the pipeline's detector runs beside its lane stage).
+    fn beside(&self) -> Box<dyn StageTimer>;
 }
 
 /// A timer that always answers 0 (deterministic tests, golden files).
@@ -18,6 +22,10 @@ pub struct NoTimer;
 impl StageTimer for NoTimer {
     fn lap_us(&mut self) -> u32 {
         0
+    }
+
+    fn beside(&self) -> Box<dyn StageTimer> {
+        Box::new(NoTimer)
     }
 }
 

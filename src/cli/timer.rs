@@ -36,6 +36,10 @@ impl StageTimer for WallTimer {
         self.0 = now;
         us
     }
+
+    fn beside(&self) -> Box<dyn StageTimer> {
+        Box::new(WallTimer::new())
+    }
 }
 
 /// The wall clock the binary hands to the loop (latency, loop period, pacing); seconds since

@@ -20,6 +20,13 @@
 //! 3. **Scan** every cascade's windows on it ([`Scanner::scan`]); raw hits per cascade stay in
 //!    ascending scale order, as OpenCV produces them, so grouping gives OpenCV's boxes.
 //!
+//! In parallel (feature `parallel`, [`DetectParams::parallel`]), levels costing more than an
+//! eighth of the frame's work (two threads) are cut into bands of window rows, each built and
+//! scanned like a level of its own, and rayon's threads take plans, costliest first, as each
+//! becomes free: a thread that ran the lane stage beside the detector (src/pipeline.rs) joins
+//! in when it is done instead of being handed half the levels up front. Hits are put back in
+//! plan order, so the raw hits are the sequential ones, in order.
+//!
 //! With no region (the whole frame) a cascade's raw hits are exactly those of its own
 //! `detectMultiScale`; with a region, exactly the subset whose boxes lie inside it (the scan
 //! reproduces OpenCV's skip-after-a-failed-first-stage chain at the region's left edge).
@@ -69,6 +76,9 @@ struct Scratch {
     /// Hits per scan job, in the order this worker ran them (parallel mode).
     #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
     counts: Vec<usize>,
+    /// The plans this worker ran: (plan, its first count, its first hit) (parallel mode).
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+    done: Vec<(usize, usize, usize)>,
 }
 
 /// One level to build and the cascades to scan on it.
@@ -82,6 +92,15 @@ struct Plan {
     cols: usize,
     /// (detector index, its windows).
     jobs: Vec<(usize, WinRange)>,
+}
+
+impl Plan {
+    /// Estimated work: the level pixels built, once per cascade scanning them and once to
+    /// build them.
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+    fn cost(&self) -> usize {
+        self.cols * (self.row1 - self.row0) * (1 + self.jobs.len())
+    }
 }
 
 /// What a plan was made for (re-planned when any of it changes).
@@ -106,8 +125,13 @@ pub struct Pyramid {
     scratch: Scratch,
     #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
     pool: Vec<Scratch>,
+    /// The plans by cost, costliest first (parallel mode).
     #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
-    assign: Vec<usize>,
+    order: Vec<usize>,
+    /// Per plan: the worker that ran it, and where its counts and hits start there
+    /// (parallel mode).
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+    placed: Vec<(usize, usize, usize)>,
     /// Per detector: the row band of its boxes (none = the region only).
     bands: Vec<Option<RowBand>>,
 }
@@ -212,6 +236,12 @@ impl Pyramid {
             }
         }
         self.plans.sort_by(|a, b| a.level.scale.total_cmp(&b.level.scale));
+        // With the levels spread over threads, the large ones in bands (sequential runs keep
+        // whole levels: the reference the parallel one is tested against).
+        #[cfg(feature = "parallel")]
+        if params.iter().any(|p| p.parallel) && rayon::current_num_threads() > 1 {
+            self.split_large(dets, 4 * rayon::current_num_threads());
+        }
         // 2. One layout for all levels: the stride and row count of the largest.
         self.stride = self.plans.iter().map(|p| p.level.width + 1).max().unwrap_or(1);
         self.rows = self.plans.iter().map(|p| p.level.height + 1).max().unwrap_or(1);
@@ -229,6 +259,59 @@ impl Pyramid {
             bands: self.bands.clone(),
         });
         Ok(())
+    }
+
+    /// Splits every plan costing more than `1/parts` of all of them into bands of window rows,
+    /// so that the workers of [`Pyramid::run`] share the large levels instead of one worker
+    /// scanning the whole scale-1 level while the others wait. A band is built like a plan
+    /// (its rows plus a window's height below); rows of windows are independent (OpenCV's own
+    /// `detectMultiScale` splits them into stripes for its threads), and the bands of a level
+    /// follow each other in the plan list, so each cascade's hits keep their order.
+    #[cfg(feature = "parallel")]
+    fn split_large(&mut self, dets: &[Scanner], parts: usize) {
+        let total: usize = self.plans.iter().map(Plan::cost).sum();
+        let limit = (total / parts.max(1)).max(1);
+        let mut out = Vec::with_capacity(self.plans.len() + parts);
+        for p in self.plans.drain(..) {
+            let n = p.cost().div_ceil(limit);
+            let (y0, y1) = (
+                p.jobs.iter().map(|j| j.1.ya).min().unwrap_or(0),
+                p.jobs.iter().map(|j| j.1.yb).max().unwrap_or(0),
+            );
+            let step = p.level.step.max(1);
+            if n < 2 || (y1 - y0) / step < 2 * n {
+                out.push(p);
+                continue;
+            }
+            // Band b scans the window rows y with cut[b] <= y < cut[b + 1].
+            let cuts: Vec<usize> = (0..=n).map(|b| y0 + (y1 + 1 - y0) * b / n).collect();
+            for b in 0..n {
+                let (lo, hi) = (cuts[b], cuts[b + 1]);
+                let mut band = Plan {
+                    level: p.level,
+                    row0: usize::MAX,
+                    row1: 0,
+                    cols: p.cols,
+                    jobs: Vec::with_capacity(p.jobs.len()),
+                };
+                for &(i, w) in &p.jobs {
+                    // The job's first row at or after `lo`, and its last before `hi`.
+                    let first = if lo <= w.ya { w.ya } else { w.ya + (lo - w.ya).div_ceil(step) * step };
+                    if hi <= w.ya || first >= hi || first > w.yb {
+                        continue;
+                    }
+                    let last = (w.ya + (hi - 1 - w.ya) / step * step).min(w.yb);
+                    let ch = dets[i].window().1;
+                    band.row0 = band.row0.min(first);
+                    band.row1 = band.row1.max(last + ch);
+                    band.jobs.push((i, WinRange { ya: first, yb: last, ..w }));
+                }
+                if !band.jobs.is_empty() {
+                    out.push(band);
+                }
+            }
+        }
+        self.plans = out;
     }
 
     /// The input rows the planned levels read, as sorted, disjoint half-open ranges (after
@@ -313,28 +396,32 @@ impl Pyramid {
         Ok(())
     }
 
-    /// Levels spread over rayon's threads, largest first to the least loaded worker; raw hits
-    /// are then put back in level order.
+    /// Plans (levels, or bands of the large ones) handed to rayon's threads as each becomes
+    /// free, the costliest first (a worker that draws cheap plans takes more of them); raw
+    /// hits are then put back in plan order, as the sequential scan gives them.
     #[cfg(feature = "parallel")]
     fn run_parallel(&mut self, ctx: &Ctx<'_>, dets: &mut [Scanner]) {
         use rayon::prelude::*;
+        use std::sync::atomic::{AtomicUsize, Ordering};
         let t = rayon::current_num_threads().min(self.plans.len()).min(64);
         if self.pool.len() < t {
             self.pool.resize_with(t, Scratch::default);
         }
-        let mut load = [0usize; 64];
-        self.assign.clear();
-        for p in &self.plans {
-            let g = (0..t).min_by_key(|&g| load[g]).unwrap_or(0);
-            load[g] += p.cols * (p.row1 - p.row0) * (1 + p.jobs.len());
-            self.assign.push(g);
-        }
-        let (plans, assign) = (&self.plans, &self.assign);
+        self.order.clear();
+        self.order.extend(0..self.plans.len());
+        let plans = &self.plans;
+        self.order.sort_by_key(|&k| std::cmp::Reverse(plans[k].cost()));
+        let (order, next) = (&self.order, AtomicUsize::new(0));
         let shared: &[Scanner] = dets;
-        self.pool[..t].par_iter_mut().enumerate().for_each(|(g, s)| {
+        self.pool[..t].par_iter_mut().for_each(|s| {
             s.hits.clear();
             s.counts.clear();
-            for (p, _) in plans.iter().zip(assign).filter(|(_, &a)| a == g) {
+            s.done.clear();
+            loop {
+                let k = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&pi) = order.get(k) else { break };
+                let p = &plans[pi];
+                s.done.push((pi, s.counts.len(), s.hits.len()));
                 ctx.build(p, s);
                 for &(i, win) in &p.jobs {
                     let before = s.hits.len();
@@ -345,15 +432,20 @@ impl Pyramid {
                 }
             }
         });
-        // Hits in level order, as the sequential scan gives them.
-        let mut next = [(0usize, 0usize); 64]; // per worker: (count index, hit index)
-        for (p, &g) in self.plans.iter().zip(&self.assign) {
+        // Hits in plan order: where each plan's counts and hits are (worker, count, hit).
+        self.placed.clear();
+        self.placed.resize(self.plans.len(), (0, 0, 0));
+        for (g, s) in self.pool[..t].iter().enumerate() {
+            for &(pi, ci, hi) in &s.done {
+                self.placed[pi] = (g, ci, hi);
+            }
+        }
+        for (p, &(g, mut ci, mut hi)) in self.plans.iter().zip(&self.placed) {
             let s = &self.pool[g];
             for &(i, _) in &p.jobs {
-                let (ci, hi) = next[g];
                 let n = s.counts[ci];
                 dets[i].raw_mut().extend_from_slice(&s.hits[hi..hi + n]);
-                next[g] = (ci + 1, hi + n);
+                (ci, hi) = (ci + 1, hi + n);
             }
         }
     }
