@@ -7,7 +7,8 @@
 //!    the lane in the same bird's-eye images (src/lane/stop_line.rs);
 //! 2. detect: the classes' cascades on the frame (src/detect), or boxes handed in
 //!    ([`Pipeline::step_with`], the simulator's ground-truth switch), light state per light box.
-//!    The cascades run beside step 1 (with feature `parallel`, on rayon's threads: the two
+//!    A parallel detector ([`DetectStage::set_parallel`], as the car, replay and simulator
+//!    load it) runs beside step 1 (with feature `parallel`, on rayon's threads: the two
 //!    read the same frame and nothing of each other; whichever ends first helps the
 //!    detector's scales), so a frame costs about the detector's time, not the sum;
 //! 3. dead reckoning: speed and distance from the previous command through `[vehicle]`;
@@ -414,12 +415,18 @@ pub struct Pipeline {
 /// it before the car is at the fork, near enough not to take a sign at the fork after.
 pub const TURN_SIGN_NEAR_M: f64 = 2.0;
 
-/// Runs `a` and `b` side by side (both on rayon's threads with feature `parallel`, the
-/// caller waiting; one after the other without) and returns both results.
-fn side_by_side<A: Send, B: Send>(a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + Send) -> (A, B) {
+/// Runs `a` and `b` side by side when `parallel` (on rayon's threads with feature
+/// `parallel`, the caller waiting), else one after the other, and returns both results.
+fn side_by_side<A: Send, B: Send>(
+    parallel: bool,
+    a: impl FnOnce() -> A + Send,
+    b: impl FnOnce() -> B + Send,
+) -> (A, B) {
     #[cfg(feature = "parallel")]
-    return rayon::join(a, b);
-    #[cfg(not(feature = "parallel"))]
+    if parallel {
+        return rayon::join(a, b);
+    }
+    let _ = parallel;
     (a(), b())
 }
 
@@ -679,8 +686,10 @@ impl Pipeline {
         self.frame_index += 1;
         let run_detector = given.is_none() && detect_now;
         let mut side = timer.beside();
+        let parallel = self.detect.as_ref().is_some_and(DetectStage::is_parallel);
         let (lane_stage, detector) = (&mut self.lane, &mut self.detect);
         let (lane, (found, found_us)) = side_by_side(
+            parallel,
             || lane_stage.measure(frame, timer, &mut stage_us),
             || {
                 let found = match detector {

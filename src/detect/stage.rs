@@ -229,11 +229,17 @@ impl DetectStage {
         found
     }
 
-    /// Spread the pyramid levels over threads (feature `parallel`) for every cascade.
+    /// Spread the pyramid levels over threads (feature `parallel`) for every cascade; the
+    /// pipeline then also runs this stage beside its lane stage.
     pub fn set_parallel(&mut self, parallel: bool) {
         for p in &mut self.params {
             p.parallel = parallel;
         }
+    }
+
+    /// Whether any cascade spreads its levels over threads ([`DetectStage::set_parallel`]).
+    pub fn is_parallel(&self) -> bool {
+        self.params.iter().any(|p| p.parallel)
     }
 
     /// The region, minimum and maximum window of each cascade, then of each colour detector,
@@ -308,7 +314,7 @@ impl DetectStage {
     /// traffic-light reading and the colour detectors.
     pub fn run(&mut self, gray: &GrayImage, rgb: Option<&RgbImage>) -> Result<Vec<DetectedObject>, DetectError> {
         let (w, h) = (gray.width() as usize, gray.height() as usize);
-        let parallel = self.params.iter().any(|p| p.parallel);
+        let parallel = self.is_parallel();
         if !self.dets.is_empty() {
             self.pyramid.run(
                 gray.as_raw(),
