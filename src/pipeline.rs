@@ -685,7 +685,8 @@ impl Pipeline {
         let detect_now = given.is_some() || self.frame_index.is_multiple_of(self.every_n);
         self.frame_index += 1;
         let run_detector = given.is_none() && detect_now;
-        let mut side = timer.beside();
+        let run_detector = run_detector && self.detect.is_some();
+        let mut side = run_detector.then(|| timer.beside());
         let parallel = self.detect.as_ref().is_some_and(DetectStage::is_parallel);
         let (lane_stage, detector) = (&mut self.lane, &mut self.detect);
         let (lane, (found, found_us)) = side_by_side(
@@ -696,7 +697,7 @@ impl Pipeline {
                     Some(d) if run_detector => d.run_rgb(frame).ok(),
                     _ => None,
                 };
-                (found, side.lap_us())
+                (found, side.as_mut().map_or(0, |t| t.lap_us()))
             },
         );
         // The wait for the slower of the two is neither's time.

@@ -125,7 +125,7 @@ pub struct Pyramid {
     scratch: Scratch,
     #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
     pool: Vec<Scratch>,
-    /// The plans by cost, costliest first (parallel mode).
+    /// The plans by cost, costliest first (made with the plan; parallel mode).
     #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
     order: Vec<usize>,
     /// Per plan: the worker that ran it, and where its counts and hits start there
@@ -242,6 +242,11 @@ impl Pyramid {
         if params.iter().any(|p| p.parallel) && rayon::current_num_threads() > 1 {
             self.split_large(dets, 4 * rayon::current_num_threads());
         }
+        // The order threads take the plans in: costliest first (made once per plan).
+        self.order.clear();
+        self.order.extend(0..self.plans.len());
+        let plans = &self.plans;
+        self.order.sort_by_key(|&k| std::cmp::Reverse(plans[k].cost()));
         // 2. One layout for all levels: the stride and row count of the largest.
         self.stride = self.plans.iter().map(|p| p.level.width + 1).max().unwrap_or(1);
         self.rows = self.plans.iter().map(|p| p.level.height + 1).max().unwrap_or(1);
@@ -407,11 +412,7 @@ impl Pyramid {
         if self.pool.len() < t {
             self.pool.resize_with(t, Scratch::default);
         }
-        self.order.clear();
-        self.order.extend(0..self.plans.len());
-        let plans = &self.plans;
-        self.order.sort_by_key(|&k| std::cmp::Reverse(plans[k].cost()));
-        let (order, next) = (&self.order, AtomicUsize::new(0));
+        let (plans, order, next) = (&self.plans, &self.order, AtomicUsize::new(0));
         let shared: &[Scanner] = dets;
         self.pool[..t].par_iter_mut().for_each(|s| {
             s.hits.clear();

@@ -577,11 +577,16 @@ def _max_err(a_pts, b_pts):
     return max(abs(p[k] - q[k]) for p, q in zip(a_pts, b_pts) for k in (0, 1))
 
 
+# The page's preview state in one read: [count, answers the page's corners, bird's-eye image,
+# binary image, lane text, message, what the shown preview was asked with].
+_PREVIEW_JS = ("const s=window.setup;return [s.previews, JSON.stringify(s.last||null)==JSON.stringify(s.pts.map(p=>[Math.round(p[0]*100)/100,Math.round(p[1]*100)/100])),"
+               "document.getElementById('bird').src, document.getElementById('binary').src, document.getElementById('lane').textContent, document.getElementById('msg').textContent, s.sent||null]")
+
+
 def _preview_after(wd, n0, timeout=10):
     """Waits for a preview newer than count n0 that answers the page's corners; its images."""
     def done():
-        v = wd.js("const s=window.setup;return [s.previews, JSON.stringify(s.last||null)==JSON.stringify(s.pts.map(p=>[Math.round(p[0]*100)/100,Math.round(p[1]*100)/100])),"
-                  "document.getElementById('bird').src, document.getElementById('binary').src, document.getElementById('lane').textContent, document.getElementById('msg').textContent]")
+        v = wd.js(_PREVIEW_JS)
         return v if v[0] > n0 and v[1] else None
     return wait(done, timeout, 0.05)
 
@@ -591,8 +596,7 @@ def _preview_sent(wd, n0, mode, key, value, timeout=10):
     `key` = `value` (the page sends the newest values once the request in flight is back, so
     the first new preview after three key presses may answer the first press only)."""
     def done():
-        v = wd.js("const s=window.setup;return [s.previews, JSON.stringify(s.last||null)==JSON.stringify(s.pts.map(p=>[Math.round(p[0]*100)/100,Math.round(p[1]*100)/100])),"
-                  "document.getElementById('bird').src, document.getElementById('binary').src, document.getElementById('lane').textContent, document.getElementById('msg').textContent, s.sent||null]")
+        v = wd.js(_PREVIEW_JS)
         sent = v[6]
         return v if v[0] > n0 and v[1] and sent and sent["threshold_mode"] == mode and sent[key] == value else None
     return wait(done, timeout, 0.05)
