@@ -212,7 +212,7 @@ pub fn load_detector(cfg: &Config, base: &Path) -> Result<(Option<DetectStage>, 
             label: class.name().into(),
             path,
             traffic_light: class.info().reads_light,
-            params,
+            params: class_params(params, cfg.classes[class].min_neighbors),
         })
         .collect();
     let colour: Vec<ObjectClass> = cfg
@@ -239,6 +239,15 @@ pub fn load_detector(cfg: &Config, base: &Path) -> Result<(Option<DetectStage>, 
         stage.add_colour_sign(class.name(), det);
     }
     Ok((Some(stage), missing))
+}
+
+/// `[detect]`'s scan parameters with one class's own grouping threshold
+/// (`classes.<name>.min_neighbors`; 0 keeps `detect.min_neighbors`).
+fn class_params(detect: DetectParams, min_neighbors: u32) -> DetectParams {
+    DetectParams {
+        min_neighbors: if min_neighbors > 0 { min_neighbors } else { detect.min_neighbors },
+        ..detect
+    }
 }
 
 /// Where and at which sizes one class is searched (from `[classes.<name>]`, `[detect]` and the

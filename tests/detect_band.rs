@@ -102,3 +102,47 @@ fn the_band_keeps_every_object_box_in_range() {
     );
     assert!(failed.is_empty(), "{failed:#?}");
 }
+
+/// `classes.<name>.min_neighbors` sets that class's grouping threshold only: on a simulator
+/// frame of the stop sign 1 m ahead, the shipped stop-sign cascade boxes it with `n` merged
+/// hits at `detect.min_neighbors` 3; set `classes.stop_sign.min_neighbors = n` (a box needs
+/// more than `n`) and the box is gone, while the same value for another class, or 0 (= the
+/// `[detect]` value), leaves the stop sign's boxes as they were.
+#[test]
+fn a_class_min_neighbors_applies_to_that_class_only() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let base = Config::default();
+    let lens_ahead = base.vehicle.camera_x_m - base.vehicle.wheelbase_m / 2.0;
+    let mut sim = Simulation::new(&base, &track("stop_sign")).unwrap();
+    sim.set_truth_boxes(true);
+    sim.place_at(3.0 - 1.0 - lens_ahead);
+    let truth = sim.step().truth.objects.first().expect("the sign in view").bbox;
+    let img = sim.image().clone();
+    let signs = |cfg: &Config| -> Vec<(i32, i32, i32, i32, u32)> {
+        let (Some(mut stage), missing) = load_detector(cfg, &root.join("config")).unwrap() else {
+            panic!("no cascades");
+        };
+        assert!(missing.is_empty(), "{missing:?}");
+        stage.set_parallel(false);
+        let mut v: Vec<_> = stage
+            .run_rgb(&img)
+            .unwrap()
+            .into_iter()
+            .filter(|o| o.label == "stop_sign" && iou(o.rect, truth) > 0.2)
+            .map(|o| (o.rect.x, o.rect.y, o.rect.width, o.rect.height, o.neighbors))
+            .collect();
+        v.sort();
+        v
+    };
+    assert_eq!(base.detect.min_neighbors, 3);
+    let at_default = signs(&base);
+    let n = at_default.iter().map(|b| b.4).max().expect("the stop sign boxed at 1 m");
+    assert!(n > 3, "{at_default:?}");
+    let with = |key: &str| signs(&base.with_override(key).unwrap());
+    assert_eq!(with(&format!("classes.stop_sign.min_neighbors={n}")), vec![], "more than {n} hits needed: no box");
+    assert_eq!(with("classes.stop_sign.min_neighbors=0"), at_default, "0 = detect.min_neighbors");
+    assert_eq!(with(&format!("classes.traffic_light.min_neighbors={n}")), at_default, "another class's value");
+    let e = base.with_override("classes.stop_sign.min_neighbors=101").unwrap_err().to_string();
+    assert!(e.contains("classes.stop_sign.min_neighbors"), "{e}");
+    println!("stop sign at 1 m: {at_default:?} at detect.min_neighbors 3; none at classes.stop_sign.min_neighbors {n}");
+}

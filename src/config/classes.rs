@@ -51,6 +51,11 @@ pub struct ClassConfig {
     /// Its detector box's size over the face's outline (the training crops' margin plus the
     /// detector's own bias; 1 = tight).
     pub box_margin: f64,
+    /// Its cascade's grouping threshold (`minNeighbors`: a box needs more than this many raw
+    /// hits), for this class only; 0 = `detect.min_neighbors`. A cascade trained by a class is
+    /// given the value `rccar-train evaluate` chooses on its held-out frames (docs/training.md,
+    /// step 5): cascades differ in how many hits a true object gets.
+    pub min_neighbors: u32,
 }
 
 impl ClassConfig {
@@ -65,6 +70,7 @@ impl ClassConfig {
             size_m: d.size_m,
             bottom_m: d.bottom_m,
             box_margin: d.box_margin,
+            min_neighbors: 0,
         }
     }
 
@@ -110,6 +116,7 @@ impl ClassConfig {
         c.range(&key("size_m[1]"), self.size_m[1], 0.0, 3.0);
         c.range(&key("bottom_m"), self.bottom_m, 0.0, 3.0);
         c.range(&key("box_margin"), self.box_margin, 0.5, 3.0);
+        c.range(&key("min_neighbors"), self.min_neighbors, 0, 100);
     }
 }
 
