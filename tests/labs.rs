@@ -393,7 +393,22 @@ fn training_recipe() {
         assert!(recall >= min_recall, "{model}: recall {recall} < {min_recall}");
         assert!(fp_neg <= max_fp_neg, "{model}: {fp_neg} FP per negative frame > {max_fp_neg}");
         assert!(fp_track <= max_fp_track, "{model}: {fp_track} FP per track frame > {max_fp_track}");
+        // The car's minNeighbors, chosen on these held-out frames: the smallest of 1-10 whose
+        // false positives per frame without the sign are within the default target 0.01.
+        let within = rep["points"].as_array().expect("points").iter().find(|p| {
+            p["min_neighbors"].as_u64().is_some_and(|m| m >= 1)
+                && p["fp_per_negative_frame"].as_f64().is_some_and(|f| f <= 0.01)
+        });
+        assert_eq!(rep["target_fp_per_frame"].as_f64(), Some(0.01));
+        assert_eq!(
+            rep["chosen_min_neighbors"].as_u64(),
+            within.and_then(|p| p["min_neighbors"].as_u64()),
+            "{model}"
+        );
     }
+    let choices: Vec<&str> = run.stdout.lines().filter(|l| l.starts_with("choose: ")).collect();
+    eprintln!("{}", choices.join("\n"));
+    assert_eq!(choices.len(), 2, "{}", run.stdout);
     assert!(run.stdout.contains("track-b: 240 frames without the object"), "{}", run.stdout);
     // Held-out negatives from training's own files, then from its folders: said (one stage).
     let train = |bg: &str, holdout: &str, out: &str| {

@@ -14,7 +14,7 @@
 #               it; not built or shipped by this repository)
 # Env: RCCAR_TRAIN (default target/release/rccar-train), RCCAR_PYTHON (default .venv/bin/python,
 # needs cv2 for the .vec), PHOTOS (default /usr/share/doc/opencv-doc/examples/data, Debian's
-# opencv-doc), NICE (default 10).
+# opencv-doc), NICE (default 10), TARGET (default 0.01: evaluate's --target-fp-per-frame).
 #
 # The material (the stop sign at the car's 320x240, `SETS/320`):
 #   the 91 DeepPiCar photos sorted by name, every other one: even places train, odd ones test;
@@ -25,15 +25,20 @@
 #   backgrounds (training): the first half of DeepPiCar's 219 track frames without signs, every
 #     other one of OpenCV's sample photos (PHOTOS, from the first), the training photos without
 #     a stop sign;
+#   calibration: the third quarter of the track frames (the next part of the drive after the
+#     training frames), as the recipe's held-out recording `track-b`: each cascade's
+#     minNeighbors is chosen there (`evaluate`'s `choose:`, --target-fp-per-frame TARGET), never
+#     on the test frames;
 #   test: the test photos (with their stop signs; those without count as negative frames), the
-#     second half of the track frames, the other OpenCV sample photos.
+#     last quarter of the track frames, the other OpenCV sample photos.
 # rccar-train: `train` with its defaults (min hit rate 0.998, 2000 negatives per stage,
 # mirrored negatives, 20 stages), --threads 1, no --holdout (no sign frames to spare for the
 # early stop: it runs the 20 stages, as opencv_traincascade does).
 # opencv_traincascade: OpenCV's usual -numStages 20 -minHitRate 0.995 -maxFalseAlarmRate 0.5,
 # HAAR BASIC, GAB, stumps, -numPos 0.9 x the samples in the .vec, -numNeg 2 x numPos,
 # -w/-h the same window, -numThreads 1.
-# Both: `rccar-train evaluate` (scale factor 1.1, minNeighbors 0-10, no size limit, IoU 0.5).
+# Both: `rccar-train evaluate` (scale factor 1.1, minNeighbors 0-10, no size limit, IoU 0.5),
+# compared at the detector's default minNeighbors 3 and at each cascade's chosen minNeighbors.
 # Each training takes up to about 10 minutes at one thread; /usr/bin/time -v gives time and
 # peak memory. Not run by the test suite or CI (it needs the fetched photos and an OpenCV
 # binary this repository does not build).
@@ -48,6 +53,7 @@ PY=${RCCAR_PYTHON:-$ROOT/.venv/bin/python}
 [ -x "$PY" ] || PY=python3
 PHOTOS=${PHOTOS:-/usr/share/doc/opencv-doc/examples/data}
 NICE=${NICE:-10}
+TARGET=${TARGET:-0.01}
 S320="$SETS/320"
 [ -f "$S320/stop_sign.info.dat" ] || { echo "$S320: no photo lists; run training/realsets/deeppicar.sh first" >&2; exit 2; }
 [ -x "$TC" ] || { echo "$TC: not an executable" >&2; exit 2; }
@@ -66,7 +72,10 @@ touch "$L/train_nosign.txt"
 sort "$S320/track.bg.txt" | awk -v d="$S320" '{ print d "/" $1 }' > "$L/track_all.txt"
 n=$(wc -l < "$L/track_all.txt")
 head -n $(( (n + 1) / 2 )) "$L/track_all.txt" > "$L/train_track.txt"
-tail -n +$(( (n + 1) / 2 + 1 )) "$L/track_all.txt" > "$L/test_track.txt"
+tail -n +$(( (n + 1) / 2 + 1 )) "$L/track_all.txt" > "$L/rest_track.txt"
+m=$(wc -l < "$L/rest_track.txt")
+head -n $(( (m + 1) / 2 )) "$L/rest_track.txt" > "$L/calib_track.txt"
+tail -n +$(( (m + 1) / 2 + 1 )) "$L/rest_track.txt" > "$L/test_track.txt"
 find "$PHOTOS" -maxdepth 1 -type f \( -iname '*.jpg' -o -iname '*.jpeg' -o -iname '*.png' \) | LC_ALL=C sort > "$L/photos_all.txt"
 awk 'NR % 2 == 1' "$L/photos_all.txt" > "$L/train_photos.txt"
 # evaluate takes frames of at most 8 megapixels: that leaves out chessboard.png (13 MP).
@@ -83,6 +92,7 @@ cat "$L/train_track.txt" "$L/train_photos.txt" "$L/train_nosign.txt" > "$L/train
 printf '%-34s %s\n' \
   "training photos with stop signs" "$(wc -l < "$L/train_pos.dat") ($(awk '{n+=$2} END{print n}' "$L/train_pos.dat") signs)" \
   "training backgrounds" "$(wc -l < "$L/train_bg.txt") ($(wc -l < "$L/train_track.txt") track, $(wc -l < "$L/train_photos.txt") OpenCV photos, $(wc -l < "$L/train_nosign.txt") DeepPiCar photos without a stop sign)" \
+  "calibration (minNeighbors)" "$(wc -l < "$L/calib_track.txt") track frames" \
   "test photos" "$(wc -l < "$L/test_photos.dat") ($(awk '$2>0' "$L/test_photos.dat" | wc -l) with $(awk '{n+=$2} END{print n}' "$L/test_photos.dat") signs)" \
   "test frames without the sign" "$(( $(awk '$2==0' "$L/test_photos.dat" | wc -l) + $(wc -l < "$L/test_track.txt") + $(wc -l < "$L/test_photos_bg.txt") )) ($(wc -l < "$L/test_track.txt") track, $(wc -l < "$L/test_photos_bg.txt") OpenCV photos, the rest DeepPiCar photos)"
 
@@ -115,7 +125,14 @@ if [ ! -f "$OUT/opencv/cascade.xml" ]; then
 fi
 tr '\r' '\n' < "$OUT/opencv.log" | grep -E '^Training until now|^Required leaf' | tail -1
 
-echo "== evaluate (scale factor 1.1, no size limit, IoU 0.5)"
+echo "== minNeighbors chosen on the calibration frames (--target-fp-per-frame $TARGET)"
+for t in rccar opencv; do
+  "$RT" evaluate --cascade "$OUT/$t/cascade.xml" --out "$OUT/calib-$t" --target-fp-per-frame "$TARGET" \
+    --info "$L/calib_track.txt" > "$OUT/calib-$t.log"
+  echo "$t: $(grep '^choose:' "$OUT/calib-$t.log")"
+done
+
+echo "== evaluate on the test frames (scale factor 1.1, no size limit, IoU 0.5)"
 for t in rccar opencv; do
   "$RT" evaluate --cascade "$OUT/$t/cascade.xml" --out "$OUT/eval-$t" \
     --info "$L/test_photos.dat" "$L/test_track.txt" "$L/test_photos_bg.txt" > "$OUT/eval-$t.log"

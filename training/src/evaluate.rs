@@ -76,6 +76,31 @@ pub struct Report {
     pub frame_size: (u32, u32),
     /// Per-frame details at the reporting minNeighbors: (file, found, false positives).
     pub frames_detail: Vec<(String, usize, usize)>,
+    /// The false-positive target [`Report::choose`] chose for (`None`: no choice made).
+    pub target_fp_per_frame: Option<f64>,
+    /// The chosen operating point ([`Report::choose`]): the smallest minNeighbors ≥ 1 whose
+    /// false positives per frame without the object are at most the target (`None`: no frame
+    /// without the object, or none of 1–10 meets it).
+    pub chosen_min_neighbors: Option<u32>,
+}
+
+impl Report {
+    /// Chooses the operating point for the car: the smallest `minNeighbors` of 1 and up whose
+    /// false positives **per frame without the object** (the held-out track recording: what the
+    /// car sees) are at most `target`. Both recall and false positives fall as minNeighbors
+    /// grows (a group needs more hits), so the smallest that meets the target keeps the most
+    /// recall. 0 (raw hits, no grouping) is never chosen. Frames with the object only give the
+    /// recall there; without frames lacking the object nothing is chosen.
+    pub fn choose(&mut self, target: f64) -> Option<&Point> {
+        self.target_fp_per_frame = Some(target);
+        let p = self
+            .points
+            .iter()
+            .filter(|p| p.min_neighbors >= 1)
+            .find(|p| p.fp_per_negative_frame.is_some_and(|f| f <= target));
+        self.chosen_min_neighbors = p.map(|p| p.min_neighbors);
+        p
+    }
 }
 
 /// Greedy one-to-one matching; returns (TP, FP, misses).
@@ -210,6 +235,8 @@ pub fn evaluate(
         ms_max: sorted.last().copied().unwrap_or(0.0),
         frame_size: size,
         frames_detail: detail,
+        target_fp_per_frame: None,
+        chosen_min_neighbors: None,
     })
 }
 
@@ -306,5 +333,59 @@ mod tests {
         assert!((neg * 2.0 - p.fp_negative_frames as f64).abs() < 1e-9);
         assert!((neg * 2.0 + sign - p.false_positives as f64).abs() < 1e-9, "{p:?}");
         assert!((p.fp_per_frame * 3.0 - p.false_positives as f64).abs() < 1e-9);
+    }
+
+    fn point(mn: u32, recall: f64, fp_neg: Option<f64>) -> Point {
+        Point {
+            min_neighbors: mn,
+            true_positives: 0,
+            false_positives: 0,
+            misses: 0,
+            recall,
+            precision: 1.0,
+            fp_per_frame: 0.0,
+            fp_negative_frames: 0,
+            fp_per_negative_frame: fp_neg,
+            fp_per_sign_frame: None,
+        }
+    }
+
+    fn report(points: Vec<Point>) -> Report {
+        Report {
+            cascade: String::new(),
+            frames: 0,
+            boxes: 0,
+            negative_frames: 0,
+            sign_frames: 0,
+            iou: 0.5,
+            scale_factor: 1.1,
+            min_size: (0, 0),
+            points,
+            ms_median: 0.0,
+            ms_mean: 0.0,
+            ms_max: 0.0,
+            frame_size: (0, 0),
+            frames_detail: vec![],
+            target_fp_per_frame: None,
+            chosen_min_neighbors: None,
+        }
+    }
+
+    /// The chosen minNeighbors is the smallest of 1 and up whose false positives per frame
+    /// without the object meet the target (0, raw hits, never; the target itself counts as
+    /// met); none when no value meets it or there are no such frames.
+    #[test]
+    fn the_smallest_min_neighbors_within_the_target_is_chosen() {
+        let curve = [(0, 0.95, 0.0), (1, 0.9, 0.30), (2, 0.85, 0.05), (3, 0.8, 0.01), (4, 0.7, 0.0)];
+        let mut r = report(curve.iter().map(|&(m, rc, f)| point(m, rc, Some(f))).collect());
+        assert_eq!(r.choose(0.01).map(|p| p.min_neighbors), Some(3));
+        assert_eq!((r.chosen_min_neighbors, r.target_fp_per_frame), (Some(3), Some(0.01)));
+        assert_eq!(r.choose(0.05).map(|p| p.recall), Some(0.85));
+        assert_eq!(r.choose(1.0).map(|p| p.min_neighbors), Some(1), "0 is not an operating point");
+        let mut r = report(vec![point(1, 0.9, Some(0.5)), point(2, 0.8, Some(0.2))]);
+        assert!(r.choose(0.1).is_none());
+        assert_eq!(r.chosen_min_neighbors, None);
+        let mut r = report(vec![point(1, 0.9, None), point(2, 0.8, None)]);
+        assert!(r.choose(0.1).is_none(), "no frame without the object: nothing to choose on");
     }
 }

@@ -580,6 +580,11 @@ struct EvalArgs {
     /// IoU for a match.
     #[arg(long, default_value_t = 0.5)]
     iou: f64,
+    /// The false positives per frame without the object the car can live with: the printed
+    /// choice is the smallest minNeighbors that stays within it on these frames (the held-out
+    /// track recording), to set as `classes.<name>.min_neighbors`.
+    #[arg(long, default_value_t = 0.01)]
+    target_fp_per_frame: f64,
     /// Title of the curve.
     #[arg(long)]
     title: Option<String>,
@@ -610,8 +615,9 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
     if frames.is_empty() {
         bail!("{info_name}: no readable frames");
     }
+    within("--target-fp-per-frame", a.target_fp_per_frame, 0.0, 1000.0, "")?;
     let mns: Vec<u32> = (0..=10).collect();
-    let rep = evaluate::evaluate(
+    let mut rep = evaluate::evaluate(
         cascade,
         &a.cascade.display().to_string(),
         &frames,
@@ -621,6 +627,7 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
         &mns,
         a.min_neighbors,
     )?;
+    let chosen = rep.choose(a.target_fp_per_frame).cloned();
     let out = a
         .out
         .unwrap_or_else(|| a.cascade.parent().map(|p| p.to_path_buf()).unwrap_or_default());
@@ -674,6 +681,7 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
          FP/all: over all {} frames",
         rep.frames
     );
+    print_choice(&rep, chosen.as_ref(), a.target_fp_per_frame);
     // (frames_detail is kept at the printed minNeighbors, one of 0-10)
     if lists.len() > 1 && rep.frames_detail.len() == frames.len() {
         println!("at minNeighbors {}, list by list:", a.min_neighbors);
@@ -703,6 +711,38 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
     );
     println!("wrote {} and curve.png", json.display());
     Ok(ExitCode::SUCCESS)
+}
+
+/// The `choose:` line of `evaluate`: the minNeighbors for the car ([`evaluate::Report::choose`])
+/// and what it costs, or why there is none.
+fn print_choice(rep: &evaluate::Report, chosen: Option<&evaluate::Point>, target: f64) {
+    match chosen {
+        Some(p) => {
+            let recall = if rep.boxes > 0 {
+                format!(", recall {:.4} ({}/{})", p.recall, p.true_positives, rep.boxes)
+            } else {
+                String::new()
+            };
+            println!(
+                "choose: minNeighbors {} — the smallest whose false positives per frame without the object \
+                 ({:.4} on {} frames) are at most {target} (--target-fp-per-frame){recall}; \
+                 set classes.<name>.min_neighbors = {} for this cascade",
+                p.min_neighbors,
+                p.fp_per_negative_frame.unwrap_or(0.0),
+                rep.negative_frames,
+                p.min_neighbors
+            );
+        }
+        None if rep.negative_frames == 0 => println!(
+            "choose: nothing to choose on: no frames without the object (give the held-out track \
+             recording, e.g. track-b)"
+        ),
+        None => println!(
+            "choose: no minNeighbors up to {} keeps the false positives at most {target} per frame \
+             without the object: add backgrounds like the frames with false positives (docs/training.md, step 6)",
+            rep.points.last().map_or(0, |p| p.min_neighbors)
+        ),
+    }
 }
 
 #[derive(clap::Args)]
