@@ -444,11 +444,12 @@ fn training_recipe() {
 /// What the recipe test accepts at minNeighbors 3, (recall ≥, FP per frame without the sign ≤,
 /// FP per track-b frame ≤), for the model from boxes and the one from crops. Measured (the
 /// run is seeded, its photos are opencv-doc's alone; docs/training.md, "The recipe as a
-/// test"): boxes 0.917 (22/24), 3.67, 1.05; crops 0.917 (22/24), 3.51, 0.94 — 12 stages on 30
-/// signs and 80 photos make a weak cascade, and the test says so rather than hide it. Accepted:
-/// two signs of the 24 fewer, and about 1.5× the false positives.
-const RECIPE_BOXES: (f64, f64, f64) = (0.833, 5.5, 1.6);
-const RECIPE_CROPS: (f64, f64, f64) = (0.833, 5.3, 1.4);
+/// test"): boxes 0.875 (21/24), 1.13, 0.042; crops 0.875 (21/24), 0.79, 0.088 — 12 stages on
+/// 30 signs and 80 photos make a weak cascade, and the test says so rather than hide it.
+/// Accepted: two signs of the 24 fewer, and about 1.5× the false positives (the track's, 10
+/// and 21 of 240 frames, more: a few frames' difference).
+const RECIPE_BOXES: (f64, f64, f64) = (0.79, 1.7, 0.15);
+const RECIPE_CROPS: (f64, f64, f64) = (0.79, 1.2, 0.2);
 
 #[test]
 fn every_lab_page_has_a_test() {

@@ -663,9 +663,10 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
     println!("minNeighbors  recall  precision    FP/neg   FP/sign    FP/all   TP   FP  miss");
     for p in &rep.points {
         println!(
-            "{:>12}  {:.4}  {:>9.4}  {}  {}  {:>8.4}  {:>3}  {:>3}  {:>4}{}",
+            "{:>12}  {}  {:>9.4}  {}  {}  {:>8.4}  {:>3}  {:>3}  {:>4}{}",
             p.min_neighbors,
-            p.recall,
+            // no labelled box: no recall to give
+            if rep.boxes > 0 { format!("{:.4}", p.recall) } else { "     -".to_string() },
             p.precision,
             per(p.fp_per_negative_frame),
             per(p.fp_per_sign_frame),
