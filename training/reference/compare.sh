@@ -39,8 +39,8 @@
 # -w/-h the same window, -numThreads 1.
 # Both: `rccar-train evaluate` (scale factor 1.1, minNeighbors 0-10, no size limit, IoU 0.5),
 # compared at the detector's default minNeighbors 3 and at each cascade's chosen minNeighbors.
-# Each training takes up to about 10 minutes at one thread; /usr/bin/time -v gives time and
-# peak memory. Not run by the test suite or CI (it needs the fetched photos and an OpenCV
+# At one thread rccar-train takes about 6 minutes, opencv_traincascade about an hour;
+# /usr/bin/time -v gives time and peak memory. Not run by the test suite or CI (it needs the fetched photos and an OpenCV
 # binary this repository does not build).
 set -euo pipefail
 OUT=${1:?usage: compare.sh OUT SETS TRAINCASCADE}
