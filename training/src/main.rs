@@ -596,6 +596,7 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
     let min_size = parse_size(&a.min_size)?;
     check_detector("", a.scale_factor, a.min_neighbors, min_size)?;
     within("--iou", a.iou, 0.01, 1.0, "")?;
+    within("--target-fp-per-frame", a.target_fp_per_frame, 0.0, 1000.0, "")?;
     let cascade = rccar::detect::Cascade::from_file(&a.cascade)?;
     // Frames list by list, so each list's figures can be named (a track recording's false
     // positives are the estimate for the car's own frames).
@@ -615,7 +616,6 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
     if frames.is_empty() {
         bail!("{info_name}: no readable frames");
     }
-    within("--target-fp-per-frame", a.target_fp_per_frame, 0.0, 1000.0, "")?;
     let mns: Vec<u32> = (0..=10).collect();
     let mut rep = evaluate::evaluate(
         cascade,
