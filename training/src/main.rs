@@ -627,7 +627,7 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
         &mns,
         a.min_neighbors,
     )?;
-    let chosen = rep.choose(a.target_fp_per_frame).cloned();
+    rep.choose(a.target_fp_per_frame);
     let out = a
         .out
         .unwrap_or_else(|| a.cascade.parent().map(|p| p.to_path_buf()).unwrap_or_default());
@@ -682,7 +682,7 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
          FP/all: over all {} frames",
         rep.frames
     );
-    print_choice(&rep, chosen.as_ref(), a.target_fp_per_frame);
+    print_choice(&rep);
     // (frames_detail is kept at the printed minNeighbors, one of 0-10)
     if lists.len() > 1 && rep.frames_detail.len() == frames.len() {
         println!("at minNeighbors {}, list by list:", a.min_neighbors);
@@ -714,9 +714,13 @@ fn run_evaluate(a: EvalArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// The `choose:` line of `evaluate`: the minNeighbors for the car ([`evaluate::Report::choose`])
-/// and what it costs, or why there is none.
-fn print_choice(rep: &evaluate::Report, chosen: Option<&evaluate::Point>, target: f64) {
+/// The `choose:` line of `evaluate`: the minNeighbors [`evaluate::Report::choose`] chose for
+/// the car and what it costs, or why there is none.
+fn print_choice(rep: &evaluate::Report) {
+    let target = rep.target_fp_per_frame.unwrap_or(0.0);
+    let chosen = rep
+        .chosen_min_neighbors
+        .and_then(|m| rep.points.iter().find(|p| p.min_neighbors == m));
     match chosen {
         Some(p) => {
             let recall = if rep.boxes > 0 {
