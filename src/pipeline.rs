@@ -241,6 +241,12 @@ pub fn load_detector(cfg: &Config, base: &Path) -> Result<(Option<DetectStage>, 
     Ok((Some(stage), missing))
 }
 
+/// The grouping threshold the car uses for `class`: `classes.<name>.min_neighbors`, or
+/// `detect.min_neighbors` when that is 0 (`rccar detect` without `--cascade` reads it here).
+pub fn class_min_neighbors(cfg: &Config, class: ObjectClass) -> u32 {
+    class_params(DetectParams::from(&cfg.detect), cfg.classes[class].min_neighbors).min_neighbors
+}
+
 /// `[detect]`'s scan parameters with one class's own grouping threshold
 /// (`classes.<name>.min_neighbors`; 0 keeps `detect.min_neighbors`).
 fn class_params(detect: DetectParams, min_neighbors: u32) -> DetectParams {

@@ -146,3 +146,66 @@ fn a_class_min_neighbors_applies_to_that_class_only() {
     assert!(e.contains("classes.stop_sign.min_neighbors"), "{e}");
     println!("stop sign at 1 m: {at_default:?} at detect.min_neighbors 3; none at classes.stop_sign.min_neighbors {n}");
 }
+
+/// `rccar detect` without `--cascade` runs what the car runs, each class at its own grouping
+/// threshold: on the same frame of the stop sign 1 m ahead (whole image, as the command scans
+/// it), the stop-sign box has `m` merged hits at the default; with
+/// `classes.stop_sign.min_neighbors = m` it is gone, another class's value leaves it, and an
+/// explicit `--min-neighbors` overrides the class's value.
+#[test]
+fn rccar_detect_uses_each_class_min_neighbors_from_the_configuration() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let base = Config::default();
+    let lens_ahead = base.vehicle.camera_x_m - base.vehicle.wheelbase_m / 2.0;
+    let mut sim = Simulation::new(&base, &track("stop_sign")).unwrap();
+    sim.set_truth_boxes(true);
+    sim.place_at(3.0 - 1.0 - lens_ahead);
+    let truth = sim.step().truth.objects.first().expect("the sign in view").bbox;
+    let dir = tempfile::tempdir().unwrap();
+    let frame = dir.path().join("sign.png");
+    sim.image().save(&frame).unwrap();
+    // The stop-sign boxes on the sign, (x, y, w, h, neighbours), and the stderr line naming the
+    // cascades.
+    type Boxes = Vec<(i64, i64, i64, i64, u64)>;
+    let run = |extra: &[&str]| -> (Boxes, String) {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_rccar"))
+            .current_dir(root)
+            .args(["detect", "--no-annotate", "--no-local"])
+            .args(extra)
+            .arg(&frame)
+            .output()
+            .unwrap();
+        let (out, err) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+        assert!(o.status.success(), "{extra:?}: {out}{err}");
+        let line: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+        let mut v: Vec<_> = line["boxes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|b| b["cascade"].as_str().unwrap().ends_with("stop_sign.xml"))
+            .map(|b| {
+                let n = |k: &str| b[k].as_i64().unwrap();
+                (n("x"), n("y"), n("width"), n("height"), b["neighbors"].as_u64().unwrap())
+            })
+            .filter(|b| {
+                let r = Rect { x: b.0 as i32, y: b.1 as i32, width: b.2 as i32, height: b.3 as i32 };
+                iou(r, truth) > 0.2
+            })
+            .collect();
+        v.sort();
+        let named = err.lines().find(|l| l.starts_with("detect: the configuration's cascades: ")).unwrap_or_default();
+        (v, named.to_string())
+    };
+    let (at_default, named) = run(&[]);
+    assert!(named.contains("stop_sign.xml (min_neighbors 3)"), "{named}");
+    let m = at_default.iter().map(|b| b.4).max().expect("the stop sign boxed at 1 m");
+    assert!(m > 3, "{at_default:?}");
+    let set = format!("classes.stop_sign.min_neighbors={m}");
+    let (strict, named) = run(&["--set", &set]);
+    assert_eq!(strict, vec![], "more than {m} hits needed: no box");
+    assert!(named.contains(&format!("stop_sign.xml (min_neighbors {m})")), "{named}");
+    let other = format!("classes.traffic_light.min_neighbors={m}");
+    assert_eq!(run(&["--set", &other]).0, at_default, "another class's value");
+    assert_eq!(run(&["--set", &set, "--min-neighbors", "3"]).0, at_default, "the flag wins");
+    println!("rccar detect, stop sign at 1 m: {at_default:?}; none at classes.stop_sign.min_neighbors {m}");
+}

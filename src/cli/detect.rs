@@ -50,9 +50,11 @@ pub struct DetectArgs {
     /// Ratio between pyramid levels (1.01..=4; below 1.01 the pyramid needs hundreds of levels).
     #[arg(long, default_value_t = 1.1)]
     pub scale_factor: f64,
-    /// Raw hits a box needs beyond itself; 0 prints raw hits (0..=100).
-    #[arg(long, default_value_t = 3)]
-    pub min_neighbors: u32,
+    /// Raw hits a box needs beyond itself; 0 prints raw hits (0..=100). Default: 3 with
+    /// `--cascade`; without it, each class's as the car uses it (`classes.<name>.min_neighbors`,
+    /// or `detect.min_neighbors` when that is 0).
+    #[arg(long)]
+    pub min_neighbors: Option<u32>,
     /// Smallest box, WxH pixels (each side 0..=16384).
     #[arg(long, value_parser = parse_size, default_value = "0x0")]
     pub min_size: (u32, u32),
@@ -90,10 +92,15 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((p(w)?, p(h)?))
 }
 
+/// OpenCV's `detectMultiScale` default, used with `--cascade` files when `--min-neighbors` is
+/// not given.
+const DEFAULT_MIN_NEIGHBORS: u32 = 3;
+
 /// Without `--cascade`: the cascade of every class of the configuration that is found by one
-/// (`classes.<name>.model`, `detect = "cascade"`), what the car runs; a configured file that is
-/// missing is an error naming its key.
-fn configured_cascades(config: &super::common::ConfigArgs) -> Result<Vec<PathBuf>> {
+/// (`classes.<name>.model`, `detect = "cascade"`), what the car runs, each with the class's
+/// grouping threshold as the car uses it; a configured file that is missing is an error naming
+/// its key.
+fn configured_cascades(config: &super::common::ConfigArgs) -> Result<Vec<(PathBuf, u32)>> {
     let cfg = config.load()?;
     let (found, missing) = rccar::pipeline::cascade_files(&cfg, Path::new("."));
     if let Some(m) = missing.first() {
@@ -104,8 +111,14 @@ fn configured_cascades(config: &super::common::ConfigArgs) -> Result<Vec<PathBuf
             "no class of the configuration is found by a cascade: give --cascade FILE (or --method colour-template)"
         );
     }
-    let files: Vec<PathBuf> = found.into_iter().map(|(_, path)| path).collect();
-    let shown: Vec<String> = files.iter().map(|p| escape_name(p.as_os_str())).collect();
+    let files: Vec<(PathBuf, u32)> = found
+        .into_iter()
+        .map(|(class, path)| (path, rccar::pipeline::class_min_neighbors(&cfg, class)))
+        .collect();
+    let shown: Vec<String> = files
+        .iter()
+        .map(|(p, mn)| format!("{} (min_neighbors {mn})", escape_name(p.as_os_str())))
+        .collect();
     eprintln!("detect: the configuration's cascades: {}", shown.join(", "));
     Ok(files)
 }
@@ -114,7 +127,7 @@ fn configured_cascades(config: &super::common::ConfigArgs) -> Result<Vec<PathBuf
 pub fn run(args: DetectArgs) -> Result<ExitCode> {
     let params = DetectParams {
         scale_factor: args.scale_factor,
-        min_neighbors: args.min_neighbors,
+        min_neighbors: args.min_neighbors.unwrap_or(DEFAULT_MIN_NEIGHBORS),
         min_size: args.min_size,
         max_size: args.max_size,
         parallel: args.parallel,
@@ -122,16 +135,20 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
     let mut detectors = Vec::new();
     let names: Vec<String> = match args.method {
         Method::Cascade => {
-            let files = if args.cascades.is_empty() {
+            let files: Vec<(PathBuf, u32)> = if args.cascades.is_empty() {
                 configured_cascades(&args.config)?
             } else {
-                args.cascades.clone()
+                args.cascades.iter().map(|p| (p.clone(), params.min_neighbors)).collect()
             };
             annotate::check_options(&params, files.len(), rccar::imageio::limits::MAX_IMAGE_SIDE)?;
-            for path in &files {
-                detectors.push(Finder::Cascade(Box::new(Detector::new(Cascade::from_file(path)?))));
+            for (path, class_mn) in &files {
+                let own = DetectParams {
+                    min_neighbors: args.min_neighbors.unwrap_or(*class_mn),
+                    ..params
+                };
+                detectors.push(Finder::Cascade(Box::new(Detector::new(Cascade::from_file(path)?)), own));
             }
-            files.iter().map(|p| escape_name(p.as_os_str())).collect()
+            files.iter().map(|(p, _)| escape_name(p.as_os_str())).collect()
         }
         Method::ColourTemplate => {
             if !args.cascades.is_empty() {
@@ -150,7 +167,7 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
     let mut used = std::collections::HashSet::new();
     for path in &args.images {
         let shown = escape_name(path.as_os_str());
-        match detect_one(&args, &params, (&names, &mut detectors), path, &shown, &mut used) {
+        match detect_one(&args, (&names, &mut detectors), path, &shown, &mut used) {
             Ok(()) => {}
             Err(DetectFailure::Skip(why)) => {
                 eprintln!("skipped {shown}: {why}");
@@ -166,9 +183,10 @@ pub fn run(args: DetectArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// One detector of the run.
+/// One detector of the run (a cascade with its own scan parameters: the grouping threshold can
+/// differ per class).
 enum Finder {
-    Cascade(Box<Detector>),
+    Cascade(Box<Detector>, DetectParams),
     Colour(Box<HsvSignDetector>),
 }
 
@@ -180,7 +198,6 @@ enum DetectFailure {
 
 fn detect_one(
     args: &DetectArgs,
-    params: &DetectParams,
     (names, detectors): (&[String], &mut [Finder]),
     path: &std::path::Path,
     shown: &str,
@@ -211,10 +228,10 @@ fn detect_one(
         }
         _ => {
             let cascades = detectors.iter_mut().filter_map(|f| match f {
-                Finder::Cascade(d) => Some(d.as_mut()),
+                Finder::Cascade(d, p) => Some((d.as_mut(), &*p)),
                 Finder::Colour(_) => None,
             });
-            annotate::detect_all(cascades, &gray, &rgb, params, args.light)
+            annotate::detect_all(cascades, &gray, &rgb, args.light)
                 .map_err(|(ci, e)| DetectFailure::Skip(format!("{}: {e}", names[ci])))?
         }
     };

@@ -117,17 +117,17 @@ pub fn image_record(image: &str, (width, height): (u32, u32), found: &[FoundBox]
     serde_json::json!({"image": image, "width": width, "height": height, "boxes": boxes})
 }
 
-/// Every detector's boxes in `gray`, in detector order (`light`: with the light reading of
-/// `rgb` inside each box); the error names the index of the detector that refused the image.
+/// Every detector's boxes in `gray` with its own scan parameters, in detector order (`light`:
+/// with the light reading of `rgb` inside each box); the error names the index of the detector
+/// that refused the image.
 pub fn detect_all<'a>(
-    detectors: impl IntoIterator<Item = &'a mut Detector>,
+    detectors: impl IntoIterator<Item = (&'a mut Detector, &'a DetectParams)>,
     gray: &GrayImage,
     rgb: &RgbImage,
-    params: &DetectParams,
     light: bool,
 ) -> Result<Vec<FoundBox>, (usize, DetectError)> {
     let mut boxes = Vec::new();
-    for (ci, det) in detectors.into_iter().enumerate() {
+    for (ci, (det, params)) in detectors.into_iter().enumerate() {
         let found = det.detect(gray, params).map_err(|e| (ci, e))?;
         boxes.extend(found.into_iter().map(|d| FoundBox {
             cascade: ci,
