@@ -65,21 +65,33 @@ mkdir -p "$L"
 echo "== lists ($L)"
 # Absolute paths everywhere: rccar-train reads paths relative to the list, opencv_traincascade
 # relative to its working folder.
-sort "$S320/stop_sign.info.dat" | awk -v d="$S320" -v L="$L" '{ $1 = d "/" $1;
-  if ((NR - 1) % 2 == 0) { if ($2 > 0) print > (L "/train_pos.dat"); else print $1 > (L "/train_nosign.txt") }
+FOLD=${FOLD:-a}
+case "$FOLD" in a) TRAINPAR=0 ;; b) TRAINPAR=1 ;; *) echo "FOLD=$FOLD: must be a or b" >&2; exit 2 ;; esac
+sort "$S320/stop_sign.info.dat" | awk -v d="$S320" -v L="$L" -v p="$TRAINPAR" '{ $1 = d "/" $1;
+  if ((NR - 1) % 2 == p) { if ($2 > 0) print > (L "/train_pos.dat"); else print $1 > (L "/train_nosign.txt") }
   else print > (L "/test_photos.dat") }'
 touch "$L/train_nosign.txt"
 sort "$S320/track.bg.txt" | awk -v d="$S320" '{ print d "/" $1 }' > "$L/track_all.txt"
 n=$(wc -l < "$L/track_all.txt")
-head -n $(( (n + 1) / 2 )) "$L/track_all.txt" > "$L/train_track.txt"
-tail -n +$(( (n + 1) / 2 + 1 )) "$L/track_all.txt" > "$L/rest_track.txt"
-m=$(wc -l < "$L/rest_track.txt")
-head -n $(( (m + 1) / 2 )) "$L/rest_track.txt" > "$L/calib_track.txt"
-tail -n +$(( (m + 1) / 2 + 1 )) "$L/rest_track.txt" > "$L/test_track.txt"
+if [ "$FOLD" = a ]; then
+  head -n $(( (n + 1) / 2 )) "$L/track_all.txt" > "$L/train_track.txt"
+  tail -n +$(( (n + 1) / 2 + 1 )) "$L/track_all.txt" > "$L/rest_track.txt"
+  m=$(wc -l < "$L/rest_track.txt")
+  head -n $(( (m + 1) / 2 )) "$L/rest_track.txt" > "$L/calib_track.txt"
+  tail -n +$(( (m + 1) / 2 + 1 )) "$L/rest_track.txt" > "$L/test_track.txt"
+else
+  # The mirror image of fold a: training is the drive's second half, calibration the stretch
+  # just before it, test the start of the drive.
+  tail -n +$(( n - (n + 1) / 2 + 1 )) "$L/track_all.txt" > "$L/train_track.txt"
+  head -n $(( n - (n + 1) / 2 )) "$L/track_all.txt" > "$L/rest_track.txt"
+  m=$(wc -l < "$L/rest_track.txt")
+  tail -n +$(( m - (m + 1) / 2 + 1 )) "$L/rest_track.txt" > "$L/calib_track.txt"
+  head -n $(( m - (m + 1) / 2 )) "$L/rest_track.txt" > "$L/test_track.txt"
+fi
 find "$PHOTOS" -maxdepth 1 -type f \( -iname '*.jpg' -o -iname '*.jpeg' -o -iname '*.png' \) | LC_ALL=C sort > "$L/photos_all.txt"
-awk 'NR % 2 == 1' "$L/photos_all.txt" > "$L/train_photos.txt"
+awk -v p="$TRAINPAR" '(NR - 1) % 2 == p' "$L/photos_all.txt" > "$L/train_photos.txt"
 # evaluate takes frames of at most 8 megapixels: that leaves out chessboard.png (13 MP).
-awk 'NR % 2 == 0' "$L/photos_all.txt" | "$PY" -c '
+awk -v p="$TRAINPAR" '(NR - 1) % 2 != p' "$L/photos_all.txt" | "$PY" -c '
 import sys, cv2
 for l in sys.stdin:
     im = cv2.imread(l.strip(), cv2.IMREAD_GRAYSCALE)
