@@ -403,6 +403,49 @@ fn an_unanswered_arm_is_asked_again() {
     assert_eq!(t.state, State::Armed);
 }
 
+/// CONFIG and CONFIG_SET are idempotent too: the first of each corrupted on the wire (the
+/// firmware drops it, no answer) is asked again, so `Link::get_config` and `Link::set_config`
+/// succeed instead of failing after one reply timeout (seen in lab 11 on a busy machine:
+/// "no CONFIG within 300 ms").
+#[test]
+fn unanswered_config_requests_are_asked_again() {
+    let sim = Sim::start("cfgretry");
+    let hit: Arc<std::sync::Mutex<Vec<u8>>> = Arc::default();
+    let h = hit.clone();
+    let link = Link::open(
+        &sim.tty,
+        LinkOptions {
+            reply_timeout: Duration::from_millis(1500),
+            silence_timeout: Duration::from_millis(3000),
+            wire_fault: Some(Box::new(move |bytes: &mut Vec<u8>| {
+                // the first frame of each config message only: its CRC no longer matches
+                let id = bytes.get(2).copied();
+                if let Some(id @ (protocol::id::CONFIG_GET | protocol::id::CONFIG_SET)) = id {
+                    let mut h = h.lock().unwrap();
+                    if !h.contains(&id) {
+                        h.push(id);
+                        let last = bytes.len() - 2;
+                        bytes[last] ^= 0x5A;
+                    }
+                }
+            })),
+            ..LinkOptions::default()
+        },
+    );
+    link.wait_connected(WAIT).expect("handshake");
+    let (cfg, _) = link.get_config().expect("CONFIG answered on the second attempt");
+    link.set_config(cfg, false).expect("CONFIG_SET answered on the second attempt");
+    assert_eq!(link.get_config().expect("CONFIG again").0, cfg, "the configuration set is the one read");
+    assert_eq!(
+        *hit.lock().unwrap(),
+        vec![protocol::id::CONFIG_GET, protocol::id::CONFIG_SET],
+        "the first of each was corrupted on the wire"
+    );
+    // intact frames the firmware decoded: two CONFIG reads (the retried one and the last), one set
+    assert_eq!(sim.rx_times(protocol::id::CONFIG_GET).len(), 2, "CONFIG_GET received intact");
+    assert_eq!(sim.rx_times(protocol::id::CONFIG_SET).len(), 1, "CONFIG_SET received intact");
+}
+
 #[test]
 fn host_recovers_from_a_firmware_reset() {
     let mut sim = Sim::start("reset");

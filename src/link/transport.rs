@@ -54,8 +54,9 @@ pub enum LinkError {
 /// before it is written, may flip bits in it.
 pub type WireFault = Box<dyn FnMut(&mut Vec<u8>) + Send>;
 
-/// How many times [`Link::arm`] asks before it gives up on an ARM that gets no answer.
-pub const ARM_ATTEMPTS: u32 = 3;
+/// How many times an idempotent request ([`Link::arm`], [`Link::get_config`],
+/// [`Link::set_config`]) is asked before the link gives up on one that gets no answer.
+pub const IDEMPOTENT_ATTEMPTS: u32 = 3;
 
 /// Transport settings.
 pub struct LinkOptions {
@@ -318,19 +319,25 @@ impl Link {
         self.shared.cv.notify_all();
     }
 
-    /// Arms the firmware (it stays armed across reconnects and firmware resets: the link
-    /// re-arms after the new handshake). The ESC follows from the next DRIVE. ARM is
-    /// idempotent, so one that gets no answer in time (a busy machine, a lost byte) is asked
-    /// again, [`ARM_ATTEMPTS`] times in all, before the error is returned.
-    pub fn arm(&self) -> Result<(), LinkError> {
-        self.shared.lock().want_armed = true;
+    /// Runs an idempotent request again when it gets no answer in time (a busy machine, a
+    /// reply frame lost to a bad checksum) while the link is up, [`IDEMPOTENT_ATTEMPTS`] times
+    /// in all; any other outcome is returned at once.
+    fn idempotent<T>(&self, once: impl Fn() -> Result<T, LinkError>) -> Result<T, LinkError> {
         let mut attempt = 1;
         loop {
-            match self.arm_once() {
-                Err(LinkError::Timeout { .. }) if attempt < ARM_ATTEMPTS && self.is_connected() => attempt += 1,
+            match once() {
+                Err(LinkError::Timeout { .. }) if attempt < IDEMPOTENT_ATTEMPTS && self.is_connected() => attempt += 1,
                 r => return r,
             }
         }
+    }
+
+    /// Arms the firmware (it stays armed across reconnects and firmware resets: the link
+    /// re-arms after the new handshake). The ESC follows from the next DRIVE. ARM is
+    /// idempotent, so one that gets no answer in time is asked again (`idempotent`).
+    pub fn arm(&self) -> Result<(), LinkError> {
+        self.shared.lock().want_armed = true;
+        self.idempotent(|| self.arm_once())
     }
 
     fn arm_once(&self) -> Result<(), LinkError> {
@@ -360,17 +367,19 @@ impl Link {
     }
 
     /// Sends a configuration (refused while armed); `persist` also stores it in EEPROM.
+    /// Idempotent (the same values again): asked again when unanswered.
     pub fn set_config(&self, config: LinkConfig, persist: bool) -> Result<(), LinkError> {
         let flags = if persist { protocol::CF_PERSIST } else { 0 };
-        self.expect_ok(Message::ConfigSet { flags, config }, "CONFIG_SET")
+        self.idempotent(|| self.expect_ok(Message::ConfigSet { flags, config }, "CONFIG_SET"))
     }
 
-    /// Reads the configuration in use and whether it came from EEPROM.
+    /// Reads the configuration in use and whether it came from EEPROM; asked again when
+    /// unanswered.
     pub fn get_config(&self) -> Result<(LinkConfig, bool), LinkError> {
-        match self.request(Message::ConfigGet, "CONFIG")?.0 {
+        self.idempotent(|| match self.request(Message::ConfigGet, "CONFIG")?.0 {
             Reply::Config(flags, c) => Ok((c, flags & 1 != 0)),
             _ => Err(self.timeout(&self.shared.lock(), "CONFIG", self.reply_timeout)),
-        }
+        })
     }
 
     /// PING → TELEMETRY; returns it with the round trip (write → answer decoded).
