@@ -446,6 +446,39 @@ fn unanswered_config_requests_are_asked_again() {
     assert_eq!(sim.rx_times(protocol::id::CONFIG_SET).len(), 1, "CONFIG_SET received intact");
 }
 
+/// A ping that gets no answer (its frame corrupted on the wire) is counted, not fatal: `rccar
+/// link --latency` measures the others and says how many went unanswered.
+#[test]
+fn an_unanswered_ping_is_counted_and_the_latency_run_goes_on() {
+    let sim = Sim::start("pinglost");
+    let pings = Arc::new(Mutex::new(0u32));
+    let p = pings.clone();
+    let link = Link::open(
+        &sim.tty,
+        LinkOptions {
+            silence_timeout: Duration::from_millis(3000),
+            wire_fault: Some(Box::new(move |bytes: &mut Vec<u8>| {
+                // the second PING only
+                if bytes.get(2) == Some(&protocol::id::PING) {
+                    let mut n = p.lock().unwrap();
+                    *n += 1;
+                    if *n == 2 {
+                        let last = bytes.len() - 2;
+                        bytes[last] ^= 0x5A;
+                    }
+                }
+            })),
+            ..LinkOptions::default()
+        },
+    );
+    link.wait_connected(WAIT).expect("handshake");
+    let r = rccar::link::bench::round_trips(&link, 5, &|| false).expect("the run goes on");
+    assert_eq!((r.ms.len(), r.unanswered), (4, 1), "{r:?}");
+    assert_eq!(*pings.lock().unwrap(), 5, "five pings written");
+    let line = rccar::link::bench::latency_line(&r).unwrap();
+    assert!(line.contains("over 4 pings") && line.ends_with("; 1 unanswered in time"), "{line}");
+}
+
 #[test]
 fn host_recovers_from_a_firmware_reset() {
     let mut sim = Sim::start("reset");

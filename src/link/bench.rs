@@ -41,27 +41,52 @@ pub fn set_trim(link: &Link, mut cfg: LinkConfig, us: u16, save: bool) -> Result
     Ok(())
 }
 
-/// Up to `n` PING → TELEMETRY round trips, milliseconds, in the order measured (fewer when
-/// stopped).
-pub fn round_trips(link: &Link, n: usize, stopped: &dyn Fn() -> bool) -> Result<Vec<f64>, LinkError> {
-    let mut rtts = Vec::with_capacity(n);
+/// PING → TELEMETRY round trips: the answered ones, ms in the order measured, and how many got
+/// no answer within the link's reply timeout.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RoundTrips {
+    /// Round trips of the answered pings, milliseconds.
+    pub ms: Vec<f64>,
+    /// Pings without an answer in time (counted, not fatal: a measurement goes on).
+    pub unanswered: usize,
+}
+
+/// Up to `n` PING → TELEMETRY round trips (fewer when stopped). A ping that gets no answer in
+/// time while the link is up (a frame lost to a bad checksum, a busy machine) is counted in
+/// [`RoundTrips::unanswered`] and the next one is sent; any other error ends the run.
+pub fn round_trips(link: &Link, n: usize, stopped: &dyn Fn() -> bool) -> Result<RoundTrips, LinkError> {
+    let mut r = RoundTrips {
+        ms: Vec::with_capacity(n),
+        unanswered: 0,
+    };
     for _ in 0..n {
         if stopped() {
             break;
         }
-        rtts.push(link.ping()?.1.as_secs_f64() * 1e3);
+        match link.ping() {
+            Ok((_, rtt)) => r.ms.push(rtt.as_secs_f64() * 1e3),
+            Err(LinkError::Timeout { .. }) if link.is_connected() => r.unanswered += 1,
+            Err(e) => return Err(e),
+        }
     }
-    Ok(rtts)
+    Ok(r)
 }
 
-/// The median and the maximum of the round trips `rtts` (ms) as one line; `None` without any.
-pub fn latency_line(rtts: &[f64]) -> Option<String> {
-    let mut r = rtts.to_vec();
-    r.sort_by(f64::total_cmp);
-    let (median, max) = (r.get(r.len() / 2)?, r.last()?);
+/// The median and the maximum of the answered round trips as one line, and the unanswered
+/// pings when there were any; `None` without any ping.
+pub fn latency_line(r: &RoundTrips) -> Option<String> {
+    let lost = match r.unanswered {
+        0 => String::new(),
+        n => format!("; {n} unanswered in time"),
+    };
+    let mut ms = r.ms.to_vec();
+    ms.sort_by(f64::total_cmp);
+    let (Some(median), Some(max)) = (ms.get(ms.len() / 2), ms.last()) else {
+        return (r.unanswered > 0).then(|| format!("round trip PING -> TELEMETRY: no answer to {} pings", r.unanswered));
+    };
     Some(format!(
-        "round trip PING -> TELEMETRY over {} pings: median {median:.2} ms, max {max:.2} ms",
-        r.len()
+        "round trip PING -> TELEMETRY over {} pings: median {median:.2} ms, max {max:.2} ms{lost}",
+        ms.len()
     ))
 }
 
@@ -127,11 +152,17 @@ mod tests {
     }
 
     #[test]
-    fn the_latency_line_gives_the_median_and_the_maximum() {
-        assert_eq!(latency_line(&[]), None);
+    fn the_latency_line_gives_the_median_the_maximum_and_the_unanswered() {
+        let rt = |ms: &[f64], unanswered| RoundTrips { ms: ms.to_vec(), unanswered };
+        assert_eq!(latency_line(&rt(&[], 0)), None);
         assert_eq!(
-            latency_line(&[3.0, 1.0, 2.0]).unwrap(),
+            latency_line(&rt(&[3.0, 1.0, 2.0], 0)).unwrap(),
             "round trip PING -> TELEMETRY over 3 pings: median 2.00 ms, max 3.00 ms"
         );
+        assert_eq!(
+            latency_line(&rt(&[3.0, 1.0, 2.0], 2)).unwrap(),
+            "round trip PING -> TELEMETRY over 3 pings: median 2.00 ms, max 3.00 ms; 2 unanswered in time"
+        );
+        assert_eq!(latency_line(&rt(&[], 4)).unwrap(), "round trip PING -> TELEMETRY: no answer to 4 pings");
     }
 }
