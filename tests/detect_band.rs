@@ -103,6 +103,16 @@ fn the_band_keeps_every_object_box_in_range() {
     assert!(failed.is_empty(), "{failed:#?}");
 }
 
+/// A simulator frame of the stop sign 1 m ahead of the lens, and the sign's true image box.
+fn stop_sign_at_1m(cfg: &Config) -> (image::RgbImage, [f64; 4]) {
+    let lens_ahead = cfg.vehicle.camera_x_m - cfg.vehicle.wheelbase_m / 2.0;
+    let mut sim = Simulation::new(cfg, &track("stop_sign")).unwrap();
+    sim.set_truth_boxes(true);
+    sim.place_at(3.0 - 1.0 - lens_ahead);
+    let truth = sim.step().truth.objects.first().expect("the sign in view").bbox;
+    (sim.image().clone(), truth)
+}
+
 /// `classes.<name>.min_neighbors` sets that class's grouping threshold only: on a simulator
 /// frame of the stop sign 1 m ahead, the shipped stop-sign cascade boxes it with `n` merged
 /// hits at `detect.min_neighbors` 3; set `classes.stop_sign.min_neighbors = n` (a box needs
@@ -112,12 +122,7 @@ fn the_band_keeps_every_object_box_in_range() {
 fn a_class_min_neighbors_applies_to_that_class_only() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let base = Config::default();
-    let lens_ahead = base.vehicle.camera_x_m - base.vehicle.wheelbase_m / 2.0;
-    let mut sim = Simulation::new(&base, &track("stop_sign")).unwrap();
-    sim.set_truth_boxes(true);
-    sim.place_at(3.0 - 1.0 - lens_ahead);
-    let truth = sim.step().truth.objects.first().expect("the sign in view").bbox;
-    let img = sim.image().clone();
+    let (img, truth) = stop_sign_at_1m(&base);
     let signs = |cfg: &Config| -> Vec<(i32, i32, i32, i32, u32)> {
         let (Some(mut stage), missing) = load_detector(cfg, &root.join("config")).unwrap() else {
             panic!("no cascades");
@@ -155,15 +160,10 @@ fn a_class_min_neighbors_applies_to_that_class_only() {
 #[test]
 fn rccar_detect_uses_each_class_min_neighbors_from_the_configuration() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let base = Config::default();
-    let lens_ahead = base.vehicle.camera_x_m - base.vehicle.wheelbase_m / 2.0;
-    let mut sim = Simulation::new(&base, &track("stop_sign")).unwrap();
-    sim.set_truth_boxes(true);
-    sim.place_at(3.0 - 1.0 - lens_ahead);
-    let truth = sim.step().truth.objects.first().expect("the sign in view").bbox;
+    let (img, truth) = stop_sign_at_1m(&Config::default());
     let dir = tempfile::tempdir().unwrap();
     let frame = dir.path().join("sign.png");
-    sim.image().save(&frame).unwrap();
+    img.save(&frame).unwrap();
     // The stop-sign boxes on the sign, (x, y, w, h, neighbours), and the stderr line naming the
     // cascades.
     type Boxes = Vec<(i64, i64, i64, i64, u64)>;

@@ -363,6 +363,26 @@ fn bit_errors_at_1e_3_never_apply_a_corrupted_command_and_every_loss_is_counted(
     }
 }
 
+/// A link to the emulator whose written frames pass through `fault` first, with this reply
+/// timeout (ms) and a silence timeout long enough for a busy machine.
+fn link_with_fault(sim: &Sim, reply_ms: u64, fault: impl FnMut(&mut Vec<u8>) + Send + 'static) -> Link {
+    Link::open(
+        &sim.tty,
+        LinkOptions {
+            reply_timeout: Duration::from_millis(reply_ms),
+            silence_timeout: Duration::from_millis(3000),
+            wire_fault: Some(Box::new(fault)),
+            ..LinkOptions::default()
+        },
+    )
+}
+
+/// Flips one byte of a frame's CRC, so the firmware's check drops the frame (no answer).
+fn break_crc(bytes: &mut [u8]) {
+    let last = bytes.len() - 2;
+    bytes[last] ^= 0x5A;
+}
+
 /// An ARM the firmware never answers (its frame corrupted on the wire, so the firmware drops
 /// it) is asked again: `Link::arm` succeeds and the car arms, instead of the run staying
 /// disarmed after one reply timeout (seen on a busy machine: "no ARM within 300 ms").
@@ -371,22 +391,13 @@ fn an_unanswered_arm_is_asked_again() {
     let sim = Sim::start("armretry");
     let corrupted = Arc::new(AtomicBool::new(false));
     let c = corrupted.clone();
-    let link = Link::open(
-        &sim.tty,
-        LinkOptions {
-            // short, so the retry is what arms the car; long enough for the emulator's reply
-            reply_timeout: Duration::from_millis(1500),
-            silence_timeout: Duration::from_millis(3000),
-            wire_fault: Some(Box::new(move |bytes: &mut Vec<u8>| {
-                // the first ARM only: flip one payload/CRC byte so the firmware's CRC check drops it
-                if bytes.get(2) == Some(&protocol::id::ARM) && !c.swap(true, Ordering::SeqCst) {
-                    let last = bytes.len() - 2;
-                    bytes[last] ^= 0x5A;
-                }
-            })),
-            ..LinkOptions::default()
-        },
-    );
+    // short, so the retry is what arms the car; long enough for the emulator's reply
+    let link = link_with_fault(&sim, 1500, move |bytes| {
+        // the first ARM only
+        if bytes.get(2) == Some(&protocol::id::ARM) && !c.swap(true, Ordering::SeqCst) {
+            break_crc(bytes);
+        }
+    });
     link.wait_connected(WAIT).expect("handshake");
     link.arm().expect("ARM answered on the second attempt");
     assert!(
@@ -412,26 +423,16 @@ fn unanswered_config_requests_are_asked_again() {
     let sim = Sim::start("cfgretry");
     let hit: Arc<std::sync::Mutex<Vec<u8>>> = Arc::default();
     let h = hit.clone();
-    let link = Link::open(
-        &sim.tty,
-        LinkOptions {
-            reply_timeout: Duration::from_millis(1500),
-            silence_timeout: Duration::from_millis(3000),
-            wire_fault: Some(Box::new(move |bytes: &mut Vec<u8>| {
-                // the first frame of each config message only: its CRC no longer matches
-                let id = bytes.get(2).copied();
-                if let Some(id @ (protocol::id::CONFIG_GET | protocol::id::CONFIG_SET)) = id {
-                    let mut h = h.lock().unwrap();
-                    if !h.contains(&id) {
-                        h.push(id);
-                        let last = bytes.len() - 2;
-                        bytes[last] ^= 0x5A;
-                    }
-                }
-            })),
-            ..LinkOptions::default()
-        },
-    );
+    let link = link_with_fault(&sim, 1500, move |bytes| {
+        // the first frame of each config message only
+        if let Some(id @ (protocol::id::CONFIG_GET | protocol::id::CONFIG_SET)) = bytes.get(2).copied() {
+            let mut h = h.lock().unwrap();
+            if !h.contains(&id) {
+                h.push(id);
+                break_crc(bytes);
+            }
+        }
+    });
     link.wait_connected(WAIT).expect("handshake");
     let (cfg, _) = link.get_config().expect("CONFIG answered on the second attempt");
     link.set_config(cfg, false).expect("CONFIG_SET answered on the second attempt");
@@ -453,24 +454,16 @@ fn an_unanswered_ping_is_counted_and_the_latency_run_goes_on() {
     let sim = Sim::start("pinglost");
     let pings = Arc::new(Mutex::new(0u32));
     let p = pings.clone();
-    let link = Link::open(
-        &sim.tty,
-        LinkOptions {
-            silence_timeout: Duration::from_millis(3000),
-            wire_fault: Some(Box::new(move |bytes: &mut Vec<u8>| {
-                // the second PING only
-                if bytes.get(2) == Some(&protocol::id::PING) {
-                    let mut n = p.lock().unwrap();
-                    *n += 1;
-                    if *n == 2 {
-                        let last = bytes.len() - 2;
-                        bytes[last] ^= 0x5A;
-                    }
-                }
-            })),
-            ..LinkOptions::default()
-        },
-    );
+    let link = link_with_fault(&sim, 300, move |bytes| {
+        // the second PING only
+        if bytes.get(2) == Some(&protocol::id::PING) {
+            let mut n = p.lock().unwrap();
+            *n += 1;
+            if *n == 2 {
+                break_crc(bytes);
+            }
+        }
+    });
     link.wait_connected(WAIT).expect("handshake");
     let r = rccar::link::bench::round_trips(&link, 5, &|| false).expect("the run goes on");
     assert_eq!((r.ms.len(), r.unanswered), (4, 1), "{r:?}");

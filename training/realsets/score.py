@@ -40,14 +40,19 @@ def iou(a, b):
     return i / u if u > 0 else 0.0
 
 
-def match(dets, truth, thr=0.5):
+def matched(dets, truth, thr=0.5):
+    """For each true box, the detection matched to it (greedy one-to-one, best IoU first), or None."""
     pairs = sorted(((iou(d, t), i, j) for i, d in enumerate(dets) for j, t in enumerate(truth)), reverse=True)
-    du, tu, tp = set(), set(), 0
+    du, res = set(), [None] * len(truth)
     for v, i, j in pairs:
-        if v >= thr and i not in du and j not in tu:
+        if v >= thr and i not in du and res[j] is None:
             du.add(i)
-            tu.add(j)
-            tp += 1
+            res[j] = dets[i]
+    return res
+
+
+def match(dets, truth, thr=0.5):
+    tp = sum(m is not None for m in matched(dets, truth, thr))
     return tp, len(dets) - tp
 
 

@@ -15,13 +15,17 @@ curve at the same minNeighbors.
 
 RCCAR   the rccar binary; INFO  an info.dat of the test frames with boxes (x y w h, absolute
 paths or relative to INFO); MN_A:MN_B  minNeighbors of A and of B for one comparison.
-Standard library only.
+Standard library and training/realsets/score.py.
 """
 import json
 import math
 import os
 import subprocess
 import sys
+
+# The one IoU and greedy matching of the real-photo scripts (training/realsets/score.py).
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "realsets"))
+from score import matched  # noqa: E402
 
 
 def read_info(path):
@@ -56,26 +60,6 @@ def detect(rccar, cascade, mn, images):
         r = json.loads(line)
         found[r["image"]] = [(b["x"], b["y"], b["width"], b["height"], b["neighbors"]) for b in r["boxes"]]
     return found
-
-
-def iou(a, b):
-    ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
-    iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
-    i = ix * iy
-    u = a[2] * a[3] + b[2] * b[3] - i
-    return i / u if u > 0 else 0.0
-
-
-def matched(dets, truth, thr=0.5):
-    """For each true box, the matched detection (greedy one-to-one, best IoU first) or None."""
-    pairs = sorted(((iou(d, t), i, j) for i, d in enumerate(dets) for j, t in enumerate(truth)
-                    if iou(d, t) >= thr), key=lambda x: -x[0])
-    du, res = set(), [None] * len(truth)
-    for _, i, j in pairs:
-        if i not in du and res[j] is None:
-            du.add(i)
-            res[j] = dets[i]
-    return res
 
 
 def sign_test(b, c):
