@@ -12,7 +12,8 @@
 # SETS          DeepPiCar's lists, `OUT/sets` of training/realsets/deeppicar.sh
 # TRAINCASCADE  an opencv_traincascade binary (OpenCV 3.4's apps/traincascade, or 4.x's copy of
 #               it; not built or shipped by this repository)
-# Env: RCCAR_TRAIN (default target/release/rccar-train), RCCAR_PYTHON (default .venv/bin/python,
+# Env: RCCAR_TRAIN (default target/release/rccar-train), RCCAR (default: rccar beside it, for
+# paired.py's sign-by-sign comparison), RCCAR_PYTHON (default .venv/bin/python,
 # needs cv2 for the .vec), PHOTOS (default /usr/share/doc/opencv-doc/examples/data, Debian's
 # opencv-doc), NICE (default 10), TARGET (default 0.01: evaluate's --target-fp-per-frame).
 #
@@ -34,11 +35,17 @@
 # rccar-train: `train` with its defaults (min hit rate 0.998, 2000 negatives per stage,
 # mirrored negatives, 20 stages), --threads 1, no --holdout (no sign frames to spare for the
 # early stop: it runs the 20 stages, as opencv_traincascade does).
+# With HOLDOUT=1, also rccar-train as the recipe's step 4: the same, with --holdout on the
+# calibration frames (training stops once its false positives per frame there are <= 0.01; on
+# both folds the 20 stages ended above that, 1 and 2 false boxes on 55 frames, and the cascade
+# was byte for byte the default run's, so it is off by default).
 # opencv_traincascade: OpenCV's usual -numStages 20 -minHitRate 0.995 -maxFalseAlarmRate 0.5,
 # HAAR BASIC, GAB, stumps, -numPos 0.9 x the samples in the .vec, -numNeg 2 x numPos,
 # -w/-h the same window, -numThreads 1.
 # Both: `rccar-train evaluate` (scale factor 1.1, minNeighbors 0-10, no size limit, IoU 0.5),
-# compared at the detector's default minNeighbors 3 and at each cascade's chosen minNeighbors.
+# compared at the detector's default minNeighbors 3 and at each cascade's chosen minNeighbors;
+# then sign by sign (paired.py: which signs each finds, the exact sign test on those only one
+# finds).
 # At one thread rccar-train takes about 6 minutes, opencv_traincascade about an hour;
 # /usr/bin/time -v gives time and peak memory. Not run by the test suite or CI (it needs the fetched photos and an OpenCV
 # binary this repository does not build).
@@ -126,6 +133,20 @@ if [ ! -f "$OUT/rccar/cascade.xml" ]; then
 fi
 cat "$OUT/rccar.log"
 
+TRAINERS="rccar opencv"
+if [ "${HOLDOUT:-0}" != 0 ]; then
+  # The recipe's step 4 as written: the same run with its early stop on held-out frames, here
+  # the calibration frames (no sign frames to spare: the early stop then watches the false
+  # positives alone), which also choose minNeighbors below.
+  echo "== rccar-train train --holdout (the calibration frames; --threads 1)"
+  if [ ! -f "$OUT/rccar-holdout/cascade.xml" ]; then
+    nice -n "$NICE" /usr/bin/time -v -o "$OUT/rccar-holdout.time" "$RT" train --pos "$OUT/distorted/info.dat" "$L/train_pos.dat" \
+      --bg "$L/train_bg.txt" --holdout "$L/calib_track.txt" --threads 1 --out "$OUT/rccar-holdout" > "$OUT/rccar-holdout.log" 2> "$OUT/rccar-holdout.err"
+  fi
+  grep -E '^(stages|held-out|time)' "$OUT/rccar-holdout.log"
+  TRAINERS="rccar rccar-holdout opencv"
+fi
+
 echo "== opencv_traincascade (-numThreads 1)"
 NPOS=$(( NVEC * 9 / 10 ))
 NNEG=$(( 2 * NPOS ))
@@ -138,16 +159,29 @@ fi
 tr '\r' '\n' < "$OUT/opencv.log" | grep -E '^Training until now|^Required leaf' | tail -1
 
 echo "== minNeighbors chosen on the calibration frames (--target-fp-per-frame $TARGET)"
-for t in rccar opencv; do
+for t in $TRAINERS; do
   "$RT" evaluate --cascade "$OUT/$t/cascade.xml" --out "$OUT/calib-$t" --target-fp-per-frame "$TARGET" \
     --info "$L/calib_track.txt" > "$OUT/calib-$t.log"
   echo "$t: $(grep '^choose:' "$OUT/calib-$t.log")"
 done
 
 echo "== evaluate on the test frames (scale factor 1.1, no size limit, IoU 0.5)"
-for t in rccar opencv; do
+for t in $TRAINERS; do
   "$RT" evaluate --cascade "$OUT/$t/cascade.xml" --out "$OUT/eval-$t" \
     --info "$L/test_photos.dat" "$L/test_track.txt" "$L/test_photos_bg.txt" > "$OUT/eval-$t.log"
 done
 
 "$PY" "$HERE/table.py" "$OUT" "$W" "$H" "$NVEC" "$NPOS" "$NNEG"
+
+echo "== sign by sign on the test photos (paired.py: which cascade finds which sign)"
+RCCAR=${RCCAR:-$(dirname "$RT")/rccar}
+if [ -x "$RCCAR" ]; then
+  chosen() { "$PY" -c 'import json,sys; v=json.load(open(sys.argv[1])).get("chosen_min_neighbors"); print(v if v else 3)' "$1"; }
+  for t in $TRAINERS; do
+    [ "$t" = opencv ] && continue
+    "$PY" "$HERE/paired.py" "$RCCAR" "$L/test_photos.dat" "$t" "$OUT/$t/cascade.xml" opencv "$OUT/opencv/cascade.xml" \
+      3:3 "$(chosen "$OUT/calib-$t/report.json"):$(chosen "$OUT/calib-opencv/report.json")"
+  done
+else
+  echo "no rccar binary at $RCCAR (set RCCAR): sign-by-sign comparison skipped"
+fi
